@@ -1,0 +1,63 @@
+"""The ``bench`` command line: discovers subcommands in :mod:`bench.commands`."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import pkgutil
+import sys
+
+import bench.commands
+from bench import __version__
+from bench.errors import BenchError
+
+
+def _user_errors() -> tuple[type[BaseException], ...]:
+    errors: list[type[BaseException]] = [BenchError, ValueError, OSError, LookupError]
+    try:
+        from drivers.errors import DriverError
+
+        errors.append(DriverError)
+    except ImportError:  # drivers is part of the same distribution; this only guards partial checkouts
+        pass
+    return tuple(errors)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="bench",
+        description="hilbench: hardware-in-the-loop friction test bench (device, runs, analysis).",
+    )
+    parser.add_argument("--version", action="version", version=f"hilbench {__version__}")
+    parser.add_argument(
+        "--traceback", action="store_true", help="show the full traceback on errors (for bug reports)"
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for info in sorted(pkgutil.iter_modules(bench.commands.__path__), key=lambda m: m.name):
+        if info.name.startswith("_"):
+            continue
+        module = importlib.import_module(f"bench.commands.{info.name}")
+        module.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    show_tb = args.traceback or bool(os.environ.get("HILBENCH_TRACEBACK"))
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        print("bench: interrupted", file=sys.stderr)
+        return 130
+    except _user_errors() as exc:
+        if show_tb:
+            raise
+        msg = " ".join(str(exc).split()) or type(exc).__name__
+        print(f"bench {args.command}: error: {msg}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,349 @@
+/* hilbench plant. See plant.h and docs/plant.md.
+ *
+ * Built with -ffp-contract=off so that the pure-Python oracle (firmware_sim/reference.py), which performs
+ * the same operations in the same order, agrees to rounding.
+ */
+#include <math.h>
+#include <string.h>
+
+#include "plant.h"
+
+#define HB_TWO_PI 6.283185307179586
+
+/* ---- random numbers: splitmix64 seeding, xoshiro256**, Box-Muller ---- */
+
+static uint64_t splitmix64(uint64_t *x) {
+    uint64_t z = (*x += 0x9E3779B97F4A7C15ULL);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    return z ^ (z >> 31);
+}
+
+static inline uint64_t rotl(uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
+
+static uint64_t xoshiro_next(uint64_t *s) {
+    uint64_t result = rotl(s[1] * 5, 7) * 9;
+    uint64_t t = s[1] << 17;
+    s[2] ^= s[0];
+    s[3] ^= s[1];
+    s[1] ^= s[2];
+    s[0] ^= s[3];
+    s[2] ^= t;
+    s[3] = rotl(s[3], 45);
+    return result;
+}
+
+static double normal(hb_state *s) {
+    if (s->has_spare) {
+        s->has_spare = 0;
+        return s->spare_normal;
+    }
+    /* u1 in (0, 1], u2 in [0, 1) */
+    double u1 = (double)((xoshiro_next(s->rng) >> 11) + 1) * 0x1.0p-53;
+    double u2 = (double)(xoshiro_next(s->rng) >> 11) * 0x1.0p-53;
+    double r = sqrt(-2.0 * log(u1));
+    double a = HB_TWO_PI * u2;
+    s->spare_normal = r * sin(a);
+    s->has_spare = 1;
+    return r * cos(a);
+}
+
+void hb_normals(hb_state *s, double *out, int64_t n) {
+    for (int64_t i = 0; i < n; i++) out[i] = normal(s);
+}
+
+/* ---- state ---- */
+
+void hb_state_init(hb_state *s, const hb_params *p, double theta0, double omega0, uint64_t seed) {
+    memset(s, 0, sizeof(*s));
+    s->theta = theta0;
+    s->omega = omega0;
+    s->n_elements = p->n_elements;
+    uint64_t x = seed;
+    for (int i = 0; i < 4; i++) s->rng[i] = splitmix64(&x);
+}
+
+/* ---- forces ---- */
+
+static inline double clip(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
+
+/* Odd-symmetric piecewise-linear table on a grid x[0] = 0 < ... < x[n-1], held beyond the end. */
+static double table_odd(double x, int n, const double *gx, const double *gf) {
+    double ax = fabs(x);
+    double f;
+    if (ax >= gx[n - 1]) {
+        f = gf[n - 1];
+    } else {
+        int lo = 0, hi = n - 1;
+        while (hi - lo > 1) {
+            int mid = (lo + hi) / 2;
+            if (gx[mid] <= ax) lo = mid; else hi = mid;
+        }
+        double w = (ax - gx[lo]) / (gx[hi] - gx[lo]);
+        f = gf[lo] + w * (gf[hi] - gf[lo]);
+    }
+    return x < 0.0 ? -f : f;
+}
+
+/* The Maxwell-slip force is piecewise linear in the displacement dx from the start of a sub-step.
+ * Moving up (dx > 0), elements already at +Delta contribute nothing more and the others add k_i*dx until
+ * they reach +Delta; moving down, symmetrically. So F(dx) = F0 + dx*slope_up for 0 < dx <= room_up and
+ * F0 + dx*slope_down for -room_down <= dx < 0, where room_* is the smallest distance at which another
+ * element saturates in that direction. One pass over the elements per sub-step fills this; the four RK4
+ * stages then cost O(1), and the exact sum is used only when a stage crosses a saturation. */
+typedef struct {
+    double f0, slope_up, slope_down, room_up, room_down;
+} ms_cache;
+
+/* Stop-operator update of every element by dx, refilling the cache in the same pass. Four independent
+ * lanes (element i goes to lane i % 4) break the dependency chains of the sums, so the loop pipelines and
+ * vectorises; the lane sums are combined at the end. */
+static void ms_commit(const hb_params *p, hb_state *s, ms_cache *c, double dx) {
+    double f0[4] = {0.0, 0.0, 0.0, 0.0}, su[4] = {0.0, 0.0, 0.0, 0.0}, sd[4] = {0.0, 0.0, 0.0, 0.0};
+    double ru[4] = {HUGE_VAL, HUGE_VAL, HUGE_VAL, HUGE_VAL}, rd[4] = {HUGE_VAL, HUGE_VAL, HUGE_VAL, HUGE_VAL};
+    double *q = s->deflection;
+    const double *ks = p->ms_stiffness, *Ds = p->ms_delta;
+    const int n = p->n_elements;
+    int i = 0;
+    for (; i + 4 <= n; i += 4) {
+        for (int j = 0; j < 4; j++) {
+            double k = ks[i + j], D = Ds[i + j];
+            double d = clip(q[i + j] + dx, -D, D);
+            q[i + j] = d;
+            f0[j] += k * d;
+            double up = D - d, down = D + d;
+            su[j] += up > 0.0 ? k : 0.0;
+            sd[j] += down > 0.0 ? k : 0.0;
+            double u2 = up > 0.0 ? up : HUGE_VAL, d2 = down > 0.0 ? down : HUGE_VAL;
+            ru[j] = u2 < ru[j] ? u2 : ru[j];
+            rd[j] = d2 < rd[j] ? d2 : rd[j];
+        }
+    }
+    for (int j = 0; i < n; i++, j++) {
+        double k = ks[i], D = Ds[i];
+        double d = clip(q[i] + dx, -D, D);
+        q[i] = d;
+        f0[j] += k * d;
+        double up = D - d, down = D + d;
+        su[j] += up > 0.0 ? k : 0.0;
+        sd[j] += down > 0.0 ? k : 0.0;
+        double u2 = up > 0.0 ? up : HUGE_VAL, d2 = down > 0.0 ? down : HUGE_VAL;
+        ru[j] = u2 < ru[j] ? u2 : ru[j];
+        rd[j] = d2 < rd[j] ? d2 : rd[j];
+    }
+    c->f0 = (f0[0] + f0[1]) + (f0[2] + f0[3]);
+    c->slope_up = (su[0] + su[1]) + (su[2] + su[3]);
+    c->slope_down = (sd[0] + sd[1]) + (sd[2] + sd[3]);
+    double r01 = ru[0] < ru[1] ? ru[0] : ru[1], r23 = ru[2] < ru[3] ? ru[2] : ru[3];
+    c->room_up = r01 < r23 ? r01 : r23;
+    r01 = rd[0] < rd[1] ? rd[0] : rd[1];
+    r23 = rd[2] < rd[3] ? rd[2] : rd[3];
+    c->room_down = r01 < r23 ? r01 : r23;
+}
+
+static void ms_cache_fill(const hb_params *p, hb_state *s, ms_cache *c) { ms_commit(p, s, c, 0.0); }
+
+static inline __attribute__((always_inline)) double maxwell_force(const hb_params *p, const hb_state *s, const ms_cache *c, double dx) {
+    if (dx >= 0.0 && dx <= c->room_up) return c->f0 + dx * c->slope_up;
+    if (dx < 0.0 && -dx <= c->room_down) return c->f0 + dx * c->slope_down;
+    double f = 0.0;
+    const double *k = p->ms_stiffness, *d = p->ms_delta, *q = s->deflection;
+    for (int i = 0; i < p->n_elements; i++) f += k[i] * clip(q[i] + dx, -d[i], d[i]);
+    return f;
+}
+
+/* Every smooth (single-valued) force resisting motion, at angle theta and velocity omega. */
+static inline __attribute__((always_inline)) double smooth_force(const hb_params *p, const hb_state *s, const ms_cache *c, double theta,
+                           double omega) {
+    double f = maxwell_force(p, s, c, theta - s->theta);
+    f += p->spring * theta;
+    f += (omega >= 0.0 ? p->viscous_pos : p->viscous_neg) * omega;
+    for (int j = 0; j < p->n_cogging; j++)
+        f += p->cogging_amplitude[j] * sin(p->cogging_order[j] * theta + p->cogging_phase[j]);
+    if (p->n_restoring > 0) f += table_odd(theta, p->n_restoring, p->restoring_x, p->restoring_f);
+    if (p->n_damping > 0) f += table_odd(omega, p->n_damping, p->damping_v, p->damping_f);
+    return f;
+}
+
+/* Total friction torque at the current state (excludes spring and cogging), N*m. */
+static double friction_now(const hb_params *p, const hb_state *s, const ms_cache *c) {
+    double f = c->f0;
+    f += (s->omega >= 0.0 ? p->viscous_pos : p->viscous_neg) * s->omega;
+    f += s->coulomb_force;
+    if (p->n_restoring > 0) f += table_odd(s->theta, p->n_restoring, p->restoring_x, p->restoring_f);
+    if (p->n_damping > 0) f += table_odd(s->omega, p->n_damping, p->damping_v, p->damping_f);
+    return f;
+}
+
+/* Coulomb/Stribeck level for motion in direction dir (+1/-1) at velocity omega, N*m (>= 0). */
+static inline __attribute__((always_inline)) double coulomb_level(const hb_params *p, double dir, double omega) {
+    double level = dir > 0.0 ? p->coulomb_pos : p->coulomb_neg;
+    if (p->stribeck_velocity > 0.0) {
+        double r = omega / p->stribeck_velocity;
+        level += p->stribeck_excess * exp(-(r * r));
+    }
+    return level;
+}
+
+/* Classical RK4 over h; dir != 0 adds the sliding Coulomb/Stribeck force dir*level(omega). */
+static inline __attribute__((always_inline)) void rk4(const hb_params *p, const hb_state *s, const ms_cache *c, double tau, double h,
+                double dir, double *th_out, double *om_out) {
+    const double inv_j = 1.0 / p->inertia;
+    double th = s->theta, om = s->omega;
+    double k1x = om;
+    double f1 = smooth_force(p, s, c, th, om);
+    if (dir != 0.0) f1 += dir * coulomb_level(p, dir, om);
+    double k1v = (tau - f1) * inv_j;
+    double k2x = om + 0.5 * h * k1v;
+    double f2 = smooth_force(p, s, c, th + 0.5 * h * k1x, k2x);
+    if (dir != 0.0) f2 += dir * coulomb_level(p, dir, k2x);
+    double k2v = (tau - f2) * inv_j;
+    double k3x = om + 0.5 * h * k2v;
+    double f3 = smooth_force(p, s, c, th + 0.5 * h * k2x, k3x);
+    if (dir != 0.0) f3 += dir * coulomb_level(p, dir, k3x);
+    double k3v = (tau - f3) * inv_j;
+    double k4x = om + h * k3v;
+    double f4 = smooth_force(p, s, c, th + h * k3x, k4x);
+    if (dir != 0.0) f4 += dir * coulomb_level(p, dir, k4x);
+    double k4v = (tau - f4) * inv_j;
+    *th_out = th + h / 6.0 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x);
+    *om_out = om + h / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v);
+}
+
+/* One sub-step of length h under constant motor torque tau.
+ * Smooth forces: classical RK4. Coulomb/Stribeck while sliding in a known direction: inside the same RK4
+ * step. If the rotor is at rest or would reverse within the step: RK4 without Coulomb, then an implicit
+ * (Moreau) velocity projection, so sticking is exact and there is no chattering. Finally the element
+ * deflections are committed with the step's displacement (stop operator). */
+static void substep(const hb_params *p, hb_state *s, ms_cache *c, double tau, double h) {
+    const double J = p->inertia;
+    double th = s->theta, om = s->omega;
+    double th_new, om_new;
+    int dry = p->coulomb_pos > 0.0 || p->coulomb_neg > 0.0 || p->stribeck_excess > 0.0;
+
+    if (!dry) {
+        rk4(p, s, c, tau, h, 0.0, &th_new, &om_new);
+        s->coulomb_force = 0.0;
+    } else {
+        double dir = om > 0.0 ? 1.0 : (om < 0.0 ? -1.0 : 0.0);
+        int sliding = 0;
+        if (dir != 0.0) {
+            rk4(p, s, c, tau, h, dir, &th_new, &om_new);
+            sliding = om_new * dir > 0.0;
+            if (sliding) s->coulomb_force = dir * coulomb_level(p, dir, om_new);
+        }
+        if (!sliding) {
+            rk4(p, s, c, tau, h, 0.0, &th_new, &om_new);
+            double free_dir = om_new >= 0.0 ? 1.0 : -1.0;
+            double dv = h * coulomb_level(p, free_dir, om) / J;
+            double om_free = om_new;
+            if (fabs(om_free) <= dv) {
+                om_new = 0.0;
+            } else {
+                om_new = om_free - free_dir * dv;
+            }
+            /* the velocity lost to friction accrued uniformly over the sub-step */
+            th_new -= 0.5 * h * (om_free - om_new);
+            s->coulomb_force = J * (om_free - om_new) / h;
+        }
+    }
+
+    s->theta = th_new;
+    s->omega = om_new;
+    ms_commit(p, s, c, th_new - th);
+}
+
+int hb_run(const hb_params *p, hb_state *s, const double *u, int64_t n, double dt, int substeps,
+           int mode, hb_outputs *out) {
+    const double h = dt / substeps;
+    const double kt_true = p->torque_constant * (1.0 + p->torque_constant_error);
+    const double lag_a = p->current_lag > 0.0 ? exp(-dt / p->current_lag) : 0.0;
+    const double lag_avg = p->current_lag > 0.0 ? p->current_lag / dt * (1.0 - lag_a) : 0.0;
+    ms_cache cache;
+    ms_cache_fill(p, s, &cache);
+
+    for (int64_t k = 0; k < n; k++) {
+        /* 1. measure at t_k */
+        double i_meas = s->current;
+        if (p->noise_current > 0.0) i_meas += p->noise_current * normal(s);
+        double th_noisy = s->theta;
+        if (p->noise_position > 0.0) th_noisy += p->noise_position * normal(s);
+        double pos;
+        int64_t counts = 0;
+        if (p->counts_per_rev > 0) {
+            double cpr = (double)p->counts_per_rev;
+            counts = (int64_t)floor(th_noisy * cpr / HB_TWO_PI + 0.5);
+            pos = (double)counts * HB_TWO_PI / cpr;
+        } else {
+            pos = th_noisy;
+        }
+        double friction = friction_now(p, s, &cache);
+
+        /* 2. command */
+        double i_cmd;
+        if (mode == HB_MODE_VELOCITY) {
+            double v_est = s->has_prev ? (pos - s->prev_position) / dt : 0.0;
+            double err = u[k] - v_est;
+            double integral = s->pi_integral + err * dt;
+            i_cmd = p->velocity_kp * err + p->velocity_ki * integral;
+            if (i_cmd > p->current_limit) {
+                i_cmd = p->current_limit;
+                if (err < 0.0) s->pi_integral = integral; /* integrate only out of saturation */
+            } else if (i_cmd < -p->current_limit) {
+                i_cmd = -p->current_limit;
+                if (err > 0.0) s->pi_integral = integral;
+            } else {
+                s->pi_integral = integral;
+            }
+        } else {
+            i_cmd = clip(u[k], -p->current_limit, p->current_limit);
+        }
+        s->prev_position = pos;
+        s->has_prev = 1;
+
+        /* 3. delay, current-loop lag, torque constant, offset, drift */
+        double i_del = i_cmd;
+        if (p->delay_samples > 0) {
+            i_del = s->delay_buf[s->delay_pos];
+            s->delay_buf[s->delay_pos] = i_cmd;
+            s->delay_pos = (s->delay_pos + 1) % p->delay_samples;
+        }
+        double i_avg;
+        if (p->current_lag > 0.0) {
+            i_avg = i_del + (s->current - i_del) * lag_avg;
+            s->current = i_del + (s->current - i_del) * lag_a;
+        } else {
+            i_avg = i_del;
+            s->current = i_del;
+        }
+        double tau = kt_true * i_avg + p->torque_offset + p->torque_drift * s->time;
+
+        out->theta[k] = s->theta;
+        out->omega[k] = s->omega;
+        out->friction[k] = friction;
+        out->current_cmd[k] = i_cmd;
+        out->current_meas[k] = i_meas;
+        out->torque[k] = tau;
+        out->position_meas[k] = pos;
+        out->counts[k] = counts;
+
+        /* 4. mechanics over [t_k, t_k+1) */
+        for (int j = 0; j < substeps; j++) substep(p, s, &cache, tau, h);
+        s->time += dt;
+        if (!isfinite(s->theta) || !isfinite(s->omega)) return -1;
+    }
+    return 0;
+}
+
+void hb_stop_operator(const double *x, int64_t n, const double *deltas, int m, double *state,
+                      double *out) {
+    if (n <= 0) return;
+    for (int j = 0; j < m; j++) out[j] = state[j];
+    for (int64_t i = 1; i < n; i++) {
+        double dx = x[i] - x[i - 1];
+        double *row = out + i * (int64_t)m;
+        const double *prev = row - m;
+        for (int j = 0; j < m; j++) row[j] = clip(prev[j] + dx, -deltas[j], deltas[j]);
+    }
+    for (int j = 0; j < m; j++) state[j] = out[(n - 1) * (int64_t)m + j];
+}

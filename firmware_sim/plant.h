@@ -1,0 +1,96 @@
+/* hilbench plant: a DC motor (or mass) with Maxwell-slip friction, sampled as a device sees it.
+ *
+ * Equations, integration scheme and sampling convention: docs/plant.md.
+ * All quantities are SI: rad, rad/s, N*m, A, s (or m, m/s, N for a linear axis).
+ */
+#ifndef HILBENCH_PLANT_H
+#define HILBENCH_PLANT_H
+
+#include <stdint.h>
+
+#define HB_MAX_ELEMENTS 1024
+#define HB_MAX_DELAY 4096
+#define HB_MODE_CURRENT 0
+#define HB_MODE_VELOCITY 1
+
+typedef struct {
+    int n_elements;              /* Maxwell-slip elements, 0..HB_MAX_ELEMENTS */
+    const double *ms_stiffness;  /* k_i, N*m/rad */
+    const double *ms_delta;      /* slip displacement Delta_i = W_i / k_i, rad */
+    double inertia;              /* J, kg*m^2 */
+    double spring;               /* linear spring, N*m/rad */
+    double viscous_pos;          /* b for omega >= 0, N*m*s/rad */
+    double viscous_neg;          /* b for omega < 0 */
+    double coulomb_pos;          /* F_c for motion in + direction, N*m */
+    double coulomb_neg;          /* F_c for motion in - direction, N*m */
+    double stribeck_excess;      /* F_s - F_c, N*m */
+    double stribeck_velocity;    /* v_s, rad/s (0: no Stribeck) */
+    double torque_constant;      /* nominal k_t, N*m/A */
+    double torque_constant_error;/* relative error of the true k_t */
+    double torque_offset;        /* N*m */
+    double torque_drift;         /* N*m/s */
+    int n_cogging;
+    const double *cogging_order; /* cycles per revolution */
+    const double *cogging_amplitude; /* N*m */
+    const double *cogging_phase; /* rad */
+    int delay_samples;           /* 0..HB_MAX_DELAY */
+    double current_lag;          /* first-order time constant, s (0: off) */
+    int64_t counts_per_rev;      /* 0: ideal encoder */
+    double noise_current;        /* A rms */
+    double noise_position;       /* rad rms */
+    double velocity_kp;          /* A/(rad/s) */
+    double velocity_ki;          /* A/rad */
+    double current_limit;        /* A */
+    int n_restoring;             /* tabulated odd restoring force F_k(x), x >= 0 grid */
+    const double *restoring_x;
+    const double *restoring_f;
+    int n_damping;               /* tabulated odd damping force F_d(v), v >= 0 grid */
+    const double *damping_v;
+    const double *damping_f;
+} hb_params;
+
+typedef struct {
+    double theta;        /* rad */
+    double omega;        /* rad/s */
+    double time;         /* s since the state was initialised */
+    double current;      /* actual motor current (after delay and lag), A */
+    double prev_position;/* previous measured position, for the velocity estimate, rad */
+    double pi_integral;  /* integral of the velocity error, rad */
+    double coulomb_force;/* Coulomb/Stribeck force of the last sub-step, N*m */
+    double spare_normal; /* Box-Muller second deviate */
+    uint64_t rng[4];     /* xoshiro256** */
+    int32_t has_spare;
+    int32_t has_prev;
+    int32_t delay_pos;
+    int32_t n_elements;
+    double delay_buf[HB_MAX_DELAY];
+    double deflection[HB_MAX_ELEMENTS];  /* Maxwell-slip spring deflections delta_i, rad */
+} hb_state;
+
+typedef struct {
+    double *theta;
+    double *omega;
+    double *friction;
+    double *current_cmd;
+    double *current_meas;
+    double *torque;
+    double *position_meas;
+    int64_t *counts;
+} hb_outputs;
+
+void hb_state_init(hb_state *s, const hb_params *p, double theta0, double omega0, uint64_t seed);
+
+/* Run n samples of input u (A in current mode, rad/s in velocity mode), each held for dt and
+ * integrated in `substeps` RK4 sub-steps. Returns 0, or -1 if the state became non-finite. */
+int hb_run(const hb_params *p, hb_state *s, const double *u, int64_t n, double dt, int substeps,
+           int mode, hb_outputs *out);
+
+/* Stop (play) operator for m thresholds over a path x[0..n): out is n*m, row-major.
+ * state[j] is the deflection at x[0] on entry and at x[n-1] on exit. */
+void hb_stop_operator(const double *x, int64_t n, const double *deltas, int m, double *state,
+                      double *out);
+
+/* Standard normal deviates from the plant's generator (for tests of the generator). */
+void hb_normals(hb_state *s, double *out, int64_t n);
+
+#endif

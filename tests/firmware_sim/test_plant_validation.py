@@ -1,0 +1,111 @@
+"""Bad parameters raise one clear error before any C code runs."""
+
+import math
+import re
+
+import numpy as np
+import pytest
+
+from firmware_sim.friction_models import dc_motor, paper_system
+from firmware_sim.plant import (
+    MAX_ELEMENTS,
+    RK4_STABLE_RADIUS,
+    Plant,
+    PlantParameterError,
+    PlantParams,
+    simulate,
+    stop_operator,
+)
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"ms_stiffness": (1.0, -2.0), "ms_slip": (0.1, 0.1)}, r"ms_stiffness\[1\]"),
+        ({"ms_stiffness": (1.0, 2.0), "ms_slip": (0.1, 0.0)}, "slip force must be > 0"),
+        ({"ms_stiffness": (1.0,), "ms_slip": (-0.1,)}, "slip force must be > 0"),
+        ({"ms_stiffness": (1.0, 2.0), "ms_slip": (0.1,)}, "equal length"),
+        ({"ms_stiffness": (float("nan"),), "ms_slip": (0.1,)}, "NaN"),
+        ({"inertia": 0.0}, "inertia"),
+        ({"inertia": float("nan")}, "inertia"),
+        ({"viscous": -1.0}, "viscous"),
+        ({"spring": -1.0}, "spring"),
+        ({"coulomb": float("inf")}, "coulomb"),
+        ({"coulomb": 0.1, "static": 0.05, "stribeck_velocity": 1.0}, "below Coulomb"),
+        ({"coulomb": 0.1, "static": 0.2}, "stribeck_velocity"),
+        ({"delay_samples": -1}, "delay_samples"),
+        ({"delay_samples": 10**6}, "delay_samples"),
+        ({"counts_per_rev": 2.5}, "counts_per_rev"),
+        ({"torque_constant": 0.0}, "torque_constant"),
+        ({"torque_constant_error": -1.0}, "torque_constant_error"),
+        ({"current_limit": 0.0}, "current_limit"),
+        ({"seed": -1}, "seed"),
+        ({"restoring_table": ((0.0, 1.0, 0.5), (0.0, 1.0, 2.0))}, "restoring_table"),
+        ({"damping_table": ((0.0, 1.0), (0.3, 1.0))}, "damping_table"),
+    ],
+)
+def test_bad_parameter_is_refused_with_a_clear_message(changes, message):
+    params = PlantParams(inertia=1.0).replace(**changes)
+    with pytest.raises(PlantParameterError, match=message):
+        Plant(params, 1e-3)
+
+
+def test_too_many_elements():
+    n = MAX_ELEMENTS + 1
+    params = PlantParams(inertia=1.0, ms_stiffness=(1.0,) * n, ms_slip=(0.1,) * n)
+    with pytest.raises(PlantParameterError, match="above the limit"):
+        Plant(params, 1e-3)
+
+
+def test_256_elements_are_allowed():
+    out = simulate(dc_motor(256), np.full(100, 5.0), 1e-4)
+    assert np.all(np.isfinite(out.theta))
+
+
+def test_nan_input_is_refused():
+    with pytest.raises(PlantParameterError, match="NaN or inf.*sample 3"):
+        simulate(paper_system(), np.array([0, 1, 2, np.nan, 4.0]), 1e-3)
+    with pytest.raises(PlantParameterError, match="NaN"):
+        stop_operator(np.array([0.0, np.nan]), np.array([0.1]))
+
+
+def test_unstable_step_is_refused_and_the_message_says_what_to_do():
+    stiff = PlantParams(inertia=1e-4, ms_stiffness=(1e6,), ms_slip=(1.0,))
+    with pytest.raises(PlantParameterError, match=r"unstable step.*substeps >= \d+") as info:
+        Plant(stiff, 1e-3)
+    need = int(re.search(r"substeps >= (\d+)", str(info.value)).group(1))
+    assert need >= math.sqrt(1e6 / 1e-4) * 1e-3 / RK4_STABLE_RADIUS
+    Plant(stiff, 1e-3, substeps=need)  # the advised value is accepted
+    with pytest.raises(PlantParameterError):
+        Plant(stiff, 1e-3, substeps=need - 1)
+
+
+def test_rk4_region_contains_the_half_disc_used_by_the_check():
+    # |R(z)| <= 1 for R(z) = 1 + z + z^2/2 + z^3/6 + z^4/24 on the closed left half-disc |z| <= 2.5
+    r = np.linspace(0, RK4_STABLE_RADIUS, 400)
+    a = np.linspace(np.pi / 2, 3 * np.pi / 2, 800)
+    z = (r[:, None] * np.exp(1j * a[None, :])).ravel()
+    stab = np.abs(1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24)
+    assert stab.max() <= 1 + 1e-12
+    # and the stiff plant really does blow up just outside the limit, so the check is needed
+    lam = 100.0
+    params = PlantParams(inertia=1.0, spring=lam**2)
+    dt = 2.9 / lam  # beyond the imaginary-axis limit 2*sqrt(2) of RK4
+    with pytest.raises(PlantParameterError):
+        Plant(params, dt)
+
+
+def test_wrong_mode_and_dt():
+    with pytest.raises(PlantParameterError, match="mode"):
+        Plant(paper_system(), 1e-3, mode="torque")
+    with pytest.raises(PlantParameterError, match="dt"):
+        Plant(paper_system(), 0.0)
+    with pytest.raises(PlantParameterError, match="substeps"):
+        Plant(paper_system(), 1e-3, substeps=0)
+
+
+def test_params_dict_round_trip_and_unknown_key():
+    p = dc_motor().replace(static=0.9, stribeck_velocity=0.3)
+    assert PlantParams.from_dict(p.to_dict()).to_dict() == p.to_dict()
+    with pytest.raises(PlantParameterError, match="unknown plant parameter"):
+        PlantParams.from_dict({"inertia": 1.0, "mass": 2.0})
