@@ -25,8 +25,8 @@ def numpy_simulate(params, u, dt):
     for i, tau_i in enumerate(u * params.torque_constant):
         theta[i] = th
 
-        def acc(x, v, th0=th):
-            return (tau_i - k @ np.clip(defl + (x - th0), -delta, delta) - b * v) / J
+        def acc(x, v, th0=th, tau=tau_i, d0=defl):
+            return (tau - k @ np.clip(d0 + (x - th0), -delta, delta) - b * v) / J
 
         k1x, k1v = om, acc(th, om)
         k2x = om + 0.5 * dt * k1v
@@ -71,9 +71,9 @@ def run(quick: bool = False) -> list[dict]:
         u = excitation(n_c, dt)
         plant = Plant(p, dt)
         plant.run(u[:1000])  # warm-up
-        c_rate = max(_rate(lambda: Plant(p, dt).run(u), n_c) for _ in range(3))
-        oracle_rate = _rate(lambda: reference_simulate(p, u[:n_py], dt), n_py)
-        numpy_rate = _rate(lambda: numpy_simulate(p, u[:n_py], dt), n_py)
+        c_rate = max(_rate(lambda p=p, u=u: Plant(p, dt).run(u), n_c) for _ in range(3))
+        oracle_rate = _rate(lambda p=p, u=u[:n_py]: reference_simulate(p, u, dt), n_py)
+        numpy_rate = _rate(lambda p=p, u=u[:n_py]: numpy_simulate(p, u, dt), n_py)
         rows.append({"name": f"C plant N={n_el}", "value": c_rate, "unit": "steps/s",
                      "baseline_name": "python oracle", "baseline_value": oracle_rate,
                      "ratio": c_rate / oracle_rate, "target": ">= 300x oracle",

@@ -1,0 +1,280 @@
+"""Campaigns: a TOML list of runs (protocol, parameters, repeats) played one after another.
+
+    [defaults]                      # applies to every run (protocol parameters and device settings)
+    device = "sim://"
+    operator = "ab"
+    sample_rate = 10000
+    current_limit = "8 A"           # a value may carry its unit; it must be the parameter's unit
+
+    [[run]]
+    name = "id"
+    protocol = "identification"     # identification | chirp | stepped_sine
+    repeats = 2
+    amplitude = "4 A"
+    duration = "10 s"
+
+Output: one run file per run and repeat in the output folder (``<name>-<repeat>.h5``) plus
+``index.json``, rewritten atomically after every run. ``--resume`` keeps the runs whose file says
+``completed`` and redoes the others (a crashed or aborted file is kept beside as ``*.failed-N.h5``).
+Everything is validated before anything moves: a bad key, unit or value is reported with file, line
+and reason.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import tomllib
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from bench.errors import BenchError
+from bench.protocols import PROTOCOLS, Protocol, ProtocolError
+from bench.runner import Bench, DeviceSettings, Progress, RunControl, settings_dict
+
+INDEX_NAME = "index.json"
+RUN_KEYS = {"name", "protocol", "repeats"}
+GENERAL_KEYS = {"device", "operator", "notes"}
+SETTING_UNITS = {"current_limit": "A", "velocity_limit": "rad/s", "position_min": "rad", "position_max": "rad",
+                 "watchdog_timeout": "s", "torque_constant": "N*m/A", "counts_per_rev": "counts", "ratio": "1"}
+_QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-z*/^0-9]+)?\s*$")
+
+
+class CampaignError(BenchError):
+    """A campaign file that cannot run; the message names the file, the line and the reason."""
+
+
+@dataclass
+class PlannedRun:
+    name: str
+    repeat: int
+    protocol: Protocol
+    settings: DeviceSettings
+    device: str
+    operator: str = ""
+    notes: str = ""
+
+    @property
+    def key(self) -> str:
+        return f"{self.name}-{self.repeat}"
+
+
+@dataclass
+class Campaign:
+    path: Path
+    runs: list[PlannedRun] = field(default_factory=list)
+
+    @property
+    def device(self) -> str:
+        return self.runs[0].device if self.runs else "sim://"
+
+
+def _line_of(text: str, key: str, section_index: int | None) -> int:
+    """Line (1-based) of ``key =`` in the n-th ``[[run]]`` table (or in [defaults] when None)."""
+    lines = text.splitlines()
+    start, seen = 0, -1
+    for i, line in enumerate(lines):
+        s = line.strip()
+        if section_index is None and s == "[defaults]":
+            start = i
+            break
+        if section_index is not None and s == "[[run]]":
+            seen += 1
+            if seen == section_index:
+                start = i
+                break
+    for i in range(start, len(lines)):
+        if re.match(rf"\s*{re.escape(key)}\s*=", lines[i]):
+            return i + 1
+    return start + 1
+
+
+def _value(raw: Any, unit: str | None, what: str) -> Any:
+    """A TOML value; a string ``"<number> <unit>"`` is checked against ``unit`` and becomes a number."""
+    if isinstance(raw, str) and unit is not None:
+        m = _QUANTITY.match(raw)
+        if not m:
+            raise ValueError(f"{what}: {raw!r} is not a number with a unit")
+        given = m.group(2) or unit
+        if given != unit:
+            raise ValueError(f"{what}: unit {given!r} is wrong, expected {unit!r}")
+        number = float(m.group(1))
+        return int(number) if number.is_integer() and unit in ("counts", "periods", "Hz") else number
+    if isinstance(raw, list):
+        return [_value(v, unit, what) for v in raw]
+    return raw
+
+
+def load_campaign(path: str | Path) -> Campaign:
+    """Parse and validate a campaign file. Raises :class:`CampaignError` (file:line: reason)."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise CampaignError(f"{path}: cannot read: {exc.strerror}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise CampaignError(f"{path}: not valid TOML: {exc}") from None
+    unknown_top = sorted(set(data) - {"defaults", "run"})
+    if unknown_top:
+        raise CampaignError(f"{path}:{_line_of(text, unknown_top[0], None)}: unknown table or key "
+                            f"{unknown_top[0]!r} (expected [defaults] and [[run]])")
+    defaults = data.get("defaults", {})
+    runs = data.get("run", [])
+    if not isinstance(runs, list) or not runs:
+        raise CampaignError(f"{path}: no [[run]] tables")
+    campaign = Campaign(path)
+    names: set[str] = set()
+    for i, table in enumerate(runs):
+        merged = {**defaults, **table}
+        where_table = {k: i for k in table}
+
+        def fail(key: str, reason: str, i: int = i, where_table: dict = where_table) -> CampaignError:
+            line = _line_of(text, key, where_table.get(key))
+            return CampaignError(f"{path}:{line}: run {i + 1}: {reason}")
+
+        proto_name = merged.get("protocol")
+        if proto_name not in PROTOCOLS:
+            raise fail("protocol", f"protocol must be one of {', '.join(PROTOCOLS)}, got {proto_name!r}")
+        cls = PROTOCOLS[proto_name]
+        specs = cls.specs()
+        name = str(merged.get("name", f"{proto_name}{i + 1}"))
+        if not re.match(r"^[A-Za-z0-9_.-]+$", name) or name in names:
+            raise fail("name", f"name {name!r} must be unique and use only letters, digits, '_', '.', '-'")
+        names.add(name)
+        repeats = merged.get("repeats", 1)
+        if not isinstance(repeats, int) or isinstance(repeats, bool) or not 1 <= repeats <= 1000:
+            raise fail("repeats", f"repeats must be a whole number in [1, 1000], got {repeats!r}")
+        mode = merged.get("mode", "current")
+        params, setting_values = {}, {}
+        for key, raw in merged.items():
+            if key in RUN_KEYS or key in GENERAL_KEYS:
+                continue
+            try:
+                if key in specs:
+                    unit = specs[key].unit_for(mode) if mode in ("current", "velocity") else None
+                    params[key] = _value(raw, unit or None, key)
+                elif key in SETTING_UNITS:
+                    setting_values[key] = _value(raw, SETTING_UNITS[key], key)
+                else:
+                    known = sorted(set(specs) | set(SETTING_UNITS) | RUN_KEYS | GENERAL_KEYS)
+                    raise ValueError(f"unknown key {key!r} for protocol {proto_name} "
+                                     f"(known: {', '.join(known)})")
+            except ValueError as exc:
+                raise fail(key, str(exc)) from None
+        try:
+            protocol = cls.from_dict(params)
+        except ProtocolError as exc:
+            bad = next((k for k in params if str(exc).startswith(k)), "protocol")
+            raise fail(bad, str(exc)) from None
+        try:
+            settings = DeviceSettings(**setting_values)
+            protocol.excitation(settings.limit_for(protocol))
+        except (TypeError, ValueError) as exc:
+            raise fail("protocol", str(exc)) from None
+        device = merged.get("device", "sim://")
+        if not isinstance(device, str) or "://" not in device:
+            raise fail("device", f"device must be a URL like sim:// or serial:///dev/ttyUSB0, got {device!r}")
+        for r in range(1, repeats + 1):
+            campaign.runs.append(PlannedRun(name, r, protocol, settings, device,
+                                            str(merged.get("operator", "")), str(merged.get("notes", ""))))
+    devices = {r.device for r in campaign.runs}
+    if len(devices) > 1:
+        raise CampaignError(f"{path}: one campaign runs on one device; found {', '.join(sorted(devices))}")
+    return campaign
+
+
+def read_index(out_dir: Path) -> dict[str, dict]:
+    path = out_dir / INDEX_NAME
+    if not path.exists():
+        return {}
+    try:
+        entries = json.loads(path.read_text())["runs"]
+    except (ValueError, KeyError, TypeError) as exc:
+        raise CampaignError(f"{path}: unreadable campaign index ({exc})") from None
+    return {e["key"]: e for e in entries}
+
+
+def _write_index(out_dir: Path, campaign: Campaign, entries: dict[str, dict]) -> None:
+    doc = {"campaign": str(campaign.path), "schema": "hilbench-campaign-index", "version": 1,
+           "runs": [entries[r.key] for r in campaign.runs if r.key in entries]}
+    tmp = out_dir / (INDEX_NAME + ".tmp")
+    tmp.write_text(json.dumps(doc, indent=2))
+    os.replace(tmp, out_dir / INDEX_NAME)
+
+
+def _file_status(path: Path) -> str:
+    from bench.runfile import open_run
+
+    try:
+        with open_run(path) as run:
+            return run.status
+    except (BenchError, OSError):
+        return "unreadable"
+
+
+@dataclass
+class CampaignProgress:
+    index: int        # position of the run in the campaign (0-based)
+    total: int
+    key: str
+    state: str        # "skipped" | "running" | "completed" | "aborted" | ...
+    run: Progress | None = None
+
+
+def run_campaign(campaign: Campaign, out_dir: str | Path, *, resume: bool = False,
+                 progress: Callable[[CampaignProgress], None] | None = None,
+                 control: RunControl | None = None, bench: Bench | None = None) -> dict[str, dict]:
+    """Play every planned run; returns the index entries by run key. Stops at the first run that does not
+    complete (the index says so), unless it was skipped on resume."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    entries = read_index(out_dir)
+    if entries and not resume:
+        raise CampaignError(f"{out_dir}: holds a campaign already; use --resume or another folder")
+    control = control or RunControl()
+    own = bench is None
+    bench = bench or Bench.open(campaign.device)
+    try:
+        for i, planned in enumerate(campaign.runs):
+            path = out_dir / f"{planned.key}.h5"
+            if path.exists():
+                status = _file_status(path)
+                if status == "completed" and planned.key in entries:
+                    if progress:
+                        progress(CampaignProgress(i, len(campaign.runs), planned.key, "skipped"))
+                    continue
+                n = 1
+                while (failed := out_dir / f"{planned.key}.failed-{n}.h5").exists():
+                    n += 1
+                os.replace(path, failed)
+            bench.settings = planned.settings
+            if progress:
+                progress(CampaignProgress(i, len(campaign.runs), planned.key, "running"))
+            result = bench.run(planned.protocol, path, operator=planned.operator, notes=planned.notes,
+                               control=control,
+                               progress=(lambda p, i=i, k=planned.key: progress(
+                                   CampaignProgress(i, len(campaign.runs), k, "running", p))) if progress else None)
+            entries[planned.key] = {
+                "key": planned.key, "name": planned.name, "repeat": planned.repeat,
+                "protocol": planned.protocol.name, "file": path.name, "status": result.status, "uid": result.uid,
+                "samples": result.samples, "parameters": planned.protocol.parameters(),
+                "settings": settings_dict(planned.settings),
+            }
+            _write_index(out_dir, campaign, entries)
+            if progress:
+                progress(CampaignProgress(i, len(campaign.runs), planned.key, result.status))
+            if result.status != "completed":
+                break
+    finally:
+        if own:
+            bench.close()
+    return entries
+
+
+def protocol_fields(cls: type[Protocol]) -> list[str]:
+    return [f.name for f in fields(cls)]

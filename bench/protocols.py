@@ -1,0 +1,248 @@
+"""Measurement protocols: what a run plays, with units and validated ranges.
+
+Each protocol is a frozen dataclass whose ``SPECS`` are the single source of truth for the CLI options,
+the GUI forms and the campaign files. ``setpoints()`` builds the whole setpoint array from the pure
+excitation functions in :mod:`bench.excitations`. ``segments()`` splits it into the steps a run may pause
+between.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any, ClassVar
+
+import numpy as np
+
+from bench import excitations
+from bench.errors import BenchError
+
+SAMPLE_RATES = (1000, 2000, 5000, 10000, 20000)
+MODES = ("current", "velocity")
+
+
+class ProtocolError(BenchError):
+    """A protocol parameter out of range, of the wrong type or unknown."""
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """Unit, range and help of one protocol parameter. ``unit`` ``"setpoint"`` means A in current mode
+    and rad/s in velocity mode. ``kind`` is ``float``, ``int``, ``str``, ``floats`` (a list) or ``choice``."""
+
+    unit: str
+    minimum: float | None
+    maximum: float | None
+    help: str
+    kind: str = "float"
+    choices: tuple[str, ...] = ()
+
+    def unit_for(self, mode: str) -> str:
+        if self.unit == "setpoint":
+            return excitations.MODES[mode]
+        return self.unit
+
+    def check(self, name: str, value: Any, mode: str) -> Any:
+        """Return ``value`` converted to its kind, or raise :class:`ProtocolError` with name, unit, range."""
+        unit = self.unit_for(mode)
+        if self.kind == "choice":
+            if value not in self.choices:
+                raise ProtocolError(f"{name} must be one of {', '.join(self.choices)}, got {value!r}")
+            return value
+        if self.kind == "floats":
+            if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
+                raise ProtocolError(f"{name} must be a list of numbers in {unit}, got {value!r}")
+            values = tuple(self._number(name, v, unit) for v in value)
+            if not values:
+                raise ProtocolError(f"{name} needs at least one value")
+            return values
+        return self._number(name, value, unit)
+
+    def _number(self, name: str, value: Any, unit: str) -> float | int:
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+            raise ProtocolError(f"{name} must be a number in {unit}, got {value!r}")
+        if self.kind == "int":
+            if int(value) != value:
+                raise ProtocolError(f"{name} must be a whole number, got {value!r}")
+            value = int(value)
+        else:
+            value = float(value)
+        if not math.isfinite(value):
+            raise ProtocolError(f"{name} must be finite, got {value}")
+        lo, hi = self.minimum, self.maximum
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            raise ProtocolError(f"{name} = {value:g} {unit} is outside [{lo:g}, {hi:g}] {unit}"
+                                if lo is not None and hi is not None else f"{name} = {value:g} out of range")
+        return value
+
+
+COMMON_SPECS: dict[str, ParameterSpec] = {
+    "mode": ParameterSpec("", None, None, "current (setpoints in A) or velocity (rad/s, device PI loop)",
+                          kind="choice", choices=MODES),
+    "sample_rate": ParameterSpec("Hz", 1000, 20000, "device sample rate: 1000, 2000, 5000, 10000 or 20000",
+                                 kind="int"),
+}
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """Base class: validation from ``SPECS`` and the common interface."""
+
+    name: ClassVar[str] = ""
+    SPECS: ClassVar[dict[str, ParameterSpec]] = {}
+
+    def __post_init__(self) -> None:
+        mode = self.mode  # type: ignore[attr-defined]
+        if mode not in MODES:
+            raise ProtocolError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+        for f in fields(self):
+            spec = self.specs()[f.name]
+            object.__setattr__(self, f.name, spec.check(f.name, getattr(self, f.name), mode))
+        if self.sample_rate not in SAMPLE_RATES:  # type: ignore[attr-defined]
+            rates = ", ".join(map(str, SAMPLE_RATES))
+            raise ProtocolError(f"sample_rate {self.sample_rate} Hz is not one of {rates} Hz")  # type: ignore
+        self._check()
+
+    def _check(self) -> None:
+        """Cross-field checks of a subclass."""
+
+    @classmethod
+    def specs(cls) -> dict[str, ParameterSpec]:
+        return {**cls.SPECS, **COMMON_SPECS}
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> Protocol:
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ProtocolError(f"unknown {cls.name} parameter(s): {', '.join(unknown)} "
+                                f"(known: {', '.join(sorted(known))})")
+        return cls(**values)
+
+    def parameters(self) -> dict[str, Any]:
+        """JSON-able snapshot of every parameter, with units."""
+        out = {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
+        out["units"] = {k: s.unit_for(self.mode) for k, s in self.specs().items() if s.unit}  # type: ignore
+        return out
+
+    def excitation(self, limit: float | None = None) -> excitations.Excitation:
+        raise NotImplementedError
+
+    def setpoints(self, limit: float | None = None) -> np.ndarray:
+        """The whole setpoint array (A in current mode, rad/s in velocity mode)."""
+        return self.excitation(limit).u
+
+    def segments(self, limit: float | None = None) -> list[tuple[int, int]]:
+        """(start, stop) sample ranges a run plays one after another; pauses happen between them."""
+        return [(0, self.excitation(limit).u.size)]
+
+    @property
+    def duration(self) -> float:
+        return self.excitation().u.size / self.sample_rate  # type: ignore[attr-defined]
+
+
+@dataclass(frozen=True)
+class Identification(Protocol):
+    """Random-enveloped identification input (science.md §6): uniform noise low-passed at ``cutoff``
+    times the three-term square-wave envelope of ``amplitude``, ``period`` and ``offset``."""
+
+    name: ClassVar[str] = "identification"
+    SPECS: ClassVar[dict[str, ParameterSpec]] = {
+        "duration": ParameterSpec("s", 0.1, 3600.0, "length of the run"),
+        "amplitude": ParameterSpec("setpoint", 1e-3, 1e3, "envelope amplitude"),
+        "period": ParameterSpec("s", 0.05, 600.0, "envelope (square-wave) period"),
+        "offset": ParameterSpec("setpoint", -1e3, 1e3, "envelope offset"),
+        "cutoff": ParameterSpec("Hz", 0.5, 2000.0, "low-pass cut-off of the noise"),
+        "seed": ParameterSpec("", 0, 2**32 - 1, "random seed (same seed, same input)", kind="int"),
+    }
+    duration: float = 20.0
+    amplitude: float = 5.0
+    period: float = 4.0
+    offset: float = 0.0
+    cutoff: float = 40.0
+    seed: int = 0
+    mode: str = "current"
+    sample_rate: int = 10000
+
+    def _check(self) -> None:
+        if self.cutoff >= self.sample_rate / 2:
+            raise ProtocolError(f"cutoff {self.cutoff} Hz must be below Nyquist ({self.sample_rate / 2} Hz)")
+
+    def excitation(self, limit: float | None = None) -> excitations.Excitation:
+        return excitations.random_enveloped(
+            self.duration, self.sample_rate, amplitude=self.amplitude, period=self.period, offset=self.offset,
+            cutoff=self.cutoff, seed=self.seed, mode=self.mode, limit=limit)
+
+
+@dataclass(frozen=True)
+class Chirp(Protocol):
+    """Chirp ``gain*sin(pi*rate*t^2)`` (``sweep = quadratic``, the paper's), or a linear/log sine sweep
+    from ``f_start`` to ``f_stop``."""
+
+    name: ClassVar[str] = "chirp"
+    SPECS: ClassVar[dict[str, ParameterSpec]] = {
+        "duration": ParameterSpec("s", 0.1, 3600.0, "length of the run"),
+        "gain": ParameterSpec("setpoint", 1e-3, 1e3, "peak setpoint G"),
+        "sweep": ParameterSpec("", None, None, "quadratic: G*sin(pi*a*t^2); linear/log: f_start..f_stop",
+                               kind="choice", choices=("quadratic", "linear", "log")),
+        "rate": ParameterSpec("Hz/s", 1e-4, 1e4, "a of the quadratic chirp (instantaneous frequency a*t)"),
+        "f_start": ParameterSpec("Hz", 1e-3, 5000.0, "start frequency of a linear/log sweep"),
+        "f_stop": ParameterSpec("Hz", 1e-3, 5000.0, "stop frequency of a linear/log sweep"),
+    }
+    duration: float = 20.0
+    gain: float = 2.0
+    sweep: str = "quadratic"
+    rate: float = 0.1
+    f_start: float = 0.1
+    f_stop: float = 20.0
+    mode: str = "current"
+    sample_rate: int = 10000
+
+    def excitation(self, limit: float | None = None) -> excitations.Excitation:
+        if self.sweep == "quadratic":
+            return excitations.quadratic_chirp(self.duration, self.sample_rate, gain=self.gain, a=self.rate,
+                                               mode=self.mode, limit=limit)
+        return excitations.sweep(self.duration, self.sample_rate, gain=self.gain, f_start=self.f_start,
+                                 f_stop=self.f_stop, method=self.sweep, mode=self.mode, limit=limit)
+
+
+@dataclass(frozen=True)
+class SteppedSine(Protocol):
+    """Stepped sine over ``amplitudes`` x ``frequencies`` (amplitude outer), each step ``settle_periods``
+    then ``measure_periods`` whole periods. A run may pause between steps."""
+
+    name: ClassVar[str] = "stepped_sine"
+    SPECS: ClassVar[dict[str, ParameterSpec]] = {
+        "frequencies": ParameterSpec("Hz", 1e-3, 5000.0, "excitation frequencies", kind="floats"),
+        "amplitudes": ParameterSpec("setpoint", 1e-3, 1e3, "excitation amplitudes", kind="floats"),
+        "settle_periods": ParameterSpec("periods", 0, 10000, "whole periods discarded per step", kind="int"),
+        "measure_periods": ParameterSpec("periods", 1, 10000, "whole periods analysed per step", kind="int"),
+    }
+    frequencies: tuple[float, ...] = field(default=(1.0, 2.0, 5.0))
+    amplitudes: tuple[float, ...] = field(default=(0.5, 2.0))
+    settle_periods: int = 5
+    measure_periods: int = 10
+    mode: str = "current"
+    sample_rate: int = 10000
+
+    def excitation(self, limit: float | None = None) -> excitations.Excitation:
+        return excitations.stepped_sine(self.sample_rate, frequencies=self.frequencies,
+                                        amplitudes=self.amplitudes, settle_periods=self.settle_periods,
+                                        measure_periods=self.measure_periods, mode=self.mode, limit=limit)
+
+    def segments(self, limit: float | None = None) -> list[tuple[int, int]]:
+        w = self.excitation(limit).windows
+        return [(int(r["settle_start"]), int(r["measure_stop"])) for r in w]
+
+
+PROTOCOLS: dict[str, type[Protocol]] = {p.name: p for p in (Identification, Chirp, SteppedSine)}
+
+
+def make_protocol(name: str, values: dict[str, Any]) -> Protocol:
+    """Build protocol ``name`` from a dict of parameters (campaign files, GUI forms)."""
+    if name not in PROTOCOLS:
+        raise ProtocolError(f"unknown protocol {name!r} (known: {', '.join(PROTOCOLS)})")
+    try:
+        return PROTOCOLS[name].from_dict(values)
+    except (TypeError, ValueError) as exc:
+        raise ProtocolError(str(exc)) from exc

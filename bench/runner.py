@@ -1,0 +1,253 @@
+"""The protocol runner: startup (configure, arm), execute (stream, log), shutdown (always).
+
+    with Bench.open("sim://") as bench:
+        result = bench.run(Identification(duration=10, amplitude=4.0), out="runs/id.h5")
+
+Every sample the device returns goes to the run file as it arrives. The file is flushed at least every
+0.5 s of device time and says ``completed``, ``aborted`` or, after a crash, ``crashed``. Whatever
+happens (an exception, Ctrl-C, an abort, a device fault), shutdown zeroes the current and disarms.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+import uuid
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from bench.errors import BenchError
+from bench.protocols import Protocol
+from bench.runfile import DEVICE_CHANNELS, RunWriter
+from drivers import protocol as wire
+from drivers.amplifier import Amplifier
+from drivers.device_url import open_device
+from drivers.errors import DeviceFaultError, DriverError
+
+#: Default device settings: the simulated DC motor's catalogue values (firmware_sim default_sim.toml).
+DEFAULT_TORQUE_CONSTANT = 0.2  # N*m/A
+DEFAULT_COUNTS_PER_REV = 1 << 20
+
+
+@dataclass(frozen=True)
+class DeviceSettings:
+    """Limits and calibration sent to the device with every run (units at the motor shaft)."""
+
+    current_limit: float = 10.0          # A
+    velocity_limit: float = 300.0        # rad/s
+    position_min: float = -math.inf      # rad
+    position_max: float = math.inf      # rad
+    watchdog_timeout: float = 0.1        # s
+    torque_constant: float = DEFAULT_TORQUE_CONSTANT  # N*m/A
+    counts_per_rev: int = DEFAULT_COUNTS_PER_REV
+    ratio: float = 1.0                   # motor revolutions per load revolution
+
+    def config(self, protocol: Protocol) -> wire.Config:
+        mode = wire.Mode.CURRENT if protocol.mode == "current" else wire.Mode.VELOCITY  # type: ignore
+        return wire.Config(sample_rate=protocol.sample_rate, mode=mode,  # type: ignore[attr-defined]
+                           current_limit=self.current_limit, velocity_limit=self.velocity_limit,
+                           position_min=self.position_min, position_max=self.position_max,
+                           watchdog_timeout=self.watchdog_timeout, torque_constant=self.torque_constant,
+                           counts_per_rev=self.counts_per_rev, ratio=self.ratio)
+
+    def limit_for(self, protocol: Protocol) -> float:
+        return self.current_limit if protocol.mode == "current" else self.velocity_limit  # type: ignore
+
+
+@dataclass
+class Progress:
+    """One received sample block, for progress displays and live plots (arrays of the new block)."""
+
+    done: int            # samples received so far
+    total: int           # samples in the protocol
+    eta_s: float         # estimated seconds to go (wall clock)
+    segment: int         # index of the current segment (stepped-sine step)
+    n_segments: int
+    t: np.ndarray        # device time, s
+    current_cmd: np.ndarray  # A
+    current_meas: np.ndarray  # A
+    torque: np.ndarray   # N*m
+    position: np.ndarray  # rad
+    velocity: np.ndarray  # rad/s, backward difference of position (display only; not logged)
+
+
+@dataclass
+class RunResult:
+    path: Path
+    status: str
+    samples: int
+    uid: str = ""
+    message: str = ""
+
+
+@dataclass
+class RunControl:
+    """Thread-safe pause/resume/abort of a run. Pause takes effect at the next segment boundary."""
+
+    _resume: threading.Event = field(default_factory=threading.Event)
+    _abort: threading.Event = field(default_factory=threading.Event)
+
+    def __post_init__(self) -> None:
+        self._resume.set()
+
+    def pause(self) -> None:
+        self._resume.clear()
+
+    def resume(self) -> None:
+        self._resume.set()
+
+    def abort(self) -> None:
+        self._abort.set()
+        self._resume.set()
+
+    @property
+    def paused(self) -> bool:
+        return not self._resume.is_set()
+
+    @property
+    def aborted(self) -> bool:
+        return self._abort.is_set()
+
+    def wait_while_paused(self, keepalive: Callable[[], None], period: float = 0.05) -> None:
+        while not self._resume.wait(period):
+            keepalive()
+
+
+class AbortRun(BenchError):
+    """Raised inside a run when the operator aborts it."""
+
+
+class Bench:
+    """A connected bench: one device, its settings, and the protocols run on it."""
+
+    def __init__(self, amplifier: Amplifier, url: str, settings: DeviceSettings | None = None):
+        self.amplifier = amplifier
+        self.url = url
+        self.settings = settings or DeviceSettings()
+
+    @classmethod
+    def open(cls, url: str = "sim://", settings: DeviceSettings | None = None, timeout: float = 2.0) -> Bench:
+        """Connect to the device at ``url`` (``sim://`` starts the simulated amplifier)."""
+        return cls(open_device(url, timeout=timeout), url, settings)
+
+    def __enter__(self) -> Bench:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self.amplifier.close()
+
+    def identity(self) -> dict:
+        ident = self.amplifier.identity
+        return {k: getattr(ident, k) for k in ident.__slots__}
+
+    def run(self, protocol: Protocol, out: str | Path | None = None, *, operator: str = "", notes: str = "",
+            progress: Callable[[Progress], None] | None = None, control: RunControl | None = None,
+            overwrite: bool = False) -> RunResult:
+        """Run ``protocol`` and log it to ``out`` (default ``runs/<protocol>-<uid>.h5``).
+
+        Raises whatever the device or the link raised after the file has been finished as ``aborted``;
+        :class:`AbortRun` and Ctrl-C are turned into an ``aborted`` result (Ctrl-C is re-raised).
+        """
+        control = control or RunControl()
+        limit = self.settings.limit_for(protocol)
+        excitation = protocol.excitation(limit)
+        segments = protocol.segments(limit)
+        config = self.settings.config(protocol)
+        stamp = uuid.uuid4().hex[:8]
+        path = Path(out) if out is not None else Path("runs") / f"{protocol.name}-{stamp}.h5"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        arrays = {"setpoints": excitation.u}
+        if excitation.windows is not None:
+            arrays["step_windows"] = excitation.windows
+        amp = self.amplifier
+        # -- startup
+        amp.configure(config)
+        writer = RunWriter(
+            path, sample_rate=float(protocol.sample_rate), channels=DEVICE_CHANNELS,  # type: ignore
+            device={**self.identity(), "url": self.url},
+            config={k: getattr(config, k) if not isinstance(getattr(config, k), float) or
+                    math.isfinite(getattr(config, k)) else str(getattr(config, k)) for k in config.__slots__},
+            calibration={"torque_constant": config.torque_constant, "counts_per_rev": config.counts_per_rev,
+                         "ratio": config.ratio, "units": {"torque_constant": "N*m/A", "ratio": "1"}},
+            protocol_name=protocol.name, protocol_params=protocol.parameters(), protocol_arrays=arrays,
+            operator=operator, notes=notes, overwrite=overwrite,
+        )
+        status, message, done = "aborted", "", 0
+        try:
+            amp.arm()
+            done = self._execute(protocol, excitation.u, segments, writer, progress, control)
+            status = "completed"
+        except AbortRun as exc:
+            message = str(exc)
+            writer.add_event("abort", message)
+        except KeyboardInterrupt:
+            message = "interrupted (Ctrl-C)"
+            writer.add_event("abort", message)
+            raise
+        except DeviceFaultError as exc:
+            message = str(exc)
+            writer.add_event("fault", message)
+            raise
+        except BaseException as exc:
+            message = " ".join(str(exc).split()) or type(exc).__name__
+            writer.add_event("error", message)
+            raise
+        finally:
+            # -- shutdown: always zero the current and disarm, then finish the file
+            try:
+                amp.disarm()
+            except DriverError:
+                pass
+            writer.finish(status)
+        return RunResult(path, status, done, writer.uid, message)
+
+    def _execute(self, protocol: Protocol, u: np.ndarray, segments: list[tuple[int, int]], writer: RunWriter,
+                 progress: Callable[[Progress], None] | None, control: RunControl) -> int:
+        amp = self.amplifier
+        total = int(u.size)
+        done = 0
+        t_start = time.monotonic()
+        last_pos = None
+        for seg, (a, b) in enumerate(segments):
+            if control.paused:
+                writer.add_event("pause", f"paused before step {seg}")
+                amp.disarm()
+                control.wait_while_paused(keepalive=amp.status)
+                if not control.aborted:
+                    writer.add_event("resume", f"resumed at step {seg}")
+                    amp.arm()
+            if control.aborted:
+                raise AbortRun(f"aborted by operator after {done} of {total} samples")
+            for blk in amp.stream(u[a:b]):
+                n = len(blk)
+                position = blk.position
+                torque = blk.torque
+                t = blk.time
+                writer.append({"sample_index": blk.index, "t": t, "current_cmd": blk.current_cmd,
+                               "current": blk.current_meas, "torque": torque, "position": position,
+                               "counts": blk.counts})
+                done += n
+                if progress is not None:
+                    prev = position[:1] if last_pos is None else np.array([last_pos])
+                    velocity = np.diff(np.concatenate([prev, position])) * blk.sample_rate
+                    elapsed = time.monotonic() - t_start
+                    eta = elapsed / done * (total - done) if done else math.inf
+                    progress(Progress(done, total, eta, seg, len(segments), t, blk.current_cmd,
+                                      blk.current_meas, torque, position, velocity))
+                if n:
+                    last_pos = float(position[-1])
+                if control.aborted:
+                    raise AbortRun(f"aborted by operator after {done} of {total} samples")
+        return done
+
+
+def settings_dict(settings: DeviceSettings) -> dict:
+    return {k: (v if not isinstance(v, float) or math.isfinite(v) else str(v))
+            for k, v in asdict(settings).items()}

@@ -1,0 +1,136 @@
+"""Protocol runner end to end on the simulated device: logging, shutdown, pause/resume, abort, Ctrl-C,
+SIGKILL."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from bench.protocols import Identification, ProtocolError, SteppedSine
+from bench.runfile import open_run
+from bench.runner import Bench, DeviceSettings, RunControl
+from drivers import protocol as wire
+
+LOCKSTEP = "sim://?pacing=lockstep"
+
+
+@pytest.fixture(scope="module")
+def bench():
+    with Bench.open(LOCKSTEP) as b:
+        yield b
+
+
+def test_identification_run_logs_every_sample(bench, tmp_path):
+    proto = Identification(duration=1.0, amplitude=4.0, seed=3)
+    events = []
+    result = bench.run(proto, tmp_path / "id.h5", operator="tester", progress=events.append)
+    assert result.status == "completed"
+    with open_run(result.path) as run:
+        assert run.status == "completed"
+        idx = run.channel("sample_index")
+        np.testing.assert_array_equal(idx, np.arange(10_000))
+        np.testing.assert_allclose(run.t, idx / 10_000)
+        # the commanded current is the protocol's setpoint array, sent as float32
+        np.testing.assert_array_equal(run.channel("current_cmd"), proto.setpoints().astype(np.float32))
+        assert run.unit("torque") == "N*m" and run.unit("position") == "rad"
+        assert run.protocol_name == "identification"
+        assert run.protocol_params["amplitude"] == 4.0 and run.protocol_params["units"]["amplitude"] == "A"
+        assert run.calibration["torque_constant"] == 0.2 and run.meta["operator"] == "tester"
+        assert run.device["model"]
+    assert events[-1].done == events[-1].total == 10_000
+    assert bench.amplifier.status().state == wire.State.DISARMED  # shutdown disarmed
+
+
+def test_pause_and_resume_between_stepped_sine_steps(bench, tmp_path):
+    proto = SteppedSine(frequencies=(20.0, 40.0), amplitudes=(1.0,), settle_periods=2, measure_periods=4)
+    control = RunControl()
+    paused_at = []
+
+    def on_progress(p):
+        if p.segment == 0 and not paused_at:
+            control.pause()
+            paused_at.append(time.monotonic())
+            import threading
+
+            threading.Timer(0.3, control.resume).start()
+
+    result = bench.run(proto, tmp_path / "ss.h5", progress=on_progress, control=control)
+    assert result.status == "completed"
+    with open_run(result.path) as run:
+        kinds = [e.decode() if isinstance(e, bytes) else e for e in run.events["kind"]]
+        assert kinds.count("pause") == 1 and kinds.count("resume") == 1
+        assert run.channel("sample_index").size == proto.setpoints().size
+
+
+def test_abort_marks_the_file_and_disarms(bench, tmp_path):
+    control = RunControl()
+    proto = Identification(duration=5.0, amplitude=3.0)
+    result = bench.run(proto, tmp_path / "ab.h5", control=control,
+                       progress=lambda p: control.abort() if p.done > 5000 else None)
+    assert result.status == "aborted"
+    assert bench.amplifier.status().state == wire.State.DISARMED
+    with open_run(result.path) as run:
+        assert run.status == "aborted"
+        assert 5000 < run.channel("t").size < 50_000
+
+
+def test_host_refuses_out_of_range_parameters_before_anything_moves(bench, tmp_path):
+    with pytest.raises(ProtocolError, match="sample_rate"):
+        Identification(sample_rate=3000)
+    with pytest.raises(ProtocolError, match="amplitude"):
+        Identification(amplitude=float("nan"))
+    small = Bench(bench.amplifier, LOCKSTEP, DeviceSettings(current_limit=1.0))
+    with pytest.raises(ValueError, match="exceeds"):
+        small.run(Identification(duration=0.5, amplitude=4.0), tmp_path / "x.h5")
+    assert not (tmp_path / "x.h5").exists()
+
+
+def _start_cli_run(tmp_path, duration=30):
+    out = tmp_path / "cli.h5"
+    proc = subprocess.Popen([sys.executable, "-m", "bench.cli", "run", "identify", "--duration", str(duration),
+                             "--quiet", "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        if out.exists():
+            try:
+                with open_run(out) as run:
+                    if run.channel("t").size >= 10_000:  # at least 1 s logged
+                        return proc, out
+            except Exception:  # noqa: BLE001 - file still being created
+                pass
+        time.sleep(0.1)
+    proc.kill()
+    pytest.fail("the run did not start logging within 30 s")
+
+
+def test_ctrl_c_leaves_an_aborted_file_and_a_nonzero_exit(tmp_path):
+    proc, out = _start_cli_run(tmp_path)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=20)
+    assert proc.returncode != 0
+    assert "aborted" in stdout + stderr
+    with open_run(out) as run:
+        assert run.status == "aborted"
+        kinds = [e.decode() if isinstance(e, bytes) else e for e in run.events["kind"]]
+        assert "abort" in kinds
+
+
+def test_sigkill_leaves_a_crashed_file_with_every_flushed_sample(tmp_path):
+    proc, out = _start_cli_run(tmp_path)
+    time.sleep(0.7)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait(timeout=10)
+    # the simulator child loses its host: its watchdog disarms it; the file must open with bench
+    cp = subprocess.run([sys.executable, "-m", "bench.cli", "show", str(out), "--repair"],
+                        capture_output=True, text=True, timeout=60)
+    assert cp.returncode == 0, cp.stderr
+    with open_run(out) as run:
+        assert run.status == "crashed"
+        n = run.channel("sample_index").size
+        assert n >= 10_000
+        np.testing.assert_array_equal(run.channel("sample_index"), np.arange(n))  # no gaps, no duplicates
