@@ -1,0 +1,129 @@
+"""Reading hilbench run files (HDF5 schema v1, docs/run-file.md) for the analysis, with plain h5py.
+
+analysis never imports bench; this is the one place it reads the file layout. A file still being
+written (SWMR) or left by a crash reads as far as it was flushed.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from analysis.errors import AnalysisError
+
+SCHEMA = "hilbench-run"
+#: How sample k of the torque channel relates to the plant's input convention (torque held over
+#: [t_k, t_k+1)), by the file's ``source``; see analysis.regressors.held_torque.
+TORQUE_TIMING = {"device": "hold_previous", "import:emps": "hold_next"}
+
+
+@dataclass
+class RunFile:
+    """One run file's samples and metadata.
+
+    Attributes:
+        path: the file.
+        axis: ``"rotary"`` (rad, N*m) or ``"linear"`` (m, N).
+        sample_rate: Hz.
+        status: ``completed``, ``aborted``, ``crashed`` or ``running`` as stored.
+        source: ``device`` or ``import:<format>``.
+        channels: name -> 1-D array (the flushed samples).
+        units: name -> unit string.
+        protocol_name, protocol_params: what the run played.
+        protocol_arrays: e.g. ``setpoints``, ``step_windows``.
+        torque_timing: ``hold_previous`` (torque from the current sampled at t_k), ``hold_next`` (a command
+            held over the next interval) or ``instant``.
+    """
+
+    path: Path
+    axis: str
+    sample_rate: float
+    status: str
+    source: str
+    channels: dict[str, np.ndarray]
+    units: dict[str, str]
+    protocol_name: str = ""
+    protocol_params: dict[str, Any] = field(default_factory=dict)
+    protocol_arrays: dict[str, np.ndarray] = field(default_factory=dict)
+    calibration: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        return self.path.stem
+
+    @property
+    def torque_timing(self) -> str:
+        return TORQUE_TIMING.get(self.source, "instant")
+
+    @property
+    def t(self) -> np.ndarray:
+        return self.channels["t"]
+
+    def channel(self, name: str) -> np.ndarray:
+        """A channel by name (``force`` reads ``torque`` on a linear axis); AnalysisError if missing."""
+        key = "torque" if name == "force" else name
+        if key not in self.channels:
+            raise AnalysisError(f"{self.path}: no {name!r} channel (has: {', '.join(sorted(self.channels))})")
+        return self.channels[key]
+
+    def arrays(self):
+        """The run as :class:`analysis.identification.RunArrays` (t, torque, position, axis, name)."""
+        from analysis.identification import RunArrays
+
+        torque = self.channels.get("torque")
+        return RunArrays(self.t, torque, self.channel("position"), self.axis, self.name)
+
+
+def _text(value: Any) -> str:
+    if isinstance(value, bytes | np.bytes_):
+        return value.decode()
+    return str(value)
+
+
+def read_run_file(path: str | Path) -> RunFile:
+    """Read a run file. Raises :class:`AnalysisError` for a missing, damaged or foreign file."""
+    import h5py
+
+    path = Path(path)
+    if not path.exists():
+        raise AnalysisError(f"{path}: no such run file")
+    try:
+        f = h5py.File(path, "r", libver="latest", swmr=True, locking=False)
+    except OSError:
+        try:
+            f = h5py.File(path, "r", locking=False)
+        except OSError as exc:
+            raise AnalysisError(f"{path}: not readable as HDF5 (truncated or damaged?): "
+                                f"{' '.join(str(exc).split())}") from None
+    try:
+        with f:
+            attrs = {k: f.attrs[k] for k in f.attrs}
+            if _text(attrs.get("schema", "")) != SCHEMA:
+                raise AnalysisError(f"{path}: not a hilbench run file (no schema={SCHEMA!r} attribute)")
+            if int(attrs.get("schema_version", 0)) != 1:
+                raise AnalysisError(f"{path}: unsupported run-file schema version {attrs.get('schema_version')}")
+            samples = f["samples"]
+            channels = {name: samples[name][()] for name in samples}
+            units = {name: _text(samples[name].attrs.get("unit", "")) for name in samples}
+            n = min((a.size for a in channels.values()), default=0)
+            channels = {k: v[:n] for k, v in channels.items()}
+            proto = f["protocol"] if "protocol" in f else None
+            params, arrays = {}, {}
+            if proto is not None:
+                if "parameters" in proto:
+                    params = json.loads(_text(proto["parameters"][()]))
+                arrays = {k: proto[k][()] for k in proto if k != "parameters"}
+            calibration = json.loads(_text(f["device/calibration"][()])) if "device/calibration" in f else {}
+            return RunFile(
+                path=path, axis=_text(attrs.get("axis", "rotary")), sample_rate=float(attrs["sample_rate"]),
+                status=_text(attrs.get("status", "")), source=_text(attrs.get("source", "device")),
+                channels=channels, units=units,
+                protocol_name=_text(proto.attrs.get("name", "")) if proto is not None else "",
+                protocol_params=params, protocol_arrays=arrays, calibration=calibration,
+            )
+    except (KeyError, ValueError) as exc:
+        raise AnalysisError(f"{path}: damaged or incomplete run file ({exc})") from None
