@@ -26,7 +26,6 @@ serial = "SIM-DEMO"
 
 [plant]
 preset = "dc_motor"
-counts_per_rev = 1048576
 noise_current = 0.01
 seed = 11
 

@@ -1,0 +1,66 @@
+"""``bench info --device URL``: identity, configuration, faults and counters of a device."""
+
+from __future__ import annotations
+
+import math
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser("info",
+                                   help="show a device's identity, configuration, faults and counters",
+                                   description="Connect to a device, print what it reports, disconnect "
+                                               "(closing disarms it).")
+    parser.add_argument("--device", required=True,
+                        help="device URL: serial:///dev/ttyUSB0?baud=2000000, can://socketcan/can0?node=1, "
+                             "sim://")
+    parser.set_defaults(func=run)
+
+
+def describe(amp) -> list[str]:
+    """Lines describing an :class:`drivers.amplifier.Amplifier` (units in every line)."""
+    from drivers import protocol as p
+
+    ident = amp.identity
+    status = amp.status()
+    lines = [
+        f"model: {ident.model}",
+        f"serial: {ident.serial}",
+        f"firmware: {ident.firmware}",
+        f"protocol version: {ident.protocol_version}",
+        f"setpoint buffer: {ident.buffer_capacity} samples (blocks up to {ident.max_block})",
+        f"state: {p.State(status.state).name}",
+        f"faults: {p.describe_faults(status.faults)}"
+        + (f" (first at sample {status.fault_index})" if status.faults else ""),
+        f"sample index: {status.index}",
+        f"current applied: {status.current_applied:.6g} A",
+        f"counters: crc_errors={status.crc_errors} dropped_frames={status.dropped_frames} "
+        f"rx_frames={status.rx_frames} tx_frames={status.tx_frames}",
+    ]
+    cfg = amp.config
+    if cfg is None:
+        lines.append("config: not configured")
+    else:
+        window = "off" if math.isinf(cfg.position_min) and math.isinf(cfg.position_max) else \
+            f"[{cfg.position_min:.6g}, {cfg.position_max:.6g}] rad"
+        watchdog = f"{cfg.watchdog_timeout:.6g} s" if cfg.watchdog_timeout > 0 else "off"
+        lines += [
+            f"sample rate: {cfg.sample_rate} Hz",
+            f"mode: {p.Mode(cfg.mode).name.lower()}",
+            f"current limit: {cfg.current_limit:.6g} A",
+            f"velocity limit: {cfg.velocity_limit:.6g} rad/s",
+            f"position window: {window}",
+            f"watchdog: {watchdog}",
+            f"torque constant: {cfg.torque_constant:.6g} N*m/A",
+            f"encoder: {cfg.counts_per_rev} counts/rev",
+            f"ratio: {cfg.ratio:.6g} motor rev per load rev",
+        ]
+    return lines
+
+
+def run(args) -> int:
+    from drivers.device_url import open_device
+
+    with open_device(args.device) as amp:
+        for line in describe(amp):
+            print(line)
+    return 0

@@ -1,0 +1,58 @@
+"""The hilbench wire protocol (version :data:`PROTOCOL_VERSION`): pure encode/decode, no I/O.
+
+Build a message, then send it: ``link.send(Arm())``. Serial links frame messages with
+:func:`encode_frame` / :class:`FrameDecoder`, CAN links with :func:`encode_can` / :class:`CanReassembler`.
+Specified in ``docs/protocol.md``. The only exception decoding raises is :class:`ProtocolError`.
+"""
+
+from drivers.errors import ProtocolError
+from drivers.protocol.can_framing import (
+    DEVICE_TO_HOST,
+    HOST_TO_DEVICE,
+    CanReassembler,
+    can_id,
+    encode_can,
+    max_payload,
+    split_can_id,
+)
+from drivers.protocol.messages import (
+    MESSAGE_CLASSES,
+    PROTOCOL_VERSION,
+    SAMPLE_RATES,
+    Arm,
+    ClearFaults,
+    Config,
+    Disarm,
+    EStop,
+    Fault,
+    GetConfig,
+    GetIdentity,
+    Heartbeat,
+    Identity,
+    Message,
+    Mode,
+    MsgType,
+    Reply,
+    Result,
+    SampleBlock,
+    SampleStatus,
+    SetpointBlock,
+    State,
+    Status,
+    decode_message,
+    describe_faults,
+    encode_message,
+    make_setpoint_blocks,
+)
+from drivers.protocol.serial_framing import MAX_FRAME_BYTES, FrameDecoder, decode_frame, encode_frame
+
+__all__ = [
+    "PROTOCOL_VERSION", "SAMPLE_RATES", "MAX_FRAME_BYTES", "MESSAGE_CLASSES", "ProtocolError",
+    "Message", "MsgType", "Mode", "State", "Fault", "SampleStatus", "Result",
+    "Arm", "ClearFaults", "Config", "Disarm", "EStop", "GetConfig", "GetIdentity", "Heartbeat", "Identity",
+    "Reply", "SampleBlock", "SetpointBlock", "Status",
+    "decode_message", "encode_message", "describe_faults", "make_setpoint_blocks",
+    "encode_frame", "decode_frame", "FrameDecoder",
+    "HOST_TO_DEVICE", "DEVICE_TO_HOST", "can_id", "split_can_id", "encode_can", "max_payload",
+    "CanReassembler",
+]

@@ -1,0 +1,91 @@
+"""Serial framing: ``COBS(version | type | payload | crc32) 0x00``.
+
+The CRC is ``zlib.crc32`` (IEEE 802.3) over version, type and payload, little-endian. COBS removes every
+0x00 from the frame body, so 0x00 only ever delimits frames and a decoder resynchronises at the next one.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+
+from cobs import cobs
+
+from drivers.errors import ProtocolError
+from drivers.protocol.messages import PROTOCOL_VERSION, Message, decode_message
+
+MAX_FRAME_BYTES = 8192  # decoded frame size limit (header + payload + CRC)
+_CRC = struct.Struct("<I")
+
+
+def encode_frame(msg: Message) -> bytes:
+    """The bytes to write for ``msg``: COBS-encoded frame followed by the 0x00 delimiter."""
+    raw = bytes((PROTOCOL_VERSION, int(msg.TYPE))) + msg.encode()
+    if len(raw) + 4 > MAX_FRAME_BYTES:
+        raise ProtocolError(f"{msg.TYPE.name}: frame of {len(raw) + 4} bytes exceeds {MAX_FRAME_BYTES}")
+    return cobs.encode(raw + _CRC.pack(zlib.crc32(raw))) + b"\x00"
+
+
+def decode_frame(data: bytes) -> Message:
+    """Message from one COBS-encoded frame without its delimiter. Raises only :class:`ProtocolError`."""
+    try:
+        raw = cobs.decode(bytes(data))
+    except cobs.DecodeError as exc:
+        raise ProtocolError(f"bad COBS encoding: {exc}") from exc
+    if len(raw) < 6:
+        raise ProtocolError(f"frame of {len(raw)} bytes is shorter than header + CRC")
+    body, (crc,) = raw[:-4], _CRC.unpack(raw[-4:])
+    if zlib.crc32(body) != crc:
+        raise ProtocolError("CRC mismatch")
+    if body[0] != PROTOCOL_VERSION:
+        raise ProtocolError(f"protocol version {body[0]} (this host speaks {PROTOCOL_VERSION})")
+    return decode_message(body[1], body[2:])
+
+
+class FrameDecoder:
+    """Streaming decoder: :meth:`feed` arbitrary byte chunks, get the complete messages back.
+
+    Bad frames never raise; they are counted (``crc_errors`` counts every rejected frame: bad COBS, CRC,
+    version, payload or oversize) and skipped, and decoding resumes after the next 0x00.
+    """
+
+    def __init__(self, max_frame: int = MAX_FRAME_BYTES) -> None:
+        self._buf = bytearray()
+        self._max_encoded = max_frame + max_frame // 254 + 2
+        self._discarding = False  # inside an oversize frame: drop bytes until the next delimiter
+        self.frames = 0
+        self.crc_errors = 0
+        self.last_error = ""
+
+    def feed(self, chunk: bytes) -> list[Message]:
+        """Append ``chunk`` and return the messages of every frame it completes (possibly none)."""
+        out: list[Message] = []
+        buf = self._buf
+        buf += chunk
+        start = 0
+        while True:
+            end = buf.find(0, start)
+            if end < 0:
+                break
+            frame = buf[start:end]
+            start = end + 1
+            if self._discarding:
+                self._discarding = False
+                continue
+            if not frame:
+                continue  # empty frame: line idle / sender resync
+            try:
+                msg = decode_frame(frame)
+            except ProtocolError as exc:
+                self.crc_errors += 1
+                self.last_error = str(exc)
+                continue
+            self.frames += 1
+            out.append(msg)
+        del buf[:start]
+        if len(buf) > self._max_encoded:
+            buf.clear()
+            self._discarding = True
+            self.crc_errors += 1
+            self.last_error = "oversize frame"
+        return out

@@ -1,0 +1,70 @@
+"""``python -m firmware_sim``: run the simulated amplifier on a new pseudo-terminal or a python-can bus.
+
+With ``--serial`` the first line on stdout is the pty path to open (nothing else is printed there).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from firmware_sim.firmware import PACINGS
+
+
+def build_parser(prog: str = "python -m firmware_sim") -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog=prog,
+                                     description="Simulated hilbench amplifier (a real protocol peer).")
+    where = parser.add_mutually_exclusive_group(required=True)
+    where.add_argument("--serial", action="store_true",
+                       help="serve on a new pseudo-terminal; its path is the first line printed")
+    where.add_argument("--can", metavar="CHANNEL", help="serve on this python-can channel (e.g. vcan0)")
+    parser.add_argument("--interface", default="socketcan",
+                        help="python-can interface for --can (socketcan, udp_multicast, pcan...; "
+                             "default socketcan)")
+    parser.add_argument("--node", type=int, default=1, help="CAN node id, 1..15 (default 1)")
+    parser.add_argument("--fd", action="store_true", help="use CAN FD frames")
+    parser.add_argument("--config",
+                        help="simulator TOML (plant and injected effects); default: the packaged one")
+    parser.add_argument("--seed", type=int, help="override the plant's random seed")
+    parser.add_argument("--pacing", choices=PACINGS, default="realtime",
+                        help="realtime (default) or lockstep (as fast as flow control allows, for tests)")
+    parser.add_argument("--tick", type=float, default=0.004, help="realtime loop period, s (default 0.004)")
+    return parser
+
+
+def main(argv: list[str] | None = None, prog: str = "python -m firmware_sim") -> int:
+    args = build_parser(prog).parse_args(argv)
+    from firmware_sim.device import CanTransport, PtyTransport, serve
+    from firmware_sim.firmware import Firmware
+    from firmware_sim.sim_config import load_sim_config
+
+    try:
+        sim = load_sim_config(args.config, seed=args.seed)
+        if not 0.0005 <= args.tick <= 0.1:
+            raise ValueError(f"--tick must be within 0.0005..0.1 s, got {args.tick}")
+        if args.serial:
+            transport = PtyTransport()
+        else:
+            import can
+
+            bus = can.Bus(interface=args.interface, channel=args.can, fd=args.fd)
+            transport = CanTransport(bus, args.node, args.fd)
+    except (ValueError, OSError, ImportError) as exc:
+        print(f"{prog}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    firmware = Firmware(sim, args.pacing, transport.max_block)
+    if args.serial:
+        print(transport.path, flush=True)
+    else:
+        print(f"{args.interface}:{args.can} node {args.node}", flush=True)
+    try:
+        serve(transport, firmware, args.tick)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        transport.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

