@@ -28,6 +28,8 @@ serial = "SIM-DEMO"
 preset = "dc_motor"
 noise_current = 0.01
 seed = 11
+velocity_kp = 0.5
+velocity_ki = 20.0
 
 [[plant.cogging]]
 order = 6
@@ -50,8 +52,8 @@ def measure(out: Path, duration: float = 20.0) -> dict[str, Path]:
     config = out / "sim-hidden.toml"
     config.write_text(HIDDEN_SIM_CONFIG)
     plan = {
-        "identification": Identification(duration=duration, amplitude=8.0, period=4.0, seed=1),
-        "validation": Identification(duration=duration, amplitude=8.0, period=4.0, seed=2),
+        "identification": Identification(duration=duration, amplitude=16.0, period=4.0, seed=1),
+        "validation": Identification(duration=duration, amplitude=16.0, period=4.0, seed=2),
         "afrf": SteppedSine(frequencies=(2.0, 5.0, 10.0, 20.0), amplitudes=(2.0, 5.0, 8.0), settle_periods=5,
                             measure_periods=10),
     }
@@ -101,9 +103,22 @@ def paper_figure(out: Path) -> Path:
     return path
 
 
+def _cli(*argv: str) -> None:
+    from bench.cli import main
+
+    rc = main([str(a) for a in argv])
+    if rc != 0:
+        raise RuntimeError(f"bench {' '.join(map(str, argv))} exited {rc}")
+
+
+def identify_step(files: dict[str, Path], out: Path) -> None:
+    _cli("identify", files["identification"], "--validate", files["validation"], "--json", out / "model.json",
+         "--plots", out / "identification")
+
+
 def analysis_steps() -> list[tuple[str, Callable[[dict[str, Path], Path], None]]]:
-    """Step 4: the analysis steps that exist in this build, in order."""
-    return []
+    """Step 4: the analysis steps, in order."""
+    return [("identification: Maxwell-slip + inertia, validated on the other seed", identify_step)]
 
 
 def run_demo(out: Path, duration: float = 20.0) -> int:

@@ -156,7 +156,7 @@ class Identification(Protocol):
         "seed": ParameterSpec("", 0, 2**32 - 1, "random seed (same seed, same input)", kind="int"),
     }
     duration: float = 20.0
-    amplitude: float = 8.0
+    amplitude: float = 16.0  # about 4x the DC-motor break-away current: presliding and sliding
     period: float = 4.0
     offset: float = 0.0
     cutoff: float = 40.0

@@ -37,7 +37,7 @@ DEFAULT_COUNTS_PER_REV = 1 << 20
 class DeviceSettings:
     """Limits and calibration sent to the device with every run (units at the motor shaft)."""
 
-    current_limit: float = 10.0          # A
+    current_limit: float = 20.0          # A
     velocity_limit: float = 300.0        # rad/s
     position_min: float = -math.inf      # rad
     position_max: float = math.inf      # rad
