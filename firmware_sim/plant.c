@@ -85,44 +85,26 @@ static double table_odd(double x, int n, const double *gx, const double *gf) {
     return x < 0.0 ? -f : f;
 }
 
-/* The Maxwell-slip force is piecewise linear in the displacement dx from the start of a sub-step.
- * Moving up (dx > 0), elements already at +Delta contribute nothing more and the others add k_i*dx until
- * they reach +Delta; moving down, symmetrically. So F(dx) = F0 + dx*slope_up for 0 < dx <= room_up and
- * F0 + dx*slope_down for -room_down <= dx < 0, where room_* is the smallest distance at which another
- * element saturates in that direction. One pass over the elements per sub-step fills this; the four RK4
- * stages then cost O(1), and the exact sum is used only when a stage crosses a saturation. */
+/* Lazy stop operator. The element deflections are held as e_i at the last commit plus one offset X
+ * (s->ms_offset): while the motion since the commit is monotone and no element reaches its slip limit, every
+ * element moves with the path, so delta_i = e_i + X for the unsaturated ones and the Maxwell-slip force is
+ * linear: F = F0 + X*slope_up for X >= 0 (slope_up sums the elements free to move up) and F0 + X*slope_down
+ * for X <= 0, up to room_up / room_down, the first saturation in each direction. A sub-step is then O(1).
+ * The O(N) commit (delta_i = clip(clip(e_i + X) + dx)) runs only at a reversal or a saturation. */
 typedef struct {
     double f0, slope_up, slope_down, room_up, room_down;
 } ms_cache;
 
-/* Stop-operator update of every element by dx, refilling the cache in the same pass. Four independent
- * lanes (element i goes to lane i % 4) break the dependency chains of the sums, so the loop pipelines and
- * vectorises; the lane sums are combined at the end. */
-static void ms_commit(const hb_params *p, hb_state *s, ms_cache *c, double dx) {
+/* Fill the cache from the committed deflections e_i (no change to the state). Four independent lanes
+ * (element i in lane i % 4) break the dependency chains of the sums. */
+static void ms_fill(const hb_params *p, const hb_state *s, ms_cache *c) {
     double f0[4] = {0.0, 0.0, 0.0, 0.0}, su[4] = {0.0, 0.0, 0.0, 0.0}, sd[4] = {0.0, 0.0, 0.0, 0.0};
     double ru[4] = {HUGE_VAL, HUGE_VAL, HUGE_VAL, HUGE_VAL}, rd[4] = {HUGE_VAL, HUGE_VAL, HUGE_VAL, HUGE_VAL};
-    double *q = s->deflection;
-    const double *ks = p->ms_stiffness, *Ds = p->ms_delta;
+    const double *q = s->deflection, *ks = p->ms_stiffness, *Ds = p->ms_delta;
     const int n = p->n_elements;
-    int i = 0;
-    for (; i + 4 <= n; i += 4) {
-        for (int j = 0; j < 4; j++) {
-            double k = ks[i + j], D = Ds[i + j];
-            double d = clip(q[i + j] + dx, -D, D);
-            q[i + j] = d;
-            f0[j] += k * d;
-            double up = D - d, down = D + d;
-            su[j] += up > 0.0 ? k : 0.0;
-            sd[j] += down > 0.0 ? k : 0.0;
-            double u2 = up > 0.0 ? up : HUGE_VAL, d2 = down > 0.0 ? down : HUGE_VAL;
-            ru[j] = u2 < ru[j] ? u2 : ru[j];
-            rd[j] = d2 < rd[j] ? d2 : rd[j];
-        }
-    }
-    for (int j = 0; i < n; i++, j++) {
-        double k = ks[i], D = Ds[i];
-        double d = clip(q[i] + dx, -D, D);
-        q[i] = d;
+    for (int i = 0; i < n; i++) {
+        int j = i & 3;
+        double k = ks[i], D = Ds[i], d = q[i];
         f0[j] += k * d;
         double up = D - d, down = D + d;
         su[j] += up > 0.0 ? k : 0.0;
@@ -141,33 +123,85 @@ static void ms_commit(const hb_params *p, hb_state *s, ms_cache *c, double dx) {
     c->room_down = r01 < r23 ? r01 : r23;
 }
 
-static void ms_cache_fill(const hb_params *p, hb_state *s, ms_cache *c) { ms_commit(p, s, c, 0.0); }
+/* Is the path "X since the commit, then dx" monotone and free of saturations? */
+static inline int ms_linear(const ms_cache *c, double X, double dx) {
+    double y = X + dx;
+    return (dx >= 0.0 && X >= 0.0 && y <= c->room_up) || (dx <= 0.0 && X <= 0.0 && -y <= c->room_down);
+}
 
-static inline __attribute__((always_inline)) double maxwell_force(const hb_params *p, const hb_state *s, const ms_cache *c, double dx) {
-    if (dx >= 0.0 && dx <= c->room_up) return c->f0 + dx * c->slope_up;
-    if (dx < 0.0 && -dx <= c->room_down) return c->f0 + dx * c->slope_down;
+/* Advance every element by the sub-step's displacement dx (stop operator), lazily. */
+static void ms_commit(const hb_params *p, hb_state *s, ms_cache *c, double dx) {
+    double X = s->ms_offset;
+    if (ms_linear(c, X, dx)) {
+        s->ms_offset = X + dx;
+        return;
+    }
+    double *q = s->deflection;
+    for (int i = 0; i < p->n_elements; i++) {
+        double D = p->ms_delta[i];
+        q[i] = clip(clip(q[i] + X, -D, D) + dx, -D, D);
+    }
+    s->ms_offset = 0.0;
+    ms_fill(p, s, c);
+}
+
+static inline __attribute__((always_inline)) double maxwell_force(const hb_params *p, const hb_state *s,
+                                                                   const ms_cache *c, double dx) {
+    double X = s->ms_offset, y = X + dx;
+    if (dx >= 0.0 && X >= 0.0 && y <= c->room_up) return c->f0 + y * c->slope_up;
+    if (dx <= 0.0 && X <= 0.0 && -y <= c->room_down) return c->f0 + y * c->slope_down;
     double f = 0.0;
     const double *k = p->ms_stiffness, *d = p->ms_delta, *q = s->deflection;
-    for (int i = 0; i < p->n_elements; i++) f += k[i] * clip(q[i] + dx, -d[i], d[i]);
+    for (int i = 0; i < p->n_elements; i++) f += k[i] * clip(clip(q[i] + X, -d[i], d[i]) + dx, -d[i], d[i]);
+    return f;
+}
+
+/* Maxwell-slip force at the current state (the lazy offset is always within its linear range). */
+static inline double maxwell_now(const ms_cache *c, double X) {
+    return c->f0 + X * (X >= 0.0 ? c->slope_up : c->slope_down);
+}
+
+void hb_deflections(const hb_params *p, const hb_state *s, double *out) {
+    for (int i = 0; i < p->n_elements; i++) {
+        double D = p->ms_delta[i];
+        out[i] = clip(s->deflection[i] + s->ms_offset, -D, D);
+    }
+}
+
+/* What a run's parameters switch on, decided once per hb_run call instead of in every RK4 stage. */
+typedef struct {
+    int extras;        /* cogging or tables present */
+    int dry;           /* Coulomb or Stribeck present */
+    int asym_viscous;  /* viscous differs by direction */
+} hb_features;
+
+static hb_features features_of(const hb_params *p) {
+    hb_features f;
+    f.extras = p->n_cogging > 0 || p->n_restoring > 0 || p->n_damping > 0;
+    f.dry = p->coulomb_pos > 0.0 || p->coulomb_neg > 0.0 || p->stribeck_excess > 0.0;
+    f.asym_viscous = p->viscous_pos != p->viscous_neg;
     return f;
 }
 
 /* Every smooth (single-valued) force resisting motion, at angle theta and velocity omega. */
-static inline __attribute__((always_inline)) double smooth_force(const hb_params *p, const hb_state *s, const ms_cache *c, double theta,
-                           double omega) {
+static inline __attribute__((always_inline)) double smooth_force(const hb_params *p, const hb_state *s,
+                                                                  const ms_cache *c, const hb_features *ft,
+                                                                  double theta, double omega) {
     double f = maxwell_force(p, s, c, theta - s->theta);
     f += p->spring * theta;
-    f += (omega >= 0.0 ? p->viscous_pos : p->viscous_neg) * omega;
-    for (int j = 0; j < p->n_cogging; j++)
-        f += p->cogging_amplitude[j] * sin(p->cogging_order[j] * theta + p->cogging_phase[j]);
-    if (p->n_restoring > 0) f += table_odd(theta, p->n_restoring, p->restoring_x, p->restoring_f);
-    if (p->n_damping > 0) f += table_odd(omega, p->n_damping, p->damping_v, p->damping_f);
+    f += (ft->asym_viscous && omega < 0.0 ? p->viscous_neg : p->viscous_pos) * omega;
+    if (ft->extras) {
+        for (int j = 0; j < p->n_cogging; j++)
+            f += p->cogging_amplitude[j] * sin(p->cogging_order[j] * theta + p->cogging_phase[j]);
+        if (p->n_restoring > 0) f += table_odd(theta, p->n_restoring, p->restoring_x, p->restoring_f);
+        if (p->n_damping > 0) f += table_odd(omega, p->n_damping, p->damping_v, p->damping_f);
+    }
     return f;
 }
 
 /* Total friction torque at the current state (excludes spring and cogging), N*m. */
 static double friction_now(const hb_params *p, const hb_state *s, const ms_cache *c) {
-    double f = c->f0;
+    double f = maxwell_now(c, s->ms_offset);
     f += (s->omega >= 0.0 ? p->viscous_pos : p->viscous_neg) * s->omega;
     f += s->coulomb_force;
     if (p->n_restoring > 0) f += table_odd(s->theta, p->n_restoring, p->restoring_x, p->restoring_f);
@@ -186,24 +220,25 @@ static inline __attribute__((always_inline)) double coulomb_level(const hb_param
 }
 
 /* Classical RK4 over h; dir != 0 adds the sliding Coulomb/Stribeck force dir*level(omega). */
-static inline __attribute__((always_inline)) void rk4(const hb_params *p, const hb_state *s, const ms_cache *c, double tau, double h,
-                double dir, double *th_out, double *om_out) {
+static inline __attribute__((always_inline)) void rk4(const hb_params *p, const hb_state *s, const ms_cache *c,
+                                                      const hb_features *ft, double tau, double h, double dir,
+                                                      double *th_out, double *om_out) {
     const double inv_j = 1.0 / p->inertia;
     double th = s->theta, om = s->omega;
     double k1x = om;
-    double f1 = smooth_force(p, s, c, th, om);
+    double f1 = smooth_force(p, s, c, ft, th, om);
     if (dir != 0.0) f1 += dir * coulomb_level(p, dir, om);
     double k1v = (tau - f1) * inv_j;
     double k2x = om + 0.5 * h * k1v;
-    double f2 = smooth_force(p, s, c, th + 0.5 * h * k1x, k2x);
+    double f2 = smooth_force(p, s, c, ft, th + 0.5 * h * k1x, k2x);
     if (dir != 0.0) f2 += dir * coulomb_level(p, dir, k2x);
     double k2v = (tau - f2) * inv_j;
     double k3x = om + 0.5 * h * k2v;
-    double f3 = smooth_force(p, s, c, th + 0.5 * h * k2x, k3x);
+    double f3 = smooth_force(p, s, c, ft, th + 0.5 * h * k2x, k3x);
     if (dir != 0.0) f3 += dir * coulomb_level(p, dir, k3x);
     double k3v = (tau - f3) * inv_j;
     double k4x = om + h * k3v;
-    double f4 = smooth_force(p, s, c, th + h * k3x, k4x);
+    double f4 = smooth_force(p, s, c, ft, th + h * k3x, k4x);
     if (dir != 0.0) f4 += dir * coulomb_level(p, dir, k4x);
     double k4v = (tau - f4) * inv_j;
     *th_out = th + h / 6.0 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x);
@@ -215,25 +250,25 @@ static inline __attribute__((always_inline)) void rk4(const hb_params *p, const 
  * step. If the rotor is at rest or would reverse within the step: RK4 without Coulomb, then an implicit
  * (Moreau) velocity projection, so sticking is exact and there is no chattering. Finally the element
  * deflections are committed with the step's displacement (stop operator). */
-static void substep(const hb_params *p, hb_state *s, ms_cache *c, double tau, double h) {
+static void substep(const hb_params *p, hb_state *s, ms_cache *c, const hb_features *ft, double tau,
+                    double h) {
     const double J = p->inertia;
     double th = s->theta, om = s->omega;
     double th_new, om_new;
-    int dry = p->coulomb_pos > 0.0 || p->coulomb_neg > 0.0 || p->stribeck_excess > 0.0;
 
-    if (!dry) {
-        rk4(p, s, c, tau, h, 0.0, &th_new, &om_new);
+    if (!ft->dry) {
+        rk4(p, s, c, ft, tau, h, 0.0, &th_new, &om_new);
         s->coulomb_force = 0.0;
     } else {
         double dir = om > 0.0 ? 1.0 : (om < 0.0 ? -1.0 : 0.0);
         int sliding = 0;
         if (dir != 0.0) {
-            rk4(p, s, c, tau, h, dir, &th_new, &om_new);
+            rk4(p, s, c, ft, tau, h, dir, &th_new, &om_new);
             sliding = om_new * dir > 0.0;
             if (sliding) s->coulomb_force = dir * coulomb_level(p, dir, om_new);
         }
         if (!sliding) {
-            rk4(p, s, c, tau, h, 0.0, &th_new, &om_new);
+            rk4(p, s, c, ft, tau, h, 0.0, &th_new, &om_new);
             double free_dir = om_new >= 0.0 ? 1.0 : -1.0;
             double dv = h * coulomb_level(p, free_dir, om) / J;
             double om_free = om_new;
@@ -259,8 +294,9 @@ int hb_run(const hb_params *p, hb_state *s, const double *u, int64_t n, double d
     const double kt_true = p->torque_constant * (1.0 + p->torque_constant_error);
     const double lag_a = p->current_lag > 0.0 ? exp(-dt / p->current_lag) : 0.0;
     const double lag_avg = p->current_lag > 0.0 ? p->current_lag / dt * (1.0 - lag_a) : 0.0;
+    const hb_features ft = features_of(p);
     ms_cache cache;
-    ms_cache_fill(p, s, &cache);
+    ms_fill(p, s, &cache);
 
     for (int64_t k = 0; k < n; k++) {
         /* 1. measure at t_k */
@@ -328,7 +364,7 @@ int hb_run(const hb_params *p, hb_state *s, const double *u, int64_t n, double d
         out->counts[k] = counts;
 
         /* 4. mechanics over [t_k, t_k+1) */
-        for (int j = 0; j < substeps; j++) substep(p, s, &cache, tau, h);
+        for (int j = 0; j < substeps; j++) substep(p, s, &cache, &ft, tau, h);
         s->time += dt;
         if (!isfinite(s->theta) || !isfinite(s->omega)) return -1;
     }

@@ -57,6 +57,7 @@ typedef struct {
     double prev_position;/* previous measured position, for the velocity estimate, rad */
     double pi_integral;  /* integral of the velocity error, rad */
     double coulomb_force;/* Coulomb/Stribeck force of the last sub-step, N*m */
+    double ms_offset;    /* lazy stop operator: displacement since the last commit, rad */
     double spare_normal; /* Box-Muller second deviate */
     uint64_t rng[4];     /* xoshiro256** */
     int32_t has_spare;
@@ -64,7 +65,7 @@ typedef struct {
     int32_t delay_pos;
     int32_t n_elements;
     double delay_buf[HB_MAX_DELAY];
-    double deflection[HB_MAX_ELEMENTS];  /* Maxwell-slip spring deflections delta_i, rad */
+    double deflection[HB_MAX_ELEMENTS];  /* Maxwell-slip deflections at the last commit, rad */
 } hb_state;
 
 typedef struct {
@@ -89,6 +90,9 @@ int hb_run(const hb_params *p, hb_state *s, const double *u, int64_t n, double d
  * state[j] is the deflection at x[0] on entry and at x[n-1] on exit. */
 void hb_stop_operator(const double *x, int64_t n, const double *deltas, int m, double *state,
                       double *out);
+
+/* Current deflections delta_i = clip(e_i + offset) of the n elements, rad. */
+void hb_deflections(const hb_params *p, const hb_state *s, double *out);
 
 /* Standard normal deviates from the plant's generator (for tests of the generator). */
 void hb_normals(hb_state *s, double *out, int64_t n);

@@ -395,8 +395,10 @@ class Plant:
     @property
     def deflections(self) -> np.ndarray:
         """Maxwell-slip spring deflections delta_i (rad), a copy."""
-        n = self.params.n_elements
-        return np.frombuffer(ffi.buffer(self._state.deflection, 8 * n), dtype=np.float64).copy()
+        out = np.empty(self.params.n_elements)
+        if out.size:
+            lib.hb_deflections(self._c.struct, self._state, ffi.cast("double *", ffi.from_buffer(out)))
+        return out
 
     def get_state(self) -> bytes:
         """The complete state (mechanics, effects, generator) as bytes."""

@@ -56,6 +56,7 @@ typedef struct {
     double prev_position;
     double pi_integral;
     double coulomb_force;
+    double ms_offset;
     double spare_normal;
     uint64_t rng[4];
     int32_t has_spare;
@@ -83,6 +84,7 @@ int hb_run(const hb_params *p, hb_state *s, const double *u, int64_t n, double d
 void hb_stop_operator(const double *x, int64_t n, const double *deltas, int m, double *state,
                       double *out);
 void hb_normals(hb_state *s, double *out, int64_t n);
+void hb_deflections(const hb_params *p, const hb_state *s, double *out);
 """
 
 ffibuilder = FFI()
