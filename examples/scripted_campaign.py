@@ -1,0 +1,33 @@
+"""A scripted measurement campaign with the Python API: identification at three seeds, then identify the
+friction model on the first run and validate it on the others.
+
+    python examples/scripted_campaign.py runs/scripted
+"""
+
+import sys
+from pathlib import Path
+
+from analysis.identification import identify
+from analysis.run_file import read_run_file
+from bench.protocols import Identification
+from bench.runner import Bench
+
+
+def main(out: Path) -> None:
+    files = []
+    with Bench.open("sim://?pacing=lockstep") as bench:
+        for seed in (1, 2, 3):
+            result = bench.run(Identification(duration=10, amplitude=16.0, seed=seed), out / f"id-{seed}.h5",
+                               operator="script", overwrite=True)
+            print(result.status, result.path)
+            files.append(result.path)
+    train = read_run_file(files[0]).arrays()
+    for path in files[1:]:
+        fit = identify(train, validate=read_run_file(path).arrays())
+        m = fit.model
+        print(f"{path.name}: J = {m.inertia:.6g} kg*m^2, break-away {m.breakaway:.4f} N*m, "
+              f"validation position NRMSE {fit.figures['validation_position_nrmse']:.3f}")
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1] if len(sys.argv) > 1 else "runs/scripted"))
