@@ -19,6 +19,19 @@ SCHEMA = "hilbench-run"
 #: How sample k of the torque channel relates to the plant's input convention (torque held over
 #: [t_k, t_k+1)), by the file's ``source``; see analysis.regressors.held_torque.
 TORQUE_TIMING = {"device": "hold_previous", "import:emps": "hold_next"}
+TIMINGS = ("auto", "hold_previous", "hold_next", "instant")
+
+
+def torque_timing_for(source: str, timing: str = "auto", channel: str = "torque") -> str:
+    """The torque timing for ``channel`` of a run whose file says ``source``: ``timing`` unless it is
+    ``auto``. A commanded channel (``*_cmd``) is held over the next interval wherever it comes from."""
+    if timing not in TIMINGS:
+        raise AnalysisError(f"torque timing must be one of {', '.join(TIMINGS)}, got {timing!r}")
+    if timing != "auto":
+        return timing
+    if channel.endswith("_cmd"):
+        return "hold_next"
+    return TORQUE_TIMING.get(source, "instant")
 
 
 @dataclass
@@ -57,7 +70,7 @@ class RunFile:
 
     @property
     def torque_timing(self) -> str:
-        return TORQUE_TIMING.get(self.source, "instant")
+        return torque_timing_for(self.source)
 
     @property
     def t(self) -> np.ndarray:
@@ -92,13 +105,18 @@ def read_run_file(path: str | Path) -> RunFile:
     if not path.exists():
         raise AnalysisError(f"{path}: no such run file")
     try:
-        f = h5py.File(path, "r", libver="latest", swmr=True, locking=False)
-    except OSError:
-        try:
-            f = h5py.File(path, "r", locking=False)
-        except OSError as exc:
+        f = h5py.File(path, "r", locking=False)
+    except OSError as exc:
+        # A file being written (or left by a crash) is flagged open-for-write: read it as an SWMR reader.
+        # Only then: SWMR on a truncated file makes HDF5 retry for a long time.
+        text = str(exc)
+        if "already open for write" not in text and "locking flag values" not in text:
             raise AnalysisError(f"{path}: not readable as HDF5 (truncated or damaged?): "
-                                f"{' '.join(str(exc).split())}") from None
+                                f"{' '.join(text.split())}") from None
+        try:  # default locking: a writer in this very process needs the flags matched
+            f = h5py.File(path, "r", libver="latest", swmr=True)
+        except OSError as exc2:
+            raise AnalysisError(f"{path}: not readable: {' '.join(str(exc2).split())}") from None
     try:
         with f:
             attrs = {k: f.attrs[k] for k in f.attrs}

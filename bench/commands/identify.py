@@ -30,11 +30,11 @@ def register(subparsers) -> None:
     parser.add_argument("--spring", action="store_true", help="add a linear spring K*position")
     parser.add_argument(
         "--torque-timing",
-        choices=("hold_previous", "hold_next", "instant"),
-        default="hold_previous",
-        help="what torque sample k means: hold_previous = mean over [t_k-1, t_k) (a measured "
-        "current, the device default); hold_next = held over [t_k, t_k+1) (a command); "
-        "instant = value at t_k",
+        choices=("auto", "hold_previous", "hold_next", "instant"),
+        default="auto",
+        help="what torque sample k means: auto (default) = from the file's source (device runs: "
+        "hold_previous; EMPS imports: hold_next); hold_previous = mean over [t_k-1, t_k) (a measured "
+        "current); hold_next = held over [t_k, t_k+1) (a command); instant = value at t_k",
     )
     parser.add_argument("--refine", action="store_true", help="refine the thresholds (variable projection)")
     parser.set_defaults(func=run)
@@ -67,16 +67,20 @@ def run(args) -> int:
     from analysis.identification import identify
     from analysis.maxwell_fit import LipSettings
     from analysis.model_file import model_document, write_model
+    from analysis.run_file import torque_timing_for
+    from bench.runfile import open_run
 
     train = _arrays(args.run)
     val = _arrays(args.validate) if args.validate else None
+    with open_run(args.run) as r:
+        timing = torque_timing_for(str(r.meta.get("source", "device")), args.torque_timing)
     settings = LipSettings(
         n_thresholds=args.thresholds,
         cutoff=args.cutoff,
         coulomb=args.coulomb,
         offset=args.offset,
         spring=args.spring,
-        timing=args.torque_timing,
+        timing=timing,
         refine=args.refine,
     )
     res = identify(train, method=args.method, validate=val, settings=settings)

@@ -1,0 +1,25 @@
+"""The residual loop: what does a fitted friction model get wrong, and which physical effect is it?
+
+    from analysis.residual import prepare_run, residual_loop
+    result = residual_loop(prepare_run(x, tau, fs), validation=prepare_run(x2, tau2, fs))
+    result.to_dict()   # the JSON report (docs/residual-report.md)
+
+Modules: ``rundata`` (filtered rows of a run), ``design`` (joint bounded least squares),
+``candidates`` (the registry of model terms), ``diagnostics`` (statistics and tests on a residual),
+``selection`` (the loop), ``simulation_error`` (windowed simulation with the C plant), ``report``
+(JSON, PNG figures and a Markdown summary), ``runs`` (reading run files with h5py).
+"""
+
+from analysis.residual.candidates import REGISTRY, Term, get_term, register
+from analysis.residual.rundata import RunData, prepare_run
+from analysis.residual.selection import (
+    DEFAULT_START,
+    EMPS_START,
+    NO_EFFECT,
+    LoopOptions,
+    LoopResult,
+    residual_loop,
+)
+
+__all__ = ["DEFAULT_START", "EMPS_START", "NO_EFFECT", "REGISTRY", "LoopOptions", "LoopResult", "RunData", "Term",
+           "get_term", "prepare_run", "register", "residual_loop"]

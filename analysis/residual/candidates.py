@@ -1,0 +1,459 @@
+"""Model terms of the residual loop: a registry of named, parameterised effects.
+
+Each term contributes columns to the joint linear design (``analysis.residual.design``); a few carry
+nonlinear settings searched in 1-D over the linear solve (delay, Stribeck velocity) or read from a
+diagnostic (harmonic orders from the angle-domain spectrum). Conventions (rotary names; a linear axis
+reads m, m/s, N, kg):
+
+    J*theta'' + F(theta, theta', t) = tau_applied = (1 + eps)*tau(t - d)      (F: every friction/load term)
+
+| term | columns (each L[.] at the rows) | parameters | sign |
+|---|---|---|---|
+| inertia | theta'' | J | >= 0 |
+| maxwell_slip | S_Delta_j[theta] on the threshold grid | k_j (W_j = k_j*Delta_j) | >= 0 |
+| coulomb | sign(v) | F_c | >= 0 |
+| viscous | v | b | >= 0 |
+| offset | 1 | c0 (constant load; plant torque_offset = -c0) | free |
+| offset_drift | 1, t | c0, c1 (load c0 + c1*t) | free |
+| stribeck | sign(v)*exp(-(v/v_s)^2) | F_s - F_c; v_s searched | >= 0 |
+| asymmetric_friction | max(v,0), min(v,0), [v>0], -[v<0] | b+, b-, F_c+, F_c- | >= 0 |
+| position_periodic | sin(k_n theta), cos(k_n theta) | A_n, phi_n: A_n*sin(k_n theta + phi_n) | free |
+| position_dependent_friction | sign(v)*sin(k_n theta), sign(v)*cos(k_n theta) | A_n, phi_n | free |
+| delay | (shifts the torque: tau(t - d)) | d, searched | >= 0 |
+| torque_gain | tau(t - d) | eps: applied torque (1 + eps)*tau | free |
+
+k_n is the spatial angular frequency in rad per unit position: on a rotary axis the harmonic order
+(cycles/rev); on a linear axis 2*pi/wavelength.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from analysis.friction_model import AXES
+from analysis.residual.design import Fit, Setting
+from analysis.residual.rundata import RunData
+
+FREE = -np.inf
+
+
+def _units(axis: str) -> dict:
+    u = AXES[axis]
+    return {"torque": u["torque"], "position": u["position"], "velocity": f"{u['position']}/s",
+            "viscous": u["viscous"], "inertia": u["inertia"], "stiffness": u["stiffness"]}
+
+
+class Term:
+    """A named model term. Subclasses define ``columns``; the defaults describe a plain term."""
+
+    name: str = ""
+    physics: str = ""  # what it is physically, one line
+    diagnostics: tuple[str, ...] = ()  # diagnostics whose significance points to this term
+    replaces: tuple[str, ...] = ()  # terms this one contains (removed from the model when it is added)
+    main: str = ""  # the main parameter's key in ``parameters``
+    candidate: bool = True  # offered by the loop (inertia is not)
+
+    def columns(self, run: RunData, nl: dict, setting: Setting) -> np.ndarray:
+        raise NotImplementedError
+
+    def lower(self, nl: dict, q: int) -> np.ndarray:
+        return np.zeros(q)
+
+    def delay(self, nl: dict) -> float:
+        return 0.0
+
+    def static_level(self, coef: np.ndarray) -> float:
+        """Static (set-valued at rest) friction level this term contributes, N*m or N."""
+        return 0.0
+
+    def applicable(self, setting: Setting, model_names: list[str]) -> str | None:
+        """None if the term can be fitted, else the reason it cannot."""
+        return None
+
+    def settings(self, runs: list[RunData], diagnostics: dict) -> list[dict]:
+        """Nonlinear settings to try (a 1-D grid), or [{}]; an empty list means nothing to fit."""
+        return [{}]
+
+    refine_key: str | None = None  # scalar nonlinear setting refined by a parabola through the grid minimum
+    refine_log: bool = False
+
+    def parameters(self, fit: Fit, nl: dict, axis: str) -> tuple[dict, dict]:
+        """(parameters, standard errors) as JSON-friendly dicts with a ``units`` entry."""
+        raise NotImplementedError
+
+    def plant(self, fit: Fit, nl: dict) -> dict:
+        """PlantParams fields this term sets (``stribeck_excess`` is resolved against ``coulomb``)."""
+        return {}
+
+
+def _sym_col(run: RunData, key: str, fn) -> np.ndarray:
+    return run.cached((key,), lambda: run.filt(fn(run.velocity_fast))[:, None])
+
+
+class Inertia(Term):
+    name, physics, main, candidate = "inertia", "rigid-body inertia J", "inertia", False
+
+    def columns(self, run, nl, setting):
+        if setting.fixed_inertia is not None:
+            return np.zeros((run.n_rows, 0))
+        return run.data.acceleration[:, None]
+
+    def parameters(self, fit, nl, axis):
+        u = _units(axis)
+        if fit.setting.fixed_inertia is not None:
+            return {"inertia": fit.setting.fixed_inertia, "fixed": True, "units": {"inertia": u["inertia"]}}, {}
+        return ({"inertia": float(fit.term_coef(self.name)[0]), "units": {"inertia": u["inertia"]}},
+                {"inertia": float(fit.term_se(self.name)[0])})
+
+    def plant(self, fit, nl):
+        if fit.setting.fixed_inertia is not None:
+            return {"inertia": fit.setting.fixed_inertia}
+        return {"inertia": float(fit.term_coef(self.name)[0])}
+
+
+class MaxwellSlip(Term):
+    """Stop-operator columns on the threshold grid, plus the Delta -> 0 element: below the encoder
+    resolution (where the grid starts) an element slips after an unmeasurably small travel, which is
+    Coulomb friction W_0*sign(v). Without it every real Maxwell-slip model with sub-resolution thresholds
+    would show a "missing" Coulomb term."""
+
+    name, main = "maxwell_slip", "breakaway"
+    physics = "presliding hysteresis: Maxwell-slip elements (stiffness k_i, slip force W_i)"
+    diagnostics = ("low_speed", "position")
+    replaces = ("coulomb",)
+
+    def columns(self, run, nl, setting):
+        return np.column_stack([_sym_col(run, "sign", np.sign), run.stop(setting.thresholds)])
+
+    def static_level(self, coef):
+        return float(coef[0])
+
+    def parameters(self, fit, nl, axis):
+        u = _units(axis)
+        c = fit.term_coef(self.name)
+        w0, k = float(c[0]), c[1:]
+        d = fit.setting.thresholds
+        keep = k > 0
+        w = k[keep] * d[keep]
+        se_all = fit.term_se(self.name)
+        cov = np.nan_to_num(fit.term_cov(self.name))
+        grad = np.concatenate([[1.0], d])
+        se_b = float(np.sqrt(max(grad @ cov @ grad, 0.0)))
+        return ({"n_elements": int(keep.sum()), "breakaway": float(w.sum()) + w0, "coulomb_element": w0,
+                 "ms_stiffness": k[keep].tolist(), "ms_delta": d[keep].tolist(), "ms_slip": w.tolist(),
+                 "units": {"breakaway": u["torque"], "coulomb_element": u["torque"], "ms_stiffness": u["stiffness"],
+                           "ms_delta": u["position"], "ms_slip": u["torque"]}},
+                {"breakaway": se_b, "coulomb_element": float(se_all[0]), "ms_stiffness": se_all[1:][keep].tolist()})
+
+    def plant(self, fit, nl):
+        c = fit.term_coef(self.name)
+        k = c[1:]
+        keep = k > 0
+        return {"coulomb": float(c[0]), "ms_stiffness": tuple(map(float, k[keep])),
+                "ms_slip": tuple(map(float, k[keep] * fit.setting.thresholds[keep]))}
+
+
+class _Scalar(Term):
+    """A term with one column and one parameter ``main``."""
+
+    unit_key = "torque"
+
+    def parameters(self, fit, nl, axis):
+        return ({self.main: float(fit.term_coef(self.name)[0]), "units": {self.main: _units(axis)[self.unit_key]}},
+                {self.main: float(fit.term_se(self.name)[0])})
+
+
+class Coulomb(_Scalar):
+    name, main = "coulomb", "coulomb"
+    physics = "Coulomb friction F_c*sign(v)"
+    diagnostics = ("direction",)
+
+    def columns(self, run, nl, setting):
+        return _sym_col(run, "sign", np.sign)
+
+    def static_level(self, coef):
+        return float(coef[0])
+
+    def plant(self, fit, nl):
+        return {"coulomb": float(fit.term_coef(self.name)[0])}
+
+
+class Viscous(_Scalar):
+    name, main, unit_key = "viscous", "viscous", "viscous"
+    physics = "viscous friction b*v (lubricant shear, back-EMF damping)"
+    diagnostics = ("velocity",)
+
+    def columns(self, run, nl, setting):
+        return run.data.velocity[:, None]
+
+    def plant(self, fit, nl):
+        return {"viscous": float(fit.term_coef(self.name)[0])}
+
+
+class Offset(_Scalar):
+    name, main = "offset", "offset"
+    physics = "constant load or torque offset c0 (gravity, current-sensor offset)"
+    diagnostics = ("mean_trend",)
+
+    def columns(self, run, nl, setting):
+        return np.ones((run.n_rows, 1))
+
+    def lower(self, nl, q):
+        return np.full(q, FREE)
+
+    def plant(self, fit, nl):
+        return {"torque_offset": -float(fit.term_coef(self.name)[0])}
+
+
+class OffsetDrift(Term):
+    name, main = "offset_drift", "drift"
+    physics = "torque offset and its drift in time (thermal drift of the current sensor or amplifier)"
+    diagnostics = ("mean_trend",)
+    replaces = ("offset",)
+
+    def columns(self, run, nl, setting):
+        return np.column_stack([np.ones(run.n_rows), run.t_rows])
+
+    def lower(self, nl, q):
+        return np.full(q, FREE)
+
+    def parameters(self, fit, nl, axis):
+        c, se = fit.term_coef(self.name), fit.term_se(self.name)
+        tu = _units(axis)["torque"]
+        return ({"offset": float(c[0]), "drift": float(c[1]), "units": {"offset": tu, "drift": f"{tu}/s"}},
+                {"offset": float(se[0]), "drift": float(se[1])})
+
+    def plant(self, fit, nl):
+        c = fit.term_coef(self.name)
+        return {"torque_offset": -float(c[0]), "torque_drift": -float(c[1])}
+
+
+class Stribeck(Term):
+    name, main = "stribeck", "stribeck_excess"
+    physics = "Stribeck effect: friction above the Coulomb level at low sliding speed, (F_s-F_c)*exp(-(v/v_s)^2)"
+    diagnostics = ("low_speed",)
+    refine_key, refine_log = "v_s", True
+
+    def columns(self, run, nl, setting):
+        vs = float(nl["v_s"])
+        return run.cached(("stribeck", vs), lambda: run.filt(
+            np.sign(run.velocity_fast) * np.exp(-((run.velocity_fast / vs) ** 2)))[:, None])
+
+    def static_level(self, coef):
+        return float(coef[0])
+
+    def settings(self, runs, diagnostics):
+        speed = np.abs(np.concatenate([r.velocity_fast for r in runs]))
+        lo, hi = np.percentile(speed, [3, 60])
+        if not hi > lo > 0:
+            return []
+        return [{"v_s": float(v)} for v in np.geomspace(lo, hi, 14)]
+
+    def parameters(self, fit, nl, axis):
+        u = _units(axis)
+        se = dict(nl.get("_se", {}))
+        return ({"stribeck_excess": float(fit.term_coef(self.name)[0]), "stribeck_velocity": float(nl["v_s"]),
+                 "units": {"stribeck_excess": u["torque"], "stribeck_velocity": u["velocity"]}},
+                {"stribeck_excess": float(fit.term_se(self.name)[0]),
+                 "stribeck_velocity": float(se.get("v_s", np.nan))})
+
+    def plant(self, fit, nl):
+        return {"stribeck_excess": float(fit.term_coef(self.name)[0]), "stribeck_velocity": float(nl["v_s"])}
+
+
+class AsymmetricFriction(Term):
+    name, main = "asymmetric_friction", "coulomb_difference"
+    physics = "direction-dependent friction: Coulomb level and viscous slope differ between directions"
+    diagnostics = ("direction",)
+    replaces = ("viscous", "coulomb", "offset")
+
+    def columns(self, run, nl, setting):
+        def make():
+            v = run.velocity_fast
+            return run.filt(np.column_stack([np.maximum(v, 0), np.minimum(v, 0), (v > 0) * 1.0,
+                                             -1.0 * (v < 0)]))
+        return run.cached(("asym",), make)
+
+    def static_level(self, coef):
+        return float(max(coef[2], coef[3]))
+
+    def parameters(self, fit, nl, axis):
+        u = _units(axis)
+        c, cov = fit.term_coef(self.name), np.nan_to_num(fit.term_cov(self.name))
+        se = fit.term_se(self.name)
+        d_c, d_b = np.array([0, 0, 1, -1.0]), np.array([1, -1.0, 0, 0])
+        names = ("viscous_pos", "viscous_neg", "coulomb_pos", "coulomb_neg")
+        params = dict(zip(names, map(float, c), strict=True))
+        params["coulomb_difference"] = float(c[2] - c[3])
+        params["viscous_difference"] = float(c[0] - c[1])
+        params["units"] = {"viscous_pos": u["viscous"], "viscous_neg": u["viscous"], "coulomb_pos": u["torque"],
+                           "coulomb_neg": u["torque"], "coulomb_difference": u["torque"],
+                           "viscous_difference": u["viscous"]}
+        unc = dict(zip(names, map(float, se), strict=True))
+        unc["coulomb_difference"] = float(np.sqrt(max(d_c @ cov @ d_c, 0)))
+        unc["viscous_difference"] = float(np.sqrt(max(d_b @ cov @ d_b, 0)))
+        return params, unc
+
+    def plant(self, fit, nl):
+        c = fit.term_coef(self.name)
+        return {"viscous": float(c[0]), "viscous_neg": float(c[1]), "coulomb": float(c[2]),
+                "coulomb_neg": float(c[3])}
+
+
+def _harmonic_parameters(fit: Fit, name: str, nl: dict, axis: str) -> tuple[dict, dict]:
+    c, cov = fit.term_coef(name), np.nan_to_num(fit.term_cov(name))
+    harmonics, unc = [], []
+    for i, k in enumerate(nl["wavenumbers"]):
+        a, b = c[2 * i], c[2 * i + 1]
+        amp = float(np.hypot(a, b))
+        g = np.array([a, b]) / amp if amp > 0 else np.zeros(2)
+        sub = cov[2 * i: 2 * i + 2, 2 * i: 2 * i + 2]
+        h = {"amplitude": amp, "phase": float(np.arctan2(b, a))}
+        if axis == "rotary":
+            h["order"] = float(k)
+        else:
+            h["wavelength"] = float(2 * np.pi / k)
+        harmonics.append(h)
+        unc.append({"amplitude": float(np.sqrt(max(g @ sub @ g, 0)))})
+    best = int(np.argmax([h["amplitude"] for h in harmonics]))
+    u = _units(axis)
+    params = {"amplitude": harmonics[best]["amplitude"], "harmonics": harmonics,
+              "units": {"amplitude": u["torque"], "phase": "rad",
+                        **({"order": "cycles/rev"} if axis == "rotary" else {"wavelength": u["position"]})}}
+    return params, {"amplitude": unc[best]["amplitude"], "harmonics": unc}
+
+
+class PositionPeriodic(Term):
+    name, main = "position_periodic", "amplitude"
+    physics = "cogging or torque ripple: torque periodic in position, sum A_n*sin(k_n*theta + phi_n)"
+    diagnostics = ("angle_spectrum",)
+    spectrum = "angle_spectrum"
+    max_harmonics = 4
+
+    def _basis(self, run: RunData, k: float) -> np.ndarray:
+        return np.column_stack([np.sin(k * run.position), np.cos(k * run.position)])
+
+    def columns(self, run, nl, setting):
+        ks = tuple(nl["wavenumbers"])
+        return run.cached((self.name, ks), lambda: run.filt(np.column_stack([self._basis(run, k) for k in ks])))
+
+    def lower(self, nl, q):
+        return np.full(q, FREE)
+
+    def settings(self, runs, diagnostics):
+        diag = diagnostics.get(self.spectrum)
+        if diag is None or not diag.detail.get("peaks"):
+            return []
+        # every significant peak of the spectrum (strongest first) enters as one harmonic
+        return [{"wavenumbers": [p["wavenumber"] for p in diag.detail["peaks"][: self.max_harmonics]]}]
+
+    def parameters(self, fit, nl, axis):
+        return _harmonic_parameters(fit, self.name, nl, axis)
+
+    def plant(self, fit, nl):
+        from firmware_sim.plant import Cogging
+
+        c = fit.term_coef(self.name)
+        return {"cogging": tuple(Cogging(float(k), float(np.hypot(c[2 * i], c[2 * i + 1])),
+                                         float(np.arctan2(c[2 * i + 1], c[2 * i])))
+                                 for i, k in enumerate(nl["wavenumbers"]))}
+
+
+class PositionDependentFriction(PositionPeriodic):
+    name = "position_dependent_friction"
+    physics = "friction level that varies with position (eccentricity, raceway waviness): sign(v)*A*sin(k*theta+phi)"
+    diagnostics = ("angle_spectrum_direction",)
+    spectrum = "angle_spectrum_direction"
+
+    def _basis(self, run, k):
+        s = np.sign(run.velocity_fast)[:, None]
+        return s * np.column_stack([np.sin(k * run.position), np.cos(k * run.position)])
+
+    def plant(self, fit, nl):
+        return {}  # the C plant has no position-dependent friction level; simulated without it
+
+
+class Delay(Term):
+    name, main = "delay", "delay"
+    physics = "input delay or current-loop lag between the torque command and the torque acting"
+    diagnostics = ("input_rate", "input_xcorr")
+    refine_key = "samples"
+    max_samples = 30
+
+    def columns(self, run, nl, setting):
+        return np.zeros((run.n_rows, 0))
+
+    def delay(self, nl):
+        return float(nl["samples"])
+
+    def applicable(self, setting, model_names):
+        return "a delay is already in the model" if setting.delay else None
+
+    def settings(self, runs, diagnostics):
+        fs = runs[0].fs
+        return [{"samples": float(s), "_fs": fs} for s in np.arange(0.0, self.max_samples + 0.5, 1.0)]
+
+    def parameters(self, fit, nl, axis):
+        dt = 1.0 / nl["_fs"]
+        se = nl.get("_se", {}).get("samples", np.nan)
+        return ({"delay": float(nl["samples"]) * dt, "delay_samples": float(nl["samples"]),
+                 "units": {"delay": "s", "delay_samples": "samples"}},
+                {"delay": float(se) * dt, "delay_samples": float(se)})
+
+    def plant(self, fit, nl):
+        s = float(nl["samples"])
+        whole = int(np.floor(s))
+        return {"delay_samples": whole, "current_lag": (s - whole) / nl["_fs"]}
+
+
+class TorqueGain(Term):
+    name, main = "torque_gain", "torque_constant_error"
+    physics = "torque-constant error: the applied torque is (1 + eps) times the assumed one"
+    diagnostics = ("command", "acceleration")
+
+    def applicable(self, setting, model_names):
+        if setting.fixed_inertia is None:
+            return ("not identifiable without a known inertia: a torque gain only rescales J and every "
+                    "friction parameter (pass a known inertia)")
+        return None
+
+    def columns(self, run, nl, setting):
+        return run.torque_rows(setting.delay)[:, None]
+
+    def lower(self, nl, q):
+        return np.full(q, FREE)
+
+    def parameters(self, fit, nl, axis):
+        return ({"torque_constant_error": -float(fit.term_coef(self.name)[0]),
+                 "units": {"torque_constant_error": "1"}},
+                {"torque_constant_error": float(fit.term_se(self.name)[0])})
+
+    def plant(self, fit, nl):
+        return {"torque_constant_error": -float(fit.term_coef(self.name)[0])}
+
+
+REGISTRY: dict[str, Term] = {}
+
+
+def register(term: Term) -> Term:
+    """Add a term to the registry (the set of candidates is open)."""
+    if not term.name:
+        raise ValueError("a term needs a name")
+    REGISTRY[term.name] = term
+    return term
+
+
+for _t in (Inertia(), MaxwellSlip(), Coulomb(), Viscous(), Offset(), OffsetDrift(), Stribeck(),
+           AsymmetricFriction(), PositionPeriodic(), PositionDependentFriction(), Delay(), TorqueGain()):
+    register(_t)
+
+CANDIDATE_NAMES = ("viscous", "stribeck", "asymmetric_friction", "position_periodic",
+                   "position_dependent_friction", "delay", "torque_gain", "offset_drift")
+
+
+def get_term(name: str) -> Term:
+    from analysis.errors import AnalysisError
+
+    if name not in REGISTRY:
+        raise AnalysisError(f"unknown model term {name!r}; known: {', '.join(REGISTRY)}")
+    return REGISTRY[name]

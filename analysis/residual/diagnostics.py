@@ -1,0 +1,339 @@
+"""Diagnostics that locate structure in an equation-error residual, each with a statistic and a test.
+
+Most diagnostics are a partial F-test: regress the residual e on nuisance columns N, then on [N, X];
+
+    F = ((SS_N - SS_NX)/q) / (SS_NX/(n_eff - p)),    p-value = F_{q, n_eff - p}.sf(F)
+
+with n_eff the residual's effective sample count (:func:`analysis.regressors.effective_sample_count`;
+the filtered residual is coloured). The *effect* is the fraction of the residual variance X explains,
+(SS_N - SS_NX)/SS_total. A diagnostic is significant when its (Bonferroni-adjusted) p-value is below
+``alpha`` AND its effect is at least ``min_effect``: with thousands of rows a negligible but consistent
+pattern is always "significant", so the effect size keeps the verdict physical.
+
+| diagnostic | X (nuisance N) | points to |
+|---|---|---|
+| mean_trend | 1, t | offset_drift |
+| velocity | v (1) | viscous |
+| low_speed | sign(v)*exp(-(v/v_j)^2), 3 scales v_j (1, v) | stribeck |
+| direction | [v>0], abs(v) (1, v) | asymmetric_friction |
+| position | theta (1) | maxwell_slip |
+| acceleration | theta'' (1) | torque_gain |
+| command | tau (1) | torque_gain |
+| input_rate | d tau/dt (1) | delay |
+| input_xcorr | max_l corr(e, tau(t - l)), Fisher z, Bonferroni over lags | delay |
+| angle_spectrum | sin/cos(k*theta) per wavenumber k, Bonferroni over k | position_periodic |
+| angle_spectrum_direction | sign(v)*sin/cos(k*theta) | position_dependent_friction |
+| time_spectrum | Welch PSD line vs running-median background, chi^2 | (none: reported) |
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from analysis.regressors import effective_sample_count, position_resolution
+from analysis.residual.rundata import RunData
+
+ALPHA = 1e-3
+MIN_EFFECT = 0.03
+
+
+@dataclass
+class Diagnostic:
+    name: str
+    statistic: float
+    statistic_name: str
+    p_value: float
+    effect: float  # fraction of the residual variance explained
+    significant: bool
+    points_to: tuple[str, ...]
+    description: str
+    detail: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "statistic": _num(self.statistic), "statistic_name": self.statistic_name,
+                "p_value": _num(self.p_value), "effect": _num(self.effect), "significant": bool(self.significant),
+                "points_to": list(self.points_to), "description": self.description,
+                "detail": _jsonable(self.detail)}
+
+
+def _num(v: float) -> float | None:
+    return float(v) if np.isfinite(v) else None
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {k: _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, (np.floating, float)):
+        return _num(float(obj))
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
+
+
+@dataclass
+class Signals:
+    """Residual and regressors at the stacked rows of the runs (all shape (N,))."""
+
+    residual: np.ndarray  # N*m or N
+    time: np.ndarray  # s (per run)
+    position: np.ndarray  # rad or m
+    velocity: np.ndarray  # rad/s or m/s (regression velocity D L[theta])
+    velocity_fast: np.ndarray  # lightly filtered velocity at the rows
+    acceleration: np.ndarray
+    command: np.ndarray  # L[tau], N*m or N
+    command_rate: np.ndarray  # d L[tau]/dt, N*m/s
+    run_rows: list  # (start, stop) per run
+    row_rate: float  # rows per second (fs/decimation)
+    axis: str
+    resolution: float  # position resolution, rad or m
+    cutoff: float  # Hz
+
+    @classmethod
+    def from_runs(cls, runs: list[RunData], residual: np.ndarray) -> Signals:
+        cat = np.concatenate
+        rr, start = [], 0
+        for r in runs:
+            rr.append((start, start + r.n_rows))
+            start += r.n_rows
+        return cls(
+            residual=np.asarray(residual, float),
+            time=cat([r.t_rows for r in runs]),
+            position=cat([r.data.position for r in runs]),
+            velocity=cat([r.data.velocity for r in runs]),
+            velocity_fast=cat([r.velocity_fast[r.rows] for r in runs]),
+            acceleration=cat([r.data.acceleration for r in runs]),
+            command=cat([r.data.torque for r in runs]),
+            command_rate=cat([np.gradient(r.torque_filtered, 1 / r.fs)[r.rows] for r in runs]),
+            run_rows=rr,
+            row_rate=runs[0].fs / runs[0].data.decimation,
+            axis=runs[0].axis,
+            resolution=max(position_resolution(r.position) for r in runs),
+            cutoff=runs[0].data.cutoff,
+        )
+
+
+def partial_f(e: np.ndarray, x: np.ndarray, nuisance: np.ndarray | None, n_eff: float) -> tuple[float, float, float]:
+    """(F, p-value, effect) of adding columns ``x`` (N, q) to ``nuisance`` (N, p0) in a regression of e."""
+    from scipy import stats
+
+    x = np.atleast_2d(x.T).T
+    base = np.ones((e.size, 1)) if nuisance is None else np.atleast_2d(nuisance.T).T
+    ss_tot = float(e @ e)
+    if ss_tot == 0:
+        return 0.0, 1.0, 0.0
+
+    def rss(a):
+        c, *_ = np.linalg.lstsq(a, e, rcond=None)
+        r = e - a @ c
+        return float(r @ r)
+
+    ss0 = rss(base)
+    full = np.column_stack([base, x])
+    ss1 = rss(full)
+    q = x.shape[1]
+    dof = max(n_eff - full.shape[1], 1.0)
+    f = max(ss0 - ss1, 0.0) / q / max(ss1 / dof, 1e-300)
+    return float(f), float(stats.f.sf(f, q, dof)), float(max(ss0 - ss1, 0.0) / ss_tot)
+
+
+def _make(name, stat, stat_name, p, effect, points, desc, alpha, min_effect, **detail) -> Diagnostic:
+    sig = bool(p < alpha and effect >= min_effect)
+    return Diagnostic(name, stat, stat_name, p, effect, sig, points, desc, detail)
+
+
+def _one(s: Signals) -> np.ndarray:
+    return np.ones_like(s.residual)
+
+
+def wavenumber_grid(s: Signals) -> tuple[np.ndarray, str]:
+    """Spatial angular frequencies k (rad per unit position) to scan, and their unit label.
+
+    Rotary: integer orders 1..M (cycles/rev). Linear: spatial frequencies from 1/travel, step
+    1/(2*travel). The top is where the cogging torque at the median moving speed reaches 2x the
+    filter cutoff (k*|v|/2pi = 2*cutoff), and at most 1/8 of the encoder's Nyquist.
+    """
+    moving = np.abs(s.velocity) > 10 * s.resolution * s.row_rate
+    speed = float(np.median(np.abs(s.velocity[moving]))) if moving.any() else 0.0
+    k_speed = 2 * np.pi * 2 * s.cutoff / speed if speed > 0 else 0.0
+    k_enc = np.pi / (8 * max(s.resolution, 1e-12))
+    k_max = min(k_speed, k_enc)
+    if s.axis == "rotary":
+        m = int(np.clip(k_max, 8, 300))
+        return np.arange(1, m + 1, dtype=float), "cycles/rev"
+    travel = float(np.ptp(s.position))
+    if travel <= 0:
+        return np.zeros(0), "1/m"
+    f = np.arange(1.0 / travel, k_max / (2 * np.pi), 0.5 / travel)[:2000]
+    return 2 * np.pi * f, "1/m"
+
+
+def angle_periodogram(e: np.ndarray, theta: np.ndarray, ks: np.ndarray, weight: np.ndarray | None = None
+                      ) -> np.ndarray:
+    """Fraction of the (mean-removed) residual variance explained by [w*sin(k theta), w*cos(k theta)] for
+    each k: the least-squares (Lomb-Scargle) periodogram in the angle domain, shape (len(ks),)."""
+    e = e - e.mean()
+    w = np.ones_like(e) if weight is None else weight
+    out = np.empty(ks.size)
+    tot = float(e @ e)
+    for i0 in range(0, ks.size, 64):
+        k = ks[i0: i0 + 64]
+        ph = np.outer(theta, k)
+        sn, cs = w[:, None] * np.sin(ph), w[:, None] * np.cos(ph)
+        sn -= sn.mean(0)
+        cs -= cs.mean(0)
+        a11, a22, a12 = (sn * sn).sum(0), (cs * cs).sum(0), (sn * cs).sum(0)
+        b1, b2 = e @ sn, e @ cs
+        det = a11 * a22 - a12**2
+        det[det <= 0] = np.inf
+        out[i0: i0 + 64] = (a22 * b1**2 - 2 * a12 * b1 * b2 + a11 * b2**2) / det / tot
+    return out
+
+
+def _spectrum_peaks(r2: np.ndarray, ks: np.ndarray, n_eff: float, alpha: float, min_effect: float,
+                    axis: str, max_peaks: int = 6) -> tuple[list, float, float]:
+    from scipy import stats
+
+    dof = max(n_eff - 3, 1.0)
+    f = (r2 / 2) / np.maximum((1 - r2) / dof, 1e-300)
+    p = np.minimum(1.0, stats.f.sf(f, 2, dof) * ks.size)
+    peaks = []
+    order = np.argsort(r2)[::-1]
+    taken = np.zeros(ks.size, bool)
+    for i in order:
+        if p[i] >= alpha or r2[i] < min_effect / 2 or len(peaks) >= max_peaks:
+            break
+        if taken[max(0, i - 1): i + 2].any():
+            continue
+        taken[i] = True
+        k = float(ks[i])
+        if axis != "rotary" and 0 < i < ks.size - 1:  # parabolic refinement of a continuous frequency
+            y0, y1, y2 = r2[i - 1], r2[i], r2[i + 1]
+            den = y0 - 2 * y1 + y2
+            if den < 0:
+                k += 0.5 * (y0 - y2) / den * (ks[1] - ks[0])
+        pk = {"wavenumber": k, "effect": float(r2[i]), "p_value": float(p[i])}
+        pk["order" if axis == "rotary" else "wavelength"] = k if axis == "rotary" else 2 * np.pi / k
+        peaks.append(pk)
+    i = int(np.argmax(r2)) if r2.size else 0
+    return peaks, (float(f[i]) if r2.size else 0.0), (float(p[i]) if r2.size else 1.0)
+
+
+def _spectrum_diag(name, s, n_eff, alpha, min_effect, weight, points, what) -> Diagnostic:
+    ks, unit = wavenumber_grid(s)
+    if ks.size == 0:
+        return Diagnostic(name, 0.0, "F", 1.0, 0.0, False, points, "position does not move", {})
+    r2 = angle_periodogram(s.residual, s.position, ks, weight)
+    peaks, fmax, pmin = _spectrum_peaks(r2, ks, n_eff, alpha, min_effect, s.axis)
+    total = float(sum(pk["effect"] for pk in peaks))
+    if peaks:
+        at = ", ".join(f"{pk['order']:.0f} cycles/rev" if s.axis == "rotary" else f"wavelength {pk['wavelength']:.4g} m"
+                       for pk in peaks)
+        desc = f"{what} periodic in position at {at}"
+    else:
+        desc = f"no {what} periodic in position"
+    spectrum = {"wavenumber": ks, "effect": r2, "unit": unit}
+    return _make(name, fmax, "F", pmin, total, points, desc, alpha, min_effect, peaks=peaks, spectrum=spectrum)
+
+
+def _xcorr_diag(s: Signals, n_eff: float, alpha: float, min_effect: float, max_lag: int = 30) -> Diagnostic:
+    from scipy import stats
+
+    e = s.residual - s.residual.mean()
+    u = s.command - s.command.mean()
+    lags = np.arange(-max_lag, max_lag + 1)
+    rho = np.zeros(lags.size)
+    for i, lag in enumerate(lags):
+        if lag >= 0:
+            a, b = e[lag:], u[: u.size - lag]
+        else:
+            a, b = e[: e.size + lag], u[-lag:]
+        den = np.sqrt((a @ a) * (b @ b))
+        rho[i] = (a @ b) / den if den > 0 else 0.0
+    i = int(np.argmax(np.abs(rho)))
+    z = np.arctanh(np.clip(abs(rho[i]), 0, 0.999999)) * np.sqrt(max(n_eff - 3, 1.0))
+    p = min(1.0, 2 * stats.norm.sf(z) * lags.size)
+    lag_s = float(lags[i]) / s.row_rate
+    if lags[i] >= 0:
+        desc = f"residual correlates with the input {lag_s * 1e3:.1f} ms earlier (rho {rho[i]:+.2f})"
+    else:  # the input follows the residual: feedback (a controller reacting), not a delay
+        desc = f"residual correlates with the input {-lag_s * 1e3:.1f} ms later (rho {rho[i]:+.2f}; feedback)"
+    return _make("input_xcorr", float(rho[i]), "rho", p, float(rho[i] ** 2), ("delay",), desc, alpha, min_effect,
+                 lag_s=lag_s, lags_s=lags / s.row_rate, rho=rho)
+
+
+def _time_spectrum(s: Signals, alpha: float, min_effect: float) -> Diagnostic:
+    from scipy import ndimage, signal, stats
+
+    nper = 256
+    psds = []
+    for lo, hi in s.run_rows:
+        if hi - lo >= 2 * nper:
+            f, pxx = signal.welch(s.residual[lo:hi] - s.residual[lo:hi].mean(), fs=s.row_rate, nperseg=nper)
+            psds.append((pxx, (hi - lo) // (nper // 2) - 1))
+    if not psds:
+        return Diagnostic("time_spectrum", 0.0, "ratio", 1.0, 0.0, False, (), "run too short for a spectrum", {})
+    segs = sum(k for _, k in psds)
+    pxx = sum(p * k for p, k in psds) / segs
+    bg = ndimage.median_filter(pxx, size=17, mode="nearest")
+    ratio = pxx / np.maximum(bg, 1e-300)
+    dof = max(int(1.8 * segs), 2)  # Welch, Hann, 50 % overlap: ~0.9 x 2 dof per segment
+    p = np.minimum(1.0, stats.chi2.sf(ratio * dof, dof) * ratio.size)
+    i = int(np.argmax(ratio[1:])) + 1
+    df = f[1] - f[0]
+    line = float(np.sum(np.clip(pxx[i - 1: i + 2] - bg[i - 1: i + 2], 0, None)) * df)
+    total = float(np.sum(pxx) * df)
+    effect = line / total if total > 0 else 0.0
+    desc = f"strongest line at {f[i]:.3g} Hz ({ratio[i]:.1f}x the background)"
+    return _make("time_spectrum", float(ratio[i]), "line/background", float(p[i]), effect, (), desc, alpha,
+                 min_effect, frequency_hz=float(f[i]), spectrum={"frequency_hz": f, "psd": pxx, "background": bg})
+
+
+def run_diagnostics(s: Signals, alpha: float = ALPHA, min_effect: float = MIN_EFFECT) -> dict[str, Diagnostic]:
+    """Every diagnostic of the residual in ``s``; dict name -> :class:`Diagnostic`."""
+    e = s.residual
+    n_eff = effective_sample_count(e)
+    one = _one(s)
+    v = s.velocity
+    out: dict[str, Diagnostic] = {}
+
+    def reg(name, x, nuisance, points, desc_fn):
+        f, p, eff = partial_f(e, x, nuisance, n_eff)
+        out[name] = _make(name, f, "F", p, eff, points, desc_fn(), alpha, min_effect)
+
+    t_rel = s.time - s.time.mean()
+    c, *_ = np.linalg.lstsq(np.column_stack([one, t_rel]), e, rcond=None)
+    reg("mean_trend", np.column_stack([one, t_rel]), np.zeros((e.size, 0)), ("offset_drift",),
+        lambda: f"mean {c[0]:+.3g}, trend {c[1]:+.3g} per s")
+    slope = np.polyfit(v, e, 1)[0] if np.ptp(v) > 0 else 0.0
+    reg("velocity", v, one, ("viscous",), lambda: f"residual grows with velocity ({slope:+.3g} per unit velocity)")
+    speed = np.abs(s.velocity_fast)
+    scales = np.percentile(speed, [10, 25, 50]) + 1e-12
+    sgn = np.sign(s.velocity_fast)
+    low = np.column_stack([sgn * np.exp(-((speed / vs) ** 2)) for vs in scales])
+    reg("low_speed", low, np.column_stack([one, v]), ("stribeck",),
+        lambda: "residual concentrated at low sliding speed, odd in velocity")
+    pos, neg = s.velocity_fast > 0, s.velocity_fast < 0
+    gap = (e[pos].mean() if pos.any() else 0.0) - (e[neg].mean() if neg.any() else 0.0)
+    reg("direction", np.column_stack([pos * 1.0, np.abs(v)]), np.column_stack([one, v]), ("asymmetric_friction",),
+        lambda: f"residual differs between directions (mean + minus -: {gap:+.3g})")
+    reg("position", s.position - s.position.mean(), one, ("maxwell_slip",),
+        lambda: "residual correlates with position (a spring-like load)")
+    reg("acceleration", s.acceleration, one, ("torque_gain",), lambda: "residual proportional to the acceleration")
+    reg("command", s.command, one, ("torque_gain",), lambda: "residual proportional to the command")
+    reg("input_rate", s.command_rate, one, ("delay",), lambda: "residual largest where the torque changes fast")
+    out["input_xcorr"] = _xcorr_diag(s, n_eff, alpha, min_effect)
+    out["angle_spectrum"] = _spectrum_diag("angle_spectrum", s, n_eff, alpha, min_effect, None,
+                                           ("position_periodic",), "residual")
+    out["angle_spectrum_direction"] = _spectrum_diag("angle_spectrum_direction", s, n_eff, alpha, min_effect,
+                                                     np.sign(s.velocity_fast), ("position_dependent_friction",),
+                                                     "direction-odd residual")
+    out["time_spectrum"] = _time_spectrum(s, alpha, min_effect)
+    for d in out.values():
+        d.detail.setdefault("n_eff", n_eff)
+    return out

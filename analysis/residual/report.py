@@ -1,0 +1,168 @@
+"""Report of a residual loop: the JSON document, diagnostic figures (PNG) and a Markdown summary.
+
+JSON keys are documented in docs/residual-report.md.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from analysis.residual.diagnostics import Diagnostic, Signals, _jsonable
+from analysis.residual.selection import LoopResult
+
+
+def report_dict(result: LoopResult, inputs: dict | None = None) -> dict:
+    """The JSON report (plain types; NaN/inf become null)."""
+    out = result.to_dict()
+    if inputs:
+        out = {"inputs": inputs, **out}
+    return _jsonable(out)
+
+
+def write_json(result: LoopResult, path: str | Path, inputs: dict | None = None) -> None:
+    Path(path).write_text(json.dumps(report_dict(result, inputs), indent=2, allow_nan=False) + "\n")
+
+
+def _binned(x: np.ndarray, y: np.ndarray, bins: int = 30) -> tuple[np.ndarray, np.ndarray]:
+    from scipy.stats import binned_statistic
+
+    if np.ptp(x) == 0:
+        return np.array([x[0]]), np.array([np.mean(y)])
+    m, edges, _ = binned_statistic(x, y, "mean", bins=bins)
+    return 0.5 * (edges[1:] + edges[:-1]), m
+
+
+def plot_diagnostics(s: Signals, diags: dict[str, Diagnostic], title: str, path: str | Path,
+                     units: dict[str, str]) -> None:
+    """3x3 figure: residual against time, position, velocity, acceleration and command; the angle-domain
+    and time-domain spectra; direction dependence; cross-correlation with the input."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    e = s.residual
+    tu, pu = units["torque"], units["position"]
+    fig, ax = plt.subplots(3, 3, figsize=(14, 10))
+    scatter = dict(s=2, alpha=0.3, color="tab:blue", rasterized=True)
+
+    def panel(a, x, label, diag):
+        a.scatter(x, e, **scatter)
+        bx, by = _binned(x, e)
+        a.plot(bx, by, color="tab:red", lw=1.5, label="bin mean")
+        a.set_xlabel(label)
+        a.set_ylabel(f"residual ({tu})")
+        if diag is not None:
+            d = diags[diag]
+            a.set_title(f"{diag}: F={d.statistic:.3g}, p={d.p_value:.2g}, effect {100 * d.effect:.1f} %", fontsize=8)
+
+    panel(ax[0, 0], s.time, "time (s)", "mean_trend")
+    panel(ax[0, 1], s.position, f"position ({pu})", "position")
+    panel(ax[0, 2], s.velocity, f"velocity ({pu}/s)", "velocity")
+    panel(ax[1, 0], s.acceleration, f"acceleration ({pu}/s^2)", "acceleration")
+    panel(ax[1, 1], s.command, f"command torque ({tu})", "command")
+    a = ax[1, 2]
+    spec = diags["angle_spectrum"].detail.get("spectrum")
+    if spec is not None:
+        k = np.asarray(spec["wavenumber"])
+        x = k if s.axis == "rotary" else k / (2 * np.pi)
+        a.plot(x, 100 * np.asarray(spec["effect"]), lw=0.8)
+        a.set_xlabel("order (cycles/rev)" if s.axis == "rotary" else "spatial frequency (1/m)")
+    a.set_ylabel("variance explained (%)")
+    d = diags["angle_spectrum"]
+    a.set_title(f"angle spectrum: {d.description}"[:70], fontsize=8)
+    a = ax[2, 0]
+    spec = diags["time_spectrum"].detail.get("spectrum")
+    if spec is not None:
+        a.semilogy(spec["frequency_hz"], spec["psd"], lw=0.8, label="PSD")
+        a.semilogy(spec["frequency_hz"], spec["background"], lw=0.8, label="background")
+        a.legend(fontsize=7)
+    a.set_xlabel("frequency (Hz)")
+    a.set_ylabel(f"PSD ({tu}^2/Hz)")
+    a.set_title(f"time spectrum: {diags['time_spectrum'].description}"[:70], fontsize=8)
+    a = ax[2, 1]
+    for mask, lab in ((s.velocity_fast > 0, "v > 0"), (s.velocity_fast < 0, "v < 0")):
+        if mask.sum() > 10:
+            bx, by = _binned(np.abs(s.velocity[mask]), e[mask])
+            a.plot(bx, by, marker=".", label=lab)
+    a.legend(fontsize=7)
+    a.set_xlabel(f"speed |v| ({pu}/s)")
+    a.set_ylabel(f"mean residual ({tu})")
+    d = diags["direction"]
+    a.set_title(f"direction: F={d.statistic:.3g}, p={d.p_value:.2g}", fontsize=8)
+    a = ax[2, 2]
+    d = diags["input_xcorr"]
+    if "lags_s" in d.detail:
+        a.plot(1e3 * np.asarray(d.detail["lags_s"]), d.detail["rho"], marker=".")
+    a.set_xlabel("lag (ms), > 0: input earlier")
+    a.set_ylabel("correlation")
+    a.set_title(f"input_xcorr: rho={d.statistic:+.2f}, p={d.p_value:.2g}", fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+def _fmt(v) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return str(v)
+
+
+def markdown_summary(result: LoopResult, title: str = "Residual loop", notes: list[str] | None = None) -> str:
+    d = report_dict(result)
+    lines = [f"# {title}", "", f"**Verdict:** {d['verdict']}", "",
+             f"Starting model: `{', '.join(d['start'])}`. Held-out error from: {d['validation_mode']}.", ""]
+    lines += ["## Error before and after", "", "| set | metric | before | after |", "|---|---|---|---|"]
+    for part in ("train", "validation"):
+        for key in ("torque_rel_pct", "torque_nrmse", "position_nrmse", "velocity_nrmse"):
+            lines.append(f"| {part} | {key} | {_fmt(d['error_before'][part].get(key))} | "
+                         f"{_fmt(d['error_after'][part].get(key))} |")
+    lines += ["", "## Effects added (in order)", ""]
+    if not d["effects_added"]:
+        lines.append("None.")
+    for i, e in enumerate(d["effects_added"], 1):
+        p = {k: v for k, v in e["parameters"].items() if k != "units" and not isinstance(v, (list, dict))}
+        u = e["uncertainty"]
+        units = e["parameters"].get("units", {})
+        par = ", ".join(f"{k} = {_fmt(v)}" + (f" ± {_fmt(u.get(k))}" if u.get(k) is not None else "")
+                        + (f" {units[k]}" if k in units else "") for k, v in p.items())
+        lines.append(f"{i}. **{e['name']}** — {e['physics']}. {par}. Held-out MSE reduced by "
+                     f"{100 * e['validation_gain']:.1f} % (p = {e['p_value']:.2g}); validation torque error "
+                     f"{_fmt(e['error_after']['validation']['torque_rel_pct'])} %.")
+    lines += ["", "## Unexplained structure", ""]
+    lines += [f"- {u['description']} (effect {100 * u['effect']:.1f} % of the residual variance, "
+              f"p = {u['p_value']:.2g})" for u in d["unexplained"]] or ["None."]
+    lines += ["", "## Candidates per round", ""]
+    for i, rd in enumerate(d["rounds"], 1):
+        lines.append(f"Round {i}: " + "; ".join(
+            f"{c['name']} (gain {_fmt(c['validation_gain'])}, p {_fmt(c['p_value'])}{', kept' if c['kept'] else ''})"
+            if c["validation_gain"] is not None else f"{c['name']} (not fitted: {c['note']})"
+            for c in rd["candidates"]))
+    if notes:
+        lines += ["", "## Notes", ""] + [f"- {n}" for n in notes]
+    lines += ["", "Figures: `diagnostics_before.png`, `diagnostics_after.png`.", ""]
+    return "\n".join(lines)
+
+
+def write_report(result: LoopResult, directory: str | Path, title: str = "Residual loop",
+                 notes: list[str] | None = None) -> list[Path]:
+    """Write diagnostics_before.png, diagnostics_after.png and summary.md into ``directory``."""
+    from analysis.friction_model import AXES
+
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    axis = result.signals_before.axis
+    units = {"torque": AXES[axis]["torque"], "position": AXES[axis]["position"]}
+    paths = [out / "diagnostics_before.png", out / "diagnostics_after.png", out / "summary.md"]
+    plot_diagnostics(result.signals_before, result.diagnostics_before, f"{title}: before ({', '.join(result.start)})",
+                     paths[0], units)
+    after = ", ".join(result.names_added) or "nothing added"
+    plot_diagnostics(result.signals_after, result.diagnostics_after, f"{title}: after ({after})", paths[1], units)
+    paths[2].write_text(markdown_summary(result, title, notes))
+    return paths

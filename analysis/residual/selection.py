@@ -1,0 +1,373 @@
+"""The residual loop: diagnose, rank candidates, fit each jointly, keep what validates, repeat.
+
+Each round:
+
+1. fit the current model (bounded least squares, ``analysis.residual.design``) on the training runs;
+2. run the diagnostics on the training residual (``analysis.residual.diagnostics``) and rank the
+   candidate terms by the significance of the diagnostics that point to them;
+3. fit every applicable candidate jointly with the model (nonlinear settings by a 1-D search on the
+   training error, refined by a parabola through the grid minimum) and compute its held-out residual:
+   on the validation runs (parameters fixed), or by blocked cross-validation of the training rows;
+4. keep a candidate only if it lowers the held-out mean square error by at least ``min_gain``
+   (relative) AND significantly: a one-sided Diebold-Mariano test on d_k = e0_k^2 - e1_k^2,
+   z = mean(d)/(std(d)/sqrt(n_eff(d))), at level alpha/(number of candidates) (Bonferroni);
+5. of the kept candidates take the largest gain; a simpler one (fewer parameters) whose gain is at
+   least ``parsimony`` x the best is preferred. Add it and repeat until nothing is kept.
+
+Whatever the final residual's diagnostics still flag is reported as unexplained structure.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from analysis.errors import AnalysisError
+from analysis.regressors import effective_sample_count, threshold_grid
+from analysis.residual.candidates import REGISTRY, Term, get_term
+from analysis.residual.design import Fit, Setting, blocked_cv_residual, build_design, fit_model, predict
+from analysis.residual.diagnostics import ALPHA, MIN_EFFECT, Diagnostic, Signals, run_diagnostics
+from analysis.residual.rundata import RunData
+from analysis.residual.simulation_error import simulation_error
+
+DEFAULT_START = ("inertia", "maxwell_slip")
+EMPS_START = ("inertia", "coulomb", "viscous", "offset")
+NO_EFFECT = "no significant missing effect"
+
+
+@dataclass(frozen=True)
+class LoopOptions:
+    """Settings of :func:`residual_loop`.
+
+    alpha: significance level of the diagnostics and of the validation test (before Bonferroni).
+    min_effect: smallest fraction of the residual variance a diagnostic must explain to count.
+    min_gain: smallest relative reduction of the held-out mean square error to keep a candidate.
+    parsimony: a simpler candidate with at least this fraction of the best gain is preferred.
+    fixed_inertia: known inertia (kg*m^2 or kg); makes a torque-gain error identifiable.
+    n_thresholds: Maxwell-slip threshold grid size; folds: blocked cross-validation folds.
+    sim_window: window of the simulation error, s (None: skip the simulation error).
+    """
+
+    alpha: float = ALPHA
+    min_effect: float = MIN_EFFECT
+    min_gain: float = 0.05
+    parsimony: float = 0.9
+    max_effects: int = 6
+    fixed_inertia: float | None = None
+    n_thresholds: int = 40
+    folds: int = 5
+    sim_window: float | None = 1.0
+    candidates: tuple[str, ...] | None = None  # None: every registered candidate term
+
+
+@dataclass
+class Attempt:
+    """One candidate tried in one round."""
+
+    name: str
+    score: float  # diagnostic evidence, -log10 p of the strongest pointing diagnostic (0 if none)
+    gain: float | None = None  # relative reduction of the held-out MSE
+    p_value: float | None = None
+    kept: bool = False
+    note: str = ""
+    nl: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        out = {"name": self.name, "diagnostic_score": self.score, "validation_gain": self.gain,
+               "p_value": self.p_value, "kept": self.kept, "note": self.note}
+        nl = {k: v for k, v in self.nl.items() if not k.startswith("_")}
+        if nl:
+            out["settings"] = nl
+        return out
+
+
+@dataclass
+class LoopResult:
+    start: tuple[str, ...]
+    effects_added: list[dict]
+    error_before: dict
+    error_after: dict
+    verdict: str
+    unexplained: list[dict]
+    rounds: list[dict]
+    model_before: dict
+    model_after: dict
+    diagnostics_before: dict[str, Diagnostic]
+    diagnostics_after: dict[str, Diagnostic]
+    signals_before: Signals
+    signals_after: Signals
+    validation_mode: str
+    fit_after: Fit = field(repr=False, default=None)
+
+    @property
+    def names_added(self) -> list[str]:
+        return [e["name"] for e in self.effects_added]
+
+    def effect(self, name: str) -> dict:
+        for e in self.effects_added:
+            if e["name"] == name:
+                return e
+        raise KeyError(name)
+
+    def to_dict(self) -> dict:
+        return {
+            "start": list(self.start),
+            "effects_added": self.effects_added,
+            "error_before": self.error_before,
+            "error_after": self.error_after,
+            "verdict": self.verdict,
+            "unexplained": self.unexplained,
+            "validation_mode": self.validation_mode,
+            "model_before": self.model_before,
+            "model_after": self.model_after,
+            "rounds": self.rounds,
+            "diagnostics_before": {k: d.to_dict() for k, d in self.diagnostics_before.items()},
+            "diagnostics_after": {k: d.to_dict() for k, d in self.diagnostics_after.items()},
+        }
+
+
+def _held_out(model: list, train: list[RunData], validation: list[RunData] | None, setting: Setting,
+              folds: int, fit: Fit | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(held-out y, held-out residual)."""
+    if validation:
+        fit = fit or fit_model(model, train, setting, covariance=False)
+        return predict(fit, validation)
+    d = build_design(model, train, setting)
+    return d.y, blocked_cv_residual(model, train, setting, folds)
+
+
+def _dm_test(e0: np.ndarray, e1: np.ndarray) -> float:
+    """One-sided Diebold-Mariano p-value that e1 has a smaller mean square than e0."""
+    from scipy import stats
+
+    d = e0**2 - e1**2
+    sd = float(np.std(d))
+    if sd == 0:
+        return 0.5
+    z = float(np.mean(d)) / (sd / np.sqrt(effective_sample_count(d)))
+    return float(stats.norm.sf(z))
+
+
+def _setting_for(model: list, setting: Setting) -> Setting:
+    return Setting(setting.fixed_inertia, setting.thresholds, sum(t.delay(nl) for t, nl in model))
+
+
+def _with(model: list, term: Term, nl: dict) -> list:
+    return [(t, n) for t, n in model if t.name not in term.replaces] + [(term, nl)]
+
+
+def _search(model: list, term: Term, settings: list[dict], train: list[RunData], setting: Setting
+            ) -> tuple[dict, Fit]:
+    """Best nonlinear setting by training error; parabolic refinement of ``term.refine_key``."""
+    sse = []
+    for nl in settings:
+        sse.append(fit_model(_with(model, term, nl), train, setting, covariance=False).sse)
+    sse = np.asarray(sse)
+    i = int(np.argmin(sse))
+    best = dict(settings[i])
+    key = term.refine_key
+    if key is not None and 0 < i < len(settings) - 1:
+        to = np.log if term.refine_log else (lambda z: z)
+        back = np.exp if term.refine_log else (lambda z: z)
+        xs = np.array([to(settings[j][key]) for j in (i - 1, i, i + 1)])
+        s0, s1, s2 = sse[i - 1: i + 2]
+        h = xs[1] - xs[0]
+        curv = (s0 - 2 * s1 + s2) / h**2
+        if curv > 0:
+            x_star = xs[1] - 0.5 * h * (s2 - s0) / (s0 - 2 * s1 + s2)
+            trial = {**best, key: float(back(x_star))}
+            f_trial = fit_model(_with(model, term, trial), train, setting, covariance=False)
+            if f_trial.sse <= s1:
+                best = trial
+            n = f_trial.y.size
+            n_eff = effective_sample_count(f_trial.residual)
+            s2_noise = f_trial.sse / max(n - 1, 1) * max(1.0, n / n_eff)
+            se = float(np.sqrt(2 * s2_noise / curv))
+            best["_se"] = {key: se * best[key] if term.refine_log else se}
+    fit = fit_model(_with(model, term, best), train, setting)
+    return best, fit
+
+
+def _complexity(term: Term, nl: dict, model: list, train: list[RunData], setting: Setting) -> int:
+    q_new = term.columns(train[0], nl, _setting_for(_with(model, term, nl), setting)).shape[1]
+    q_nl = sum(1 for k in nl if not k.startswith("_"))
+    q_old = sum(t.columns(train[0], n, setting).shape[1] for t, n in model if t.name in term.replaces)
+    return q_new + q_nl - q_old
+
+
+def metrics(y: np.ndarray, e: np.ndarray) -> dict:
+    """torque_rel_pct = 100*|e|/|y| (the EMPS metric) and torque_nrmse = rms(e)/std(y)."""
+    ny = float(np.linalg.norm(y))
+    sy = float(np.std(y))
+    return {"torque_rel_pct": 100.0 * float(np.linalg.norm(e)) / ny if ny > 0 else None,
+            "torque_nrmse": float(np.sqrt(np.mean(e**2))) / sy if sy > 0 else None}
+
+
+def _sim_metrics(fit: Fit, runs: list[RunData], window: float | None) -> dict:
+    if window is None or not runs:
+        return {"position_nrmse": None, "velocity_nrmse": None}
+    res = [simulation_error(fit, r, window) for r in runs]
+    out = {}
+    for key in ("position_nrmse", "velocity_nrmse"):
+        vals = [r[key] for r in res]
+        out[key] = None if any(v is None for v in vals) else float(np.sqrt(np.mean(np.square(vals))))
+    notes = [r["simulation_note"] for r in res if "simulation_note" in r]
+    if notes:
+        out["simulation_note"] = notes[0]
+    return out
+
+
+def _errors(fit: Fit, model: list, train, validation, setting, opts: LoopOptions) -> dict:
+    tr = {**metrics(fit.y, fit.residual), **_sim_metrics(fit, train, opts.sim_window)}
+    yv, ev = _held_out(model, train, validation, setting, opts.folds, fit)
+    va = metrics(yv, ev)
+    if validation:
+        va.update(_sim_metrics(fit, validation, opts.sim_window))
+    else:
+        va.update({"position_nrmse": None, "velocity_nrmse": None,
+                   "note": f"blocked {opts.folds}-fold cross-validation of the training run (torque only)"})
+    return {"train": tr, "validation": va}
+
+
+def describe_model(fit: Fit, axis: str) -> dict:
+    """Every term's parameters and standard errors."""
+    out = {}
+    for term, nl in fit.model:
+        params, unc = term.parameters(fit, nl, axis)
+        out[term.name] = {"parameters": params, "uncertainty": unc, "physics": term.physics}
+    return out
+
+
+def _score(term: Term, diags: dict[str, Diagnostic]) -> float:
+    best = 0.0
+    for name in term.diagnostics:
+        d = diags.get(name)
+        if d is not None and d.significant:
+            best = max(best, -np.log10(max(d.p_value, 1e-300)))
+    return float(best)
+
+
+def _unexplained(diags: dict[str, Diagnostic], tried: dict[str, str]) -> list[dict]:
+    out = []
+    for d in diags.values():
+        if not d.significant:
+            continue
+        reasons = [f"{c}: {tried[c]}" for c in d.points_to if c in tried]
+        suffix = "; candidates tried: " + "; ".join(reasons) if reasons else ""
+        out.append({"diagnostic": d.name, "statistic": d.statistic, "statistic_name": d.statistic_name,
+                    "p_value": d.p_value, "effect": d.effect,
+                    "description": f"{d.description}, unexplained{suffix}"})
+    return out
+
+
+def residual_loop(
+    train: RunData | list[RunData],
+    validation: RunData | list[RunData] | None = None,
+    start: tuple[str, ...] | list[str] = DEFAULT_START,
+    options: LoopOptions | None = None,
+) -> LoopResult:
+    """Find the effects the ``start`` model lacks, blind, and report the error before and after.
+
+    Args:
+        train: prepared run(s) (:func:`analysis.residual.prepare_run`) to fit on.
+        validation: run(s) never fitted, for the held-out error; None: blocked cross-validation.
+        start: names of the starting model's terms (registry ``analysis.residual.candidates.REGISTRY``).
+        options: :class:`LoopOptions`.
+    Returns:
+        :class:`LoopResult` (``to_dict()`` is the JSON report, docs/residual-report.md).
+    """
+    opts = options or LoopOptions()
+    train = [train] if isinstance(train, RunData) else list(train)
+    validation = [validation] if isinstance(validation, RunData) else list(validation or [])
+    if not train:
+        raise AnalysisError("the residual loop needs at least one training run")
+    axis = train[0].axis
+    if any(r.axis != axis for r in train + validation):
+        raise AnalysisError("all runs must be on the same axis (rotary or linear)")
+    start = tuple(start)
+    if "inertia" not in start:
+        raise AnalysisError("the starting model must contain 'inertia'")
+    model = [(get_term(n), {}) for n in dict.fromkeys(start)]
+    longest = max(train, key=lambda r: r.position.size)
+    thresholds = threshold_grid(longest.position, opts.n_thresholds)
+    setting = Setting(opts.fixed_inertia, thresholds)
+    names = opts.candidates if opts.candidates is not None else tuple(
+        n for n, t in REGISTRY.items() if t.candidate)
+    for n in names:
+        get_term(n)
+
+    fit0 = fit_model(model, train, setting)
+    errors0 = _errors(fit0, model, train, validation, setting, opts)
+    diags0 = run_diagnostics(Signals.from_runs(train, fit0.residual), opts.alpha, opts.min_effect)
+    fit, diags, errors = fit0, diags0, errors0
+    effects, rounds, tried = [], [], {}
+    while len(effects) < opts.max_effects:
+        in_model = {t.name for t, _ in model}
+        replaced = {r for t, _ in model for r in t.replaces}
+        cur = _setting_for(model, setting)
+        _, e0 = _held_out(model, train, validation, cur, opts.folds, fit)
+        attempts = []
+        for n in names:
+            term = REGISTRY[n]
+            if n in in_model or n in replaced:
+                continue
+            att = Attempt(n, _score(term, diags))
+            why = term.applicable(cur, list(in_model))
+            settings = term.settings(train, diags) if why is None else []
+            if why is None and not settings:
+                why = "no diagnostic located it (nothing to fit)"
+            if why:
+                att.note = why
+                attempts.append(att)
+                continue
+            nl, fit_c = _search(model, term, settings, train, setting)
+            new_model = _with(model, term, nl)
+            _, e1 = _held_out(new_model, train, validation, _setting_for(new_model, setting), opts.folds, fit_c)
+            att.nl, att.gain, att.p_value = nl, 1.0 - float(e1 @ e1) / float(e0 @ e0), _dm_test(e0, e1)
+            att._fit, att._model = fit_c, new_model  # type: ignore[attr-defined]
+            attempts.append(att)
+        fitted = [a for a in attempts if a.gain is not None]
+        level = opts.alpha / max(len(fitted), 1)
+        ok = [a for a in fitted if a.gain >= opts.min_gain and a.p_value < level]
+        for a in fitted:
+            if a not in ok:
+                a.note = (f"held-out MSE change {-100 * a.gain:+.1f} % (p {a.p_value:.2g}): "
+                          f"not a significant gain of at least {100 * opts.min_gain:.0f} %")
+                tried[a.name] = a.note
+        attempts.sort(key=lambda a: -a.score)
+        if not ok:
+            rounds.append({"diagnostics": {k: d.to_dict() for k, d in diags.items() if d.significant},
+                           "candidates": [a.to_dict() for a in attempts]})
+            break
+        top = max(a.gain for a in ok)
+        near = [a for a in ok if a.gain >= opts.parsimony * top]
+        pick = min(near, key=lambda a: (_complexity(REGISTRY[a.name], a.nl, model, train, setting), -a.gain))
+        pick.kept = True
+        tried.pop(pick.name, None)
+        rounds.append({"diagnostics": {k: d.to_dict() for k, d in diags.items() if d.significant},
+                       "candidates": [a.to_dict() for a in attempts]})
+        model, fit = pick._model, pick._fit  # type: ignore[attr-defined]
+        term = REGISTRY[pick.name]
+        params, unc = term.parameters(fit, pick.nl, axis)
+        errors = _errors(fit, model, train, validation, setting, opts)
+        effects.append({"name": pick.name, "physics": term.physics, "parameters": params, "uncertainty": unc,
+                        "main_parameter": term.main, "validation_gain": pick.gain, "p_value": pick.p_value,
+                        "error_after": errors})
+        diags = run_diagnostics(Signals.from_runs(train, fit.residual), opts.alpha, opts.min_effect)
+
+    unexplained = _unexplained(diags, tried)
+    if effects:
+        verdict = "missing effect(s) found: " + ", ".join(e["name"] for e in effects)
+        if unexplained:
+            verdict += "; structure remains that no candidate explains"
+    else:
+        verdict = NO_EFFECT if not unexplained else "structure found that no candidate explains"
+    return LoopResult(
+        start=start, effects_added=effects, error_before=errors0, error_after=errors, verdict=verdict,
+        unexplained=unexplained, rounds=rounds, model_before=describe_model(fit0, axis),
+        model_after=describe_model(fit, axis), diagnostics_before=diags0, diagnostics_after=diags,
+        signals_before=Signals.from_runs(train, fit0.residual), signals_after=Signals.from_runs(train, fit.residual),
+        validation_mode="validation runs" if validation else f"blocked {opts.folds}-fold cross-validation",
+        fit_after=fit,
+    )

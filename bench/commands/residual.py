@@ -1,0 +1,86 @@
+"""``bench residual RUN.h5 [--validate RUN2.h5] [--start TERMS] --json OUT.json --report DIR``: what does the
+model get wrong? Fits the starting model, diagnoses its residual, adds the candidate effects that validate,
+and reports the error before and after (docs/residual-report.md)."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "residual",
+        help="residual loop: find the physical effects a friction model lacks, validated on held-out data",
+        description=(
+            "Fit the starting model to RUN.h5, diagnose the torque residual (against time, position, velocity, "
+            "acceleration, command; angle- and time-domain spectra; direction; lag), then add candidate effects "
+            "(viscous, stribeck, asymmetric_friction, position_periodic, position_dependent_friction, delay, "
+            "torque_gain, offset_drift, ...) one at a time, keeping each only if it lowers the error on held-out "
+            "data (--validate run, else blocked cross-validation) significantly. See docs/residual-report.md."
+        ),
+    )
+    parser.add_argument("run", metavar="RUN.h5", help="training run file (position and torque channels)")
+    parser.add_argument("--validate", metavar="RUN2.h5", action="append", default=[],
+                        help="validation run never fitted (repeatable); default: 5-fold blocked cross-validation")
+    parser.add_argument("--start", default="inertia,maxwell_slip", metavar="TERMS",
+                        help="comma-separated starting terms (default inertia,maxwell_slip; "
+                             "EMPS reference: inertia,coulomb,viscous,offset)")
+    parser.add_argument("--json", required=True, metavar="OUT.json", help="write the JSON report here")
+    parser.add_argument("--report", metavar="DIR", help="write diagnostics PNGs and summary.md into DIR")
+    parser.add_argument("--torque-channel", default=None, metavar="NAME",
+                        help="torque channel (default: torque_cmd if present, else torque)")
+    parser.add_argument("--timing", choices=("auto", "hold_next", "hold_previous", "instant"), default="auto",
+                        help="torque sample timing: auto (default: from the file's source; device runs are "
+                             "hold_previous, EMPS imports hold_next), hold_next (sample k held over "
+                             "[t_k, t_k+1), a command), hold_previous (mean over the previous interval), instant")
+    parser.add_argument("--cutoff", type=float, default=None, metavar="HZ",
+                        help="regression low-pass cutoff in Hz (default fs/20)")
+    parser.add_argument("--inertia", type=float, default=None, metavar="J",
+                        help="known inertia (kg*m^2, or kg on a linear axis): fixes J and makes a torque-gain "
+                             "error identifiable")
+    parser.add_argument("--candidates", default=None, metavar="TERMS",
+                        help="comma-separated candidate terms to try (default: all registered)")
+    parser.set_defaults(func=run)
+
+
+def _load(path: str, channel: str | None, timing: str | None, cutoff: float | None):
+    import numpy as np
+
+    from analysis.residual import prepare_run
+    from analysis.run_file import torque_timing_for
+    from bench.errors import BenchError
+    from bench.runfile import open_run
+
+    with open_run(path) as r:
+        name = channel or ("torque_cmd" if "torque_cmd" in r.channels else "torque")
+        if name not in r.channels and not (r.axis == "linear" and name in ("force", "force_cmd")):
+            raise BenchError(f"{path}: no torque channel {name!r} (has: {', '.join(r.channels)})")
+        position = np.asarray(r.channel("position"), float)
+        torque = np.asarray(r.channel(name), float)
+        fs, axis = r.sample_rate, r.axis
+        timing = torque_timing_for(str(r.meta.get("source", "device")), timing or "auto", name)
+    return prepare_run(position, torque, fs, axis=axis, name=path, cutoff=cutoff, timing=timing), name, timing
+
+
+def run(args: argparse.Namespace) -> int:
+    from analysis.residual import LoopOptions, residual_loop
+    from analysis.residual.report import write_json, write_report
+
+    start = tuple(t.strip() for t in args.start.split(",") if t.strip())
+    cands = None if args.candidates is None else tuple(t.strip() for t in args.candidates.split(",") if t.strip())
+    train, channel, timing = _load(args.run, args.torque_channel, args.timing, args.cutoff)
+    validation = [_load(p, args.torque_channel, args.timing, args.cutoff)[0] for p in args.validate]
+    opts = LoopOptions(fixed_inertia=args.inertia, candidates=cands)
+    result = residual_loop(train, validation or None, start=start, options=opts)
+    inputs = {"run": args.run, "validate": list(args.validate), "start": list(start), "torque_channel": channel,
+              "timing": timing, "cutoff_hz": train.data.cutoff, "decimation": train.data.decimation,
+              "fixed_inertia": args.inertia}
+    write_json(result, args.json, inputs)
+    if args.report:
+        write_report(result, args.report, title=f"Residual loop on {args.run}")
+    before = result.error_before["validation"]["torque_rel_pct"]
+    after = result.error_after["validation"]["torque_rel_pct"]
+    print(f"{result.verdict}; validation torque error {before:.3g} % -> {after:.3g} %")
+    for u in result.unexplained:
+        print(f"  unexplained: {u['description']}")
+    return 0

@@ -1,0 +1,61 @@
+"""``bench residual``: run files in, JSON + figures + Markdown out, one-line errors for bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from bench.cli import main
+from bench.runfile import RunWriter
+from firmware_sim.friction_models import dc_motor
+from firmware_sim.plant import simulate
+from tests.analysis.test_residual_loop import FS, excitation
+
+
+def write_run(path, seed: int) -> None:
+    params = dc_motor().replace(viscous=0.01, counts_per_rev=20000, seed=seed)
+    tau = excitation(seed)
+    out = simulate(params, tau / params.torque_constant, 1 / FS, substeps=4)
+    n = tau.size
+    with RunWriter(path, sample_rate=FS, channels=("sample_index", "t", "position", "torque_cmd")) as w:
+        w.append({"sample_index": np.arange(n), "t": np.arange(n) / FS, "position": out.position_meas,
+                  "torque_cmd": tau})
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    d = tmp_path_factory.mktemp("residual")
+    write_run(d / "train.h5", 41)
+    write_run(d / "valid.h5", 1041)
+    return d
+
+
+def test_cli_writes_json_and_report(runs, capsys):
+    out_json, report = runs / "out.json", runs / "report"
+    rc = main(["residual", str(runs / "train.h5"), "--validate", str(runs / "valid.h5"),
+               "--json", str(out_json), "--report", str(report)])
+    assert rc == 0
+    doc = json.loads(out_json.read_text())
+    assert [e["name"] for e in doc["effects_added"]] == ["viscous"]
+    e = doc["effects_added"][0]
+    assert set(e) >= {"name", "parameters", "uncertainty", "error_after"}
+    assert e["parameters"]["viscous"] == pytest.approx(0.01, rel=0.1)  # the issue's 10 % bound
+    for key in ("error_before", "error_after"):
+        for part in ("train", "validation"):
+            assert set(doc[key][part]) >= {"torque_rel_pct", "torque_nrmse", "position_nrmse"}
+    assert doc["verdict"].startswith("missing effect(s) found: viscous")
+    assert isinstance(doc["unexplained"], list)
+    for name in ("diagnostics_before.png", "diagnostics_after.png", "summary.md"):
+        assert (report / name).stat().st_size > 0
+    assert "viscous" in (report / "summary.md").read_text()
+    assert "validation torque error" in capsys.readouterr().out
+
+
+def test_cli_bad_input_is_one_line(runs, capsys):
+    assert main(["residual", str(runs / "missing.h5"), "--json", str(runs / "x.json")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("bench residual: error:") and "\n" not in err
+    assert main(["residual", str(runs / "train.h5"), "--start", "inertia,bogus", "--json", str(runs / "x.json")]) == 2
+    assert "unknown model term" in capsys.readouterr().err
