@@ -86,48 +86,105 @@ static double table_odd(double x, int n, const double *gx, const double *gf) {
 }
 
 /* Lazy stop operator. The element deflections are held as e_i at the last commit plus one offset X
- * (s->ms_offset): while the motion since the commit is monotone and no element reaches its slip limit, every
- * element moves with the path, so delta_i = e_i + X for the unsaturated ones and the Maxwell-slip force is
- * linear: F = F0 + X*slope_up for X >= 0 (slope_up sums the elements free to move up) and F0 + X*slope_down
- * for X <= 0, up to room_up / room_down, the first saturation in each direction. A sub-step is then O(1).
- * The O(N) commit (delta_i = clip(clip(e_i + X) + dx)) runs only at a reversal or a saturation. */
+ * (s->ms_offset). While the motion since the commit is monotone, each element moves with the path until it
+ * saturates: moving up by y >= 0, F(y) = F0 + sum_i k_i*min(y, up_i) with up_i = Delta_i - e_i the room of
+ * each element free to move up (down likewise). The cache keeps F0, the total free slope and the MS_NEAR
+ * smallest rooms in each direction, sorted, so F is exact and O(MS_NEAR) up to the next room beyond them
+ * (the horizon). Only a reversal, or motion past the horizon, needs the O(N) commit
+ * delta_i = clip(clip(e_i + X) + dx). */
+#define MS_NEAR 8
+
 typedef struct {
-    double f0, slope_up, slope_down, room_up, room_down;
+    double f0, slope_up, slope_down, room_up, room_down; /* room_*: horizon of the exact expansion */
+    int n_up, n_down;
+    int cur_up, cur_down; /* how many near rooms the last evaluation had passed (a search hint) */
+    double r_up[MS_NEAR + 1], k_up[MS_NEAR + 1], r_down[MS_NEAR + 1], k_down[MS_NEAR + 1];
+    /* prefix sums over the sorted near rooms: K[c] = sum_{j<c} k_j, R[c] = sum_{j<c} k_j*r_j */
+    double K_up[MS_NEAR + 1], R_up[MS_NEAR + 1], K_down[MS_NEAR + 1], R_down[MS_NEAR + 1];
 } ms_cache;
 
-/* Fill the cache from the committed deflections e_i (no change to the state). Four independent lanes
- * (element i in lane i % 4) break the dependency chains of the sums. */
+/* Keep the near+1 smallest rooms (sorted) with their stiffness. */
+static inline void near_insert(double *r, double *k, int *n, int near, double room, double stiff) {
+    int m = *n;
+    if (m == near + 1 && room >= r[near]) return;
+    int j = m < near + 1 ? m : near;
+    while (j > 0 && r[j - 1] > room) {
+        r[j] = r[j - 1];
+        k[j] = k[j - 1];
+        j--;
+    }
+    r[j] = room;
+    k[j] = stiff;
+    if (m < near + 1) *n = m + 1;
+}
+
+/* Fill the cache from the committed deflections e_i (no change to the state). */
 static void ms_fill(const hb_params *p, const hb_state *s, ms_cache *c) {
     double f0[4] = {0.0, 0.0, 0.0, 0.0}, su[4] = {0.0, 0.0, 0.0, 0.0}, sd[4] = {0.0, 0.0, 0.0, 0.0};
-    double ru[4] = {HUGE_VAL, HUGE_VAL, HUGE_VAL, HUGE_VAL}, rd[4] = {HUGE_VAL, HUGE_VAL, HUGE_VAL, HUGE_VAL};
     const double *q = s->deflection, *ks = p->ms_stiffness, *Ds = p->ms_delta;
     const int n = p->n_elements;
+    const int near = MS_NEAR;
+    c->n_up = c->n_down = 0;
     for (int i = 0; i < n; i++) {
         int j = i & 3;
         double k = ks[i], D = Ds[i], d = q[i];
         f0[j] += k * d;
         double up = D - d, down = D + d;
-        su[j] += up > 0.0 ? k : 0.0;
-        sd[j] += down > 0.0 ? k : 0.0;
-        double u2 = up > 0.0 ? up : HUGE_VAL, d2 = down > 0.0 ? down : HUGE_VAL;
-        ru[j] = u2 < ru[j] ? u2 : ru[j];
-        rd[j] = d2 < rd[j] ? d2 : rd[j];
+        if (up > 0.0) {
+            su[j] += k;
+            near_insert(c->r_up, c->k_up, &c->n_up, near, up, k);
+        }
+        if (down > 0.0) {
+            sd[j] += k;
+            near_insert(c->r_down, c->k_down, &c->n_down, near, down, k);
+        }
     }
     c->f0 = (f0[0] + f0[1]) + (f0[2] + f0[3]);
     c->slope_up = (su[0] + su[1]) + (su[2] + su[3]);
     c->slope_down = (sd[0] + sd[1]) + (sd[2] + sd[3]);
-    double r01 = ru[0] < ru[1] ? ru[0] : ru[1], r23 = ru[2] < ru[3] ? ru[2] : ru[3];
-    c->room_up = r01 < r23 ? r01 : r23;
-    r01 = rd[0] < rd[1] ? rd[0] : rd[1];
-    r23 = rd[2] < rd[3] ? rd[2] : rd[3];
-    c->room_down = r01 < r23 ? r01 : r23;
+    /* beyond the MS_NEAR nearest rooms the expansion needs the next one as its horizon */
+    c->room_up = c->n_up > near ? c->r_up[near] : HUGE_VAL;
+    c->room_down = c->n_down > near ? c->r_down[near] : HUGE_VAL;
+    if (c->n_up > near) c->n_up = near;
+    if (c->n_down > near) c->n_down = near;
+    c->K_up[0] = c->R_up[0] = c->K_down[0] = c->R_down[0] = 0.0;
+    for (int j = 0; j < c->n_up; j++) {
+        c->K_up[j + 1] = c->K_up[j] + c->k_up[j];
+        c->R_up[j + 1] = c->R_up[j] + c->k_up[j] * c->r_up[j];
+    }
+    for (int j = 0; j < c->n_down; j++) {
+        c->K_down[j + 1] = c->K_down[j] + c->k_down[j];
+        c->R_down[j + 1] = c->R_down[j] + c->k_down[j] * c->r_down[j];
+    }
+    c->cur_up = c->cur_down = 0;
 }
 
-/* Is the path "X since the commit, then dx" monotone and free of saturations? */
-static inline int ms_linear(const ms_cache *c, double X, double dx) {
+/* Is the path "X since the commit, then dx" monotone and within the horizon? */
+static inline int ms_linear(ms_cache *c, double X, double dx) {
     double y = X + dx;
     return (dx >= 0.0 && X >= 0.0 && y <= c->room_up) || (dx <= 0.0 && X <= 0.0 && -y <= c->room_down);
 }
+
+/* Number of sorted rooms r[0..n) below y, searched from the hint c. */
+static inline int ms_count(const double *r, int n, int c, double y) {
+    while (c > 0 && r[c - 1] >= y) c--;
+    while (c < n && r[c] < y) c++;
+    return c;
+}
+
+/* Force after a monotone displacement y from the commit point, |y| within the horizon:
+ * F = F0 + y*(slope - K[c]) + R[c] with c the rooms already passed. */
+static inline double ms_expand_up(ms_cache *c, double y) {
+    int n = c->cur_up = ms_count(c->r_up, c->n_up, c->cur_up, y);
+    return c->f0 + y * (c->slope_up - c->K_up[n]) + c->R_up[n];
+}
+
+static inline double ms_expand_down(ms_cache *c, double y) {
+    int n = c->cur_down = ms_count(c->r_down, c->n_down, c->cur_down, -y);
+    return c->f0 + y * (c->slope_down - c->K_down[n]) - c->R_down[n];
+}
+
+static inline double ms_expand(ms_cache *c, double y) { return y >= 0.0 ? ms_expand_up(c, y) : ms_expand_down(c, y); }
 
 /* Advance every element by the sub-step's displacement dx (stop operator), lazily. */
 static void ms_commit(const hb_params *p, hb_state *s, ms_cache *c, double dx) {
@@ -146,20 +203,18 @@ static void ms_commit(const hb_params *p, hb_state *s, ms_cache *c, double dx) {
 }
 
 static inline __attribute__((always_inline)) double maxwell_force(const hb_params *p, const hb_state *s,
-                                                                   const ms_cache *c, double dx) {
+                                                                   ms_cache *c, double dx) {
     double X = s->ms_offset, y = X + dx;
-    if (dx >= 0.0 && X >= 0.0 && y <= c->room_up) return c->f0 + y * c->slope_up;
-    if (dx <= 0.0 && X <= 0.0 && -y <= c->room_down) return c->f0 + y * c->slope_down;
+    if (dx >= 0.0 && X >= 0.0 && y <= c->room_up) return ms_expand_up(c, y);
+    if (dx <= 0.0 && X <= 0.0 && -y <= c->room_down) return ms_expand_down(c, y);
     double f = 0.0;
     const double *k = p->ms_stiffness, *d = p->ms_delta, *q = s->deflection;
     for (int i = 0; i < p->n_elements; i++) f += k[i] * clip(clip(q[i] + X, -d[i], d[i]) + dx, -d[i], d[i]);
     return f;
 }
 
-/* Maxwell-slip force at the current state (the lazy offset is always within its linear range). */
-static inline double maxwell_now(const ms_cache *c, double X) {
-    return c->f0 + X * (X >= 0.0 ? c->slope_up : c->slope_down);
-}
+/* Maxwell-slip force at the current state (the lazy offset is always within its horizon). */
+static inline double maxwell_now(ms_cache *c, double X) { return ms_expand(c, X); }
 
 void hb_deflections(const hb_params *p, const hb_state *s, double *out) {
     for (int i = 0; i < p->n_elements; i++) {
@@ -173,6 +228,7 @@ typedef struct {
     int extras;        /* cogging or tables present */
     int dry;           /* Coulomb or Stribeck present */
     int asym_viscous;  /* viscous differs by direction */
+    int spring;        /* a linear spring is present */
 } hb_features;
 
 static hb_features features_of(const hb_params *p) {
@@ -180,16 +236,17 @@ static hb_features features_of(const hb_params *p) {
     f.extras = p->n_cogging > 0 || p->n_restoring > 0 || p->n_damping > 0;
     f.dry = p->coulomb_pos > 0.0 || p->coulomb_neg > 0.0 || p->stribeck_excess > 0.0;
     f.asym_viscous = p->viscous_pos != p->viscous_neg;
+    f.spring = p->spring != 0.0;
     return f;
 }
 
 /* Every smooth (single-valued) force resisting motion, at angle theta and velocity omega. */
 static inline __attribute__((always_inline)) double smooth_force(const hb_params *p, const hb_state *s,
-                                                                  const ms_cache *c, const hb_features *ft,
+                                                                  ms_cache *c, const hb_features *ft,
                                                                   double theta, double omega) {
     double f = maxwell_force(p, s, c, theta - s->theta);
-    f += p->spring * theta;
-    f += (ft->asym_viscous && omega < 0.0 ? p->viscous_neg : p->viscous_pos) * omega;
+    if (ft->spring) f += p->spring * theta;
+    f += (ft->asym_viscous ? (omega < 0.0 ? p->viscous_neg : p->viscous_pos) : p->viscous_pos) * omega;
     if (ft->extras) {
         for (int j = 0; j < p->n_cogging; j++)
             f += p->cogging_amplitude[j] * sin(p->cogging_order[j] * theta + p->cogging_phase[j]);
@@ -200,7 +257,7 @@ static inline __attribute__((always_inline)) double smooth_force(const hb_params
 }
 
 /* Total friction torque at the current state (excludes spring and cogging), N*m. */
-static double friction_now(const hb_params *p, const hb_state *s, const ms_cache *c) {
+static double friction_now(const hb_params *p, const hb_state *s, ms_cache *c) {
     double f = maxwell_now(c, s->ms_offset);
     f += (s->omega >= 0.0 ? p->viscous_pos : p->viscous_neg) * s->omega;
     f += s->coulomb_force;
@@ -220,7 +277,7 @@ static inline __attribute__((always_inline)) double coulomb_level(const hb_param
 }
 
 /* Classical RK4 over h; dir != 0 adds the sliding Coulomb/Stribeck force dir*level(omega). */
-static inline __attribute__((always_inline)) void rk4(const hb_params *p, const hb_state *s, const ms_cache *c,
+static inline __attribute__((always_inline)) void rk4(const hb_params *p, const hb_state *s, ms_cache *c,
                                                       const hb_features *ft, double tau, double h, double dir,
                                                       double *th_out, double *om_out) {
     const double inv_j = 1.0 / p->inertia;

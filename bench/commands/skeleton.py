@@ -1,0 +1,162 @@
+"""``bench skeleton RUN.h5 [RUN2.h5 ...]``: ForceVib skeleton curves of logged chirp runs, composed."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "skeleton",
+        help="equivalent stiffness and damping (skeleton curves) from chirp runs, composed across runs",
+        description="ForceVib on each run (x = position channel, force = torque channel), then composition "
+        "across runs into k_eq(A), restoring force k_eq*A against displacement amplitude, and "
+        "damping force c_eq*V against velocity amplitude (science.md §4).",
+    )
+    parser.add_argument("runs", nargs="+", metavar="RUN.h5", help="chirp run files (same axis)")
+    parser.add_argument(
+        "--mass",
+        type=float,
+        help="inertia J (kg*m^2) or mass (kg); default: the run's declared calibration 'inertia' if present",
+    )
+    parser.add_argument(
+        "--spring", type=float, default=0.0, help="linear spring to subtract, N*m/rad (default 0)"
+    )
+    parser.add_argument("--method", choices=("cwt", "hilbert"), default="cwt", help="instantaneous analysis")
+    parser.add_argument("--fb", type=float, default=0.5, help="Morlet bandwidth f_b (default 0.5)")
+    parser.add_argument("--fc", type=float, default=0.8, help="Morlet centre frequency f_c (default 0.8)")
+    parser.add_argument(
+        "--band",
+        type=float,
+        nargs=2,
+        metavar=("F_MIN", "F_MAX"),
+        help="analysed band in Hz (default: from the spectrum of each run)",
+    )
+    parser.add_argument("--bins", type=int, default=30, help="log-spaced bins per curve (default 30)")
+    parser.add_argument("--json", metavar="OUT.json", help="write the composed curves as JSON")
+    parser.add_argument("--plot", metavar="OUT.png", help="write the skeleton plot")
+    parser.set_defaults(func=run)
+
+
+def _mass(args, runs) -> float:
+    from bench.errors import BenchError
+
+    if args.mass is not None:
+        mass = args.mass
+    else:
+        declared = [r.calibration.get("inertia") for r in runs]
+        if any(m is None for m in declared):
+            raise BenchError("no --mass given and a run declares no inertia in its calibration")
+        mass = float(declared[0])
+    if not (math.isfinite(mass) and mass > 0):
+        raise BenchError(f"--mass must be positive, got {mass}")
+    return mass
+
+
+def centred_force(torque, timing: str):
+    """Torque at the sample instants t_k from a logged channel: a value averaged over [t_k-1, t_k)
+    (``hold_previous``) or held over [t_k, t_k+1) (``hold_next``) is centred half a sample off, which biases
+    ForceVib's damping by ~5 %; the mean of two neighbours is centred on t_k (ends repeated)."""
+    import numpy as np
+
+    f = np.asarray(torque, float)
+    if timing == "hold_previous":
+        return 0.5 * (f + np.append(f[1:], f[-1]))
+    if timing == "hold_next":
+        return 0.5 * (f + np.insert(f[:-1], 0, f[0]))
+    return f
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from analysis.forcevib import compose, forcevib
+    from analysis.run_file import read_run_file
+    from bench.errors import BenchError
+
+    runs = [read_run_file(p) for p in args.runs]
+    if len({r.axis for r in runs}) > 1:
+        raise BenchError("runs mix rotary and linear axes")
+    if not (math.isfinite(args.spring) and args.spring >= 0):
+        raise BenchError(f"--spring must be >= 0, got {args.spring}")
+    mass = _mass(args, runs)
+    options = {"fb": args.fb, "fc": args.fc} if args.method == "cwt" else {}
+    if args.band:
+        options["freq_range"] = tuple(args.band)
+    results = []
+    for r in runs:
+        x = np.asarray(r.channel("position"), float)
+        force = centred_force(r.channel("torque"), r.torque_timing)
+        results.append(forcevib(x, force, r.sample_rate, mass, args.method, spring=args.spring, **options))
+        v = results[-1].valid
+        print(
+            f"{r.path.name}: {v.sum()} valid samples, A {results[-1].amplitude[v].min():.4g} .. "
+            f"{results[-1].amplitude[v].max():.4g}"
+        )
+    curves = compose(results, n_bins=args.bins)
+    pos, trq = ("rad", "N*m") if runs[0].axis == "rotary" else ("m", "N")
+    doc = {
+        "runs": [str(p) for p in args.runs],
+        "mass": mass,
+        "spring": args.spring,
+        "method": args.method,
+        "units": {
+            "amplitude": pos,
+            "stiffness": f"{trq}/{pos}",
+            "restoring_force": trq,
+            "energy": f"{trq}*{pos}",
+            "velocity": f"{pos}/s",
+            "damping": f"{trq}*s/{pos}",
+            "damping_force": trq,
+        },
+        **{
+            k: getattr(curves, k).tolist()
+            for k in (
+                "amplitude",
+                "stiffness",
+                "restoring_force",
+                "energy",
+                "amplitude_count",
+                "velocity",
+                "damping",
+                "damping_force",
+                "velocity_count",
+            )
+        },
+    }
+    print(
+        f"composed {len(results)} runs: {curves.amplitude.size} amplitude bins "
+        f"({curves.amplitude.min():.4g} .. {curves.amplitude.max():.4g} {pos}), k_eq "
+        f"{curves.stiffness.max():.4g} .. {curves.stiffness.min():.4g} {trq}/{pos}"
+    )
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(doc, fh, indent=1)
+    if args.plot:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(1, 2, figsize=(11, 4))
+        for i in np.unique(curves.points_run):
+            m = curves.points_run == i
+            ax[0].plot(
+                curves.points_amplitude[m], curves.points_restoring_force[m], ".", ms=1, label=runs[i].name
+            )
+            ax[1].plot(curves.points_velocity[m], curves.points_damping_force[m], ".", ms=1)
+        ax[0].plot(curves.amplitude, curves.restoring_force, "ko", ms=3, label="composed")
+        ax[1].plot(curves.velocity, curves.damping_force, "ko", ms=3)
+        ax[0].set_xscale("log")
+        ax[0].set_xlabel(f"displacement amplitude ({pos})")
+        ax[0].set_ylabel(f"restoring force k_eq*A ({trq})")
+        ax[1].set_xlabel(f"velocity amplitude ({pos}/s)")
+        ax[1].set_ylabel(f"damping force c_eq*V ({trq})")
+        ax[0].legend(fontsize=7, markerscale=8)
+        for a in ax:
+            a.grid(alpha=0.3)
+        fig.savefig(args.plot, dpi=100, bbox_inches="tight")
+        plt.close(fig)
+    return 0

@@ -1,0 +1,81 @@
+"""``bench skeleton`` on run files of the paper's system under chirps (written with bench.runfile)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from analysis.paper import maxwell_slip_closed_form
+from bench.cli import main
+from bench.runfile import RunWriter
+from firmware_sim.friction_models import paper_system
+from firmware_sim.plant import simulate
+
+FS = 1000.0
+
+
+def _write_chirp(path, g, a=0.05, duration=40.0):
+    p = paper_system()
+    n = int(duration * FS)
+    t = np.arange(n) / FS
+    out = simulate(p, g * np.sin(np.pi * a * t**2), 1 / FS, substeps=4)
+    # a device logs the torque as the mean over [t_k-1, t_k); here the held command, i.e. hold_next timing
+    # shifted by one sample = hold_previous
+    torque = np.insert(g * np.sin(np.pi * a * t[:-1] ** 2), 0, 0.0)
+    with RunWriter(
+        path,
+        sample_rate=FS,
+        channels=("sample_index", "t", "torque", "position"),
+        calibration={"inertia": p.inertia},
+    ) as w:
+        w.append({"sample_index": np.arange(n), "t": t, "torque": torque, "position": out.theta})
+    return p
+
+
+def test_skeleton_cli_composes_runs(tmp_path, capsys):
+    files = [tmp_path / f"g{g}.h5" for g in (0.5, 5.0, 20.0)]
+    for f, g in zip(files, (0.5, 5.0, 20.0), strict=True):
+        p = _write_chirp(f, g)
+    rc = main(
+        [
+            "skeleton",
+            *map(str, files),
+            "--spring",
+            "50",
+            "--json",
+            str(tmp_path / "s.json"),
+            "--plot",
+            str(tmp_path / "s.png"),
+        ]
+    )
+    assert rc == 0
+    doc = json.loads((tmp_path / "s.json").read_text())
+    a = np.array(doc["amplitude"])
+    assert doc["mass"] == 1.0 and doc["units"]["stiffness"] == "N*m/rad"
+    assert a.min() < 0.02 and a.max() > 3.0
+    # k_eq against the 16-element closed form: 5 % (as the paper reproduction; measured < 2 %)
+    k16, e16 = maxwell_slip_closed_form(p, a)
+    np.testing.assert_array_less(np.abs(np.array(doc["stiffness"]) / k16 - 1), 0.05)
+    # energy where it matters (A >= 0.1): median within 5 % (three runs only: a sparse composition)
+    m = a >= 0.1
+    assert np.median(np.abs(np.array(doc["energy"])[m] / e16[m] - 1)) < 0.05
+    assert (tmp_path / "s.png").stat().st_size > 10_000
+
+
+def test_skeleton_cli_errors(tmp_path, capsys):
+    assert main(["skeleton", str(tmp_path / "missing.h5")]) == 2
+    assert "no such run file" in capsys.readouterr().err
+    f = tmp_path / "a.h5"
+    _write_chirp(f, 1.0, duration=20.0)
+    assert main(["skeleton", str(f), "--mass", "-1"]) == 2
+    assert "--mass" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "timing, expect",
+    [("hold_previous", [1.5, 2.5, 3.0]), ("hold_next", [1.0, 1.5, 2.5]), ("instant", [1.0, 2.0, 3.0])],
+)
+def test_centred_force(timing, expect):
+    from bench.commands.skeleton import centred_force
+
+    np.testing.assert_allclose(centred_force(np.array([1.0, 2.0, 3.0]), timing), expect)
