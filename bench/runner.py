@@ -41,7 +41,7 @@ class DeviceSettings:
     velocity_limit: float = 300.0        # rad/s
     position_min: float = -math.inf      # rad
     position_max: float = math.inf      # rad
-    watchdog_timeout: float = 0.1        # s
+    watchdog_timeout: float = 0.5        # s; 0.1 s trips under host load on small machines (see docs/protocol.md)
     torque_constant: float = DEFAULT_TORQUE_CONSTANT  # N*m/A
     counts_per_rev: int = DEFAULT_COUNTS_PER_REV
     ratio: float = 1.0                   # motor revolutions per load revolution

@@ -77,7 +77,7 @@ def open_device(url: str, timeout: float = 2.0) -> Amplifier:
 def start_simulator(options: dict[str, str]) -> tuple[subprocess.Popen, str]:
     """Start ``python -m firmware_sim --serial`` with ``options`` (pacing, config, seed, tick) as flags;
     return the process and the pty path it printed."""
-    cmd = [sys.executable, "-m", "firmware_sim", "--serial"]
+    cmd = [sys.executable, "-m", "firmware_sim", "--serial", "--parent-pid", str(os.getpid())]
     for key in ("pacing", "config", "seed", "tick"):
         if key in options:
             cmd += [f"--{key}", options[key]]

@@ -29,7 +29,30 @@ def build_parser(prog: str = "python -m firmware_sim") -> argparse.ArgumentParse
     parser.add_argument("--pacing", choices=PACINGS, default="realtime",
                         help="realtime (default) or lockstep (as fast as flow control allows, for tests)")
     parser.add_argument("--tick", type=float, default=0.004, help="realtime loop period, s (default 0.004)")
+    parser.add_argument("--parent-pid", type=int, default=None,
+                        help="exit once this process is gone (sim:// passes the host's pid); the watchdog has "
+                             "zeroed the current and latched its fault by then")
     return parser
+
+
+def watch_parent(pid: int, stop, grace: float = 2.0, period: float = 0.25) -> None:
+    """Set ``stop`` once process ``pid`` no longer exists (or is no longer our parent), after ``grace`` s."""
+    import os
+    import time
+
+    while not stop.is_set():
+        try:
+            os.kill(pid, 0)
+            alive = os.getppid() == pid
+        except ProcessLookupError:
+            alive = False
+        except PermissionError:
+            alive = True
+        if not alive:
+            time.sleep(grace)
+            stop.set()
+            return
+        time.sleep(period)
 
 
 def main(argv: list[str] | None = None, prog: str = "python -m firmware_sim") -> int:
@@ -57,8 +80,13 @@ def main(argv: list[str] | None = None, prog: str = "python -m firmware_sim") ->
         print(transport.path, flush=True)
     else:
         print(f"{args.interface}:{args.can} node {args.node}", flush=True)
+    import threading
+
+    stop = threading.Event()
+    if args.parent_pid is not None:
+        threading.Thread(target=watch_parent, args=(args.parent_pid, stop), daemon=True).start()
     try:
-        serve(transport, firmware, args.tick)
+        serve(transport, firmware, args.tick, stop)
     except KeyboardInterrupt:
         pass
     finally:

@@ -122,6 +122,8 @@ def test_ctrl_c_leaves_an_aborted_file_and_a_nonzero_exit(tmp_path):
 
 def test_sigkill_leaves_a_crashed_file_with_every_flushed_sample(tmp_path):
     proc, out = _start_cli_run(tmp_path)
+    sims = _children(proc.pid)
+    assert sims, "sim:// should run the simulator as a child process"
     time.sleep(0.7)
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait(timeout=10)
@@ -134,3 +136,21 @@ def test_sigkill_leaves_a_crashed_file_with_every_flushed_sample(tmp_path):
         n = run.channel("sample_index").size
         assert n >= 10_000
         np.testing.assert_array_equal(run.channel("sample_index"), np.arange(n))  # no gaps, no duplicates
+    # the orphaned simulator latches its watchdog, then exits by itself
+    deadline = time.monotonic() + 15
+    while any(os.path.exists(f"/proc/{pid}") for pid in sims) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not any(os.path.exists(f"/proc/{pid}") for pid in sims)
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as f:
+                    if int(f.read().rsplit(")", 1)[1].split()[1]) == pid:
+                        out.append(int(entry))
+            except OSError:
+                continue
+    return out

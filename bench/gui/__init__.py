@@ -1,0 +1,1 @@
+"""The operator GUI (pyqtgraph + PySide6): ``bench gui``. See ``docs/gui.md``."""

@@ -1,0 +1,197 @@
+"""Analyses the run browser offers, as plain functions: run file in, numbers and curves out.
+
+Each analysis returns an :class:`AnalysisResult` (a table of numbers with units and a few figures of
+curves) computed by the public entry points of :mod:`analysis`; the browser runs them off the GUI thread
+and draws the curves with pyqtgraph. An analysis whose entry point does not exist yet reports
+"not available" through :func:`availability` instead of producing anything.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from bench.errors import BenchError
+
+
+class AnalysisUnavailable(BenchError):
+    """The analysis package does not (yet) provide the entry point an analysis needs."""
+
+
+@dataclass
+class Figure:
+    """One plot: title, axis labels with units, and named curves ``(name, x, y)``."""
+
+    title: str
+    xlabel: str
+    ylabel: str
+    curves: list[tuple[str, np.ndarray, np.ndarray]] = field(default_factory=list)
+    scatter: bool = False
+
+
+@dataclass
+class AnalysisResult:
+    title: str
+    numbers: list[tuple[str, str, str]]  # (quantity, value, unit)
+    figures: list[Figure]
+    warnings: list[str] = field(default_factory=list)
+
+
+#: analysis name -> (module, attribute) entry points it needs
+ENTRY_POINTS: dict[str, list[tuple[str, str]]] = {
+    "identification": [("analysis.maxwell_fit", "fit_lip")],
+    "skeleton": [("analysis.forcevib", "forcevib")],
+    "afrf": [("analysis.afrf", "afrf_from_run")],
+    "residual": [("analysis.residual", "residual_loop"), ("analysis.residual", "prepare_run")],
+}
+#: analyses that read the file themselves (by path): no other handle of it may be open in this process
+BY_PATH = ("afrf",)
+TITLES = {"identification": "Identification (Maxwell-slip, NNLS)", "skeleton": "Skeleton (ForceVib)",
+          "afrf": "AFRF", "residual": "Residual loop"}
+
+
+def availability(name: str) -> str:
+    """"" when analysis ``name`` can run, else why not (one line)."""
+    for module, attr in ENTRY_POINTS[name]:
+        try:
+            mod = importlib.import_module(module)
+        except ImportError:
+            return f"not available: {module} is not part of this installation yet"
+        if not hasattr(mod, attr):
+            return f"not available: {module}.{attr} does not exist yet"
+    return ""
+
+
+def _entry(name: str) -> Callable:
+    why = availability(name)
+    if why:
+        raise AnalysisUnavailable(f"{TITLES[name]}: {why}")
+    module, attr = ENTRY_POINTS[name][0]
+    return getattr(importlib.import_module(module), attr)
+
+
+def _thin(x: np.ndarray, *ys: np.ndarray, n: int = 20000) -> list[np.ndarray]:
+    step = max(1, x.size // n)
+    return [x[::step], *[y[::step] for y in ys]]
+
+
+def identification(run, options: dict | None = None) -> AnalysisResult:
+    """Maxwell-slip identification (``analysis.maxwell_fit.fit_lip``) of position and torque of ``run``."""
+    fit_lip = _entry("identification")
+    position = run.channel("position")
+    torque = run.channel("torque")
+    fit = fit_lip(position, torque, run.sample_rate, axis=run.axis)
+    m = fit.model
+    d = m.to_dict()
+    u = d["units"]
+    numbers = [
+        ("inertia J", f"{m.inertia:.6g}", u["inertia"]),
+        ("viscous b", f"{m.viscous:.6g}", u["viscous"]),
+        ("Coulomb Fc", f"{m.coulomb:.6g}", u["coulomb"]),
+        ("offset c0", f"{m.offset:.6g}", u["offset"]),
+        ("spring K", f"{m.spring:.6g}", u["spring"]),
+        ("Maxwell-slip elements N", str(m.ms_stiffness.size), ""),
+        ("breakaway sum W_i + Fc", f"{m.breakaway:.6g}", u["coulomb"]),
+        ("torque NRMSE (filtered)", f"{fit.torque_nrmse:.4g}", "1"),
+        ("filter cut-off", f"{fit.cutoff:.4g}", "Hz"),
+    ]
+    for i, (k, delta) in enumerate(zip(m.ms_stiffness, m.ms_delta, strict=True)):
+        numbers.append((f"element {i + 1}: k_i, Delta_i", f"{k:.4g}, {delta:.4g}",
+                        f"{u['ms_stiffness']}, {u['ms_delta']}"))
+    t_rows = fit.rows / run.sample_rate
+    span = float(np.ptp(position)) / 2 if position.size else 1.0
+    x = np.linspace(-span, span, 401)
+    figures = [
+        Figure("filtered torque: measured and model", "t (s)", f"torque ({u['coulomb']})",
+               [("measured", *_thin(t_rows, fit.measured)), ("model", *_thin(t_rows, fit.predicted))]),
+        Figure("virgin curve", f"displacement ({u['ms_delta']})", f"friction ({u['coulomb']})",
+               [("sum k_i clip(x, Delta_i)", x, m.virgin_curve(x))]),
+    ]
+    return AnalysisResult(TITLES["identification"], numbers, figures, list(fit.warnings))
+
+
+def skeleton(run, options: dict | None = None) -> AnalysisResult:
+    """ForceVib (``analysis.forcevib.forcevib``) on position and torque; ``options['inertia']`` in
+    kg*m^2 (rotary) or kg (linear) and ``options['method']`` (``hilbert`` or ``cwt``)."""
+    forcevib = _entry("skeleton")
+    options = options or {}
+    inertia = float(options.get("inertia", 0.0))
+    if not inertia > 0:
+        raise BenchError("skeleton analysis needs the inertia J > 0 (kg*m^2); set it in the browser")
+    x = run.channel("position")
+    f = run.channel("torque")
+    res = forcevib(x - np.mean(x), f, run.sample_rate, inertia, options.get("method", "hilbert"))
+    ok = res.valid
+    if not ok.any():
+        raise BenchError("ForceVib found no valid samples in this run (is it a chirp or a sine run?)")
+    pos_unit = run.unit("position")
+    tq_unit = run.unit("torque")
+    a, fk = _thin(res.amplitude[ok], res.restoring_force[ok])
+    v, fd = _thin(res.velocity_amplitude[ok], res.damping_force[ok])
+    numbers = [
+        ("valid samples", f"{int(ok.sum())} of {ok.size}", ""),
+        ("amplitude range", f"{res.amplitude[ok].min():.4g} .. {res.amplitude[ok].max():.4g}", pos_unit),
+        ("median k_eq", f"{np.median(res.stiffness[ok]):.6g}", f"{tq_unit}/{pos_unit}"),
+        ("median c_eq", f"{np.median(res.damping[ok]):.6g}", f"{tq_unit}*s/{pos_unit}"),
+    ]
+    figures = [
+        Figure("restoring force skeleton", f"amplitude A ({pos_unit})", f"F_k ({tq_unit})",
+               [("(k_eq - k_lin) A", a, fk)], scatter=True),
+        Figure("damping force skeleton", f"velocity amplitude V ({pos_unit}/s)", f"F_d ({tq_unit})",
+               [("c_eq V", v, fd)], scatter=True),
+    ]
+    return AnalysisResult(TITLES["skeleton"], numbers, figures)
+
+
+def afrf(run, options: dict | None = None) -> AnalysisResult:
+    """AFRF (``analysis.afrf.afrf_from_run``) of a stepped-sine run: |c_k| of the position per step."""
+    afrf_from_run = _entry("afrf")
+    res = afrf_from_run(run.path)
+    mags = res.magnitudes
+    numbers = []
+    for i, a in enumerate(res.amplitudes):
+        for j, f in enumerate(res.frequencies):
+            c1 = mags[i, j, 0]
+            ratio = mags[i, j, 2] / c1 if res.n_harmonics >= 3 and c1 > 0 else float("nan")
+            numbers.append((f"G {a:.4g} {res.amplitude_unit}, f {f:.4g} Hz: |c1|, |c3|/|c1|",
+                            f"{c1:.4g}, {ratio:.3g}", f"{res.displacement_unit}, 1"))
+    figures = []
+    for k in range(res.n_harmonics):
+        fig = Figure(f"AFRF, harmonic {k + 1}", "frequency (Hz)", f"|c{k + 1}| ({res.displacement_unit})")
+        for i, a in enumerate(res.amplitudes):
+            fig.curves.append((f"G = {a:.4g} {res.amplitude_unit}", res.frequencies, mags[i, :, k]))
+        figures.append(fig)
+    return AnalysisResult(TITLES["afrf"], numbers, figures)
+
+
+def residual(run, options: dict | None = None) -> AnalysisResult:
+    """Residual loop (``analysis.residual.residual_loop``) on position and torque, blocked
+    cross-validation (no separate validation run)."""
+    residual_loop = _entry("residual")
+    from analysis.residual import prepare_run
+
+    data = prepare_run(run.channel("position"), run.channel("torque"), run.sample_rate, axis=run.axis,
+                       name=os.path.basename(run.path))
+    res = residual_loop(data)
+    numbers = [("verdict", str(res.verdict), ""), ("validation", str(res.validation_mode), ""),
+               ("start model", ", ".join(res.start), ""),
+               ("effects added", ", ".join(res.names_added) or "none", "")]
+    for label, errors in (("before", res.error_before), ("after", res.error_after)):
+        for key, value in errors.items():
+            if isinstance(value, int | float):
+                numbers.append((f"error {label}: {key}", f"{value:.4g}", ""))
+    tq = run.unit("torque")
+    sb, sa = res.signals_before, res.signals_after
+    figures = [Figure("residual over time", "t (s)", f"residual ({tq})",
+                      [("before", *_thin(sb.time, sb.residual)), ("after", *_thin(sa.time, sa.residual))]),
+               Figure("residual against velocity", f"velocity ({run.unit('position')}/s)", f"residual ({tq})",
+                      [("after", *_thin(sa.velocity, sa.residual))], scatter=True)]
+    return AnalysisResult(TITLES["residual"], numbers, figures)
+
+
+ANALYSES: dict[str, Callable] = {"identification": identification, "skeleton": skeleton, "afrf": afrf,
+                                 "residual": residual}

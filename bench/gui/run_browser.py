@@ -1,0 +1,350 @@
+"""Run browser: open run files (finished, crashed, or still being written: SWMR), plot any channel, and run
+identification, skeleton, AFRF and residual analyses off the GUI thread."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6 import QtCore, QtWidgets
+
+from bench.gui import analyses
+from bench.gui.worker import one_line
+
+COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
+
+
+class AnalysisWorker(QtCore.QThread):
+    """Runs one analysis on its own read handle of the run file."""
+
+    done = QtCore.Signal(object)  # AnalysisResult
+    failed = QtCore.Signal(str)
+
+    def __init__(self, name: str, path: str, options: dict) -> None:
+        super().__init__()
+        self.name, self.path, self.options = name, path, options
+
+    def run(self) -> None:
+        from types import SimpleNamespace
+
+        from bench.runfile import open_run
+
+        try:
+            if self.name in analyses.BY_PATH:
+                result = analyses.ANALYSES[self.name](SimpleNamespace(path=self.path), self.options)
+            else:
+                with open_run(self.path) as r:
+                    result = analyses.ANALYSES[self.name](r, self.options)
+        except Exception as exc:  # shown in the browser; the GUI keeps running
+            self.failed.emit(f"{analyses.TITLES[self.name]} failed: {one_line(exc)}")
+            return
+        self.done.emit(result)
+
+
+class RunBrowser(QtWidgets.QWidget):
+    """Open a run file, inspect metadata and events, plot channels, run analyses."""
+
+    message = QtCore.Signal(str, bool)  # text, is_error
+
+    def __init__(self, parent: QtWidgets.QWidget | None = None, runs_dir: str | Path = "runs") -> None:
+        super().__init__(parent)
+        self.runs_dir = Path(runs_dir)
+        self.run = None
+        self.worker: AnalysisWorker | None = None
+        self.last_result: analyses.AnalysisResult | None = None
+
+        self.path_edit = QtWidgets.QLineEdit()
+        self.path_edit.setPlaceholderText("run file (.h5)")
+        self.path_edit.returnPressed.connect(lambda: self.open(self.path_edit.text()))
+        browse = QtWidgets.QPushButton("Browse...")
+        browse.clicked.connect(self._browse)
+        open_button = QtWidgets.QPushButton("Open")
+        open_button.clicked.connect(lambda: self.open(self.path_edit.text()))
+        self.follow_box = QtWidgets.QCheckBox("Follow live file")
+        self.follow_box.setToolTip("re-read a file that is still being written (SWMR) once a second")
+        self.follow_box.toggled.connect(self._on_follow)
+        self.files = QtWidgets.QListWidget()
+        self.files.itemActivated.connect(lambda item: self.open(item.data(QtCore.Qt.ItemDataRole.UserRole)))
+        refresh = QtWidgets.QPushButton("Refresh list")
+        refresh.clicked.connect(self.refresh_files)
+
+        self.info = QtWidgets.QPlainTextEdit()
+        self.info.setReadOnly(True)
+        self.channels = QtWidgets.QListWidget()
+        self.channels.setSelectionMode(QtWidgets.QAbstractItemView.SelectionMode.ExtendedSelection)
+        self.channels.itemSelectionChanged.connect(self.plot_selected)
+        self.plot = pg.PlotWidget(background="w")
+        self.plot.showGrid(x=True, y=True, alpha=0.3)
+        self.plot.setLabel("bottom", "t (s)")
+        self.plot.addLegend(offset=(5, 5))
+        self.plot.setClipToView(True)
+        self.plot.setDownsampling(auto=True, mode="peak")
+
+        # analysis controls
+        self.analysis_buttons: dict[str, QtWidgets.QPushButton] = {}
+        buttons = QtWidgets.QHBoxLayout()
+        for name, title in analyses.TITLES.items():
+            b = QtWidgets.QPushButton(title.split(" (")[0])
+            why = analyses.availability(name)
+            b.setEnabled(not why)
+            b.setToolTip(why or title)
+            b.clicked.connect(lambda _c=False, n=name: self.analyse(n))
+            buttons.addWidget(b)
+            self.analysis_buttons[name] = b
+        self.inertia_edit = QtWidgets.QLineEdit("")
+        self.inertia_edit.setPlaceholderText("from identification")
+        self.inertia_edit.setToolTip("inertia J for the skeleton analysis, kg*m^2 (kg on a linear axis); "
+                                     "filled in by an identification")
+        self.method_box = QtWidgets.QComboBox()
+        self.method_box.addItems(["hilbert", "cwt"])
+        opts = QtWidgets.QHBoxLayout()
+        opts.addWidget(QtWidgets.QLabel("J (kg*m^2)"))
+        opts.addWidget(self.inertia_edit)
+        opts.addWidget(QtWidgets.QLabel("instantaneous method"))
+        opts.addWidget(self.method_box)
+        opts.addStretch(1)
+        self.analysis_status = QtWidgets.QLabel(self._availability_text())
+        self.analysis_status.setWordWrap(True)
+        self.numbers = QtWidgets.QTableWidget(0, 3)
+        self.numbers.setHorizontalHeaderLabels(["quantity", "value", "unit"])
+        self.numbers.verticalHeader().setVisible(False)
+        self.numbers.horizontalHeader().setStretchLastSection(True)
+        self.numbers.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
+        self.figures = pg.GraphicsLayoutWidget()
+        self.figures.setBackground("w")
+
+        left = QtWidgets.QVBoxLayout()
+        left.addWidget(QtWidgets.QLabel(f"Runs in {self.runs_dir}/"))
+        left.addWidget(self.files, 1)
+        left.addWidget(refresh)
+        left.addWidget(QtWidgets.QLabel("Channels"))
+        left.addWidget(self.channels, 1)
+        left_w = QtWidgets.QWidget()
+        left_w.setLayout(left)
+
+        data_tab = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
+        data_tab.addWidget(self.plot)
+        data_tab.addWidget(self.info)
+        data_tab.setSizes([500, 200])
+        analysis_tab = QtWidgets.QWidget()
+        al = QtWidgets.QVBoxLayout(analysis_tab)
+        al.addLayout(buttons)
+        al.addLayout(opts)
+        al.addWidget(self.analysis_status)
+        split = QtWidgets.QSplitter(QtCore.Qt.Orientation.Horizontal)
+        split.addWidget(self.numbers)
+        split.addWidget(self.figures)
+        split.setSizes([480, 620])
+        al.addWidget(split, 1)
+        self.tabs = QtWidgets.QTabWidget()
+        self.tabs.addTab(data_tab, "Channels")
+        self.tabs.addTab(analysis_tab, "Analysis")
+
+        top = QtWidgets.QHBoxLayout()
+        top.addWidget(self.path_edit, 1)
+        top.addWidget(browse)
+        top.addWidget(open_button)
+        top.addWidget(self.follow_box)
+        body = QtWidgets.QSplitter(QtCore.Qt.Orientation.Horizontal)
+        body.addWidget(left_w)
+        body.addWidget(self.tabs)
+        body.setSizes([250, 950])
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.addLayout(top)
+        layout.addWidget(body, 1)
+
+        self.follow_timer = QtCore.QTimer(self)
+        self.follow_timer.timeout.connect(self.follow)
+        self.refresh_files()
+
+    @staticmethod
+    def _availability_text() -> str:
+        missing = [f"{analyses.TITLES[n]}: {why}" for n in analyses.TITLES if (why := analyses.availability(n))]
+        return "<br>".join(missing)
+
+    # ------------------------------------------------------------- files
+    def refresh_files(self) -> None:
+        self.files.clear()
+        if not self.runs_dir.is_dir():
+            return
+        paths = sorted(self.runs_dir.glob("*.h5"), key=lambda p: p.stat().st_mtime, reverse=True)
+        for p in paths:
+            item = QtWidgets.QListWidgetItem(p.name)
+            item.setData(QtCore.Qt.ItemDataRole.UserRole, str(p))
+            self.files.addItem(item)
+
+    def _browse(self) -> None:
+        path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Open run file", str(self.runs_dir),
+                                                        "HDF5 run files (*.h5);;all files (*)")
+        if path:
+            self.open(path)
+
+    def open(self, path: str) -> bool:
+        """Open ``path``; a bad file gives a message in the window, never an exception."""
+        from bench.runfile import open_run
+
+        path = str(path).strip()
+        if not path:
+            self.message.emit("enter a run file name", True)
+            return False
+        try:
+            run = open_run(path)
+        except Exception as exc:
+            self.message.emit(f"cannot open {path}: {one_line(exc)}", True)
+            return False
+        self.close_run()
+        self.run = run
+        self.path_edit.setText(path)
+        self.channels.blockSignals(True)
+        self.channels.clear()
+        for name in run.channels:
+            if name in ("sample_index",):
+                continue
+            self.channels.addItem(f"{name}")
+        self.channels.blockSignals(False)
+        for i in range(self.channels.count()):
+            if self.channels.item(i).text() in ("torque", "position"):
+                self.channels.item(i).setSelected(True)
+        if not self.channels.selectedItems() and self.channels.count():
+            self.channels.item(self.channels.count() - 1).setSelected(True)
+        self.follow_box.setChecked(run.status == "running")
+        self.show_info()
+        self.plot_selected()
+        self.message.emit(f"opened {path} ({run.status}, {run.n_samples} samples)", False)
+        return True
+
+    def close_run(self) -> None:
+        if self.run is not None:
+            self.run.close()
+            self.run = None
+
+    def show_info(self) -> None:
+        r = self.run
+        if r is None:
+            return
+        lines = [
+            f"{r.path}", f"status     {r.status}", f"protocol   {r.protocol_name or '-'}",
+            f"samples    {r.n_samples} at {r.sample_rate:g} Hz ({r.duration:.6g} s)",
+            f"start      {r.start_time}", f"end        {r.end_time or '-'}",
+            f"operator   {r.meta.get('operator', '') or '-'}", f"notes      {r.meta.get('notes', '') or '-'}",
+            f"device     {r.device}", f"parameters {r.protocol_params}", "events:",
+        ]
+        for e in r.events:
+            lines.append(f"  t={e['t']:<10.6g} #{e['sample_index']:<9} {e['kind']:<7} {e['message']}")
+        self.info.setPlainText("\n".join(lines))
+
+    def _on_follow(self, on: bool) -> None:
+        if on:
+            self.follow_timer.start(1000)
+        else:
+            self.follow_timer.stop()
+
+    def follow(self) -> None:
+        """Pick up samples a live writer flushed; stop following once the run is finished."""
+        if self.run is None:
+            return
+        try:
+            before = self.run.n_samples
+            after = self.run.refresh()
+        except Exception as exc:
+            self.message.emit(f"cannot refresh {self.run.path}: {one_line(exc)}", True)
+            self.follow_box.setChecked(False)
+            return
+        if after != before:
+            self.plot_selected()
+        if self.run.status != "running":
+            self.follow_box.setChecked(False)
+            self.show_info()
+
+    # ------------------------------------------------------------- plotting
+    def plot_selected(self) -> None:
+        self.plot.clear()
+        if self.run is None:
+            return
+        names = [item.text() for item in self.channels.selectedItems()]
+        try:
+            t = self.run.channel("t")
+            for i, name in enumerate(names):
+                y = self.run.channel(name)
+                n = min(t.size, y.size)
+                self.plot.plot(t[:n], np.asarray(y[:n], dtype=float), pen=pg.mkPen(COLOURS[i % len(COLOURS)]),
+                               name=f"{name} ({self.run.unit(name)})")
+        except Exception as exc:
+            self.message.emit(f"cannot plot: {one_line(exc)}", True)
+            return
+        units = sorted({self.run.unit(n) for n in names})
+        self.plot.setLabel("left", ", ".join(units))
+
+    # ------------------------------------------------------------- analyses
+    def analyse(self, name: str) -> None:
+        if self.run is None:
+            self.message.emit("open a run file first", True)
+            return
+        if self.worker is not None and self.worker.isRunning():
+            self.message.emit("an analysis is still running", True)
+            return
+        options = {"method": self.method_box.currentText()}
+        text = self.inertia_edit.text().strip()
+        if text:
+            try:
+                options["inertia"] = float(text)
+            except ValueError:
+                self.message.emit(f"J = {text!r} is not a number (kg*m^2)", True)
+                return
+        self.analysis_status.setText(f"running {analyses.TITLES[name]} ...")
+        self.tabs.setCurrentIndex(1)
+        path = self.run.path
+        if name in analyses.BY_PATH:  # HDF5 refuses a second, differently-flagged handle in one process
+            self.close_run()
+            self._reopen = path
+        worker = AnalysisWorker(name, path, options)
+        worker.done.connect(self.show_result, QtCore.Qt.ConnectionType.QueuedConnection)
+        worker.failed.connect(self._analysis_failed, QtCore.Qt.ConnectionType.QueuedConnection)
+        self.worker = worker
+        worker.start()
+
+    def _after_analysis(self) -> None:
+        path, self._reopen = self._reopen, None
+        if path is not None and self.run is None:
+            self.open(path)
+            self.tabs.setCurrentIndex(1)
+
+    _reopen: str | None = None
+
+    def _analysis_failed(self, text: str) -> None:
+        self._after_analysis()
+        self.analysis_status.setText(f"<span style='color:#c00000'>{text}</span>")
+        self.message.emit(text, True)
+
+    def show_result(self, result: analyses.AnalysisResult) -> None:
+        self._after_analysis()
+        self.last_result = result
+        warn = "".join(f"<br><span style='color:#d08000'>warning: {w}</span>" for w in result.warnings)
+        self.analysis_status.setText(f"<b>{result.title}</b>{warn}")
+        self.numbers.setRowCount(len(result.numbers))
+        for row, values in enumerate(result.numbers):
+            for col, v in enumerate(values):
+                self.numbers.setItem(row, col, QtWidgets.QTableWidgetItem(v))
+        self.numbers.resizeColumnsToContents()
+        self.numbers.horizontalHeader().setStretchLastSection(True)
+        if result.title.startswith("Identification"):
+            for q, v, _u in result.numbers:
+                if q == "inertia J":
+                    self.inertia_edit.setText(v)
+        self.figures.clear()
+        for i, fig in enumerate(result.figures):
+            p = self.figures.addPlot(row=i, col=0, title=fig.title)
+            p.setLabel("bottom", fig.xlabel)
+            p.setLabel("left", fig.ylabel)
+            p.showGrid(x=True, y=True, alpha=0.3)
+            if len(fig.curves) > 1:
+                p.addLegend(offset=(5, 5))
+            for j, (label, x, y) in enumerate(fig.curves):
+                colour = COLOURS[j % len(COLOURS)]
+                if fig.scatter:
+                    p.plot(x, y, pen=None, symbol="o", symbolSize=3, symbolPen=None, symbolBrush=colour,
+                           name=label)
+                else:
+                    p.plot(x, y, pen=pg.mkPen(colour), name=label)
+        self.message.emit(f"{result.title}: done", False)
