@@ -126,6 +126,7 @@ def test_identification_run_updates_live_plots_and_writes_the_file(window, qtbot
 def test_run_browser_opens_the_file_and_shows_identification(window, qtbot, runs):
     from bench.gui.analyses import identification
 
+    _ensure_runs(window, qtbot, runs, steps=False)
     browser = window.browser
     assert browser.open(str(runs / "id.h5"))
     assert {"torque", "position"} <= {i.text() for i in browser.channels.selectedItems()}
@@ -177,7 +178,16 @@ def test_pause_resume_abort(window, qtbot, runs):
         assert r.n_samples < int(r.protocol_array("setpoints").size)
 
 
+def _ensure_runs(window, qtbot, runs, steps: bool = True) -> None:
+    """The browser tests read the runs the scenario tests record; record them when run alone (-k)."""
+    if not (runs / "id.h5").exists():
+        test_identification_run_updates_live_plots_and_writes_the_file(window, qtbot, runs)
+    if steps and not (runs / "steps.h5").exists():
+        test_pause_resume_abort(window, qtbot, runs)
+
+
 def test_browser_afrf_of_the_stepped_sine_and_residual_loop(window, qtbot, runs):
+    _ensure_runs(window, qtbot, runs)
     browser = window.browser
     browser.last_result = None
     assert browser.open(str(runs / "steps.h5"))
