@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -128,35 +128,6 @@ def chirp_analysis(
     force = level * np.sin(np.pi * rate * t**2)
     res = forcevib(out.theta, force, fs, params.inertia, spring=params.spring, **options)
     return ChirpAnalysis(level, t, force, out.theta, res)
-
-
-def harmonic_amplitudes(
-    params: PlantParams,
-    amplitude: float,
-    frequencies: Sequence[float],
-    settle: int = 10,
-    measure: int = 6,
-    per_period: int = 128,
-    orders: Sequence[int] = HARMONICS,
-) -> np.ndarray:
-    """Stepped-sine response: |X(h*f)| of the steady state for each f and harmonic h; shape (nf, len(orders)).
-
-    Each frequency is a separate run from rest, F = G*sin(2*pi*f*t), sampled ``per_period`` times per period;
-    the last ``measure`` whole periods after ``settle`` are detrended (a sliding mass drifts) and projected on
-    exp(-j*2*pi*h*f*t); magnitude = 2*|mean|, units of x (m or rad).
-    """
-    mags = np.empty((len(frequencies), len(orders)))
-    for i, f in enumerate(frequencies):
-        dt = 1.0 / (f * per_period)
-        n = per_period * (settle + measure)
-        t = np.arange(n) * dt
-        out = simulate_force(params, amplitude * np.sin(2 * np.pi * f * (t + dt / 2)), dt)
-        x = out.theta[per_period * settle :]
-        tt = t[per_period * settle :]
-        x = x - np.polyval(np.polyfit(tt - tt[0], x, 1), tt - tt[0])
-        for j, h in enumerate(orders):
-            mags[i, j] = 2.0 * abs(np.mean(x * np.exp(-2j * np.pi * h * f * tt)))
-    return mags
 
 
 def afrf_db_error(model: np.ndarray, reference: np.ndarray, floor_rel: float = 1e-4) -> np.ndarray:
@@ -274,11 +245,19 @@ def _fits(curves: SkeletonCurves) -> tuple[tuple[PaperFit, PaperFit] | None, str
 
 
 def _afrf(study: Study, progress: Callable[[str], None]) -> None:
-    for name, model in study.afrf_models.items():
-        progress(f"  AFRF {study.name}: {name}")
-        study.afrf[name] = np.stack(
-            [harmonic_amplitudes(model, g, study.afrf_frequencies) for g in study.afrf_amplitudes]
-        )
+    from analysis.afrf import settle_schedule, simulate_afrf_models
+
+    progress(f"  AFRF {study.name}: {', '.join(study.afrf_models)}")
+    # settle at least 40 periods and 20 periods of the stiffest presliding mode (every element sticking), which
+    # has no damping below the smallest slip distance and would otherwise still ring (analysis.afrf docs)
+    p = study.params
+    slow_mode = 2 * np.pi / np.sqrt((float(np.sum(p.ms_stiffness)) + 1e-300) / p.inertia)
+    settle = settle_schedule(study.afrf_frequencies, min_periods=40, min_time=20 * slow_mode)
+    results = simulate_afrf_models(study.afrf_models, study.afrf_amplitudes, study.afrf_frequencies,
+                                   samples_per_period=256, settle_periods=settle, measure_periods=10,
+                                   n_harmonics=len(HARMONICS))
+    for name, res in results.items():
+        study.afrf[name] = res.magnitudes
     ref = study.afrf["original"]
     for name in study.afrf:
         if name == "original":
