@@ -14,7 +14,8 @@ from analysis.equivalent import (
 )
 from analysis.errors import AnalysisError
 from analysis.forcevib import compose
-from analysis.paper import chirp_analysis, harmonic_amplitudes
+from analysis.afrf import simulate_afrf
+from analysis.paper import chirp_analysis
 from analysis.skeleton_fit import PaperFit, fit_skeleton_monotone
 from firmware_sim.friction_models import paper_system
 from firmware_sim.plant import simulate
@@ -56,7 +57,8 @@ def paper_skeleton():
 
 
 def _h1(params, g, f):
-    return harmonic_amplitudes(params, g, [f], orders=(1,))[0, 0]
+    return simulate_afrf(params, [g], [f], samples_per_period=256, settle_periods=40, n_harmonics=1,
+                         workers=1).magnitudes[0, 0, 0]
 
 
 # Off resonance the response is set by stiffness and mass, and k_eq(A) is within ~1 % (test_forcevib): 2 %.
