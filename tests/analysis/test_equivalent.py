@@ -4,6 +4,7 @@ equivalent against the original Maxwell-slip system under the same sine (both in
 import numpy as np
 import pytest
 
+from analysis.afrf import simulate_afrf
 from analysis.equivalent import (
     coulomb_params,
     describing_function,
@@ -14,7 +15,6 @@ from analysis.equivalent import (
 )
 from analysis.errors import AnalysisError
 from analysis.forcevib import compose
-from analysis.afrf import simulate_afrf
 from analysis.paper import chirp_analysis
 from analysis.skeleton_fit import PaperFit, fit_skeleton_monotone
 from firmware_sim.friction_models import paper_system
