@@ -107,3 +107,20 @@ def test_offset_drift_term_recovers_a_linear_load():
     assert params["offset"] == pytest.approx(0.05, abs=0.01)
     assert params["drift"] == pytest.approx(0.004, abs=0.001)
     assert unc["drift"] < 0.001
+
+
+def test_block_average_keeps_a_held_torque_exact():
+    # A torque held sample by sample at 10 kHz and constant over blocks of 5 is, after block_average, exactly
+    # the held input at 2 kHz, and the position is the plant's at the block edges (hold_next: start of block).
+    from analysis.residual.rundata import block_average
+    from firmware_sim.friction_models import dc_motor
+    from firmware_sim.plant import simulate
+
+    u2k = np.random.default_rng(0).uniform(-8, 8, 400)
+    u10k = np.repeat(u2k, 5)
+    fine = simulate(dc_motor(), u10k, 1e-4)
+    coarse = simulate(dc_motor(), u2k, 5e-4, substeps=5)
+    x, tau, fs = block_average(fine.position_meas, fine.torque, 10_000.0, 5, "hold_next")
+    assert fs == 2000.0
+    np.testing.assert_allclose(tau, coarse.torque, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(x, coarse.theta, rtol=0, atol=1e-9)  # same held input, RK4 on 5 sub-steps
