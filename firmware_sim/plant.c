@@ -101,6 +101,9 @@ typedef struct {
     double r_up[MS_NEAR + 1], k_up[MS_NEAR + 1], r_down[MS_NEAR + 1], k_down[MS_NEAR + 1];
     /* prefix sums over the sorted near rooms: K[c] = sum_{j<c} k_j, R[c] = sum_{j<c} k_j*r_j */
     double K_up[MS_NEAR + 1], R_up[MS_NEAR + 1], K_down[MS_NEAR + 1], R_down[MS_NEAR + 1];
+    /* the linear pieces a + b*y that the RK4 stages of the current sub-step almost always fall in:
+     * y in [up_lo, up_hi] (moving on up from X >= 0) and [dn_lo, dn_hi] (on down from X <= 0) */
+    double up_lo, up_hi, up_a, up_b, dn_lo, dn_hi, dn_a, dn_b;
 } ms_cache;
 
 /* Keep the near+1 smallest rooms (sorted) with their stiffness. */
@@ -186,6 +189,28 @@ static inline double ms_expand_down(ms_cache *c, double y) {
 
 static inline double ms_expand(ms_cache *c, double y) { return y >= 0.0 ? ms_expand_up(c, y) : ms_expand_down(c, y); }
 
+/* The pieces of the expansion adjacent to the current offset X, for the stages of one sub-step. */
+static inline void ms_segments(ms_cache *c, double X) {
+    c->up_lo = HUGE_VAL;
+    c->up_hi = -HUGE_VAL;
+    c->dn_lo = HUGE_VAL;
+    c->dn_hi = -HUGE_VAL;
+    if (X >= 0.0) {
+        int n = c->cur_up = ms_count(c->r_up, c->n_up, c->cur_up, X);
+        c->up_lo = X;
+        c->up_hi = n < c->n_up ? c->r_up[n] : c->room_up;
+        c->up_a = c->f0 + c->R_up[n];
+        c->up_b = c->slope_up - c->K_up[n];
+    }
+    if (X <= 0.0) {
+        int n = c->cur_down = ms_count(c->r_down, c->n_down, c->cur_down, -X);
+        c->dn_hi = X;
+        c->dn_lo = -(n < c->n_down ? c->r_down[n] : c->room_down);
+        c->dn_a = c->f0 - c->R_down[n];
+        c->dn_b = c->slope_down - c->K_down[n];
+    }
+}
+
 /* Advance every element by the sub-step's displacement dx (stop operator), lazily. */
 static void ms_commit(const hb_params *p, hb_state *s, ms_cache *c, double dx) {
     double X = s->ms_offset;
@@ -205,6 +230,8 @@ static void ms_commit(const hb_params *p, hb_state *s, ms_cache *c, double dx) {
 static inline __attribute__((always_inline)) double maxwell_force(const hb_params *p, const hb_state *s,
                                                                    ms_cache *c, double dx) {
     double X = s->ms_offset, y = X + dx;
+    if (y >= c->up_lo && y <= c->up_hi) return c->up_a + c->up_b * y;
+    if (y >= c->dn_lo && y <= c->dn_hi) return c->dn_a + c->dn_b * y;
     if (dx >= 0.0 && X >= 0.0 && y <= c->room_up) return ms_expand_up(c, y);
     if (dx <= 0.0 && X <= 0.0 && -y <= c->room_down) return ms_expand_down(c, y);
     double f = 0.0;
@@ -229,6 +256,7 @@ typedef struct {
     int dry;           /* Coulomb or Stribeck present */
     int asym_viscous;  /* viscous differs by direction */
     int spring;        /* a linear spring is present */
+    double k_spring, b_pos, b_neg; /* copies, so the RK4 stages keep them in registers */
 } hb_features;
 
 static hb_features features_of(const hb_params *p) {
@@ -237,17 +265,20 @@ static hb_features features_of(const hb_params *p) {
     f.dry = p->coulomb_pos > 0.0 || p->coulomb_neg > 0.0 || p->stribeck_excess > 0.0;
     f.asym_viscous = p->viscous_pos != p->viscous_neg;
     f.spring = p->spring != 0.0;
+    f.k_spring = p->spring;
+    f.b_pos = p->viscous_pos;
+    f.b_neg = p->viscous_neg;
     return f;
 }
 
 /* Every smooth (single-valued) force resisting motion, at angle theta and velocity omega. */
 static inline __attribute__((always_inline)) double smooth_force(const hb_params *p, const hb_state *s,
-                                                                  ms_cache *c, const hb_features *ft,
+                                                                  ms_cache *c, const hb_features ft,
                                                                   double theta, double omega) {
     double f = maxwell_force(p, s, c, theta - s->theta);
-    if (ft->spring) f += p->spring * theta;
-    f += (ft->asym_viscous ? (omega < 0.0 ? p->viscous_neg : p->viscous_pos) : p->viscous_pos) * omega;
-    if (ft->extras) {
+    if (ft.spring) f += ft.k_spring * theta;
+    f += (ft.asym_viscous && omega < 0.0 ? ft.b_neg : ft.b_pos) * omega;
+    if (ft.extras) {
         for (int j = 0; j < p->n_cogging; j++)
             f += p->cogging_amplitude[j] * sin(p->cogging_order[j] * theta + p->cogging_phase[j]);
         if (p->n_restoring > 0) f += table_odd(theta, p->n_restoring, p->restoring_x, p->restoring_f);
@@ -278,7 +309,7 @@ static inline __attribute__((always_inline)) double coulomb_level(const hb_param
 
 /* Classical RK4 over h; dir != 0 adds the sliding Coulomb/Stribeck force dir*level(omega). */
 static inline __attribute__((always_inline)) void rk4(const hb_params *p, const hb_state *s, ms_cache *c,
-                                                      const hb_features *ft, double tau, double h, double dir,
+                                                      const hb_features ft, double tau, double h, double dir,
                                                       double *th_out, double *om_out) {
     const double inv_j = 1.0 / p->inertia;
     double th = s->theta, om = s->omega;
@@ -307,13 +338,15 @@ static inline __attribute__((always_inline)) void rk4(const hb_params *p, const 
  * step. If the rotor is at rest or would reverse within the step: RK4 without Coulomb, then an implicit
  * (Moreau) velocity projection, so sticking is exact and there is no chattering. Finally the element
  * deflections are committed with the step's displacement (stop operator). */
-static void substep(const hb_params *p, hb_state *s, ms_cache *c, const hb_features *ft, double tau,
+static inline __attribute__((always_inline)) void substep(const hb_params *p, hb_state *s, ms_cache *c,
+                                                          const hb_features ft, double tau,
                     double h) {
     const double J = p->inertia;
     double th = s->theta, om = s->omega;
     double th_new, om_new;
+    ms_segments(c, s->ms_offset);
 
-    if (!ft->dry) {
+    if (!ft.dry) {
         rk4(p, s, c, ft, tau, h, 0.0, &th_new, &om_new);
         s->coulomb_force = 0.0;
     } else {
@@ -421,7 +454,7 @@ int hb_run(const hb_params *p, hb_state *s, const double *u, int64_t n, double d
         out->counts[k] = counts;
 
         /* 4. mechanics over [t_k, t_k+1) */
-        for (int j = 0; j < substeps; j++) substep(p, s, &cache, &ft, tau, h);
+        for (int j = 0; j < substeps; j++) substep(p, s, &cache, ft, tau, h);
         s->time += dt;
         if (!isfinite(s->theta) || !isfinite(s->omega)) return -1;
     }
