@@ -216,7 +216,7 @@ class Config(Message):
 
     def __init__(self, sample_rate: int = 10000, mode: Mode | int = Mode.CURRENT, current_limit: float = 5.0,
                  velocity_limit: float = 200.0, position_min: float = -math.inf,
-                 position_max: float = math.inf, watchdog_timeout: float = 0.1, torque_constant: float = 0.1,
+                 position_max: float = math.inf, watchdog_timeout: float = 0.5, torque_constant: float = 0.1,
                  counts_per_rev: int = 16384, ratio: float = 1.0) -> None:
         self.sample_rate = int(sample_rate)
         self.mode = Mode(mode) if mode in (0, 1) else mode
