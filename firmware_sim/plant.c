@@ -104,6 +104,8 @@ typedef struct {
     /* the linear pieces a + b*y that the RK4 stages of the current sub-step almost always fall in:
      * y in [up_lo, up_hi] (moving on up from X >= 0) and [dn_lo, dn_hi] (on down from X <= 0) */
     double up_lo, up_hi, up_a, up_b, dn_lo, dn_hi, dn_a, dn_b;
+    /* RK4 polynomial P(hA) of the linear stretch, for the last stiffness it was computed for */
+    double aff_kappa, aff_gamma, aff_h, aff_P[4];
 } ms_cache;
 
 /* Keep the near+1 smallest rooms (sorted) with their stiffness. */
@@ -160,6 +162,7 @@ static void ms_fill(const hb_params *p, const hb_state *s, ms_cache *c) {
         c->R_down[j + 1] = c->R_down[j] + c->k_down[j] * c->r_down[j];
     }
     c->cur_up = c->cur_down = 0;
+    c->aff_h = -1.0; /* no P(hA) cached yet */
 }
 
 /* Is the path "X since the commit, then dx" monotone and within the horizon? */
@@ -241,7 +244,9 @@ static inline __attribute__((always_inline)) double maxwell_force(const hb_param
 }
 
 /* Maxwell-slip force at the current state (the lazy offset is always within its horizon). */
-static inline double maxwell_now(ms_cache *c, double X) { return ms_expand(c, X); }
+static inline double maxwell_now(ms_cache *c, double X) {
+    return X >= 0.0 ? c->up_a + c->up_b * X : c->dn_a + c->dn_b * X;
+}
 
 void hb_deflections(const hb_params *p, const hb_state *s, double *out) {
     for (int i = 0; i < p->n_elements; i++) {
@@ -257,6 +262,7 @@ typedef struct {
     int asym_viscous;  /* viscous differs by direction */
     int spring;        /* a linear spring is present */
     double k_spring, b_pos, b_neg; /* copies, so the RK4 stages keep them in registers */
+    int affine;        /* linear mechanics between saturations: the closed-form RK4 step applies */
 } hb_features;
 
 static hb_features features_of(const hb_params *p) {
@@ -268,6 +274,7 @@ static hb_features features_of(const hb_params *p) {
     f.k_spring = p->spring;
     f.b_pos = p->viscous_pos;
     f.b_neg = p->viscous_neg;
+    f.affine = !f.extras && !f.dry && !f.asym_viscous;
     return f;
 }
 
@@ -333,6 +340,59 @@ static inline __attribute__((always_inline)) void rk4(const hb_params *p, const 
     *om_out = om + h / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v);
 }
 
+/* Classical RK4 on a linear stretch, in closed form. With no Coulomb, cogging or tables, a symmetric viscous c
+ * and every stage inside one linear piece F = a + b*y of the Maxwell-slip force, the mechanics are linear:
+ * e' = w, w' = g - kappa*e - gamma*w for the displacement e from theta_n, with kappa = (b + k)/J,
+ * gamma = c/J, g = (tau - a - b*X - k*theta_n)/J. One RK4 step is then exactly
+ * [e, w]_1 = [0, w_0] + h*P(hA)*(A*[0, w_0] + [0, g]), P(Z) = I + Z/2 + Z^2/6 + Z^3/24, which is a short
+ * dependency chain instead of four dependent stages. The stage displacements are still computed, only to
+ * check that every stage stayed in the piece; otherwise (0 returned) the caller runs the general RK4. */
+static inline __attribute__((always_inline)) int affine_step(const hb_params *p, hb_state *s, ms_cache *c,
+                                                            const hb_features ft, double tau, double h) {
+    const double th = s->theta, om = s->omega, X = s->ms_offset;
+    const int up = om > 0.0 || (om == 0.0 && X >= 0.0);
+    double lo, hi, a, b;
+    if (up) {
+        lo = c->up_lo; hi = c->up_hi; a = c->up_a; b = c->up_b;
+    } else {
+        lo = c->dn_lo; hi = c->dn_hi; a = c->dn_a; b = c->dn_b;
+    }
+    if (!(lo <= hi)) return 0;
+    const double inv_j = 1.0 / p->inertia;
+    const double kappa = (b + ft.k_spring) * inv_j, gamma = ft.b_pos * inv_j;
+    if (kappa != c->aff_kappa || gamma != c->aff_gamma || h != c->aff_h) {
+        /* Z = hA with A = [[0, 1], [-kappa, -gamma]]; P = I + Z/2 + Z^2/6 + Z^3/24 */
+        double z00 = 0.0, z01 = h, z10 = -h * kappa, z11 = -h * gamma;
+        double q00 = z00 * z00 + z01 * z10, q01 = z00 * z01 + z01 * z11;
+        double q10 = z10 * z00 + z11 * z10, q11 = z10 * z01 + z11 * z11;
+        double r00 = q00 * z00 + q01 * z10, r01 = q00 * z01 + q01 * z11;
+        double r10 = q10 * z00 + q11 * z10, r11 = q10 * z01 + q11 * z11;
+        c->aff_P[0] = 1.0 + z00 / 2.0 + q00 / 6.0 + r00 / 24.0;
+        c->aff_P[1] = z01 / 2.0 + q01 / 6.0 + r01 / 24.0;
+        c->aff_P[2] = z10 / 2.0 + q10 / 6.0 + r10 / 24.0;
+        c->aff_P[3] = 1.0 + z11 / 2.0 + q11 / 6.0 + r11 / 24.0;
+        c->aff_kappa = kappa;
+        c->aff_gamma = gamma;
+        c->aff_h = h;
+    }
+    const double g = (tau - a - b * X - ft.k_spring * th) * inv_j;
+    const double u0 = om, u1 = g - gamma * om;
+    const double e_new = h * (c->aff_P[0] * u0 + c->aff_P[1] * u1);
+    const double om_new = om + h * (c->aff_P[2] * u0 + c->aff_P[3] * u1);
+    /* stage displacements of the same RK4 step, for the check only */
+    const double e2 = 0.5 * h * om, k2x = om + 0.5 * h * u1;
+    const double e3 = 0.5 * h * k2x, k3x = om + 0.5 * h * (g - kappa * e2 - gamma * k2x);
+    const double e4 = h * k3x;
+    const double l = lo - X, r = hi - X;
+    if (!(e2 >= l && e2 <= r && e3 >= l && e3 <= r && e4 >= l && e4 <= r && e_new >= l && e_new <= r))
+        return 0;
+    s->theta = th + e_new;
+    s->omega = om_new;
+    s->coulomb_force = 0.0;
+    ms_commit(p, s, c, e_new);
+    return 1;
+}
+
 /* One sub-step of length h under constant motor torque tau.
  * Smooth forces: classical RK4. Coulomb/Stribeck while sliding in a known direction: inside the same RK4
  * step. If the rotor is at rest or would reverse within the step: RK4 without Coulomb, then an implicit
@@ -344,7 +404,10 @@ static inline __attribute__((always_inline)) void substep(const hb_params *p, hb
     const double J = p->inertia;
     double th = s->theta, om = s->omega;
     double th_new, om_new;
-    ms_segments(c, s->ms_offset);
+    if (ft.affine && affine_step(p, s, c, ft, tau, h)) {
+        ms_segments(c, s->ms_offset);
+        return;
+    }
 
     if (!ft.dry) {
         rk4(p, s, c, ft, tau, h, 0.0, &th_new, &om_new);
@@ -376,6 +439,7 @@ static inline __attribute__((always_inline)) void substep(const hb_params *p, hb
     s->theta = th_new;
     s->omega = om_new;
     ms_commit(p, s, c, th_new - th);
+    ms_segments(c, s->ms_offset);
 }
 
 int hb_run(const hb_params *p, hb_state *s, const double *u, int64_t n, double dt, int substeps,
@@ -387,6 +451,7 @@ int hb_run(const hb_params *p, hb_state *s, const double *u, int64_t n, double d
     const hb_features ft = features_of(p);
     ms_cache cache;
     ms_fill(p, s, &cache);
+    ms_segments(&cache, s->ms_offset);
 
     for (int64_t k = 0; k < n; k++) {
         /* 1. measure at t_k */
