@@ -574,6 +574,7 @@ def plot_afrf(results: AfrfResult | Sequence[AfrfResult], path: str | Path | Non
     from matplotlib import colormaps
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+    from matplotlib.ticker import NullFormatter
 
     results = [results] if isinstance(results, AfrfResult) else list(results)
     if not results:
@@ -599,6 +600,7 @@ def plot_afrf(results: AfrfResult | Sequence[AfrfResult], path: str | Path | Non
         axes[k].set_xlabel("frequency f (Hz)")
         axes[k].set_ylabel(f"|X({k + 1}f)| ({results[0].displacement_unit})")
         axes[k].grid(True, which="both", alpha=0.3)
+        axes[k].xaxis.set_minor_formatter(NullFormatter())  # a short decade range would label every minor tick
     axes[0].legend(fontsize=5, ncol=len(results))
     if title:
         fig.suptitle(title)

@@ -55,7 +55,7 @@ def measure(out: Path, duration: float = 20.0) -> dict[str, Path]:
         # 2 kHz: above the presliding resonance (about 190 Hz) and where the residual loop is validated
         "identification": Identification(duration=duration, amplitude=16.0, period=4.0, seed=1, sample_rate=2000),
         "validation": Identification(duration=duration, amplitude=16.0, period=4.0, seed=2, sample_rate=2000),
-        "afrf": SteppedSine(frequencies=(2.0, 5.0, 10.0, 20.0), amplitudes=(2.0, 5.0, 8.0), settle_periods=5,
+        "afrf": SteppedSine(frequencies=(2.0, 5.0, 10.0, 20.0), amplitudes=(2.0, 5.0, 8.0), settle_periods=10,
                             measure_periods=10),
     }
     files = {}
@@ -117,6 +117,10 @@ def identify_step(files: dict[str, Path], out: Path) -> None:
          "--plots", out / "identification")
 
 
+def afrf_step(files: dict[str, Path], out: Path) -> None:
+    _cli("afrf", files["afrf"], "--json", out / "afrf.json", "--plot", out / "afrf.png")
+
+
 def residual_step(files: dict[str, Path], out: Path) -> None:
     _cli("residual", files["identification"], "--validate", files["validation"], "--json", out / "residual.json",
          "--report", out / "residual")
@@ -133,6 +137,7 @@ def residual_step(files: dict[str, Path], out: Path) -> None:
 def analysis_steps() -> list[tuple[str, Callable[[dict[str, Path], Path], None]]]:
     """Step 4: the analysis steps, in order."""
     return [("identification: Maxwell-slip + inertia + viscous, validated on the other seed", identify_step),
+            ("AFRF (1st-3rd harmonic) of the measured stepped-sine run", afrf_step),
             ("residual loop from inertia,maxwell_slip: what does the model lack?", residual_step)]
 
 
