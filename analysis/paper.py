@@ -284,7 +284,10 @@ def simulated_system_study(s: PaperSettings, progress: Callable[[str], None] = p
     for g in (s.dead_zone_level, *s.levels):
         progress(f"  chirp G = {g:g}")
         runs.append(chirp_analysis(params, g, s.rate, s.duration, s.fs))
-    curves = compose([r.result for r in runs], n_bins=s.n_bins)
+    # The G = 0.05 run only shows the dead-zone (figures). It is not composed: with no damping below the
+    # smallest slip distance it passes resonance nearly undamped, and its fast amplitude change biases the
+    # energy in bins up to A ~ 1 (max E error 7.3 % with it, 4.6 % without, for A >= 0.1).
+    curves = compose([r.result for r in runs[1:]], n_bins=s.n_bins)
     mono = fit_skeleton_monotone(curves.amplitude, curves.stiffness, curves.velocity, curves.damping_force)
     fits, fit_error = _fits(curves)
     eq = {form: equivalent_params(mono, params.inertia, 0.0, form=form) for form in ("describing", "direct")}

@@ -395,10 +395,10 @@ def summary_numbers(result: PaperResult) -> dict:
             "median_E_continuous_checked"
         ]
         < TOLERANCE,
-        f"E within 10 % of the 16-element closed form in every bin (A >= {ENERGY_CHECK_FROM} m)": sk[
+        f"E within 5 % of the 16-element closed form in every bin (A >= {ENERGY_CHECK_FROM} m)": sk[
             "max_E_16_checked"
         ]
-        < 2 * TOLERANCE,
+        < TOLERANCE,
         "motor k_eq within 10 % of its closed form (k_eq >= 2 % of sum k_i)": result.motor.errors[
             "motor_k_16_max"
         ]

@@ -65,9 +65,10 @@ def test_paper_quick_numbers_meet_the_tolerances(quick_paper):
     # k_eq within 5 % of the 16-element and of the continuous closed forms over the excited range
     assert sk["max_k_16"] < 0.05 and sk["max_k_continuous"] < 0.05
     assert sk["excited_range"][0] < 0.01 and sk["excited_range"][1] > 3.0
-    # energy: median within 5 % of the continuous closed form and every bin within 10 % of the 16-element one
+    # energy (A >= 0.1 m): median within 5 % of the continuous closed form, and every bin within 5 % of the
+    # closed form of the simulated 16-element model (quick grid measured 4.1 %, full grid 2.9 %)
     # for A >= 0.1 (where the loss matters: E >= 7 % of the Coulomb limit 4hA)
-    assert sk["median_E_continuous_checked"] < 0.05 and sk["max_E_16_checked"] < 0.10
+    assert sk["median_E_continuous_checked"] < 0.05 and sk["max_E_16_checked"] < 0.05
     sim = doc["afrf_simulated"]
     # the paper's claim: the equivalent follows the original at low amplitude where Coulomb sticks (no
     # motion: > 40 dB off); at the largest amplitude both are within 3 dB on the first harmonic
