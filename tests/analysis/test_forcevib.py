@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from analysis.errors import AnalysisError
-from analysis.forcevib import compose, forcevib
+from analysis.forcevib import _binned, compose, forcevib
 from tests.analysis.chirp_oracle import chirp_response
 
 FS = 1000.0
@@ -99,10 +99,10 @@ def test_bad_inputs():
 H, D = 1.64, 0.656          # virgin curve (science.md §2)
 
 
-def _paper_runs(levels, a=0.05, T=40.0):
+def _paper_runs(levels, a=0.05, T=40.0, n_elements=16):
     plant = pytest.importorskip("firmware_sim.plant")
     models = pytest.importorskip("firmware_sim.friction_models")
-    params = models.paper_system()
+    params = models.paper_system(n_elements)
     dt = 1.0 / FS
     t = np.arange(int(T * FS) + 1) * dt
     runs = []
@@ -133,19 +133,47 @@ def test_maxwell_slip_equivalent_stiffness(paper_skeleton):
     assert 0.5 * D < a[np.argmax(sk.restoring_force)] < 5 * D
 
 
-def test_maxwell_slip_energy_per_cycle(paper_skeleton):
-    # E(A) = 4hA^3/(d+A)^2 from the equivalent damping, E = pi*c_eq*omega*A^2. Where damping matters
-    # (A >= 0.1, E above 2 % of 4hA) the median bin error is within 5 % and 80 % of the bins are within 5 %.
-    # The rest (worst ~6 %) sit where the chirp moves the amplitude fastest: a hysteretic element dissipates
-    # less than its steady loop while A grows and more while it decays (compose averages the two).
-    _, sk = paper_skeleton
-    a = sk.amplitude
-    e_ref = 4 * H * a**3 / (D + a) ** 2
-    err = np.abs(sk.energy / e_ref - 1)[a >= 0.1]
-    assert err.size >= 10
-    assert np.median(err) < 0.05
-    assert np.mean(err < 0.05) >= 0.8
-    assert np.max(err) < 0.10
+def test_rate_fit_recovers_the_steady_value_of_a_biased_power_law():
+    # Oracle: y = 2*A^3*(1 - 3*rate) with every sample growing (rate 0.01..0.04, as below resonance) and 5 %
+    # gross outliers. The median is biased by -3*median(rate) ~ -7.5 %; the rate fit returns 2*A_bin^3 (the
+    # steady value at the bin's median amplitude) within 0.5 %.
+    rng = np.random.default_rng(4)
+    n = 40_000
+    a = np.exp(rng.uniform(np.log(0.01), np.log(1.0), n))
+    rate = rng.uniform(0.01, 0.04, n)
+    y = 2 * a**3 * (1 - 3 * rate) * (1 + 1e-3 * rng.normal(size=n))
+    bad = rng.random(n) < 0.05
+    y[bad] *= rng.uniform(0, 3, bad.sum())
+    centre, (fit,), count = _binned(a, (y,), rate, 10, 20, "rate")
+    np.testing.assert_allclose(fit, 2 * centre**3, rtol=5e-3)
+    _, (med,), _ = _binned(a, (y,), rate, 10, 20, "median")
+    assert np.all(med / (2 * centre**3) - 1 < -0.04)
+    with pytest.raises(AnalysisError, match="method"):
+        compose([forcevib(*_linear()[1:], FS, M)], method="mean")
+
+
+@pytest.fixture(scope="module")
+def fine_paper_runs():
+    # 64 elements: the discretisation is within 0.6 % of the continuous closed forms, so what is left is the
+    # method's own error. The 13 chirp levels of ``bench paper``.
+    return _paper_runs([0.2, 0.35, 0.5, 0.7, 1.0, 1.4, 2.0, 3.0, 5.0, 7.0, 10.0, 14.0, 20.0], n_elements=64)[1]
+
+
+def test_maxwell_slip_energy_per_cycle(fine_paper_runs):
+    # E(A) = 4hA^3/(d+A)^2 from the equivalent damping, E = pi*c_eq*omega*A^2, every 30-bin value within 5 %
+    # for A >= 0.01 m = 0.015 d (measured worst 4.1 %; below, only quasi-static samples of the two smallest
+    # chirps and the dead-zone). The up/down medians (previous default) miss by up to 7 %: below resonance a
+    # chirp only grows the amplitude, and a growing hysteretic loop dissipates less than its steady loop.
+    def worst(method):
+        sk = compose(fine_paper_runs, n_bins=30, method=method)
+        a = sk.amplitude
+        e_ref = 4 * H * a**3 / (D + a) ** 2
+        err = np.abs(sk.energy / e_ref - 1)[a >= 0.01]
+        assert err.size >= 18
+        return float(np.max(err))
+
+    assert worst("rate") < 0.05
+    assert worst("updown") > 0.06
 
 
 def test_maxwell_slip_dead_zone():
