@@ -198,7 +198,7 @@ def fit_lip(
             deltas = deltas[keep]
             a, coef, rss = solve_with(deltas)
     if s.refine and np.count_nonzero(coef[nl:]) > 0:
-        deltas = _refine_thresholds(x, y, lin, data, deltas[coef[nl:] > 0])
+        deltas = _refine_thresholds(x, y, lin, data, deltas[coef[nl:] > 0], (grid[0], grid[-1]))
         a, coef, rss = solve_with(deltas)
 
     residual = y - a @ coef
@@ -253,8 +253,10 @@ def _identifiability(model: FrictionModel, data: FilteredData, s: LipSettings) -
     return warnings
 
 
-def _refine_thresholds(x, y, lin, data, deltas) -> np.ndarray:
-    """Variable projection: minimise the NNLS residual over log Delta (scipy least_squares)."""
+def _refine_thresholds(x, y, lin, data, deltas, bounds: tuple[float, float]) -> np.ndarray:
+    """Variable projection: minimise the NNLS residual over log Delta (scipy least_squares), each Delta kept
+    inside the candidate grid's range (below it the data cannot resolve a threshold, and an unbounded step
+    can make an element so stiff that no simulation is stable)."""
     from scipy.optimize import least_squares
 
     def residual(logd: np.ndarray) -> np.ndarray:
@@ -263,7 +265,9 @@ def _refine_thresholds(x, y, lin, data, deltas) -> np.ndarray:
         coef, _ = _solve(a, y)
         return y - a @ coef
 
-    sol = least_squares(residual, np.log(deltas), method="trf", x_scale=1.0, diff_step=1e-3, max_nfev=30)
+    lo, hi = np.log(bounds[0]), np.log(bounds[1])
+    start = np.clip(np.log(deltas), lo + 1e-9, hi - 1e-9)
+    sol = least_squares(residual, start, bounds=(lo, hi), method="trf", x_scale=1.0, diff_step=1e-3, max_nfev=30)
     return np.sort(np.exp(sol.x))
 
 

@@ -21,6 +21,10 @@ from analysis.maxwell_fit import nrmse
 from analysis.regressors import held_torque, zero_phase_lowpass
 
 
+#: More sub-steps per sample than this means a broken model, not a stiff plant (the C engine takes an int).
+MAX_SUBSTEPS = 100_000
+
+
 def stable_substeps(model: FrictionModel, dt: float) -> int:
     """RK4 sub-steps that keep |lambda|*h at 80 % of the engine's stability radius."""
     from firmware_sim.plant import RK4_STABLE_RADIUS, stiffest_eigenvalue
@@ -29,7 +33,13 @@ def stable_substeps(model: FrictionModel, dt: float) -> int:
         lam = stiffest_eigenvalue(model.plant_params())
     except ValueError as exc:
         raise AnalysisError(f"model cannot be simulated: {exc}") from None
-    return max(1, math.ceil(lam * dt / (0.8 * RK4_STABLE_RADIUS)))
+    sub = max(1, math.ceil(lam * dt / (0.8 * RK4_STABLE_RADIUS)))
+    if sub > MAX_SUBSTEPS:
+        raise AnalysisError(
+            f"model cannot be simulated: its stiffest mode ({lam:.3g} 1/s) needs {sub} RK4 sub-steps per sample "
+            f"(limit {MAX_SUBSTEPS}); an element is implausibly stiff"
+        )
+    return sub
 
 
 def initial_velocity(position: np.ndarray, fs: float) -> float:

@@ -126,39 +126,71 @@ def test_dc_motor_identified_and_validated(seed):
     assert res.figures["validation_torque_nrmse"] < 0.05
 
 
-def test_paper_system_equivalent_curves_from_a_chirp():
-    """science.md §3 closed forms: k_eq(A) = 2h sqrt(d)/(d+A)^1.5 and E(A) = 4hA^3/(d+A)^2."""
+def _paper_chirp_fit(n_elements: int):
     fs = 1000.0
     t = np.arange(int(20 * fs)) / fs
-    p = paper_system()
+    p = paper_system(n_elements)
     u = 20.0 * np.sin(0.1 * np.pi * t**2)
-    out = simulate(p, u, 1 / fs, substeps=2)
-    fit = fit_lip(out.theta, u, fs, "linear", LipSettings(spring=True))
-    m = fit.model
-    assert m.inertia == pytest.approx(1.0, rel=1e-3)
-    a = np.geomspace(2 * m.ms_delta.min(), 0.25 * np.ptp(out.theta), 40)[:, None]
-    k, d = m.ms_stiffness, m.ms_delta
+    out = simulate(p, u, 1 / fs, substeps=8)
+    return p, out.theta, fit_lip(out.theta, u, fs, "linear", LipSettings(spring=True)).model
+
+
+def _equivalent_curves(k, d, a):
+    """k_eq(A), E(A) of Jenkins elements (science.md §3, per element), summed; a shape (m,)."""
+    a = a[:, None]
     th = np.arccos(np.clip(1 - 2 * d / a, -1, 1))
     keq = np.where(a > d, k / np.pi * (th - 0.5 * np.sin(2 * th)), k).sum(1)
-    energy = np.where(a > d, 4 * k * d * (a - d), 0).sum(1)
-    a = a[:, 0]
+    return keq, np.where(a > d, 4 * k * d * (a - d), 0).sum(1)
+
+
+def test_paper_system_equivalent_curves_from_a_chirp():
+    """science.md §3 closed forms: k_eq(A) = 2h sqrt(d)/(d+A)^1.5 and E(A) = 4hA^3/(d+A)^2, within 3 %.
+
+    The closed forms are those of the continuous virgin curve. The paper's 16-element discretisation departs
+    from them by up to 14 % in E (docs/plant.md), so the system identified here is the paper's with 64
+    elements (within 0.6 %). The chirp G = 20 N, 0-2 Hz over 20 s cycles through half-travels of 0.2-3.4 m
+    between reversals and loads the virgin curve from rest; the curves are checked from 0.06 m to a quarter
+    of the travel (measured: k_eq 0.1 %, E 2.7 %; at 0.047 m, twice the smallest identified Delta, E is 3.6 %
+    low).
+    """
+    p, theta, m = _paper_chirp_fit(64)
+    assert m.inertia == pytest.approx(1.0, rel=1e-3)
+    a = np.geomspace(0.06, 0.25 * np.ptp(theta), 40)
+    assert 2 * m.ms_delta.min() < a[0]
+    keq, energy = _equivalent_curves(m.ms_stiffness, m.ms_delta, a)
     # Elements that never slip are indistinguishable from the linear spring, so the identifiable
     # friction stiffness is k_eq + (K_identified - 50), with the known spring 50 N/m.
     keq_total = keq + (m.spring - 50.0)
-    keq_closed = 2 * PAPER_H * np.sqrt(PAPER_D) / (PAPER_D + a) ** 1.5
-    np.testing.assert_allclose(keq_total, keq_closed, rtol=0.03)
-    # E(A): the 16-element paper system itself departs from the closed form by up to 12 % at small A
-    # and 4 % at large A (its virgin curve is piecewise linear). So E is checked (a) against the
-    # closed form evaluated on the true 16 elements (science.md §3 per element), within 3 % for
-    # A >= d/2, and (b) against the continuous closed form within 5 % for A >= d.
+    np.testing.assert_allclose(keq_total, 2 * PAPER_H * np.sqrt(PAPER_D) / (PAPER_D + a) ** 1.5, rtol=0.03)
+    np.testing.assert_allclose(energy, 4 * PAPER_H * a**3 / (PAPER_D + a) ** 2, rtol=0.03)
+
+
+def test_paper_16_element_system_recovered_from_a_chirp():
+    # The paper's own 16 elements: against the closed form evaluated on the true elements (science.md §3 per
+    # element), k_eq within 3 % and E within 3 % for A >= d/2 (below, the identified grid places its few
+    # small thresholds differently from the true ones).
+    p, theta, m = _paper_chirp_fit(16)
+    a = np.geomspace(2 * m.ms_delta.min(), 0.25 * np.ptp(theta), 40)
+    keq, energy = _equivalent_curves(m.ms_stiffness, m.ms_delta, a)
     kt, dt_ = np.array(p.ms_stiffness), p.ms_delta
-    e_true = np.where(a[:, None] > dt_, 4 * kt * dt_ * (a[:, None] - dt_), 0).sum(1)
+    k_true, e_true = _equivalent_curves(kt, dt_, a)
+    np.testing.assert_allclose(keq + (m.spring - 50.0), k_true, rtol=0.03)
     sel = a >= 0.5 * PAPER_D
     assert sel.sum() >= 5
     np.testing.assert_allclose(energy[sel], e_true[sel], rtol=0.03)
-    e_closed = 4 * PAPER_H * a**3 / (PAPER_D + a) ** 2
-    big = a >= PAPER_D
-    np.testing.assert_allclose(energy[big], e_closed[big], rtol=0.05)
+
+
+def test_threshold_refinement_stays_inside_the_candidate_range():
+    # An unbounded refinement step once drove a threshold towards 0 (seed 1, 100 000 samples), and the element became so
+    # stiff that the validation simulation asked for an absurd number of sub-steps (OverflowError in C).
+    # Here: the bound holds and the refined model simulates.
+    p, run = _dc_run(13, n=20_000)
+    fit = fit_lip(run.position, run.torque, run.fs, settings=LipSettings(timing="hold_previous", refine=True))
+    d = fit.model.ms_delta
+    g = fit.candidate_deltas
+    assert d.size > 0 and np.all(d >= g[0] * (1 - 1e-9)) and np.all(d <= g[-1] * (1 + 1e-9))
+    err, _ = simulation_error(fit.model, run.position, run.torque, run.fs, timing="hold_previous")
+    assert np.isfinite(err)
 
 
 # ---- bad input ----------------------------------------------------------------------------------------
@@ -198,3 +230,11 @@ def test_unexciting_run_names_the_unidentifiable_parameter():
     torque = 0.76 + 0.004 * 0.5 + 1e-3 * rng.normal(size=n)
     with pytest.raises(AnalysisError, match="inertia J is unidentifiable"):
         identify(RunArrays(t, torque, position))
+
+
+def test_absurdly_stiff_model_gives_a_clear_error():
+    from analysis.output_error import stable_substeps
+
+    m = FrictionModel("rotary", 1e-3, np.array([1e20]), np.array([1e-12]), viscous=0.0)
+    with pytest.raises(AnalysisError, match="cannot be simulated.*sub-steps"):
+        stable_substeps(m, 1e-3)
