@@ -8,8 +8,9 @@ Methods:
 - ``paper``: differential evolution then Nelder-Mead on the simulation error, N elements (paper_baseline).
 
 Figures (analysis.maxwell_fit.nrmse, rms(error)/std(measured)): torque NRMSE of the equation error
-on the filtered rows, and position NRMSE of the open-loop simulation, on the training run and on
-an optional validation run.
+on the filtered rows, position NRMSE of the open-loop simulation over the whole record, and position
+NRMSE of the simulation restarted every ``segment`` seconds from the measured state
+(output_error.segmented_simulation_error), on the training run and on an optional validation run.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import numpy as np
 from analysis.errors import AnalysisError
 from analysis.friction_model import FrictionModel, check_axis
 from analysis.maxwell_fit import LipFit, LipSettings, fit_lip, predict_filtered
-from analysis.output_error import refine_output_error, simulation_error
+from analysis.output_error import refine_output_error, segmented_simulation_error, simulation_error
 
 METHODS = ("lip", "oe", "paper")
 
@@ -91,7 +92,7 @@ class Identification:
 
 
 def _figures(
-    model: FrictionModel, run: RunArrays, lip: LipFit, timing: str, prefix: str, curves: dict
+    model: FrictionModel, run: RunArrays, lip: LipFit, timing: str, prefix: str, curves: dict, segment: float
 ) -> dict:
     meas, pred, rows = predict_filtered(
         model,
@@ -106,6 +107,9 @@ def _figures(
     from analysis.maxwell_fit import nrmse
 
     pos_nrmse, sim = simulation_error(model, run.position, run.torque, run.fs, timing=timing)
+    seg_nrmse, _ = segmented_simulation_error(
+        model, run.position, run.torque, run.fs, timing=timing, segment=segment
+    )
     curves[prefix] = {
         "t": run.t,
         "position": run.position,
@@ -117,6 +121,7 @@ def _figures(
     return {
         f"{prefix}_torque_nrmse": nrmse(meas, pred),
         f"{prefix}_position_nrmse": pos_nrmse,
+        f"{prefix}_position_nrmse_segmented": seg_nrmse,
         f"{prefix}_samples": int(run.t.size),
     }
 
@@ -129,8 +134,12 @@ def identify(
     settings: LipSettings | None = None,
     oe_max_nfev: int = 100,
     paper_options: dict | None = None,
+    segment: float = 1.0,
 ) -> Identification:
-    """Identify the friction model of ``run`` (see the module docstring); optionally validate."""
+    """Identify the friction model of ``run`` (see the module docstring); optionally validate.
+
+    ``segment`` (s): restart interval of the segmented simulation figure (output_error.segmented_simulation_error).
+    """
     if method not in METHODS:
         raise AnalysisError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
     run = check_run(run)
@@ -163,10 +172,16 @@ def identify(
         "condition_number": lip.condition_number,
         **extra,
     }
-    figures.update(_figures(model, run, lip, s.timing, "train", curves))
+    figures["segment_s"] = float(segment)
+    figures.update(_figures(model, run, lip, s.timing, "train", curves, segment))
     if validate is not None:
-        figures.update(_figures(model, validate, lip, s.timing, "validation", curves))
-    settings_dict = {"method": method, **s.to_dict(), "candidate_deltas": lip.candidate_deltas.tolist()}
+        figures.update(_figures(model, validate, lip, s.timing, "validation", curves, segment))
+    settings_dict = {
+        "method": method,
+        **s.to_dict(),
+        "segment_s": float(segment),
+        "candidate_deltas": lip.candidate_deltas.tolist(),
+    }
     if method == "paper":
         settings_dict["paper_options"] = dict(paper_options or {})
     return Identification(model, method, settings_dict, figures, wall, lip, curves)

@@ -400,6 +400,19 @@ class Plant:
             lib.hb_deflections(self._c.struct, self._state, ffi.cast("double *", ffi.from_buffer(out)))
         return out
 
+    def set_deflections(self, values: np.ndarray) -> None:
+        """Set the Maxwell-slip spring deflections delta_i (rad), shape (n_elements,), e.g. from
+        ``stop_operator`` of a measured path; each is clipped to its slip displacement +-Delta_i."""
+        v = np.asarray(values, dtype=float)
+        if v.shape != (self.params.n_elements,):
+            raise PlantParameterError(f"deflections must have shape ({self.params.n_elements},), got {v.shape}")
+        if not np.all(np.isfinite(v)):
+            raise PlantParameterError("deflections must be finite")
+        v = np.clip(v, -self.params.ms_delta, self.params.ms_delta)
+        self._state.ms_offset = 0.0
+        for i, value in enumerate(v):
+            self._state.deflection[i] = float(value)
+
     def get_state(self) -> bytes:
         """The complete state (mechanics, effects, generator) as bytes."""
         return bytes(ffi.buffer(self._state))

@@ -8,7 +8,7 @@ from analysis.errors import AnalysisError
 from analysis.friction_model import FrictionModel
 from analysis.identification import RunArrays, identify
 from analysis.maxwell_fit import LipSettings, fit_lip
-from analysis.output_error import simulation_error
+from analysis.output_error import segmented_simulation_error, simulation_error
 from analysis.regressors import (
     held_torque,
     reversal_travels,
@@ -93,23 +93,26 @@ def test_linear_system_recovered_exactly():
     assert fit.model.breakaway < 1e-3 * 0.76  # no friction invented
 
 
-def _dc_run(seed: int, fs: float = 4000.0, n: int = 100_000):
+def _dc_run(seed: int, fs: float = 4000.0, n: int = 100_000, amplitude: float = 16.0):
+    # amplitude 16 A (3.2 N*m, 4x the break-away) is the bench's default identification protocol
     p = dc_motor().replace(counts_per_rev=2**20, noise_current=0.02, seed=seed)
-    out = simulate(p, random_enveloped(n, fs, seed, 6.0), 1 / fs)
+    out = simulate(p, random_enveloped(n, fs, seed, amplitude), 1 / fs)
     # torque from the measured current: sampled at t_k, it is the mean over [t_k-1, t_k)
     return p, RunArrays(np.arange(n) / fs, p.torque_constant * out.current_meas, out.position_meas)
 
 
 @pytest.mark.parametrize("seed", [1, 5, 9])
 def test_dc_motor_identified_and_validated(seed):
-    p, train = _dc_run(seed)
+    # training: 100 s at 4 kHz; validation: 25 s of another seed
+    p, train = _dc_run(seed, n=400_000)
     _, val = _dc_run(seed + 100)
     settings = LipSettings(timing="hold_previous")
     res = identify(train, validate=val, settings=settings)
     m = res.model
     truth = FrictionModel("rotary", p.inertia, np.array(p.ms_stiffness), p.ms_delta, viscous=p.viscous)
-    # J within 1 % (issue target)
+    # J within 1 % (issue target; measured 0.01 %) and b within 2 % (measured 0.4 %)
     assert m.inertia == pytest.approx(p.inertia, rel=0.01)
+    assert m.viscous == pytest.approx(p.viscous, rel=0.02)
     # virgin curve within 2 % RMS (issue target), pointwise relative, on a log grid over the excited
     # range: from 2 encoder counts (below that the quantised path cannot resolve a threshold) to half
     # the largest travel between reversals, capped where the true curve is flat (100*d).
@@ -118,12 +121,42 @@ def test_dc_motor_identified_and_validated(seed):
     x = np.geomspace(2 * q, hi, 200)
     rel = m.virgin_curve(x) / truth.virgin_curve(x) - 1
     assert np.sqrt(np.mean(rel**2)) < 0.02
-    # validation simulation error against the noise floor (true model, same measured torque).
-    # The issue's target is 1.2x; we measure 1.6-3.6x over seeds (open-loop drift of a stick-slip
-    # system amplifies small parameter errors), so this is a regression guard at 4x, NOT the target.
+    # Validation simulation error against the noise floor: the true model's error under the same
+    # measured torque, in the same figure. The issue's 1.2x is held on the segmented simulation (restarted
+    # every second from the measured state; measured 1.00-1.09 over 7 seeds). The whole-record open-loop
+    # figure is a random walk of the torque noise: for the true model it varies 7x between seeds, and a
+    # fitted model beats it on some (measured ratio 0.97-1.53 over 7 seeds), so it gets a loose guard.
+    floor_seg, _ = segmented_simulation_error(truth, val.position, val.torque, val.fs, timing="hold_previous")
+    assert res.figures["validation_position_nrmse_segmented"] < 1.2 * floor_seg
     floor, _ = simulation_error(truth, val.position, val.torque, val.fs, timing="hold_previous")
-    assert res.figures["validation_position_nrmse"] < 4.0 * floor
+    assert res.figures["validation_position_nrmse"] < 2.0 * floor
     assert res.figures["validation_torque_nrmse"] < 0.05
+
+
+def test_segmented_simulation_restarts_from_the_measured_state(monkeypatch):
+    # Oracle: noise-free, unquantised run of the true model. Restarting from the measured position, the
+    # filtered velocity and the stop-operator deflections of the measured path reproduces the run closely
+    # (only the velocity estimate is approximate: 1.2e-4 of std(x)); restarted with relaxed elements instead,
+    # it is 30x worse (measured 3.9e-3). The stop operator is evaluated in chunks: a tiny chunk must not change it.
+    import analysis.output_error as oe
+
+    p = dc_motor()
+    fs, n = 4000.0, 40_000
+    out = simulate(p, random_enveloped(n, fs, 2, 16.0), 1 / fs)
+    truth = FrictionModel("rotary", p.inertia, np.array(p.ms_stiffness), p.ms_delta, viscous=p.viscous)
+    tau = p.torque_constant * out.current_meas
+    e, sim = segmented_simulation_error(truth, out.theta, tau, fs, timing="hold_previous", segment=0.5)
+    assert e < 2e-4
+    monkeypatch.setattr(oe, "CHUNK_VALUES", 16 * 2000 + 7)
+    e2, sim2 = segmented_simulation_error(truth, out.theta, tau, fs, timing="hold_previous", segment=0.5)
+    np.testing.assert_array_equal(sim2, sim)
+    from firmware_sim.plant import Plant
+
+    monkeypatch.setattr(Plant, "set_deflections", lambda self, v: None)  # restart with relaxed elements
+    e_relaxed, _ = segmented_simulation_error(truth, out.theta, tau, fs, timing="hold_previous", segment=0.5)
+    assert e_relaxed > 10 * e
+    with pytest.raises(AnalysisError, match="segment"):
+        segmented_simulation_error(truth, out.theta, tau, fs, segment=0.0)
 
 
 def _paper_chirp_fit(n_elements: int):

@@ -109,3 +109,23 @@ def test_params_dict_round_trip_and_unknown_key():
     assert PlantParams.from_dict(p.to_dict()).to_dict() == p.to_dict()
     with pytest.raises(PlantParameterError, match="unknown plant parameter"):
         PlantParams.from_dict({"inertia": 1.0, "mass": 2.0})
+
+
+def test_set_deflections_continues_a_run_exactly():
+    # Oracle: one plant run over n1 + n2 samples. A second plant started at the first one's (theta, omega,
+    # deflections) after n1 samples must reproduce the remaining n2 samples (same arithmetic: 1e-12).
+    p = dc_motor()
+    dt, n1, n2 = 2.5e-4, 3000, 3000
+    rng = np.random.default_rng(2)
+    u = np.repeat(rng.uniform(-6, 6, (n1 + n2) // 100), 100)
+    a = Plant(p, dt, 2)
+    a.run(u[:n1])
+    b = Plant(p, dt, 2, theta0=a.theta, omega0=a.omega)
+    b.set_deflections(a.deflections)
+    np.testing.assert_allclose(b.deflections, a.deflections, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(b.run(u[n1:]).theta, a.run(u[n1:]).theta, rtol=0, atol=1e-12)
+    with pytest.raises(PlantParameterError, match="shape"):
+        b.set_deflections(np.zeros(3))
+    big = np.full(p.n_elements, 1.0)
+    b.set_deflections(big)  # clipped to the slip displacements
+    np.testing.assert_allclose(b.deflections, p.ms_delta, rtol=1e-15)
