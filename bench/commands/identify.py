@@ -109,7 +109,8 @@ def run(args) -> int:
     if val is not None:
         line += (
             f"; validation NRMSE torque {f['validation_torque_nrmse']:.4f} "
-            f"position {f['validation_position_nrmse']:.4f}"
+            f"position {f['validation_position_nrmse']:.4f} "
+            f"(segmented {f['validation_position_nrmse_segmented']:.4f})"
         )
     print(line + f" ({res.wall_time:.2f} s) -> {args.json}")
     if args.plots:

@@ -35,6 +35,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="analysed band in Hz (default: from the spectrum of each run)",
     )
     parser.add_argument("--bins", type=int, default=30, help="log-spaced bins per curve (default 30)")
+    parser.add_argument(
+        "--compose",
+        choices=("rate", "updown", "median"),
+        default="rate",
+        help="per-bin energy estimate: rate-extrapolated fit (default), mean of growing/decaying medians, or the "
+        "plain median (the paper's pooling); see analysis.forcevib.compose",
+    )
     parser.add_argument("--json", metavar="OUT.json", help="write the composed curves as JSON")
     parser.add_argument("--plot", metavar="OUT.png", help="write the skeleton plot")
     parser.set_defaults(func=run)
@@ -95,13 +102,14 @@ def run(args: argparse.Namespace) -> int:
             f"{r.path.name}: {v.sum()} valid samples, A {results[-1].amplitude[v].min():.4g} .. "
             f"{results[-1].amplitude[v].max():.4g}"
         )
-    curves = compose(results, n_bins=args.bins)
+    curves = compose(results, n_bins=args.bins, method=args.compose)
     pos, trq = ("rad", "N*m") if runs[0].axis == "rotary" else ("m", "N")
     doc = {
         "runs": [str(p) for p in args.runs],
         "mass": mass,
         "spring": args.spring,
         "method": args.method,
+        "compose": args.compose,
         "units": {
             "amplitude": pos,
             "stiffness": f"{trq}/{pos}",
