@@ -152,7 +152,7 @@ class SkeletonCurves:
         amplitude: bin median of A, m, shape (na,).
         stiffness: median k_eq - spring in the bin, N/m, shape (na,).
         restoring_force: median (k_eq - spring)*A, N, shape (na,).
-        energy: median energy per cycle implied by the equivalent damping, E = pi*c_eq*omega*A^2, J,
+        energy: energy per cycle implied by the equivalent damping, E = pi*c_eq*omega*A^2 (per ``method``), J,
             shape (na,).
         amplitude_count: samples per amplitude bin, shape (na,).
         velocity: bin median of V, m/s, shape (nv,).
