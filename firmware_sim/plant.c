@@ -420,6 +420,27 @@ static inline __attribute__((always_inline)) void substep(const hb_params *p, hb
             sliding = om_new * dir > 0.0;
             if (sliding) s->coulomb_force = dir * coulomb_level(p, dir, om_new);
         }
+        if (!sliding && dir != 0.0) {
+            /* The velocity reaches zero inside the step. Locate that instant (linear in the sliding step's
+             * velocity), slide up to it with the friction of the old direction, stop there, and let the rest
+             * of the step decide between sticking and sliding the other way. Projecting the whole step at
+             * once would apply the new direction's friction from the start of the step: the reversal instant
+             * is then quantised to the step grid, and a mass sliding under a sine keeps whatever mean-velocity
+             * offset its start gave it (measured: a creep of up to 3.5e-3*G/(m*omega^2) per period). */
+            double t1 = h * om / (om - om_new);
+            if (t1 > 0.0 && t1 < h) {
+                double th1, om1;
+                rk4(p, s, c, ft, tau, t1, dir, &th1, &om1);
+                s->theta = th1;
+                s->omega = 0.0;
+                s->coulomb_force = dir * coulomb_level(p, dir, 0.0);
+                ms_commit(p, s, c, th1 - th);
+                ms_segments(c, s->ms_offset);
+                h -= t1;
+                th = th1;
+                om = 0.0;
+            }
+        }
         if (!sliding) {
             rk4(p, s, c, ft, tau, h, 0.0, &th_new, &om_new);
             double free_dir = om_new >= 0.0 ? 1.0 : -1.0;

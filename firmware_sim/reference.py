@@ -140,7 +140,7 @@ def reference_simulate(params: PlantParams, u, dt: float, substeps: int = 1, mod
             lv += s_excess * math.exp(-(r * r))
         return lv
 
-    def rk4(th: float, om: float, tau: float, direction: float) -> tuple[float, float]:
+    def rk4(th: float, om: float, tau: float, direction: float, h: float = h) -> tuple[float, float]:
         def force(x: float, v: float) -> float:
             f = smooth_force(x, v, th)
             if direction != 0.0:
@@ -234,19 +234,30 @@ def reference_simulate(params: PlantParams, u, dt: float, substeps: int = 1, mod
             else:
                 direction = 1.0 if om > 0.0 else (-1.0 if om < 0.0 else 0.0)
                 sliding = False
+                hs = h
                 if direction != 0.0:
                     th_new, om_new = rk4(th, om, tau, direction)
                     sliding = om_new * direction > 0.0
                     if sliding:
                         coulomb_force = direction * level(direction, om_new)
+                    else:
+                        # zero velocity inside the step: slide to it, stop, decide on the rest (plant.c)
+                        t1 = h * om / (om - om_new)
+                        if 0.0 < t1 < h:
+                            th1, _ = rk4(th, om, tau, direction, t1)
+                            for i in range(len(k)):
+                                defl[i] = _clip(defl[i] + th1 - th, -delta[i], delta[i])
+                            th, om = th1, 0.0
+                            coulomb_force = direction * level(direction, 0.0)
+                            hs = h - t1
                 if not sliding:
-                    th_new, om_new = rk4(th, om, tau, 0.0)
+                    th_new, om_new = rk4(th, om, tau, 0.0, hs)
                     free_dir = 1.0 if om_new >= 0.0 else -1.0
-                    dv = h * level(free_dir, om) / J
+                    dv = hs * level(free_dir, om) / J
                     om_free = om_new
                     om_new = 0.0 if abs(om_free) <= dv else om_free - free_dir * dv
-                    th_new -= 0.5 * h * (om_free - om_new)
-                    coulomb_force = J * (om_free - om_new) / h
+                    th_new -= 0.5 * hs * (om_free - om_new)
+                    coulomb_force = J * (om_free - om_new) / hs
             dx = th_new - th
             for i in range(len(k)):
                 defl[i] = _clip(defl[i] + dx, -delta[i], delta[i])

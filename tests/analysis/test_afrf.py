@@ -142,8 +142,8 @@ def _coulomb_exact(g: float, fc: float, m: float, f: float, n: int = 100_000) ->
 def test_coulomb_against_exact_solution_and_describing_function():
     """Paper-like setting: m = 1, break-away Fc = 1.5, no spring, G = 5 and 10 (sliding, no stick).
 
-    Against the exact periodic solution: 5e-3 relative on 1f and 3f. The engine resolves stick/slip at
-    the sample (Moreau step), an O(dt) effect: measured 1.1-1.8e-3 at 400 samples/period.
+    Against the exact periodic solution: 1e-4 relative on 1f and 3f (measured 1.4e-5 at 400 samples per period,
+    the held, sampled force; it was 1.1-1.8e-3 before reversals were located inside the step).
     Against the describing function N(A) = 4Fc/(pi*A): |(-m w^2 + j*N(A)*...)*A| = G gives
     A = sqrt(G^2 - (4Fc/pi)^2)/(m w^2). It drops the friction's 3rd, 5th... harmonics, so it is only
     approximate: measured -4.2 % at G/Fc = 3.3 and -1.0 % at G/Fc = 6.7 (exact: -3.9 %, -0.9 %); the
@@ -155,13 +155,15 @@ def test_coulomb_against_exact_solution_and_describing_function():
     df_error = []
     for i, g in enumerate(amps):
         exact = np.array([_coulomb_exact(g, fc, 1.0, f) for f in freqs])
-        np.testing.assert_allclose(r.magnitudes[i, :, [0, 2]], exact[:, [0, 2]].T, rtol=5e-3)
+        np.testing.assert_allclose(r.magnitudes[i, :, [0, 2]], exact[:, [0, 2]].T, rtol=1e-4)
         a_df = np.sqrt(g**2 - (4 * fc / np.pi) ** 2) / w**2
         df_error.append(np.max(np.abs(r.magnitudes[i, :, 0] / a_df - 1)))
         # odd symmetric: no 2f
         assert np.max(r.magnitudes[i, :, 1] / r.magnitudes[i, :, 0]) < 1e-6
     assert df_error[0] < 0.06 and df_error[1] < 0.015 and df_error[1] < df_error[0]
-    assert np.max(r.convergence) < 1e-9
+    # steady state: the start-from-rest mean-velocity offset decays as in the exact solution (about 1e-7 of
+    # |X(f)| per block after 20 periods at G = 10; tests/firmware_sim/test_plant_closed_forms.py)
+    assert np.max(r.convergence) < 1e-6
 
 
 def test_coulomb_sticks_below_breakaway():
