@@ -173,7 +173,8 @@ def fit_lip(
     x = np.asarray(position, float)
     data = filtered_data(x, torque, fs, cutoff, order=s.order, decimation=dec, timing=s.timing)
     design = _Design(data, s)
-    grid = threshold_grid(x, s.n_thresholds, s.delta_range)
+    # n_thresholds 0: no Maxwell-slip elements (e.g. the EMPS reference model J, Fc, b, offset)
+    grid = threshold_grid(x, s.n_thresholds, s.delta_range) if s.n_thresholds > 0 else np.empty(0)
     y = data.torque
     lin = design.columns
     nl = lin.shape[1]

@@ -209,6 +209,8 @@ def stop_columns(position: np.ndarray, deltas: np.ndarray, data: FilteredData) -
     """Filtered, triangle-averaged stop-operator regressors L[S_Delta_j[theta]] at the rows, (r, m)."""
     from firmware_sim.plant import stop_operator
 
+    if np.size(deltas) == 0:
+        return np.empty((data.rows.size, 0))
     s = stop_operator(np.asarray(position, float), np.asarray(deltas, float))
     sf = zero_phase_lowpass(np.ascontiguousarray(s.T), data.fs, data.cutoff, data.order)
     return np.ascontiguousarray(triangle_average(sf, data.rows).T)

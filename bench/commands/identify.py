@@ -23,7 +23,9 @@ def register(subparsers) -> None:
     )
     parser.add_argument("--json", required=True, metavar="OUT.json", help="model file to write")
     parser.add_argument("--plots", metavar="DIR", help="write PNG plots into DIR")
-    parser.add_argument("--thresholds", type=int, default=64, help="candidate thresholds (default 64)")
+    parser.add_argument(
+        "--thresholds", type=int, default=64, help="candidate thresholds (default 64; 0: no Maxwell-slip elements)"
+    )
     parser.add_argument("--cutoff", type=float, help="zero-phase filter cutoff, Hz (default fs/20)")
     parser.add_argument("--coulomb", action="store_true", help="add a Coulomb term Fc*sign(velocity)")
     parser.add_argument("--offset", action="store_true", help="add a constant torque offset")

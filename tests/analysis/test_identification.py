@@ -248,6 +248,13 @@ def test_bad_input_gives_clear_errors():
         identify(RunArrays(run.t[:50], run.torque[:50], run.position[:50]))
     with pytest.raises(AnalysisError, match="never changes"):
         identify(RunArrays(run.t, run.torque, np.zeros_like(run.t)))
+    jitter = run.t + 0.05 * (run.t[1] - run.t[0]) * np.sin(np.arange(run.t.size))
+    with pytest.raises(AnalysisError, match="not uniformly spaced"):
+        identify(RunArrays(jitter, run.torque, run.position))
+    # time stored in float32 (as EMPS does) is uniform to ~1e-4 of the period: accepted, fs from the whole span
+    t32 = (run.t + 20.0).astype(np.float32).astype(float)
+    assert RunArrays(t32, run.torque, run.position).fs == pytest.approx(run.fs, rel=1e-6)
+    identify(RunArrays(t32, run.torque, run.position))
     with pytest.raises(AnalysisError, match="axis"):
         identify(RunArrays(run.t, run.torque, run.position, axis="helical"))
     with pytest.raises(AnalysisError, match="method"):
