@@ -1,4 +1,4 @@
-"""``bench import {emps,hsm150,csv} FILE [-o RUN.h5]``: convert measured data into a run file (schema v1)."""
+"""``bench import {emps,hsm150,mnich,csv} FILE [-o RUN.h5]``: convert measured data into a run file (schema v1)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import os
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "import",
-        help="import real data (EMPS, HSM150, CSV) into a run file",
+        help="import real data (EMPS, HSM150, Mnich rig, CSV) into a run file",
         description="Convert measured data from another bench into a hilbench run file (HDF5 schema v1).",
     )
     formats = parser.add_subparsers(dest="format", metavar="FORMAT", required=True)
@@ -36,6 +36,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     hsm.add_argument("file", metavar="FILE.mat")
     common(hsm)
+
+    mnich = formats.add_parser(
+        "mnich",
+        help="Mnich rack-and-pinion rig: servo CSV + load-cell CSV (linear: m, N)",
+        description=(
+            "Import the rack-and-pinion friction rig (servo scope export a3MR.csv and NI load-cell export "
+            "a3NI.csv): linear axis, force from the load cell in N on its 2 kHz grid, speed from the servo, "
+            "position integrated from it. One short motion: a sanity check for a Stribeck curve."
+        ),
+    )
+    mnich.add_argument("file", metavar="a3MR.csv", help="servo amplifier scope export")
+    mnich.add_argument("--ni", metavar="a3NI.csv", help="load-cell export (default: a3NI.csv beside FILE)")
+    mnich.add_argument(
+        "--ni-shift", type=float, default=-0.004, metavar="S",
+        help="load-cell clock relative to the servo clock, s (default -0.004, the author's)",
+    )
+    common(mnich)
 
     csv = formats.add_parser(
         "csv",
@@ -81,6 +98,10 @@ def run(args: argparse.Namespace) -> int:
             args.file, torque_constant=args.torque_constant, mapping=_parse_map(args.map), linear=args.linear,
             delimiter=args.delimiter,
         )
+    elif args.format == "mnich":
+        from bench.import_mnich import load_mnich
+
+        imported = load_mnich(args.file, args.ni, shift=args.ni_shift)
     else:
         imported = importers.LOADERS[args.format](args.file)
     out = args.output or os.path.splitext(os.path.basename(args.file))[0] + ".h5"

@@ -281,3 +281,31 @@ def test_corrupt_mat_is_one_line_error(tmp_path, capsys):
     savemat(nan_mat, {"data": data})
     _one_line_error(capsys, ["import", "hsm150", str(nan_mat), "-o", str(tmp_path / "o.h5")], "non-finite")
     assert not (tmp_path / "o.h5").exists()
+
+
+# ---- Mnich rack-and-pinion ----------------------------------------------------------------------------------
+
+MNICH = REAL / "mnich_rack_pinion" / "a3MR.csv"
+
+
+@pytest.mark.skipif(not MNICH.exists(), reason="Mnich data set not available")
+def test_mnich_import_matches_readme_and_identifies_the_mass(tmp_path, capsys):
+    # README facts: one motion to -1981 rpm (0.66 m/s after the -rpm*20/1000/60 conversion), the load cell at
+    # 2 kHz (0.539 s), reduced mass 24.7 kg. The identified mass from force and integrated speed is an
+    # independent check of the whole chain (conversions, alignment, integration): measured 25.04 kg.
+    out = tmp_path / "mn.h5"
+    assert bench_main(["import", "mnich", str(MNICH), "-o", str(out)]) == 0
+    assert "2000 Hz, linear axis" in capsys.readouterr().out
+    with open_run(out) as run:
+        assert run.status == "completed" and run.meta["source"] == "import:mnich"
+        v = run.channel("velocity")
+        assert np.max(v) == pytest.approx(1981 * 20 / 1000 / 60, rel=1e-3) and np.min(v) > -1e-9
+        assert 0.5 < run.channel("t")[-1] < 0.54
+        assert np.all(np.diff(run.channel("position")) >= -1e-12)  # one motion, forward
+    model = tmp_path / "m.json"
+    assert bench_main(["identify", str(out), "--thresholds", "0", "--coulomb", "--offset", "--json", str(model)]) == 0
+    import json
+
+    assert json.loads(model.read_text())["parameters"]["inertia"] == pytest.approx(24.7, rel=0.03)
+    _one_line_error(capsys, ["import", "mnich", str(tmp_path / "none.csv"), "-o", str(tmp_path / "o.h5")],
+                    "no such file")
