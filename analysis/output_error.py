@@ -91,6 +91,29 @@ def simulation_error(
     return nrmse(x, sim), sim
 
 
+def path_deflections(position: np.ndarray, deltas: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """Stop-operator deflections S_Delta_j[x](k) of the path from relaxed elements, at the sample ``indices``
+    (increasing), shape (len(indices), len(deltas)), in the units of x. Evaluated in chunks of at most
+    ``CHUNK_VALUES`` values: the full (n, N) array of a long record would not fit in memory."""
+    from firmware_sim.plant import stop_operator
+
+    x = np.asarray(position, float)
+    d = np.asarray(deltas, float)
+    idx = np.asarray(indices, dtype=np.int64)
+    out = np.empty((idx.size, d.size))
+    if d.size == 0 or idx.size == 0:
+        return out
+    chunk = max(1, CHUNK_VALUES // d.size)
+    state = None
+    for c0 in range(0, int(idx[-1]) + 1, chunk):
+        lo = max(c0 - 1, 0)  # one sample of overlap: the chunk continues from the deflection at x[c0-1]
+        s_op = stop_operator(x[lo : c0 + chunk], d, initial=state)[c0 - lo :]
+        state = s_op[-1]
+        inside = (idx >= c0) & (idx < c0 + chunk)
+        out[inside] = s_op[idx[inside] - c0]
+    return out
+
+
 def segmented_simulation_error(
     model: FrictionModel,
     position: np.ndarray,
@@ -111,7 +134,7 @@ def segmented_simulation_error(
     deflections S_Delta_i[x](k0), the stop operators of the measured path from relaxed elements (the
     Maxwell-slip state is a function of the path alone). NRMSE = rms(x - sim)/std(x) over the whole record.
     """
-    from firmware_sim.plant import Plant, PlantParameterError, stop_operator
+    from firmware_sim.plant import Plant, PlantParameterError
 
     x = np.asarray(position, float)
     if not segment > 0:
@@ -123,17 +146,7 @@ def segmented_simulation_error(
     xf = zero_phase_lowpass(x, fs, min(fs / 20.0, 0.45 * fs))
     v = np.gradient(xf, dt)
     starts = np.arange(0, x.size, n_seg)
-    deflections = None
-    if params.n_elements:  # in chunks: the full (n, N) array of a long record would not fit in memory
-        deflections = np.empty((starts.size, params.n_elements))
-        state = np.zeros(params.n_elements)
-        chunk = max(n_seg, CHUNK_VALUES // params.n_elements // n_seg * n_seg)
-        for c0 in range(0, x.size, chunk):
-            lo = max(c0 - 1, 0)  # one sample of overlap: the chunk continues from the deflection at x[c0-1]
-            s_op = stop_operator(x[lo : c0 + chunk], params.ms_delta, initial=state)[c0 - lo :]
-            state = s_op[-1]
-            inside = starts[(starts >= c0) & (starts < c0 + chunk)]
-            deflections[inside // n_seg] = s_op[inside - c0]
+    deflections = path_deflections(x, params.ms_delta, starts) if params.n_elements else None
     sim = np.empty_like(x)
     try:
         sub = stable_substeps(model, dt)

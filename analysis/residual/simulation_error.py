@@ -4,7 +4,8 @@ The model (every term's plant parameters, ``Term.plant``) is simulated by ``firm
 the run's measured torque (torque_constant 1: the input is the torque). A friction system integrates
 every torque error into a drifting position, so a whole-run open-loop simulation of a closed-loop or
 long run says little. The run is therefore cut into windows of ``window`` s; each window starts from
-the measured position and velocity (element deflections at zero) and is simulated open loop:
+the measured position and velocity, and the Maxwell-slip deflections of the stop operators along the
+measured path (the elements' state is a function of the path), and is simulated open loop:
 
     position_nrmse = rms(theta_sim - theta_meas) / std(theta_meas),
     velocity_nrmse = rms(omega_sim - v_meas) / std(v_meas)
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from analysis.output_error import path_deflections
 from analysis.regressors import held_torque
 from analysis.residual.design import Fit
 from analysis.residual.rundata import RunData
@@ -62,10 +64,16 @@ def simulation_error(fit: Fit, run: RunData, window: float = 1.0) -> dict:
         theta = np.empty(n)
         omega = np.empty(n)
         offset0 = params.torque_offset
-        for k0 in range(0, n, w):
+        starts = np.arange(0, n, w)
+        deflections = None
+        if params.n_elements:
+            deflections = path_deflections(run.position, params.ms_delta, starts)
+        for j, k0 in enumerate(starts):
             k1 = min(n, k0 + w)
             p = params.replace(torque_offset=offset0 + params.torque_drift * run.time[k0])
             plant = Plant(p, dt, substeps, theta0=float(run.position[k0]), omega0=float(run.velocity_fast[k0]))
+            if deflections is not None:
+                plant.set_deflections(deflections[j])
             out = plant.run(u[k0:k1])
             theta[k0:k1], omega[k0:k1] = out.theta, out.omega
     except (PlantParameterError, FloatingPointError) as exc:

@@ -278,3 +278,15 @@ def test_absurdly_stiff_model_gives_a_clear_error():
     m = FrictionModel("rotary", 1e-3, np.array([1e20]), np.array([1e-12]), viscous=0.0)
     with pytest.raises(AnalysisError, match="cannot be simulated.*sub-steps"):
         stable_substeps(m, 1e-3)
+
+
+def test_path_deflections_in_chunks_equal_the_full_stop_operator(monkeypatch):
+    import analysis.output_error as oe
+    from firmware_sim.plant import stop_operator
+
+    rng = np.random.default_rng(7)
+    x = np.cumsum(rng.normal(scale=1e-3, size=5000))
+    deltas = np.array([1e-4, 1e-3, 5e-3])
+    idx = np.array([0, 1, 17, 999, 1000, 1001, 4999])
+    monkeypatch.setattr(oe, "CHUNK_VALUES", 3 * 1000)  # chunks of 1000 samples
+    np.testing.assert_array_equal(oe.path_deflections(x, deltas, idx), stop_operator(x, deltas)[idx])
