@@ -146,7 +146,7 @@ def test_coulomb_against_exact_solution_and_describing_function():
     the held, sampled force; it was 1.1-1.8e-3 before reversals were located inside the step).
     Against the describing function N(A) = 4Fc/(pi*A): |(-m w^2 + j*N(A)*...)*A| = G gives
     A = sqrt(G^2 - (4Fc/pi)^2)/(m w^2). It drops the friction's 3rd, 5th... harmonics, so it is only
-    approximate: measured -4.2 % at G/Fc = 3.3 and -1.0 % at G/Fc = 6.7 (exact: -3.9 %, -0.9 %); the
+    approximate: measured -4.1 % at G/Fc = 3.3 and -0.9 % at G/Fc = 6.7 (the exact solution: the same to 1e-4); the
     tolerances are 6 % and 1.5 %, and the error must shrink as G grows."""
     fc, freqs, amps = 1.5, np.array([0.1, 1.0, 10.0]), np.array([5.0, 10.0])
     r = simulate_afrf(coulomb_system(fc), amps, freqs, samples_per_period=400, settle_periods=20,
