@@ -115,6 +115,8 @@ def _cli(*argv: str) -> None:
 def identify_step(files: dict[str, Path], out: Path) -> None:
     _cli("identify", files["identification"], "--validate", files["validation"], "--json", out / "model.json",
          "--plots", out / "identification")
+    _say("  (position NRMSE: the whole-record open-loop simulation integrates every torque error and the hidden "
+         "cogging into drift; 'segmented' restarts it every second from the measured state, docs/model-file.md)")
 
 
 def afrf_step(files: dict[str, Path], out: Path) -> None:
