@@ -177,7 +177,6 @@ def identify(
         "condition_number": lip.condition_number,
         **extra,
     }
-    figures["segment_s"] = float(segment)
     figures.update(_figures(model, run, lip, s.timing, "train", curves, segment))
     if validate is not None:
         figures.update(_figures(model, validate, lip, s.timing, "validation", curves, segment))

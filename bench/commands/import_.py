@@ -49,8 +49,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     mnich.add_argument("file", metavar="a3MR.csv", help="servo amplifier scope export")
     mnich.add_argument("--ni", metavar="a3NI.csv", help="load-cell export (default: a3NI.csv beside FILE)")
     mnich.add_argument(
-        "--ni-shift", type=float, default=-0.004, metavar="S",
-        help="load-cell clock relative to the servo clock, s (default -0.004, the author's)",
+        "--ni-shift", type=float, metavar="S",
+        help="load-cell clock relative to the servo clock, s (default: the author's -0.004)",
     )
     common(mnich)
 
@@ -101,7 +101,8 @@ def run(args: argparse.Namespace) -> int:
     elif args.format == "mnich":
         from bench.import_mnich import load_mnich
 
-        imported = load_mnich(args.file, args.ni, shift=args.ni_shift)
+        shift = {} if args.ni_shift is None else {"shift": args.ni_shift}
+        imported = load_mnich(args.file, args.ni, **shift)
     else:
         imported = importers.LOADERS[args.format](args.file)
     out = args.output or os.path.splitext(os.path.basename(args.file))[0] + ".h5"

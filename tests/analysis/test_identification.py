@@ -9,6 +9,7 @@ from analysis.friction_model import FrictionModel
 from analysis.identification import RunArrays, identify
 from analysis.maxwell_fit import LipSettings, fit_lip
 from analysis.output_error import segmented_simulation_error, simulation_error
+from analysis.paper import maxwell_slip_closed_form
 from analysis.regressors import (
     held_torque,
     reversal_travels,
@@ -168,14 +169,6 @@ def _paper_chirp_fit(n_elements: int):
     return p, out.theta, fit_lip(out.theta, u, fs, "linear", LipSettings(spring=True)).model
 
 
-def _equivalent_curves(k, d, a):
-    """k_eq(A), E(A) of Jenkins elements (science.md §3, per element), summed; a shape (m,)."""
-    a = a[:, None]
-    th = np.arccos(np.clip(1 - 2 * d / a, -1, 1))
-    keq = np.where(a > d, k / np.pi * (th - 0.5 * np.sin(2 * th)), k).sum(1)
-    return keq, np.where(a > d, 4 * k * d * (a - d), 0).sum(1)
-
-
 def test_paper_system_equivalent_curves_from_a_chirp():
     """science.md §3 closed forms: k_eq(A) = 2h sqrt(d)/(d+A)^1.5 and E(A) = 4hA^3/(d+A)^2, within 3 %.
 
@@ -190,7 +183,7 @@ def test_paper_system_equivalent_curves_from_a_chirp():
     assert m.inertia == pytest.approx(1.0, rel=1e-3)
     a = np.geomspace(0.06, 0.25 * np.ptp(theta), 40)
     assert 2 * m.ms_delta.min() < a[0]
-    keq, energy = _equivalent_curves(m.ms_stiffness, m.ms_delta, a)
+    keq, energy = maxwell_slip_closed_form(m.plant_params(), a)  # science.md §3, per element
     # Elements that never slip are indistinguishable from the linear spring, so the identifiable
     # friction stiffness is k_eq + (K_identified - 50), with the known spring 50 N/m.
     keq_total = keq + (m.spring - 50.0)
@@ -204,9 +197,8 @@ def test_paper_16_element_system_recovered_from_a_chirp():
     # small thresholds differently from the true ones).
     p, theta, m = _paper_chirp_fit(16)
     a = np.geomspace(2 * m.ms_delta.min(), 0.25 * np.ptp(theta), 40)
-    keq, energy = _equivalent_curves(m.ms_stiffness, m.ms_delta, a)
-    kt, dt_ = np.array(p.ms_stiffness), p.ms_delta
-    k_true, e_true = _equivalent_curves(kt, dt_, a)
+    keq, energy = maxwell_slip_closed_form(m.plant_params(), a)  # science.md §3, per element
+    k_true, e_true = maxwell_slip_closed_form(p, a)
     np.testing.assert_allclose(keq + (m.spring - 50.0), k_true, rtol=0.03)
     sel = a >= 0.5 * PAPER_D
     assert sel.sum() >= 5
