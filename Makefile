@@ -5,6 +5,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.stamp-install
 C_SRC  := $(wildcard firmware_sim/*.c firmware_sim/*.h) firmware_sim/plant_build.py
+PKG    := $(wildcard hilbench/*.py)
 export QT_QPA_PLATFORM ?= offscreen
 
 .PHONY: all setup demo test bench lint clean
@@ -15,15 +16,15 @@ $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip setuptools wheel
 
-$(STAMP): $(BIN)/python pyproject.toml setup.py $(C_SRC)
+$(STAMP): $(BIN)/python pyproject.toml setup.py $(C_SRC) $(PKG)
 	$(BIN)/python -m pip install --quiet -e ".[test]"
-	$(BIN)/python -c "import firmware_sim._plant"   # the C extension is built and importable
+	$(BIN)/python -c "import hilbench.firmware_sim._plant"   # the C extension is built and importable
 	touch $@
 
 setup: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/bench demo -o demo-out
+	$(BIN)/hilbench demo -o demo-out
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -p no:cacheprovider

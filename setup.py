@@ -1,3 +1,19 @@
-from setuptools import setup
+"""Package layout and the C plant's cffi build (everything else is in pyproject.toml).
 
-setup(cffi_modules=["firmware_sim/plant_build.py:ffibuilder"])
+The repository keeps its top-level folders; the distribution installs them under one namespace:
+bench/ -> hilbench.bench, drivers/ -> hilbench.drivers, firmware_sim/ -> hilbench.firmware_sim,
+analysis/ -> hilbench.analysis. Nothing else lands at the top level of site-packages.
+"""
+
+from setuptools import find_packages, setup
+
+SUBPACKAGES = ("bench", "drivers", "firmware_sim", "analysis")
+
+package_dir = {"hilbench": "hilbench"}
+packages = ["hilbench"]
+for sub in SUBPACKAGES:
+    package_dir[f"hilbench.{sub}"] = sub
+    packages += [f"hilbench.{sub}"] + [f"hilbench.{sub}.{name}" for name in find_packages(sub)]
+
+setup(packages=packages, package_dir=package_dir,
+      cffi_modules=["firmware_sim/plant_build.py:ffibuilder"])

@@ -13,11 +13,11 @@ from typing import Any
 
 import numpy as np
 
-from analysis.errors import AnalysisError
+from hilbench.analysis.errors import AnalysisError
 
 SCHEMA = "hilbench-run"
 #: How sample k of the torque channel relates to the plant's input convention (torque held over
-#: [t_k, t_k+1)), by the file's ``source``; see analysis.regressors.held_torque.
+#: [t_k, t_k+1)), by the file's ``source``; see hilbench.analysis.identification.regressors.held_torque.
 TORQUE_TIMING = {"device": "hold_previous", "import:emps": "hold_next"}
 TIMINGS = ("auto", "hold_previous", "hold_next", "instant")
 
@@ -84,8 +84,8 @@ class RunFile:
         return self.channels[key]
 
     def arrays(self):
-        """The run as :class:`analysis.identification.RunArrays` (t, torque, position, axis, name)."""
-        from analysis.identification import RunArrays
+        """The run as :class:`hilbench.analysis.identification.identify.RunArrays` (t, torque, position, axis, name)."""
+        from hilbench.analysis.identification.identify import RunArrays
 
         torque = self.channels.get("torque")
         return RunArrays(self.t, torque, self.channel("position"), self.axis, self.name)

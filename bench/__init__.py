@@ -1,6 +1,8 @@
 """hilbench bench layer: measurement protocols, run files, campaigns, CLI and operator GUI.
 
-``bench`` uses ``drivers`` (device link) and ``analysis`` (offline methods); nothing imports ``bench``.
+``hilbench.bench`` uses ``drivers`` (device link) and ``analysis`` (offline methods); nothing imports ``bench``.
 """
 
-__version__ = "0.1.0"
+from hilbench import __version__
+
+__all__ = ["__version__"]

@@ -31,9 +31,9 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from bench.errors import BenchError
-from bench.protocols import PROTOCOLS, Protocol, ProtocolError
-from bench.runner import Bench, DeviceSettings, Progress, RunControl, settings_dict
+from hilbench.bench.errors import BenchError
+from hilbench.bench.protocols import PROTOCOLS, Protocol, ProtocolError
+from hilbench.bench.runner import Bench, DeviceSettings, Progress, RunControl, settings_dict
 
 INDEX_NAME = "index.json"
 RUN_KEYS = {"name", "protocol", "repeats"}
@@ -208,7 +208,7 @@ def _write_index(out_dir: Path, campaign: Campaign, entries: dict[str, dict]) ->
 
 
 def _file_status(path: Path) -> str:
-    from bench.runfile import open_run
+    from hilbench.bench.runfile import open_run
 
     try:
         with open_run(path) as run:

@@ -1,4 +1,4 @@
-"""The ``bench`` command line: discovers subcommands in :mod:`bench.commands`."""
+"""The ``hilbench`` command line: discovers subcommands in :mod:`hilbench.bench.commands`."""
 
 from __future__ import annotations
 
@@ -8,15 +8,15 @@ import os
 import pkgutil
 import sys
 
-import bench.commands
-from bench import __version__
-from bench.errors import BenchError
+import hilbench.bench.commands as commands
+from hilbench.bench import __version__
+from hilbench.bench.errors import BenchError
 
 
 def _user_errors() -> tuple[type[BaseException], ...]:
     errors: list[type[BaseException]] = [BenchError, ValueError, OSError, LookupError]
     try:
-        from drivers.errors import DriverError
+        from hilbench.drivers.errors import DriverError
 
         errors.append(DriverError)
     except ImportError:  # drivers is part of the same distribution; this only guards partial checkouts
@@ -26,7 +26,7 @@ def _user_errors() -> tuple[type[BaseException], ...]:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="bench",
+        prog="hilbench",
         description="hilbench: hardware-in-the-loop friction test bench (device, runs, analysis).",
     )
     parser.add_argument("--version", action="version", version=f"hilbench {__version__}")
@@ -34,10 +34,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--traceback", action="store_true", help="show the full traceback on errors (for bug reports)"
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for info in sorted(pkgutil.iter_modules(bench.commands.__path__), key=lambda m: m.name):
+    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
         if info.name.startswith("_"):
             continue
-        module = importlib.import_module(f"bench.commands.{info.name}")
+        module = importlib.import_module(f"hilbench.bench.commands.{info.name}")
         module.register(sub)
     return parser
 
@@ -49,13 +49,13 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
-        print("bench: interrupted", file=sys.stderr)
+        print("hilbench: interrupted", file=sys.stderr)
         return 130
     except _user_errors() as exc:
         if show_tb:
             raise
         msg = " ".join(str(exc).split()) or type(exc).__name__
-        print(f"bench {args.command}: error: {msg}", file=sys.stderr)
+        print(f"hilbench {args.command}: error: {msg}", file=sys.stderr)
         return 2
 
 

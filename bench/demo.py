@@ -1,4 +1,4 @@
-"""The main job end to end on the simulated bench (``bench demo``).
+"""The main job end to end on the simulated bench (``hilbench demo``).
 
 1. Start the simulated amplifier with an effect the demo does **not** declare to the analysis
    (cogging, in the simulator's private config; it never crosses the wire).
@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 HIDDEN_SIM_CONFIG = """\
-# Simulated bench for `bench demo`. The [plant] section is private to the simulator: the host and the
+# Simulated bench for `hilbench demo`. The [plant] section is private to the simulator: the host and the
 # analysis never see it. The demo's cogging below is the "undeclared effect" the residual loop must find.
 [device]
 model = "HB-SIM-1"
@@ -44,8 +44,8 @@ def _say(msg: str) -> None:
 
 def measure(out: Path, duration: float = 20.0) -> dict[str, Path]:
     """Steps 1-2: the runs on the simulated bench. Returns the run files by role."""
-    from bench.protocols import Identification, SteppedSine
-    from bench.runner import Bench
+    from hilbench.bench.protocols import Identification, SteppedSine
+    from hilbench.bench.runner import Bench
 
     runs = out / "runs"
     runs.mkdir(parents=True, exist_ok=True)
@@ -66,7 +66,7 @@ def measure(out: Path, duration: float = 20.0) -> dict[str, Path]:
         for role, protocol in plan.items():
             path = runs / f"{role}.h5"
             result = bench.run(protocol, path, operator="demo", overwrite=True,
-                               notes=f"bench demo: {role}")
+                               notes=f"hilbench demo: {role}")
             _say(f"[2] {role:<15} {protocol.name:<15} {result.status:<10} {result.samples:>8} samples")
             files[role] = path
     _say("    run files:")
@@ -82,7 +82,7 @@ def paper_figure(out: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from analysis.simulation import paper_system, simulate_chirp
+    from hilbench.analysis.models.simulation import paper_system, simulate_chirp
 
     params = paper_system()
     run = simulate_chirp(params, 5.0)
@@ -105,7 +105,7 @@ def paper_figure(out: Path) -> Path:
 
 
 def _cli(*argv: str) -> None:
-    from bench.cli import main
+    from hilbench.bench.cli import main
 
     rc = main([str(a) for a in argv])
     if rc != 0:

@@ -22,7 +22,7 @@ import os
 import numpy as np
 from scipy.integrate import cumulative_trapezoid
 
-from bench.importers import ImportDataError, ImportedRun, _check_finite, _sample_rate, _sha256
+from hilbench.bench.importers import ImportDataError, ImportedRun, _check_finite, _sample_rate, _sha256
 
 MNICH_MASS = 24.7  # kg, reduced mass (data set README)
 MNICH_SHIFT = -0.004  # s, NI clock relative to the servo clock (data set README)

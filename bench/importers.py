@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from bench.errors import BenchError
-from bench.runfile import CHANNELS, RunWriter
+from hilbench.bench.errors import BenchError
+from hilbench.bench.runfile import CHANNELS, RunWriter
 
 EMPS_CITATION = (
     "A. Janot, M. Gautier, M. Brunot, 'Data Set and Reference Models of EMPS', 2019 Workshop on Nonlinear "

@@ -14,8 +14,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from bench import excitations
-from bench.errors import BenchError
+from hilbench.bench import excitations
+from hilbench.bench.errors import BenchError
 
 SAMPLE_RATES = (1000, 2000, 5000, 10000, 20000)
 MODES = ("current", "velocity")

@@ -35,7 +35,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from bench.errors import BenchError
+from hilbench.bench.errors import BenchError
 
 SCHEMA = "hilbench-run"
 SCHEMA_VERSION = 1
@@ -96,10 +96,10 @@ class RunFileError(BenchError):
 
 def software_versions() -> dict[str, str]:
     """Versions recorded in every run file: hilbench, python, numpy, h5py and the HDF5 library."""
-    import bench
+    import hilbench
 
     return {
-        "hilbench": bench.__version__,
+        "hilbench": hilbench.__version__,
         "python": sys.version.split()[0],
         "numpy": np.__version__,
         "h5py": h5py.__version__,

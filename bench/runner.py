@@ -20,13 +20,13 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.errors import BenchError
-from bench.protocols import Protocol
-from bench.runfile import DEVICE_CHANNELS, RunWriter
-from drivers import protocol as wire
-from drivers.amplifier import Amplifier
-from drivers.device_url import open_device
-from drivers.errors import DeviceFaultError, DriverError
+from hilbench.bench.errors import BenchError
+from hilbench.bench.protocols import Protocol
+from hilbench.bench.runfile import DEVICE_CHANNELS, RunWriter
+from hilbench.drivers import protocol as wire
+from hilbench.drivers.amplifier import Amplifier
+from hilbench.drivers.device_url import open_device
+from hilbench.drivers.errors import DeviceFaultError, DriverError
 
 #: Default device settings: the simulated DC motor's catalogue values (firmware_sim default_sim.toml).
 DEFAULT_TORQUE_CONSTANT = 0.2  # N*m/A

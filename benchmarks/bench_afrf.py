@@ -2,7 +2,7 @@
 
 Grid: 9 amplitudes (0.1, 0.2, 0.5, 0.8, 1, 1.5, 2, 5, 10 N) x 50 frequencies (0.1-10 Hz, log-spaced) x 3
 models: the original Maxwell-slip system (paper_system(spring=0), N = 16), Coulomb (m = 1, Fc = 1.5 N) and
-the equivalent built from the closed forms k_eq(A), E(A) (analysis.afrf.closed_form_equivalent, a
+the equivalent built from the closed forms k_eq(A), E(A) (hilbench.analysis.afrf.frf.closed_form_equivalent, a
 placeholder for the fitted skeleton model). Settings (docs/afrf.md): 256 samples per period, settle
 max(40 periods, 60 s) of which the first half is a smooth onset, 10 measured periods.
 
@@ -28,8 +28,14 @@ def _row(name, value, unit, baseline_name=None, baseline_value=None, target="", 
 
 
 def run(quick: bool = False) -> list[dict]:
-    from analysis.afrf import afrf_error, closed_form_equivalent, coulomb_system, settle_schedule, simulate_afrf_models
-    from firmware_sim.friction_models import PAPER_D, PAPER_H, paper_system
+    from hilbench.analysis.afrf.frf import (
+        afrf_error,
+        closed_form_equivalent,
+        coulomb_system,
+        settle_schedule,
+        simulate_afrf_models,
+    )
+    from hilbench.firmware_sim.friction_models import PAPER_D, PAPER_H, paper_system
 
     models = {"original": paper_system(spring=0.0), "coulomb": coulomb_system(1.5),
               "equivalent": closed_form_equivalent(PAPER_H, PAPER_D)}

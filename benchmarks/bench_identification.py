@@ -10,11 +10,11 @@ import time
 import numpy as np
 from scipy import signal
 
-from analysis.maxwell_fit import LipSettings, fit_lip
-from analysis.output_error import simulation_error
-from analysis.paper_baseline import fit_paper
-from firmware_sim.friction_models import dc_motor
-from firmware_sim.plant import simulate
+from hilbench.analysis.identification.maxwell_fit import LipSettings, fit_lip
+from hilbench.analysis.identification.output_error import simulation_error
+from hilbench.analysis.identification.paper_baseline import fit_paper
+from hilbench.firmware_sim.friction_models import dc_motor
+from hilbench.firmware_sim.plant import simulate
 
 
 def _excitation(n: int, fs: float, seed: int) -> np.ndarray:

@@ -9,9 +9,9 @@ import time
 
 import numpy as np
 
-from firmware_sim.friction_models import dc_motor
-from firmware_sim.plant import Plant
-from firmware_sim.reference import reference_simulate
+from hilbench.firmware_sim.friction_models import dc_motor
+from hilbench.firmware_sim.plant import Plant
+from hilbench.firmware_sim.reference import reference_simulate
 
 
 def numpy_simulate(params, u, dt):

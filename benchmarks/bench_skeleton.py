@@ -34,7 +34,7 @@ fs = float(data["fs"])
 base_rss = hwm()
 from scipy.signal import hilbert
 t0 = time.perf_counter(); hilbert(x); t_hilbert = time.perf_counter() - t0
-from analysis.forcevib import forcevib
+from hilbench.analysis.skeleton.forcevib import forcevib
 t0 = time.perf_counter()
 r = forcevib(x, F, fs, 1.0, spring=50.0)
 elapsed = time.perf_counter() - t0
@@ -46,8 +46,8 @@ print(json.dumps({"elapsed": elapsed, "t_hilbert": t_hilbert, "peak": peak, "bas
 
 def _chirp_record(fs: float, duration: float, sweep_to: float = 2.0, G: float = 5.0):
     """Paper's Maxwell-slip system (C plant) under G*sin(pi*a*t^2), a = sweep_to/duration Hz/s."""
-    from firmware_sim.friction_models import paper_system
-    from firmware_sim.plant import simulate
+    from hilbench.firmware_sim.friction_models import paper_system
+    from hilbench.firmware_sim.plant import simulate
 
     dt = 1.0 / fs
     t = np.arange(int(round(duration * fs))) * dt
@@ -75,9 +75,9 @@ def _best_of(fn, repeat: int) -> float:
 def run(quick: bool = False) -> list[dict]:
     import pywt
 
-    from analysis.forcevib import forcevib
-    from analysis.instantaneous import DEFAULT_FB, DEFAULT_FC, default_band
-    from analysis.wavelet_ridge import scale_grid
+    from hilbench.analysis.skeleton.forcevib import forcevib
+    from hilbench.analysis.skeleton.instantaneous import DEFAULT_FB, DEFAULT_FC, default_band
+    from hilbench.analysis.skeleton.wavelet_ridge import scale_grid
 
     fs = 1000.0
     duration = 5.0 if quick else 20.0

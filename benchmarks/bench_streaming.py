@@ -30,9 +30,9 @@ def _rtts(amp, stop: threading.Event, out: list[float], period: float = 0.02) ->
 
 def measure(rate: int, seconds: float) -> dict:
     """Stream ``seconds`` of a 5 Hz current sine at ``rate`` Hz; return lost samples, CPU and latencies."""
-    from drivers import protocol as p
-    from drivers.device_url import open_device
-    from drivers.errors import DriverError
+    from hilbench.drivers import protocol as p
+    from hilbench.drivers.device_url import open_device
+    from hilbench.drivers.errors import DriverError
 
     with open_device("sim://?pacing=realtime") as amp:
         amp.configure(p.Config(sample_rate=rate, current_limit=3.0, torque_constant=0.2,

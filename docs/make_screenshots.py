@@ -16,7 +16,6 @@ import time
 from pathlib import Path
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 SHOTS = ("gui-live-run.png", "gui-run-browser.png", "gui-analysis.png")
 
@@ -28,8 +27,8 @@ def main(argv: list[str] | None = None) -> int:
 
     from PySide6 import QtTest, QtWidgets
 
-    from bench.gui.app import qt_problem
-    from bench.gui.main_window import MainWindow
+    from hilbench.bench.gui.app import qt_problem
+    from hilbench.bench.gui.main_window import MainWindow
 
     problem = qt_problem()
     if problem:

@@ -24,9 +24,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drivers import protocol as p
-from drivers.calibration import Calibration, CountUnwrapper
-from drivers.errors import (
+from hilbench.drivers import protocol as p
+from hilbench.drivers.calibration import Calibration, CountUnwrapper
+from hilbench.drivers.errors import (
     CommandRefusedError,
     ConfigError,
     DeviceFaultError,
@@ -36,7 +36,7 @@ from drivers.errors import (
     SampleLossError,
     SetpointError,
 )
-from drivers.links import Link
+from hilbench.drivers.links import Link
 
 _CLOSED = object()  # wakes waiters when the receiver stops
 

@@ -5,7 +5,7 @@
 - ``can://INTERFACE/CHANNEL?node=1&fd=1&bitrate=1000000`` -- any python-can interface
   (``can://socketcan/can0``, ``can://virtual/bench0``, ``can://pcan/PCAN_USBBUS1``);
 - ``sim://?pacing=lockstep&config=sim.toml&seed=3&tick=0.004`` -- starts the simulated amplifier as a
-  separate process (``python -m firmware_sim --serial``) and connects to its pseudo-terminal.
+  separate process (``python -m hilbench.firmware_sim --serial``) and connects to its pseudo-terminal.
 """
 
 from __future__ import annotations
@@ -15,12 +15,11 @@ import select
 import subprocess
 import sys
 import time
-from pathlib import Path
 from urllib.parse import parse_qsl, urlsplit
 
-from drivers.amplifier import Amplifier
-from drivers.errors import DeviceURLError, DriverError
-from drivers.links import CanLink, SerialLink
+from hilbench.drivers.amplifier import Amplifier
+from hilbench.drivers.errors import DeviceURLError, DriverError
+from hilbench.drivers.links import CanLink, SerialLink
 
 SIM_START_TIMEOUT = 20.0  # s, for the simulator to print its pty path
 
@@ -75,16 +74,13 @@ def open_device(url: str, timeout: float = 2.0) -> Amplifier:
 
 
 def start_simulator(options: dict[str, str]) -> tuple[subprocess.Popen, str]:
-    """Start ``python -m firmware_sim --serial`` with ``options`` (pacing, config, seed, tick) as flags;
+    """Start ``python -m hilbench.firmware_sim --serial`` with ``options`` (pacing, config, seed, tick) as flags;
     return the process and the pty path it printed."""
-    cmd = [sys.executable, "-m", "firmware_sim", "--serial", "--parent-pid", str(os.getpid())]
+    cmd = [sys.executable, "-m", "hilbench.firmware_sim", "--serial", "--parent-pid", str(os.getpid())]
     for key in ("pacing", "config", "seed", "tick"):
         if key in options:
             cmd += [f"--{key}", options[key]]
-    env = dict(os.environ)
-    root = str(Path(__file__).resolve().parents[1])  # the checkout, so the child finds firmware_sim
-    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     deadline = time.monotonic() + SIM_START_TIMEOUT
     line = b""
     while not line.endswith(b"\n"):

@@ -15,8 +15,8 @@ from typing import Protocol
 
 import serial
 
-from drivers import protocol as p
-from drivers.errors import LinkClosedError
+from hilbench.drivers import protocol as p
+from hilbench.drivers.errors import LinkClosedError
 
 
 class Link(Protocol):

@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 from scipy.io import loadmat
 
-from analysis.emps_reference import PUBLISHED, fit_idim, idim_observation, load_emps
-from analysis.residual import EMPS_START, prepare_run, residual_loop
-from analysis.residual.report import write_json, write_report
+from hilbench.analysis.reproductions.emps import PUBLISHED, fit_idim, idim_observation, load_emps
+from hilbench.analysis.residual import EMPS_START, prepare_run, residual_loop
+from hilbench.analysis.residual.report import write_json, write_report
 
 DATA = Path("/work/shared/data/real")
 

@@ -7,10 +7,10 @@ friction model on the first run and validate it on the others.
 import sys
 from pathlib import Path
 
-from analysis.identification import identify
-from analysis.run_file import read_run_file
-from bench.protocols import Identification
-from bench.runner import Bench
+from hilbench.analysis.identification.identify import identify
+from hilbench.analysis.run_file import read_run_file
+from hilbench.bench.protocols import Identification
+from hilbench.bench.runner import Bench
 
 
 def main(out: Path) -> None:

@@ -1,4 +1,4 @@
-"""``python -m firmware_sim``: run the simulated amplifier on a new pseudo-terminal or a python-can bus.
+"""``python -m hilbench.firmware_sim``: run the simulated amplifier on a new pseudo-terminal or a python-can bus.
 
 With ``--serial`` the first line on stdout is the pty path to open (nothing else is printed there).
 """
@@ -8,10 +8,10 @@ from __future__ import annotations
 import argparse
 import sys
 
-from firmware_sim.firmware import PACINGS
+from hilbench.firmware_sim.firmware import PACINGS
 
 
-def build_parser(prog: str = "python -m firmware_sim") -> argparse.ArgumentParser:
+def build_parser(prog: str = "python -m hilbench.firmware_sim") -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=prog,
                                      description="Simulated hilbench amplifier (a real protocol peer).")
     where = parser.add_mutually_exclusive_group(required=True)
@@ -55,11 +55,11 @@ def watch_parent(pid: int, stop, grace: float = 2.0, period: float = 0.25) -> No
         time.sleep(period)
 
 
-def main(argv: list[str] | None = None, prog: str = "python -m firmware_sim") -> int:
+def main(argv: list[str] | None = None, prog: str = "python -m hilbench.firmware_sim") -> int:
     args = build_parser(prog).parse_args(argv)
-    from firmware_sim.device import CanTransport, PtyTransport, serve
-    from firmware_sim.firmware import Firmware
-    from firmware_sim.sim_config import load_sim_config
+    from hilbench.firmware_sim.device import CanTransport, PtyTransport, serve
+    from hilbench.firmware_sim.firmware import Firmware
+    from hilbench.firmware_sim.sim_config import load_sim_config
 
     try:
         sim = load_sim_config(args.config, seed=args.seed)

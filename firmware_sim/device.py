@@ -14,8 +14,8 @@ import threading
 import time
 import tty
 
-from drivers import protocol as p
-from firmware_sim.firmware import Firmware
+from hilbench.drivers import protocol as p
+from hilbench.firmware_sim.firmware import Firmware
 
 TX_BUFFER_LIMIT = 1 << 18  # bytes queued towards a host that does not read; beyond it frames are dropped
 

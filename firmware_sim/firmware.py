@@ -18,10 +18,10 @@ from collections import deque
 
 import numpy as np
 
-from drivers import protocol as p
-from firmware_sim.plant import Plant
-from firmware_sim.safety import SafetyMonitor, watchdog_trip_index
-from firmware_sim.sim_config import SimConfig
+from hilbench.drivers import protocol as p
+from hilbench.firmware_sim.plant import Plant
+from hilbench.firmware_sim.safety import SafetyMonitor, watchdog_trip_index
+from hilbench.firmware_sim.sim_config import SimConfig
 
 FIRMWARE_VERSION = "hilbench-sim 0.1.0"
 PACINGS = ("realtime", "lockstep")

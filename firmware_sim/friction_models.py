@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from firmware_sim.plant import PlantParameterError, PlantParams
+from hilbench.firmware_sim.plant import PlantParameterError, PlantParams
 
 
 def virgin_curve(x: np.ndarray, h: float, d: float) -> np.ndarray:

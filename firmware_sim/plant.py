@@ -13,7 +13,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from firmware_sim._plant import ffi, lib
+from hilbench.firmware_sim._plant import ffi, lib
 
 MAX_ELEMENTS: int = lib.HB_MAX_ELEMENTS
 MAX_DELAY_SAMPLES: int = lib.HB_MAX_DELAY

@@ -25,7 +25,7 @@ CDEF = cdef_from_header(HERE / "plant.h")
 ffibuilder = FFI()
 ffibuilder.cdef(CDEF)
 ffibuilder.set_source(
-    "firmware_sim._plant",
+    "hilbench.firmware_sim._plant",
     '#include "plant.h"',
     sources=[str(Path("firmware_sim") / "plant.c")],
     include_dirs=[str(HERE)],

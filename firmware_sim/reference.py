@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from firmware_sim.plant import MODES, PlantOutput, PlantParams, validate
+from hilbench.firmware_sim.plant import MODES, PlantOutput, PlantParams, validate
 
 _MASK = (1 << 64) - 1
 _TWO_PI = 6.283185307179586

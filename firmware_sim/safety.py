@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from drivers.protocol import Config, Fault, Mode
+from hilbench.drivers.protocol import Config, Fault, Mode
 
 
 class SafetyMonitor:

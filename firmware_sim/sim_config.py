@@ -10,8 +10,8 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from firmware_sim.friction_models import dc_motor, paper_system
-from firmware_sim.plant import PlantParameterError, PlantParams, stiffest_eigenvalue, validate
+from hilbench.firmware_sim.friction_models import dc_motor, paper_system
+from hilbench.firmware_sim.plant import PlantParameterError, PlantParams, stiffest_eigenvalue, validate
 
 DEFAULT_PATH = Path(__file__).with_name("default_sim.toml")
 PRESETS = {"dc_motor": dc_motor, "paper_system": paper_system}
@@ -42,7 +42,7 @@ class SimConfig:
 
 def substeps_for(params: PlantParams, dt: float) -> int:
     """Fewest RK4 sub-steps per sample that keep the stiffest mode stable: ceil(|lambda|*dt / 2.5)."""
-    from firmware_sim.plant import RK4_STABLE_RADIUS
+    from hilbench.firmware_sim.plant import RK4_STABLE_RADIUS
 
     return max(1, math.ceil(stiffest_eigenvalue(params) * dt / RK4_STABLE_RADIUS * (1 + 1e-12)))
 

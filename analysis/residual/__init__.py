@@ -1,6 +1,6 @@
 """The residual loop: what does a fitted friction model get wrong, and which physical effect is it?
 
-    from analysis.residual import prepare_run, residual_loop
+    from hilbench.analysis.residual import prepare_run, residual_loop
     result = residual_loop(prepare_run(x, tau, fs), validation=prepare_run(x2, tau2, fs))
     result.to_dict()   # the JSON report (docs/residual-report.md)
 
@@ -10,9 +10,9 @@ Modules: ``rundata`` (filtered rows of a run), ``design`` (joint bounded least s
 (JSON, PNG figures and a Markdown summary), ``runs`` (reading run files with h5py).
 """
 
-from analysis.residual.candidates import REGISTRY, Term, get_term, register
-from analysis.residual.rundata import RunData, prepare_run
-from analysis.residual.selection import (
+from hilbench.analysis.residual.candidates import REGISTRY, Term, get_term, register
+from hilbench.analysis.residual.rundata import RunData, prepare_run
+from hilbench.analysis.residual.selection import (
     DEFAULT_START,
     EMPS_START,
     NO_EFFECT,

@@ -30,9 +30,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from analysis.friction_model import AXES
-from analysis.residual.design import Fit, Setting
-from analysis.residual.rundata import RunData
+from hilbench.analysis.models.friction_model import AXES
+from hilbench.analysis.residual.design import Fit, Setting
+from hilbench.analysis.residual.rundata import RunData
 
 FREE = -np.inf
 
@@ -351,7 +351,7 @@ class PositionPeriodic(Term):
         return _harmonic_parameters(fit, self.name, nl, axis)
 
     def plant(self, fit, nl):
-        from firmware_sim.plant import Cogging
+        from hilbench.firmware_sim.plant import Cogging
 
         c = fit.term_coef(self.name)
         return {"cogging": tuple(Cogging(float(k), float(np.hypot(c[2 * i], c[2 * i + 1])),
@@ -452,7 +452,7 @@ CANDIDATE_NAMES = ("viscous", "stribeck", "asymmetric_friction", "position_perio
 
 
 def get_term(name: str) -> Term:
-    from analysis.errors import AnalysisError
+    from hilbench.analysis.errors import AnalysisError
 
     if name not in REGISTRY:
         raise AnalysisError(f"unknown model term {name!r}; known: {', '.join(REGISTRY)}")

@@ -20,7 +20,7 @@ and keeps its plain residual.
 
 Standard errors: sigma^2 (A_a^T A_a)^-1 on the active columns (free, or non-zero), with sigma^2 =
 |e|^2/(n - p_a), inflated by n/n_eff from the residual autocorrelation
-(:func:`analysis.regressors.effective_sample_count`), as in :mod:`analysis.maxwell_fit`.
+(:func:`analysis.identification.regressors.effective_sample_count`), as in :mod:`analysis.identification.maxwell_fit`.
 """
 
 from __future__ import annotations
@@ -29,9 +29,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from analysis.errors import AnalysisError
-from analysis.regressors import effective_sample_count
-from analysis.residual.rundata import RunData
+from hilbench.analysis.errors import AnalysisError
+from hilbench.analysis.identification.regressors import effective_sample_count
+from hilbench.analysis.residual.rundata import RunData
 
 
 @dataclass(frozen=True)

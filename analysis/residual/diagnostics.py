@@ -4,7 +4,7 @@ Most diagnostics are a partial F-test: regress the residual e on nuisance column
 
     F = ((SS_N - SS_NX)/q) / (SS_NX/(n_eff - p)),    p-value = F_{q, n_eff - p}.sf(F)
 
-with n_eff the residual's effective sample count (:func:`analysis.regressors.effective_sample_count`;
+with n_eff the residual's effective sample count (:func:`analysis.identification.regressors.effective_sample_count`;
 the filtered residual is coloured). The *effect* is the fraction of the residual variance X explains,
 (SS_N - SS_NX)/SS_total. A diagnostic is significant when its (Bonferroni-adjusted) p-value is below
 ``alpha`` AND its effect is at least ``min_effect``: with thousands of rows a negligible but consistent
@@ -32,8 +32,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from analysis.regressors import effective_sample_count, position_resolution
-from analysis.residual.rundata import RunData
+from hilbench.analysis.identification.regressors import effective_sample_count, position_resolution
+from hilbench.analysis.residual.rundata import RunData
 
 ALPHA = 1e-3
 MIN_EFFECT = 0.03

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.residual.diagnostics import Diagnostic, Signals, _jsonable
-from analysis.residual.selection import LoopResult
+from hilbench.analysis.residual.diagnostics import Diagnostic, Signals, _jsonable
+from hilbench.analysis.residual.selection import LoopResult
 
 
 def report_dict(result: LoopResult, inputs: dict | None = None) -> dict:
@@ -153,7 +153,7 @@ def markdown_summary(result: LoopResult, title: str = "Residual loop", notes: li
 def write_report(result: LoopResult, directory: str | Path, title: str = "Residual loop",
                  notes: list[str] | None = None) -> list[Path]:
     """Write diagnostics_before.png, diagnostics_after.png and summary.md into ``directory``."""
-    from analysis.friction_model import AXES
+    from hilbench.analysis.models.friction_model import AXES
 
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)

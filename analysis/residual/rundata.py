@@ -2,7 +2,7 @@
 and the full-rate signals the candidate columns are built from.
 
 Every column of the residual loop is ``L[g(theta, theta', t)]`` at the kept rows, where L is the one
-zero-phase low-pass of :mod:`analysis.regressors` (the same filter as the torque and the inertia and
+zero-phase low-pass of :mod:`analysis.identification.regressors` (the same filter as the torque and the inertia and
 Maxwell-slip columns) followed by the same triangle average. Nonlinear functions of the velocity
 (sign, Stribeck, direction) are evaluated on a lightly filtered velocity ``velocity_fast`` (cutoff
 4x the regression cutoff), then filtered by L: evaluating them on L's own velocity would smear the
@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from analysis.errors import AnalysisError
-from analysis.regressors import (
+from hilbench.analysis.errors import AnalysisError
+from hilbench.analysis.identification.regressors import (
     FilteredData,
     filtered_data,
     position_resolution,
@@ -40,11 +40,11 @@ class RunData:
         position: measured path, shape (n,), rad (rotary) or m (linear).
         torque: motor torque / force, shape (n,), N*m or N, timing ``timing``.
         fs: sampling rate, Hz.
-        data: :class:`analysis.regressors.FilteredData` at the kept rows.
+        data: :class:`hilbench.analysis.identification.regressors.FilteredData` at the kept rows.
         torque_filtered: L[torque aligned at samples] at full rate, shape (n,) (shifted for a delay).
         velocity_fast: lightly filtered velocity at full rate, shape (n,), rad/s or m/s.
         time: t_k - t_0 at full rate, shape (n,), s.
-        timing: sample timing of ``torque`` (see :func:`analysis.regressors.held_torque`).
+        timing: sample timing of ``torque`` (see :func:`hilbench.analysis.identification.regressors.held_torque`).
         rest: rows whose filter window touches a rest phase (:func:`rest_rows`): there Coulomb/Stribeck
             friction is a set-valued reaction, not a function of the state (``analysis.residual.design``).
     """
@@ -121,9 +121,9 @@ def prepare_run(
     Args:
         position: measured path, shape (n,), rad or m.
         torque: torque or force, shape (n,), N*m or N; ``timing`` as in
-            :func:`analysis.regressors.held_torque` (``hold_next`` for a command held over a sample).
+            :func:`analysis.identification.regressors.held_torque` (``hold_next`` for a command held over a sample).
         fs: sampling rate, Hz. ``cutoff`` (Hz) default fs/20; ``decimation`` default fs/(2.5*cutoff)
-            (the defaults of :class:`analysis.maxwell_fit.LipSettings`).
+            (the defaults of :class:`hilbench.analysis.identification.maxwell_fit.LipSettings`).
         max_rate: a faster run is first reduced to at most this rate (Hz) by :func:`block_average`, exact
             for a held torque. The loop was tuned and verified at 1-2 kHz; on 10 kHz runs of the same
             plant it under-detected velocity-dependent terms (the root cause is not established; the rest

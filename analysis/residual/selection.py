@@ -23,13 +23,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from analysis.errors import AnalysisError
-from analysis.regressors import effective_sample_count, threshold_grid
-from analysis.residual.candidates import REGISTRY, Term, get_term
-from analysis.residual.design import Fit, Setting, blocked_cv_residual, build_design, fit_model, predict
-from analysis.residual.diagnostics import ALPHA, MIN_EFFECT, Diagnostic, Signals, run_diagnostics
-from analysis.residual.rundata import RunData
-from analysis.residual.simulation_error import simulation_error
+from hilbench.analysis.errors import AnalysisError
+from hilbench.analysis.identification.regressors import effective_sample_count, threshold_grid
+from hilbench.analysis.residual.candidates import REGISTRY, Term, get_term
+from hilbench.analysis.residual.design import Fit, Setting, blocked_cv_residual, build_design, fit_model, predict
+from hilbench.analysis.residual.diagnostics import ALPHA, MIN_EFFECT, Diagnostic, Signals, run_diagnostics
+from hilbench.analysis.residual.rundata import RunData
+from hilbench.analysis.residual.simulation_error import simulation_error
 
 DEFAULT_START = ("inertia", "maxwell_slip")
 EMPS_START = ("inertia", "coulomb", "viscous", "offset")

@@ -17,17 +17,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from analysis.output_error import path_deflections
-from analysis.regressors import held_torque
-from analysis.residual.design import Fit
-from analysis.residual.rundata import RunData
+from hilbench.analysis.identification.output_error import path_deflections
+from hilbench.analysis.identification.regressors import held_torque
+from hilbench.analysis.residual.design import Fit
+from hilbench.analysis.residual.rundata import RunData
 
 MAX_SUBSTEPS = 64
 
 
 def plant_params(fit: Fit):
     """:class:`firmware_sim.plant.PlantParams` of a fitted model (torque_constant 1)."""
-    from firmware_sim.plant import PlantParams
+    from hilbench.firmware_sim.plant import PlantParams
 
     fields: dict = {}
     for term, nl in fit.model:
@@ -51,7 +51,7 @@ def plant_params(fit: Fit):
 def simulation_error(fit: Fit, run: RunData, window: float = 1.0) -> dict:
     """Windowed simulation error {position_nrmse, velocity_nrmse} of ``fit`` on ``run`` (None if the model
     cannot be simulated; then ``simulation_note`` says why)."""
-    from firmware_sim.plant import Plant, PlantParameterError, stiffest_eigenvalue
+    from hilbench.firmware_sim.plant import Plant, PlantParameterError, stiffest_eigenvalue
 
     try:
         params = plant_params(fit)

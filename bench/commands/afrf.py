@@ -1,4 +1,4 @@
-"""``bench afrf``: AFRF (1st-3rd harmonic) of a measured stepped-sine run, or of a simulated model."""
+"""``hilbench afrf``: AFRF (1st-3rd harmonic) of a measured stepped-sine run, or of a simulated model."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ def register(subparsers) -> None:
         "afrf",
         help="absolute frequency response of the 1st-3rd harmonic (stepped-sine run or simulated model)",
         description="Magnitude of the displacement at f, 2f and 3f over whole periods of each step's "
-        "steady state (science.md §5). Give a stepped-sine RUN.h5 (bench run stepped_sine), or --model "
+        "steady state (science.md §5). Give a stepped-sine RUN.h5 (hilbench run stepped_sine), or --model "
         "to simulate the paper's Maxwell-slip system, a Coulomb system or the closed-form equivalent.",
     )
     parser.add_argument("run", nargs="?", help="stepped-sine run file (.h5)")
@@ -37,8 +37,8 @@ def register(subparsers) -> None:
 def _simulate(args):
     import numpy as np
 
-    from analysis.afrf import closed_form_equivalent, coulomb_system, settle_schedule, simulate_afrf
-    from firmware_sim.friction_models import PAPER_D, PAPER_H, paper_system
+    from hilbench.analysis.afrf.frf import closed_form_equivalent, coulomb_system, settle_schedule, simulate_afrf
+    from hilbench.firmware_sim.friction_models import PAPER_D, PAPER_H, paper_system
 
     f_min, f_max, n = args.frequencies
     if not (0 < f_min <= f_max) or n < 1 or n != int(n):
@@ -85,7 +85,7 @@ def _summary(result) -> str:
 def run(args) -> int:
     import json
 
-    from analysis.afrf import afrf_from_run, plot_afrf
+    from hilbench.analysis.afrf.frf import afrf_from_run, plot_afrf
 
     if (args.run is None) == (args.model is None):
         raise ValueError("give either a stepped-sine RUN.h5 or --model (not both)")

@@ -1,4 +1,4 @@
-"""``bench campaign FILE.toml``: play a campaign of runs into a folder, resumable."""
+"""``hilbench campaign FILE.toml``: play a campaign of runs into a folder, resumable."""
 
 from __future__ import annotations
 
@@ -19,8 +19,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from bench.campaign import load_campaign, run_campaign
-    from bench.progress import ProgressBar
+    from hilbench.bench.campaign import load_campaign, run_campaign
+    from hilbench.bench.progress import ProgressBar
 
     campaign = load_campaign(args.file)
     if args.check:
@@ -46,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         for bar in bars.values():
             bar.close()
-        print("bench campaign: interrupted; device disarmed. Continue with --resume.")
+        print("hilbench campaign: interrupted; device disarmed. Continue with --resume.")
         return 130
     done = sum(e["status"] == "completed" for e in entries.values())
     print(f"{done}/{len(campaign.runs)} runs completed; index: {out / 'index.json'}")

@@ -1,4 +1,4 @@
-"""``bench demo``: the main job end to end on the simulated bench."""
+"""``hilbench demo``: the main job end to end on the simulated bench."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from bench.demo import run_demo
+    from hilbench.bench.demo import run_demo
 
     if not (math.isfinite(args.duration) and 1.0 <= args.duration <= 600.0):
         raise ValueError(f"--duration must be within [1, 600] s, got {args.duration}")

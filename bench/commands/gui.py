@@ -1,4 +1,4 @@
-"""``bench gui [--device URL]``: the operator window (live plots, protocols, E-STOP, run browser)."""
+"""``hilbench gui [--device URL]``: the operator window (live plots, protocols, E-STOP, run browser)."""
 
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--device {args.device!r} is not a device URL (sim://, serial:///dev/ttyUSB0, "
                          f"can://socketcan/can0)")
     try:
-        from bench.gui.app import run_app
+        from hilbench.bench.gui.app import run_app
     except ImportError as exc:
         raise OSError(f"the GUI needs PySide6 and pyqtgraph: {exc}") from None
     return run_app(device=args.device, runs_dir=args.runs, autoconnect=args.connect, open_file=args.open)

@@ -1,4 +1,4 @@
-"""``bench identify RUN.h5``: identify a Maxwell-slip friction model from a run file."""
+"""``hilbench identify RUN.h5``: identify a Maxwell-slip friction model from a run file."""
 
 from __future__ import annotations
 
@@ -45,9 +45,9 @@ def register(subparsers) -> None:
 def _arrays(path: str):
     import numpy as np
 
-    from analysis.identification import RunArrays
-    from bench.errors import BenchError
-    from bench.runfile import open_run
+    from hilbench.analysis.identification.identify import RunArrays
+    from hilbench.bench.errors import BenchError
+    from hilbench.bench.runfile import open_run
 
     run = open_run(path)
     missing = [c for c in ("t", "position", "torque") if c not in run.channels]
@@ -66,11 +66,11 @@ def _arrays(path: str):
 
 
 def run(args) -> int:
-    from analysis.identification import identify
-    from analysis.maxwell_fit import LipSettings
-    from analysis.model_file import model_document, write_model
-    from analysis.run_file import torque_timing_for
-    from bench.runfile import open_run
+    from hilbench.analysis.identification.identify import identify
+    from hilbench.analysis.identification.maxwell_fit import LipSettings
+    from hilbench.analysis.models.model_file import model_document, write_model
+    from hilbench.analysis.run_file import torque_timing_for
+    from hilbench.bench.runfile import open_run
 
     train = _arrays(args.run)
     val = _arrays(args.validate) if args.validate else None
@@ -116,7 +116,7 @@ def run(args) -> int:
         )
     print(line + f" ({res.wall_time:.2f} s) -> {args.json}")
     if args.plots:
-        from analysis.identification_plots import write_plots
+        from hilbench.analysis.identification.plots import write_plots
 
         for p in write_plots(res, args.plots):
             print(f"plot: {p}")

@@ -1,4 +1,4 @@
-"""``bench import {emps,hsm150,mnich,csv} FILE [-o RUN.h5]``: convert measured data into a run file (schema v1)."""
+"""``hilbench import {emps,hsm150,mnich,csv} FILE [-o RUN.h5]``: convert measured data into a run file (schema v1)."""
 
 from __future__ import annotations
 
@@ -79,7 +79,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _parse_map(items: list[str]) -> dict[str, str]:
-    from bench.importers import ImportDataError
+    from hilbench.bench.importers import ImportDataError
 
     mapping = {}
     for item in items:
@@ -91,7 +91,7 @@ def _parse_map(items: list[str]) -> dict[str, str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from bench import importers
+    from hilbench.bench import importers
 
     if args.format == "csv":
         imported = importers.load_csv(
@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
             delimiter=args.delimiter,
         )
     elif args.format == "mnich":
-        from bench.import_mnich import load_mnich
+        from hilbench.bench.import_mnich import load_mnich
 
         shift = {} if args.ni_shift is None else {"shift": args.ni_shift}
         imported = load_mnich(args.file, args.ni, **shift)
@@ -120,6 +120,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _unit(name: str, axis: str) -> str:
-    from bench.runfile import CHANNELS
+    from hilbench.bench.runfile import CHANNELS
 
     return CHANNELS[name].unit(axis)

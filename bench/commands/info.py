@@ -1,4 +1,4 @@
-"""``bench info --device URL``: identity, configuration, faults and counters of a device."""
+"""``hilbench info --device URL``: identity, configuration, faults and counters of a device."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ def register(subparsers) -> None:
 
 def describe(amp) -> list[str]:
     """Lines describing an :class:`drivers.amplifier.Amplifier` (units in every line)."""
-    from drivers import protocol as p
+    from hilbench.drivers import protocol as p
 
     ident = amp.identity
     status = amp.status()
@@ -58,7 +58,7 @@ def describe(amp) -> list[str]:
 
 
 def run(args) -> int:
-    from drivers.device_url import open_device
+    from hilbench.drivers.device_url import open_device
 
     with open_device(args.device) as amp:
         for line in describe(amp):

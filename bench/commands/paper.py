@@ -1,4 +1,4 @@
-"""``bench paper -o DIR``: regenerate the figures of Tjahjowidodo (2012) on the simulated system and motor."""
+"""``hilbench paper -o DIR``: regenerate the figures of Tjahjowidodo (2012) on the simulated system and motor."""
 
 from __future__ import annotations
 
@@ -26,9 +26,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from analysis.paper import PaperSettings, reproduce
-    from analysis.paper_figures import write_figures, write_summary
-    from bench.errors import BenchError
+    from hilbench.analysis.reproductions.paper import PaperSettings, reproduce
+    from hilbench.analysis.reproductions.paper_figures import write_figures, write_summary
+    from hilbench.bench.errors import BenchError
 
     out: Path = args.out
     if out.exists() and not out.is_dir():

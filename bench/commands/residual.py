@@ -1,4 +1,4 @@
-"""``bench residual RUN.h5 [--validate RUN2.h5] [--start TERMS] --json OUT.json --report DIR``: what does the
+"""``hilbench residual RUN.h5 [--validate RUN2.h5] [--start TERMS] --json OUT.json --report DIR``: what does the
 model get wrong? Fits the starting model, diagnoses its residual, adds the candidate effects that validate,
 and reports the error before and after (docs/residual-report.md)."""
 
@@ -46,10 +46,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _load(path: str, channel: str | None, timing: str | None, cutoff: float | None):
     import numpy as np
 
-    from analysis.residual import prepare_run
-    from analysis.run_file import torque_timing_for
-    from bench.errors import BenchError
-    from bench.runfile import open_run
+    from hilbench.analysis.residual import prepare_run
+    from hilbench.analysis.run_file import torque_timing_for
+    from hilbench.bench.errors import BenchError
+    from hilbench.bench.runfile import open_run
 
     with open_run(path) as r:
         name = channel or ("torque_cmd" if "torque_cmd" in r.channels else "torque")
@@ -63,8 +63,8 @@ def _load(path: str, channel: str | None, timing: str | None, cutoff: float | No
 
 
 def run(args: argparse.Namespace) -> int:
-    from analysis.residual import LoopOptions, residual_loop
-    from analysis.residual.report import write_json, write_report
+    from hilbench.analysis.residual import LoopOptions, residual_loop
+    from hilbench.analysis.residual.report import write_json, write_report
 
     start = tuple(t.strip() for t in args.start.split(",") if t.strip())
     cands = None if args.candidates is None else tuple(t.strip() for t in args.candidates.split(",") if t.strip())

@@ -1,4 +1,4 @@
-"""``bench run {identify,chirp,afrf}``: run one measurement protocol on a device and log it."""
+"""``hilbench run {identify,chirp,afrf}``: run one measurement protocol on a device and log it."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import argparse
 import math
 from pathlib import Path
 
-from bench.protocols import Chirp, Identification, Protocol, SteppedSine
+from hilbench.bench.protocols import Chirp, Identification, Protocol, SteppedSine
 
 RUNNABLE: dict[str, type[Protocol]] = {"identify": Identification, "chirp": Chirp, "afrf": SteppedSine}
 DEVICE_OPTIONS = {
@@ -40,7 +40,7 @@ def add_protocol_options(parser: argparse.ArgumentParser, cls: type[Protocol]) -
 
 
 def add_device_options(parser: argparse.ArgumentParser) -> None:
-    from bench.runner import DeviceSettings
+    from hilbench.bench.runner import DeviceSettings
 
     parser.add_argument("--device", default="sim://", help="device URL (default sim://: the simulated bench)")
     defaults = DeviceSettings()
@@ -56,7 +56,7 @@ def protocol_from_args(cls: type[Protocol], args: argparse.Namespace) -> Protoco
 
 
 def settings_from_args(args: argparse.Namespace):
-    from bench.runner import DeviceSettings
+    from hilbench.bench.runner import DeviceSettings
 
     values = {name: getattr(args, name) for name in DEVICE_OPTIONS if getattr(args, name, None) is not None}
     for name, value in values.items():
@@ -85,8 +85,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from bench.progress import ProgressBar
-    from bench.runner import Bench
+    from hilbench.bench.progress import ProgressBar
+    from hilbench.bench.runner import Bench
 
     protocol = protocol_from_args(args.protocol_class, args)
     settings = settings_from_args(args)
@@ -96,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
                                progress=bar.update, overwrite=args.overwrite)
         except KeyboardInterrupt:
             bar.close()
-            print("bench run: interrupted; device disarmed, run file marked aborted")
+            print("hilbench run: interrupted; device disarmed, run file marked aborted")
             return 130
     print(f"{result.status}: {result.path} ({result.samples} samples, uid {result.uid})")
     return 0 if result.status == "completed" else 1

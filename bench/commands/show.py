@@ -1,4 +1,4 @@
-"""``bench show RUN.h5``: status, metadata, channel summary and events of a run file; ``--repair`` marks a
+"""``hilbench show RUN.h5``: status, metadata, channel summary and events of a run file; ``--repair`` marks a
 crashed run ``crashed`` in the file."""
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ def _fmt(value: float | None) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from bench.runfile import channel_summary, open_run, repair
+    from hilbench.bench.runfile import channel_summary, open_run, repair
 
     repaired = None
     if args.repair:

@@ -1,4 +1,4 @@
-"""``bench sim``: run the simulated amplifier (it execs ``python -m firmware_sim``)."""
+"""``hilbench sim``: run the simulated amplifier (it execs ``python -m hilbench.firmware_sim``)."""
 
 from __future__ import annotations
 
@@ -26,8 +26,8 @@ def register(subparsers) -> None:
 
 
 def firmware_argv(args) -> list[str]:
-    """The ``python -m firmware_sim`` command line equivalent to ``args``."""
-    argv = [sys.executable, "-m", "firmware_sim"]
+    """The ``python -m hilbench.firmware_sim`` command line equivalent to ``args``."""
+    argv = [sys.executable, "-m", "hilbench.firmware_sim"]
     argv += ["--serial"] if args.serial else ["--can", args.can, "--interface", args.interface,
                                               "--node", str(args.node)]
     if args.fd:

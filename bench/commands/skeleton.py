@@ -1,4 +1,4 @@
-"""``bench skeleton RUN.h5 [RUN2.h5 ...]``: ForceVib skeleton curves of logged chirp runs, composed."""
+"""``hilbench skeleton RUN.h5 [RUN2.h5 ...]``: ForceVib skeleton curves of logged chirp runs, composed."""
 
 from __future__ import annotations
 
@@ -40,7 +40,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         choices=("rate", "updown", "median"),
         default="rate",
         help="per-bin energy estimate: rate-extrapolated fit (default), mean of growing/decaying medians, or the "
-        "plain median (the paper's pooling); see analysis.forcevib.compose",
+        "plain median (the paper's pooling); see hilbench.analysis.skeleton.forcevib.compose",
     )
     parser.add_argument("--json", metavar="OUT.json", help="write the composed curves as JSON")
     parser.add_argument("--plot", metavar="OUT.png", help="write the skeleton plot")
@@ -48,7 +48,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _mass(args, runs) -> float:
-    from bench.errors import BenchError
+    from hilbench.bench.errors import BenchError
 
     if args.mass is not None:
         mass = args.mass
@@ -79,9 +79,9 @@ def centred_force(torque, timing: str):
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from analysis.forcevib import compose, forcevib
-    from analysis.run_file import read_run_file
-    from bench.errors import BenchError
+    from hilbench.analysis.run_file import read_run_file
+    from hilbench.analysis.skeleton.forcevib import compose, forcevib
+    from hilbench.bench.errors import BenchError
 
     runs = [read_run_file(p) for p in args.runs]
     if len({r.axis for r in runs}) > 1:

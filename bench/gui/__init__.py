@@ -1,1 +1,1 @@
-"""The operator GUI (pyqtgraph + PySide6): ``bench gui``. See ``docs/gui.md``."""
+"""The operator GUI (pyqtgraph + PySide6): ``hilbench gui``. See ``docs/gui.md``."""

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bench.errors import BenchError
+from hilbench.bench.errors import BenchError
 
 
 class AnalysisUnavailable(BenchError):
@@ -43,10 +43,10 @@ class AnalysisResult:
 
 #: analysis name -> (module, attribute) entry points it needs
 ENTRY_POINTS: dict[str, list[tuple[str, str]]] = {
-    "identification": [("analysis.maxwell_fit", "fit_lip")],
-    "skeleton": [("analysis.forcevib", "forcevib")],
-    "afrf": [("analysis.afrf", "afrf_from_run")],
-    "residual": [("analysis.residual", "residual_loop"), ("analysis.residual", "prepare_run")],
+    "identification": [("hilbench.analysis.identification.maxwell_fit", "fit_lip")],
+    "skeleton": [("hilbench.analysis.skeleton.forcevib", "forcevib")],
+    "afrf": [("hilbench.analysis.afrf.frf", "afrf_from_run")],
+    "residual": [("hilbench.analysis.residual", "residual_loop"), ("hilbench.analysis.residual", "prepare_run")],
 }
 #: analyses that read the file themselves (by path): no other handle of it may be open in this process
 BY_PATH = ("afrf",)
@@ -80,7 +80,7 @@ def _thin(x: np.ndarray, *ys: np.ndarray, n: int = 20000) -> list[np.ndarray]:
 
 
 def identification(run, options: dict | None = None) -> AnalysisResult:
-    """Maxwell-slip identification (``analysis.maxwell_fit.fit_lip``) of position and torque of ``run``."""
+    """Maxwell-slip identification (``analysis.identification.maxwell_fit.fit_lip``) of ``run``."""
     fit_lip = _entry("identification")
     position = run.channel("position")
     torque = run.channel("torque")
@@ -115,7 +115,7 @@ def identification(run, options: dict | None = None) -> AnalysisResult:
 
 
 def skeleton(run, options: dict | None = None) -> AnalysisResult:
-    """ForceVib (``analysis.forcevib.forcevib``) on position and torque; ``options['inertia']`` in
+    """ForceVib (``hilbench.analysis.skeleton.forcevib.forcevib``) on position and torque; ``options['inertia']`` in
     kg*m^2 (rotary) or kg (linear) and ``options['method']`` (``hilbert`` or ``cwt``)."""
     forcevib = _entry("skeleton")
     options = options or {}
@@ -148,7 +148,7 @@ def skeleton(run, options: dict | None = None) -> AnalysisResult:
 
 
 def afrf(run, options: dict | None = None) -> AnalysisResult:
-    """AFRF (``analysis.afrf.afrf_from_run``) of a stepped-sine run: |c_k| of the position per step."""
+    """AFRF (``hilbench.analysis.afrf.frf.afrf_from_run``) of a stepped-sine run: |c_k| of the position per step."""
     afrf_from_run = _entry("afrf")
     res = afrf_from_run(run.path)
     mags = res.magnitudes
@@ -172,7 +172,7 @@ def residual(run, options: dict | None = None) -> AnalysisResult:
     """Residual loop (``analysis.residual.residual_loop``) on position and torque, blocked
     cross-validation (no separate validation run)."""
     residual_loop = _entry("residual")
-    from analysis.residual import prepare_run
+    from hilbench.analysis.residual import prepare_run
 
     data = prepare_run(run.channel("position"), run.channel("torque"), run.sample_rate, axis=run.axis,
                        name=os.path.basename(run.path))

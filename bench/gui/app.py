@@ -33,7 +33,7 @@ def run_app(device: str = "sim://", runs_dir: str | Path = "runs", autoconnect: 
     import pyqtgraph as pg
     from PySide6 import QtCore, QtWidgets
 
-    from bench.gui.main_window import MainWindow
+    from hilbench.bench.gui.main_window import MainWindow
 
     app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(sys.argv[:1])
     app.setApplicationName("hilbench")

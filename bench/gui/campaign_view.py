@@ -7,7 +7,7 @@ from pathlib import Path
 
 from PySide6 import QtCore, QtWidgets
 
-from bench.gui.worker import one_line
+from hilbench.bench.gui.worker import one_line
 
 COLUMNS = ("run", "protocol", "duration (s)", "state", "progress")
 
@@ -73,7 +73,7 @@ class CampaignView(QtWidgets.QWidget):
 
     def load(self) -> bool:
         """Parse and validate the campaign file; problems are shown with file and line."""
-        from bench.campaign import load_campaign, read_index
+        from hilbench.bench.campaign import load_campaign, read_index
 
         path = self.path_edit.text().strip()
         try:

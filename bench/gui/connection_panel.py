@@ -7,8 +7,8 @@ from pathlib import Path
 
 from PySide6 import QtCore, QtWidgets
 
-from bench.gui.worker import DeviceState
-from drivers import protocol as wire
+from hilbench.bench.gui.worker import DeviceState
+from hilbench.drivers import protocol as wire
 
 DEFAULT_URL = "sim://"
 

@@ -14,7 +14,7 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtWidgets
 
-from bench.gui.display_buffer import RingBuffer, minmax_decimate
+from hilbench.bench.gui.display_buffer import RingBuffer, minmax_decimate
 
 #: (plot title, unit, [(channel, pen colour), ...])
 PANELS = (

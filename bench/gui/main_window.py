@@ -13,12 +13,12 @@ from pathlib import Path
 
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from bench.gui.campaign_view import CampaignView
-from bench.gui.connection_panel import ConnectionPanel
-from bench.gui.live_plot import LivePlot
-from bench.gui.protocol_panel import ProtocolPanel
-from bench.gui.run_browser import RunBrowser
-from bench.gui.worker import DeviceWorker, EStopLine, RunWorker
+from hilbench.bench.gui.campaign_view import CampaignView
+from hilbench.bench.gui.connection_panel import ConnectionPanel
+from hilbench.bench.gui.live_plot import LivePlot
+from hilbench.bench.gui.protocol_panel import ProtocolPanel
+from hilbench.bench.gui.run_browser import RunBrowser
+from hilbench.bench.gui.worker import DeviceWorker, EStopLine, RunWorker
 
 #: signals from worker threads always reach the GUI thread through its event queue
 QUEUED = QtCore.Qt.ConnectionType.QueuedConnection
@@ -237,7 +237,7 @@ class MainWindow(QtWidgets.QMainWindow):
         return True
 
     def start_campaign(self, campaign, out_dir: str, resume: bool) -> bool:
-        from bench.campaign import run_campaign
+        from hilbench.bench.campaign import run_campaign
 
         if self.running:
             self.show_message("a run is already in progress", error=True)

@@ -11,7 +11,7 @@ from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
-from bench.protocols import PROTOCOLS, ParameterSpec, Protocol, ProtocolError, make_protocol
+from hilbench.bench.protocols import PROTOCOLS, ParameterSpec, Protocol, ProtocolError, make_protocol
 
 #: forms build the setpoints (to run their checks) up to this many samples; longer runs are checked at start
 CHECK_SETPOINTS_UP_TO = 600_000
@@ -147,13 +147,13 @@ class ProtocolForm(QtWidgets.QWidget):
 
 
 class DeviceSettingsForm(QtWidgets.QWidget):
-    """The device limits and calibration sent with every run (the CLI's ``bench run`` options)."""
+    """The device limits and calibration sent with every run (the CLI's ``hilbench run`` options)."""
 
     changed = QtCore.Signal()
 
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
-        from bench.commands.run import DEVICE_OPTIONS
-        from bench.runner import DeviceSettings
+        from hilbench.bench.commands.run import DEVICE_OPTIONS
+        from hilbench.bench.runner import DeviceSettings
 
         super().__init__(parent)
         defaults = DeviceSettings()
@@ -175,7 +175,7 @@ class DeviceSettingsForm(QtWidgets.QWidget):
 
     def settings(self):
         """A :class:`bench.runner.DeviceSettings`; raises ProtocolError naming a bad field."""
-        from bench.runner import DeviceSettings
+        from hilbench.bench.runner import DeviceSettings
 
         values: dict[str, Any] = {}
         for name, edit in self.fields.items():
@@ -189,7 +189,7 @@ class DeviceSettingsForm(QtWidgets.QWidget):
             values[name] = int(value) if name == "counts_per_rev" and value.is_integer() else value
         try:
             settings = DeviceSettings(**values)
-            from drivers.protocol import Config
+            from hilbench.drivers.protocol import Config
 
             problems = Config(sample_rate=10000, current_limit=settings.current_limit,
                               velocity_limit=settings.velocity_limit, position_min=settings.position_min,

@@ -9,8 +9,8 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtWidgets
 
-from bench.gui import analyses
-from bench.gui.worker import one_line
+from hilbench.bench.gui import analyses
+from hilbench.bench.gui.worker import one_line
 
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
 
@@ -28,7 +28,7 @@ class AnalysisWorker(QtCore.QThread):
     def run(self) -> None:
         from types import SimpleNamespace
 
-        from bench.runfile import open_run
+        from hilbench.bench.runfile import open_run
 
         try:
             if self.name in analyses.BY_PATH:
@@ -182,7 +182,7 @@ class RunBrowser(QtWidgets.QWidget):
 
     def open(self, path: str) -> bool:
         """Open ``path``; a bad file gives a message in the window, never an exception."""
-        from bench.runfile import open_run
+        from hilbench.bench.runfile import open_run
 
         path = str(path).strip()
         if not path:

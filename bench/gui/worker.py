@@ -18,7 +18,7 @@ from typing import Any
 
 from PySide6 import QtCore
 
-from drivers import protocol as wire
+from hilbench.drivers import protocol as wire
 
 
 def one_line(exc: BaseException) -> str:
@@ -68,7 +68,7 @@ class DeviceWorker(QtCore.QObject):
 
     @QtCore.Slot(str, float)
     def open(self, url: str, timeout: float) -> None:
-        from bench.runner import Bench
+        from hilbench.bench.runner import Bench
 
         if self.bench is not None:
             self.close()
@@ -115,7 +115,7 @@ class DeviceWorker(QtCore.QObject):
             st = bench.amplifier.status()
             self.status.emit(describe_status(st, bench.amplifier.counters))
         except Exception as exc:
-            from drivers.errors import DeviceTimeoutError
+            from hilbench.drivers.errors import DeviceTimeoutError
 
             if isinstance(exc, DeviceTimeoutError):
                 self.failed.emit(f"device does not answer: {one_line(exc)}")
@@ -148,7 +148,7 @@ class RunWorker(QtCore.QThread):
 
     def __init__(self, job: Callable[[Callable[[Any], None], Any], Any]) -> None:
         super().__init__()
-        from bench.runner import RunControl
+        from hilbench.bench.runner import RunControl
 
         self.job = job
         self.control = RunControl()

@@ -5,8 +5,8 @@ Build a message, then send it: ``link.send(Arm())``. Serial links frame messages
 Specified in ``docs/protocol.md``. The only exception decoding raises is :class:`ProtocolError`.
 """
 
-from drivers.errors import ProtocolError
-from drivers.protocol.can_framing import (
+from hilbench.drivers.errors import ProtocolError
+from hilbench.drivers.protocol.can_framing import (
     DEVICE_TO_HOST,
     HOST_TO_DEVICE,
     CanReassembler,
@@ -15,7 +15,7 @@ from drivers.protocol.can_framing import (
     max_payload,
     split_can_id,
 )
-from drivers.protocol.messages import (
+from hilbench.drivers.protocol.messages import (
     MESSAGE_CLASSES,
     PROTOCOL_VERSION,
     SAMPLE_RATES,
@@ -44,7 +44,7 @@ from drivers.protocol.messages import (
     encode_message,
     make_setpoint_blocks,
 )
-from drivers.protocol.serial_framing import MAX_FRAME_BYTES, FrameDecoder, decode_frame, encode_frame
+from hilbench.drivers.protocol.serial_framing import MAX_FRAME_BYTES, FrameDecoder, decode_frame, encode_frame
 
 __all__ = [
     "PROTOCOL_VERSION", "SAMPLE_RATES", "MAX_FRAME_BYTES", "MESSAGE_CLASSES", "ProtocolError",

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import struct
 
-from drivers.errors import ProtocolError
-from drivers.protocol.messages import Message, MsgType, decode_message
+from hilbench.drivers.errors import ProtocolError
+from hilbench.drivers.protocol.messages import Message, MsgType, decode_message
 
 HOST_TO_DEVICE = 0
 DEVICE_TO_HOST = 1

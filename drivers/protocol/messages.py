@@ -14,7 +14,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from drivers.errors import ProtocolError
+from hilbench.drivers.errors import ProtocolError
 
 PROTOCOL_VERSION = 1
 SAMPLE_RATES = (1000, 2000, 5000, 10000, 20000)  # Hz, the only rates a device accepts

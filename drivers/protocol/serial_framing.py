@@ -11,8 +11,8 @@ import zlib
 
 from cobs import cobs
 
-from drivers.errors import ProtocolError
-from drivers.protocol.messages import PROTOCOL_VERSION, Message, decode_message
+from hilbench.drivers.errors import ProtocolError
+from hilbench.drivers.protocol.messages import PROTOCOL_VERSION, Message, decode_message
 
 MAX_FRAME_BYTES = 8192  # decoded frame size limit (header + payload + CRC)
 _CRC = struct.Struct("<I")

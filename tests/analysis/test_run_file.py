@@ -6,9 +6,9 @@ import time
 import numpy as np
 import pytest
 
-from analysis.errors import AnalysisError
-from analysis.run_file import read_run_file
-from bench.runfile import RunWriter
+from hilbench.analysis.errors import AnalysisError
+from hilbench.analysis.run_file import read_run_file
+from hilbench.bench.runfile import RunWriter
 
 
 def _write(path, n=5000, finish=True):

@@ -9,8 +9,8 @@ import time
 
 import pytest
 
-from bench.campaign import CampaignError, load_campaign
-from bench.runfile import open_run
+from hilbench.bench.campaign import CampaignError, load_campaign
+from hilbench.bench.runfile import open_run
 
 GOOD = """
 [defaults]
@@ -63,7 +63,7 @@ def test_bad_campaign_is_refused_with_file_line_and_reason(tmp_path, old, new, l
 
 def test_bad_campaign_from_the_cli_is_one_line_and_exit_2(tmp_path):
     path = _write(tmp_path, GOOD.format(duration=1).replace("repeats = 2", "repeats = 2\nfoo = 1"))
-    cp = subprocess.run([sys.executable, "-m", "bench.cli", "campaign", str(path)], capture_output=True,
+    cp = subprocess.run([sys.executable, "-m", "hilbench.bench.cli", "campaign", str(path)], capture_output=True,
                         text=True, timeout=60)
     assert cp.returncode == 2
     assert len(cp.stderr.strip().splitlines()) == 1 and "unknown key 'foo'" in cp.stderr
@@ -74,7 +74,7 @@ def test_killed_campaign_resumes_to_every_run_completed_once(tmp_path):
     # real-time pacing so the kill lands inside the second run
     path = _write(tmp_path, GOOD.format(duration=2).replace("?pacing=lockstep", ""))
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "bench.cli", "campaign", str(path), "-o", str(out),
+    proc = subprocess.Popen([sys.executable, "-m", "hilbench.bench.cli", "campaign", str(path), "-o", str(out),
                              "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
@@ -90,7 +90,7 @@ def test_killed_campaign_resumes_to_every_run_completed_once(tmp_path):
     proc.wait(timeout=10)
     with open_run(out / "id-2.h5") as run:
         assert run.status == "crashed"
-    cp = subprocess.run([sys.executable, "-m", "bench.cli", "campaign", str(path), "-o", str(out), "--resume",
+    cp = subprocess.run([sys.executable, "-m", "hilbench.bench.cli", "campaign", str(path), "-o", str(out), "--resume",
                          "--quiet"], capture_output=True, text=True, timeout=120)
     assert cp.returncode == 0, cp.stderr
     assert "id-1: skipped" in cp.stdout

@@ -1,9 +1,9 @@
-"""`bench demo` (what `make demo` runs) end to end: the runs, the analyses, and the hidden effect found."""
+"""`hilbench demo` (what `make demo` runs) end to end: the runs, the analyses, and the hidden effect found."""
 
 import json
 
-from analysis.run_file import read_run_file
-from bench.cli import main
+from hilbench.analysis.run_file import read_run_file
+from hilbench.bench.cli import main
 
 
 def test_demo_runs_everything_and_finds_the_undeclared_cogging(tmp_path, capsys):

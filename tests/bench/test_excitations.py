@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from bench import excitations as ex
+from hilbench.bench import excitations as ex
 
 
 def _zero_crossings(t: np.ndarray, u: np.ndarray) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""``bench identify`` end to end on run files written with bench.runfile (bench uses analysis)."""
+"""``hilbench identify`` end to end on run files written with bench.runfile (bench uses analysis)."""
 
 import json
 import os
@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.cli import main
-from bench.runfile import RunWriter
-from firmware_sim.friction_models import dc_motor
-from firmware_sim.plant import simulate
-from tests.analysis.test_identification import random_enveloped
+from hilbench.bench.cli import main
+from hilbench.bench.runfile import RunWriter
+from hilbench.firmware_sim.friction_models import dc_motor
+from hilbench.firmware_sim.plant import simulate
+from tests.analysis.identification.test_identification import random_enveloped
 
 
 def _write_run(path, seed, channels=("sample_index", "t", "torque", "position")):

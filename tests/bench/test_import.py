@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from scipy.io import loadmat, savemat
 
-from bench import importers
-from bench.cli import main as bench_main
-from bench.runfile import open_run
+from hilbench.bench import importers
+from hilbench.bench.cli import main as bench_main
+from hilbench.bench.runfile import open_run
 
 REAL = Path(os.environ.get("HILBENCH_REAL_DATA", "/work/shared/data/real"))
 EMPS = REAL / "emps" / "DATA_EMPS.mat"

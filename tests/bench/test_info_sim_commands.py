@@ -1,11 +1,10 @@
-"""``bench info`` and ``bench sim`` (device-link subcommands), and the drivers' import boundary."""
+"""``hilbench info`` and ``hilbench sim`` (device-link subcommands), and the drivers' import boundary."""
 
-import os
 import subprocess
 import sys
 from pathlib import Path
 
-from bench.cli import main
+from hilbench.bench.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -25,8 +24,8 @@ def test_bench_info_bad_url_is_one_line(capsys):
 
 
 def test_bench_sim_prints_pty_path_first():
-    proc = subprocess.Popen([sys.executable, "-m", "bench.cli", "sim", "--serial", "--pacing", "lockstep"],
-                            stdout=subprocess.PIPE, cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    proc = subprocess.Popen([sys.executable, "-m", "hilbench.bench.cli", "sim", "--serial", "--pacing", "lockstep"],
+                            stdout=subprocess.PIPE, cwd=ROOT)
     try:
         path = proc.stdout.readline().decode().strip()
         assert path.startswith("/dev/")
@@ -38,16 +37,19 @@ def test_bench_sim_prints_pty_path_first():
 
 
 def test_drivers_never_import_firmware_sim_bench_or_analysis():
-    code = ("import sys, drivers.device_url, drivers.amplifier, drivers.links, drivers.fault_injection; "
-            "bad = [m for m in sys.modules if m.split('.')[0] in ('firmware_sim', 'bench', 'analysis')]; "
+    code = ("import sys, hilbench.drivers.device_url, hilbench.drivers.amplifier, hilbench.drivers.links, "
+            "hilbench.drivers.fault_injection; "
+            "bad = [m for m in sys.modules if m.split('.')[:2] in (['hilbench', 'firmware_sim'], "
+            "['hilbench', 'bench'], ['hilbench', 'analysis'])]; "
             "print(bad)")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
     assert res.stdout.strip() == "[]"
 
 
 def test_firmware_imports_only_the_protocol_from_drivers():
-    code = ("import sys, firmware_sim.device, firmware_sim.firmware, firmware_sim.__main__; "
-            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('drivers', 'bench', 'analysis')))")
+    code = ("import sys, hilbench.firmware_sim.device, hilbench.firmware_sim.firmware, hilbench.firmware_sim.__main__; "
+            "print(sorted(m.removeprefix('hilbench.') for m in sys.modules "
+            "if m.split('.')[:2] in (['hilbench', 'drivers'], ['hilbench', 'bench'], ['hilbench', 'analysis'])))")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
     mods = eval(res.stdout)
     assert all(m in ("drivers", "drivers.errors") or m.startswith("drivers.protocol") for m in mods), mods

@@ -1,15 +1,15 @@
-"""``bench skeleton`` on run files of the paper's system under chirps (written with bench.runfile)."""
+"""``hilbench skeleton`` on run files of the paper's system under chirps (written with bench.runfile)."""
 
 import json
 
 import numpy as np
 import pytest
 
-from analysis.paper import maxwell_slip_closed_form
-from bench.cli import main
-from bench.runfile import RunWriter
-from firmware_sim.friction_models import paper_system
-from firmware_sim.plant import simulate
+from hilbench.analysis.reproductions.paper import maxwell_slip_closed_form
+from hilbench.bench.cli import main
+from hilbench.bench.runfile import RunWriter
+from hilbench.firmware_sim.friction_models import paper_system
+from hilbench.firmware_sim.plant import simulate
 
 FS = 1000.0
 
@@ -76,6 +76,6 @@ def test_skeleton_cli_errors(tmp_path, capsys):
     [("hold_previous", [1.5, 2.5, 3.0]), ("hold_next", [1.0, 1.5, 2.5]), ("instant", [1.0, 2.0, 3.0])],
 )
 def test_centred_force(timing, expect):
-    from bench.commands.skeleton import centred_force
+    from hilbench.bench.commands.skeleton import centred_force
 
     np.testing.assert_allclose(centred_force(np.array([1.0, 2.0, 3.0]), timing), expect)

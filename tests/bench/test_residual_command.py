@@ -1,4 +1,4 @@
-"""``bench residual``: run files in, JSON + figures + Markdown out, one-line errors for bad input."""
+"""``hilbench residual``: run files in, JSON + figures + Markdown out, one-line errors for bad input."""
 
 from __future__ import annotations
 
@@ -7,11 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from bench.cli import main
-from bench.runfile import RunWriter
-from firmware_sim.friction_models import dc_motor
-from firmware_sim.plant import simulate
-from tests.analysis.test_residual_loop import FS, excitation
+from hilbench.bench.cli import main
+from hilbench.bench.runfile import RunWriter
+from hilbench.firmware_sim.friction_models import dc_motor
+from hilbench.firmware_sim.plant import simulate
+from tests.analysis.residual.test_residual_loop import FS, excitation
 
 
 def write_run(path, seed: int) -> None:
@@ -56,6 +56,6 @@ def test_cli_writes_json_and_report(runs, capsys):
 def test_cli_bad_input_is_one_line(runs, capsys):
     assert main(["residual", str(runs / "missing.h5"), "--json", str(runs / "x.json")]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith("bench residual: error:") and "\n" not in err
+    assert err.startswith("hilbench residual: error:") and "\n" not in err
     assert main(["residual", str(runs / "train.h5"), "--start", "inertia,bogus", "--json", str(runs / "x.json")]) == 2
     assert "unknown model term" in capsys.readouterr().err

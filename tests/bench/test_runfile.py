@@ -9,9 +9,9 @@ import h5py
 import numpy as np
 import pytest
 
-from bench import runfile as rf
-from bench.cli import main as bench_main
-from bench.excitations import stepped_sine
+from hilbench.bench import runfile as rf
+from hilbench.bench.cli import main as bench_main
+from hilbench.bench.excitations import stepped_sine
 
 
 def _block(start: int, n: int, fs: float = 1000.0) -> dict[str, np.ndarray]:

@@ -1,5 +1,5 @@
 """SIGKILL a writer process mid-run: the file opens with bench, holds every sample up to its last flush,
-and says 'crashed'; `bench show --repair` marks it so in the file and plain HDF5 opens it again."""
+and says 'crashed'; `hilbench show --repair` marks it so in the file and plain HDF5 opens it again."""
 
 from __future__ import annotations
 
@@ -14,8 +14,8 @@ import h5py
 import numpy as np
 import pytest
 
-from bench import runfile as rf
-from bench.cli import main as bench_main
+from hilbench.bench import runfile as rf
+from hilbench.bench.cli import main as bench_main
 
 FS = 10_000.0
 
@@ -23,7 +23,7 @@ WRITER = textwrap.dedent(
     """
     import sys
     import numpy as np
-    from bench.runfile import RunWriter
+    from hilbench.bench.runfile import RunWriter
 
     fs = float(sys.argv[2])
     with RunWriter(sys.argv[1], sample_rate=fs, protocol_name="crash-test", operator="pytest") as w:

@@ -10,10 +10,10 @@ import time
 import numpy as np
 import pytest
 
-from bench.protocols import Identification, ProtocolError, SteppedSine
-from bench.runfile import open_run
-from bench.runner import Bench, DeviceSettings, RunControl
-from drivers import protocol as wire
+from hilbench.bench.protocols import Identification, ProtocolError, SteppedSine
+from hilbench.bench.runfile import open_run
+from hilbench.bench.runner import Bench, DeviceSettings, RunControl
+from hilbench.drivers import protocol as wire
 
 LOCKSTEP = "sim://?pacing=lockstep"
 
@@ -91,7 +91,7 @@ def test_host_refuses_out_of_range_parameters_before_anything_moves(bench, tmp_p
 
 def _start_cli_run(tmp_path, duration=30):
     out = tmp_path / "cli.h5"
-    proc = subprocess.Popen([sys.executable, "-m", "bench.cli", "run", "identify", "--duration", str(duration),
+    proc = subprocess.Popen([sys.executable, "-m", "hilbench.bench.cli", "run", "identify", "--duration", str(duration),
                              "--quiet", "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
     deadline = time.monotonic() + 30
@@ -128,7 +128,7 @@ def test_sigkill_leaves_a_crashed_file_with_every_flushed_sample(tmp_path):
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait(timeout=10)
     # the simulator child loses its host: its watchdog disarms it; the file must open with bench
-    cp = subprocess.run([sys.executable, "-m", "bench.cli", "show", str(out), "--repair"],
+    cp = subprocess.run([sys.executable, "-m", "hilbench.bench.cli", "show", str(out), "--repair"],
                         capture_output=True, text=True, timeout=60)
     assert cp.returncode == 0, cp.stderr
     with open_run(out) as run:

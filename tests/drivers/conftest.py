@@ -2,7 +2,7 @@
 
 import pytest
 
-from drivers.device_url import start_simulator, stop_simulator
+from hilbench.drivers.device_url import start_simulator, stop_simulator
 
 # A plant with injected effects, so that "bit for bit" covers the noise generator and its seed too.
 EFFECTS_TOML = """
@@ -40,7 +40,7 @@ def sim_toml(tmp_path):
 
 @pytest.fixture
 def simulator():
-    """Start simulators (``python -m firmware_sim --serial``); yields a starter returning (proc, pty path)."""
+    """Start simulators (``python -m hilbench.firmware_sim --serial``); yields a starter returning (proc, pty path)."""
     procs = []
 
     def start(**options):

@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 
-from drivers import protocol as p
+from hilbench.drivers import protocol as p
 
 
 def canonical_messages() -> dict[str, p.Message]:

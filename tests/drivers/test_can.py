@@ -7,13 +7,13 @@ import uuid
 import numpy as np
 import pytest
 
-from drivers import protocol as p
-from drivers.device_url import open_device
-from drivers.errors import DeviceFaultError, SetpointError
-from firmware_sim.device import CanTransport, serve
-from firmware_sim.firmware import Firmware
-from firmware_sim.plant import simulate
-from firmware_sim.sim_config import load_sim_config
+from hilbench.drivers import protocol as p
+from hilbench.drivers.device_url import open_device
+from hilbench.drivers.errors import DeviceFaultError, SetpointError
+from hilbench.firmware_sim.device import CanTransport, serve
+from hilbench.firmware_sim.firmware import Firmware
+from hilbench.firmware_sim.plant import simulate
+from hilbench.firmware_sim.sim_config import load_sim_config
 
 
 @pytest.fixture
@@ -72,7 +72,7 @@ def test_can_virtual_end_to_end_1_khz_bit_identical(virtual_device, fd):
 
 def test_can_virtual_other_node_does_not_answer(virtual_device):
     channel, _ = virtual_device(node=2)
-    from drivers.errors import DeviceTimeoutError
+    from hilbench.drivers.errors import DeviceTimeoutError
 
     with pytest.raises(DeviceTimeoutError):
         open_device(f"can://virtual/{channel}?node=4", timeout=0.3)
@@ -112,7 +112,7 @@ def test_socketcan_end_to_end_with_simulator_process(sim_toml):
 
     _socketcan_bus().shutdown()
     root = Path(__file__).resolve().parents[2]
-    proc = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--can", "vcan0", "--node", "5",
+    proc = subprocess.Popen([sys.executable, "-m", "hilbench.firmware_sim", "--can", "vcan0", "--node", "5",
                              "--pacing", "lockstep", "--config", sim_toml()],
                             cwd=root, stdout=subprocess.PIPE)
     try:

@@ -1,7 +1,6 @@
 """Watchdog, e-stop, limit trips and buffer underrun, end to end against the simulator process."""
 
 import math
-import os
 import signal
 import subprocess
 import sys
@@ -12,18 +11,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drivers import protocol as p
-from drivers.amplifier import Amplifier
-from drivers.errors import DeviceFaultError
-from drivers.links import SerialLink
+from hilbench.drivers import protocol as p
+from hilbench.drivers.amplifier import Amplifier
+from hilbench.drivers.errors import DeviceFaultError
+from hilbench.drivers.links import SerialLink
 
 ROOT = Path(__file__).resolve().parents[2]
 
 KILLED_HOST = r"""
 import sys, numpy as np
-from drivers.amplifier import Amplifier
-from drivers.links import SerialLink
-from drivers import protocol as p
+from hilbench.drivers.amplifier import Amplifier
+from hilbench.drivers.links import SerialLink
+from hilbench.drivers import protocol as p
 amp = Amplifier(SerialLink(sys.argv[1]))
 amp.configure(p.Config(sample_rate=1000, current_limit=3.0, watchdog_timeout=0.2, torque_constant=0.2,
                        counts_per_rev=4096))
@@ -44,8 +43,7 @@ def collect(amp, setpoints):
 def test_watchdog_after_sigkill_of_the_host(simulator, sim_toml):
     rate, timeout = 1000, 0.2
     _, path = simulator(pacing="realtime", config=sim_toml())
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    host = subprocess.Popen([sys.executable, "-c", KILLED_HOST, path], stdout=subprocess.PIPE, env=env)
+    host = subprocess.Popen([sys.executable, "-c", KILLED_HOST, path], stdout=subprocess.PIPE)
     last_seen = -1
     for line in host.stdout:
         last_seen = int(line)

@@ -5,13 +5,13 @@ import math
 import numpy as np
 import pytest
 
-from drivers import protocol as p
-from drivers.amplifier import Amplifier
-from drivers.device_url import open_device
-from drivers.errors import CommandRefusedError, ConfigError, DeviceURLError, SetpointError
-from drivers.links import SerialLink
-from firmware_sim.plant import simulate
-from firmware_sim.sim_config import load_sim_config
+from hilbench.drivers import protocol as p
+from hilbench.drivers.amplifier import Amplifier
+from hilbench.drivers.device_url import open_device
+from hilbench.drivers.errors import CommandRefusedError, ConfigError, DeviceURLError, SetpointError
+from hilbench.drivers.links import SerialLink
+from hilbench.firmware_sim.plant import simulate
+from hilbench.firmware_sim.sim_config import load_sim_config
 
 
 def direct_run(sim_path: str, config: p.Config, setpoints: np.ndarray):

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import serial
 
-from drivers import protocol as p
-from drivers.amplifier import Amplifier
-from drivers.errors import DriverError, LinkClosedError, SampleLossError
-from drivers.fault_injection import FaultyPort
-from drivers.links import SerialLink
+from hilbench.drivers import protocol as p
+from hilbench.drivers.amplifier import Amplifier
+from hilbench.drivers.errors import DriverError, LinkClosedError, SampleLossError
+from hilbench.drivers.fault_injection import FaultyPort
+from hilbench.drivers.links import SerialLink
 
 
 def frames(n):

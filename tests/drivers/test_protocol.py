@@ -10,9 +10,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drivers import protocol as p
-from drivers.calibration import Calibration, CountUnwrapper
-from drivers.errors import DriverError, ProtocolError
+from hilbench.drivers import protocol as p
+from hilbench.drivers.calibration import Calibration, CountUnwrapper
+from hilbench.drivers.errors import DriverError, ProtocolError
 from tests.drivers.protocol_examples import canonical_messages
 
 GOLDEN = Path(__file__).resolve().parents[1] / "data" / "protocol"

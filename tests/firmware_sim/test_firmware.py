@@ -7,11 +7,11 @@ import sys
 import numpy as np
 import pytest
 
-from drivers import protocol as p
-from firmware_sim.firmware import Firmware
-from firmware_sim.plant import simulate
-from firmware_sim.safety import SafetyMonitor, watchdog_trip_index
-from firmware_sim.sim_config import SimConfigError, load_sim_config, sim_config_from_dict
+from hilbench.drivers import protocol as p
+from hilbench.firmware_sim.firmware import Firmware
+from hilbench.firmware_sim.plant import simulate
+from hilbench.firmware_sim.safety import SafetyMonitor, watchdog_trip_index
+from hilbench.firmware_sim.sim_config import SimConfigError, load_sim_config, sim_config_from_dict
 
 SIM = sim_config_from_dict({"device": {"buffer_capacity": 4096},
                             "plant": {"elements": 4, "seed": 3, "noise_current": 0.01,
@@ -175,7 +175,7 @@ def test_sim_config_errors(tmp_path):
 def test_cli_bad_config_is_one_line(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("[plant]\ninertia = -1\n")
-    res = subprocess.run([sys.executable, "-m", "firmware_sim", "--serial", "--config", str(bad)],
+    res = subprocess.run([sys.executable, "-m", "hilbench.firmware_sim", "--serial", "--config", str(bad)],
                          capture_output=True, text=True, timeout=30)
     assert res.returncode == 2
     assert res.stderr.count("\n") == 1 and "error" in res.stderr and "Traceback" not in res.stderr

@@ -1,6 +1,6 @@
 import pytest
 
-from bench.gui.app import qt_problem
+from hilbench.bench.gui.app import qt_problem
 
 _PROBLEM = qt_problem()
 

@@ -4,7 +4,7 @@ copies, minima and maxima, so the tolerance is zero)."""
 import numpy as np
 import pytest
 
-from bench.gui.display_buffer import RingBuffer, minmax_decimate
+from hilbench.bench.gui.display_buffer import RingBuffer, minmax_decimate
 
 
 def test_ring_buffer_keeps_the_last_samples_in_order():

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from PySide6 import QtCore
 
-from bench.gui.main_window import MainWindow
-from bench.runfile import RunFileError, open_run
+from hilbench.bench.gui.main_window import MainWindow
+from hilbench.bench.runfile import RunFileError, open_run
 
 ESTOP_LIMIT_S = 0.050  # the requirement: e-stop reaches the device within 50 ms of the click
 
@@ -124,7 +124,7 @@ def test_identification_run_updates_live_plots_and_writes_the_file(window, qtbot
 
 
 def test_run_browser_opens_the_file_and_shows_identification(window, qtbot, runs):
-    from bench.gui.analyses import identification
+    from hilbench.bench.gui.analyses import identification
 
     _ensure_runs(window, qtbot, runs, steps=False)
     browser = window.browser
@@ -145,7 +145,7 @@ def test_run_browser_opens_the_file_and_shows_identification(window, qtbot, runs
 
 
 def test_unavailable_analyses_say_so(window):
-    from bench.gui.analyses import availability
+    from hilbench.bench.gui.analyses import availability
 
     for name, button in window.browser.analysis_buttons.items():
         why = availability(name)

@@ -4,9 +4,9 @@ import dataclasses
 
 import pytest
 
-from bench.gui.connection_panel import can_urls
-from bench.gui.protocol_panel import ProtocolPanel
-from bench.protocols import PROTOCOLS
+from hilbench.bench.gui.connection_panel import can_urls
+from hilbench.bench.gui.protocol_panel import ProtocolPanel
+from hilbench.bench.protocols import PROTOCOLS
 
 
 @pytest.fixture
@@ -99,7 +99,7 @@ def test_protocol_defaults_exist_for_every_field():
                               sample_rate=1000),
 ])
 def test_planned_samples_match_the_setpoints(protocol):
-    from bench.gui.protocol_panel import planned_samples
+    from hilbench.bench.gui.protocol_panel import planned_samples
 
     samples, steps = planned_samples(protocol)
     assert samples == protocol.setpoints().size  # exact: the same snapping rule, no setpoints built
@@ -114,7 +114,7 @@ def test_excitation_checks_reach_the_form(panel):
 
 
 def test_device_settings_are_checked(panel):
-    from bench.runner import DeviceSettings
+    from hilbench.bench.runner import DeviceSettings
 
     assert panel.validate() is not None and panel.settings == DeviceSettings()
     panel.device_form.set_value("current_limit", "-1")

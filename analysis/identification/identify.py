@@ -1,0 +1,195 @@
+"""Friction identification on plain arrays: check the input, fit, evaluate, validate.
+
+    J*theta'' + sum_i k_i*S_Delta_i[theta] + b*theta' (+ Fc*sign(theta') + c0) = tau
+
+Methods:
+- ``lip`` (default): linear in parameters, NNLS on filtered stop-operator regressors (maxwell_fit);
+- ``oe``: ``lip`` followed by output-error refinement on the simulated position (output_error);
+- ``paper``: differential evolution then Nelder-Mead on the simulation error, N elements (paper_baseline).
+
+Figures (analysis.identification.maxwell_fit.nrmse, rms(error)/std(measured)): torque NRMSE of the equation error
+on the filtered rows, position NRMSE of the open-loop simulation over the whole record, and position
+NRMSE of the simulation restarted every ``segment`` seconds from the measured state
+(output_error.segmented_simulation_error), on the training run and on an optional validation run.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hilbench.analysis.errors import AnalysisError
+from hilbench.analysis.identification.maxwell_fit import LipFit, LipSettings, fit_lip, predict_filtered
+from hilbench.analysis.identification.output_error import (
+    refine_output_error,
+    segmented_simulation_error,
+    simulation_error,
+)
+from hilbench.analysis.models.friction_model import FrictionModel, check_axis
+
+METHODS = ("lip", "oe", "paper")
+
+
+@dataclass
+class RunArrays:
+    """One run as arrays: t (s, uniform), torque (N*m or N), position (rad or m), its axis and name."""
+
+    t: np.ndarray
+    torque: np.ndarray | None
+    position: np.ndarray
+    axis: str = "rotary"
+    name: str = "run"
+
+    @property
+    def fs(self) -> float:
+        """Sampling rate from the whole record, (n - 1)/(t[-1] - t[0]), Hz."""
+        t = np.asarray(self.t, float)
+        return float((t.size - 1) / (t[-1] - t[0]))
+
+
+def check_run(run: RunArrays, min_samples: int = 200) -> RunArrays:
+    """Validate a run; raise :class:`AnalysisError` with the reason in one line."""
+    check_axis(run.axis)
+    if run.torque is None:
+        raise AnalysisError(f"{run.name}: no torque channel; identification needs the motor torque or force")
+    t = np.asarray(run.t, float).ravel()
+    tau = np.asarray(run.torque, float).ravel()
+    x = np.asarray(run.position, float).ravel()
+    if not (t.size == tau.size == x.size):
+        raise AnalysisError(
+            f"{run.name}: t, torque and position lengths differ ({t.size}, {tau.size}, {x.size})"
+        )
+    if t.size < min_samples:
+        raise AnalysisError(
+            f"{run.name}: run too short to identify ({t.size} samples, need >= {min_samples})"
+        )
+    for name, arr in (("t", t), ("torque", tau), ("position", x)):
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            raise AnalysisError(
+                f"{run.name}: {name} contains NaN or inf (first at sample {int(np.argmax(bad))})"
+            )
+    dt = np.diff(t)
+    period = (t[-1] - t[0]) / (t.size - 1)
+    # uniform to 1 % of the period: recorders that store time in float32 (EMPS: 4e-5 of dt) pass
+    off_grid = np.abs(t - (t[0] + period * np.arange(t.size)))
+    if not (dt.min() > 0 and off_grid.max() <= 0.01 * period):
+        raise AnalysisError(
+            f"{run.name}: time stamps are not uniformly spaced (dt from {dt.min():.3g} to "
+            f"{dt.max():.3g} s, up to {off_grid.max():.3g} s off a uniform grid); resample first"
+        )
+    if np.ptp(x) == 0:
+        raise AnalysisError(f"{run.name}: the position never changes; nothing is identifiable (no motion)")
+    if np.ptp(tau) == 0:
+        raise AnalysisError(f"{run.name}: the torque is constant; J and the friction are unidentifiable")
+    return RunArrays(t, tau, x, run.axis, run.name)
+
+
+@dataclass
+class Identification:
+    """Model, method, settings, figures and the arrays the plots need."""
+
+    model: FrictionModel
+    method: str
+    settings: dict
+    figures: dict
+    wall_time: float
+    lip: LipFit | None = None
+    curves: dict = field(default_factory=dict)  # name -> arrays for the plots
+
+
+def _figures(
+    model: FrictionModel, run: RunArrays, lip: LipFit, timing: str, prefix: str, curves: dict, segment: float
+) -> dict:
+    meas, pred, rows = predict_filtered(
+        model,
+        run.position,
+        run.torque,
+        run.fs,
+        lip.cutoff,
+        order=lip.settings.order,
+        decimation=lip.decimation,
+        timing=timing,
+    )
+    from hilbench.analysis.identification.maxwell_fit import nrmse
+
+    pos_nrmse, sim = simulation_error(model, run.position, run.torque, run.fs, timing=timing)
+    seg_nrmse, _ = segmented_simulation_error(
+        model, run.position, run.torque, run.fs, timing=timing, segment=segment
+    )
+    curves[prefix] = {
+        "t": run.t,
+        "position": run.position,
+        "position_sim": sim,
+        "torque_filtered": meas,
+        "torque_predicted": pred,
+        "t_rows": run.t[rows],
+    }
+    return {
+        f"{prefix}_torque_nrmse": nrmse(meas, pred),
+        f"{prefix}_position_nrmse": pos_nrmse,
+        f"{prefix}_position_nrmse_segmented": seg_nrmse,
+        f"{prefix}_samples": int(run.t.size),
+    }
+
+
+def identify(
+    run: RunArrays,
+    *,
+    method: str = "lip",
+    validate: RunArrays | None = None,
+    settings: LipSettings | None = None,
+    oe_max_nfev: int = 100,
+    paper_options: dict | None = None,
+    segment: float = 1.0,
+) -> Identification:
+    """Identify the friction model of ``run`` (see the module docstring); optionally validate.
+
+    ``segment`` (s): restart interval of the segmented simulation figure (output_error.segmented_simulation_error).
+    """
+    if method not in METHODS:
+        raise AnalysisError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    run = check_run(run)
+    if validate is not None:
+        validate = check_run(validate)
+        if validate.axis != run.axis:
+            raise AnalysisError(f"validation run axis {validate.axis!r} differs from {run.axis!r}")
+    s = settings or LipSettings()
+    t0 = time.perf_counter()
+    extra: dict = {}
+    lip = fit_lip(run.position, run.torque, run.fs, run.axis, s)
+    model = lip.model
+    if method == "oe":
+        model, extra = refine_output_error(
+            model, run.position, run.torque, run.fs, timing=s.timing, max_nfev=oe_max_nfev
+        )
+    elif method == "paper":
+        from hilbench.analysis.identification.paper_baseline import fit_paper
+
+        model, extra = fit_paper(
+            run.position, run.torque, run.fs, run.axis, timing=s.timing, **(paper_options or {})
+        )
+    wall = time.perf_counter() - t0
+    curves: dict = {}
+    figures = {
+        "wall_time_s": wall,
+        "cutoff_hz": lip.cutoff,
+        "decimation": lip.decimation,
+        "n_eff": lip.n_eff,
+        "condition_number": lip.condition_number,
+        **extra,
+    }
+    figures.update(_figures(model, run, lip, s.timing, "train", curves, segment))
+    if validate is not None:
+        figures.update(_figures(model, validate, lip, s.timing, "validation", curves, segment))
+    settings_dict = {
+        "method": method,
+        **s.to_dict(),
+        "segment_s": float(segment),
+        "candidate_deltas": lip.candidate_deltas.tolist(),
+    }
+    if method == "paper":
+        settings_dict["paper_options"] = dict(paper_options or {})
+    return Identification(model, method, settings_dict, figures, wall, lip, curves)
