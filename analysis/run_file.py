@@ -20,6 +20,20 @@ SCHEMA = "hilbench-run"
 #: [t_k, t_k+1)), by the file's ``source``; see hilbench.analysis.identification.regressors.held_torque.
 TORQUE_TIMING = {"device": "hold_previous", "import:emps": "hold_next"}
 TIMINGS = ("auto", "hold_previous", "hold_next", "instant")
+#: The largest channel (or protocol array) a run file may hold, values: 2**28 = 268 435 456, i.e. 2 GiB as
+#: float64 and 3.7 h at 20 kHz (a protocol lasts at most 1 h). A file claiming more is refused before
+#: anything is allocated: a 13 KB file may claim 2**33 samples that HDF5 would read back as 64 GiB of fill.
+MAX_SAMPLES = 1 << 28
+
+
+def check_size(path: Any, name: str, shape: tuple[int, ...]) -> None:
+    """Raise :class:`AnalysisError` if a dataset of ``shape`` holds more than :data:`MAX_SAMPLES` values."""
+    size = 1
+    for n in shape:
+        size *= int(n)
+    if size > MAX_SAMPLES:
+        raise AnalysisError(f"{path}: {name} claims {size} values, above the bound of {MAX_SAMPLES} "
+                            f"(MAX_SAMPLES); refusing to read it")
 
 
 def torque_timing_for(source: str, timing: str = "auto", channel: str = "torque") -> str:
@@ -125,6 +139,8 @@ def read_run_file(path: str | Path) -> RunFile:
             if int(attrs.get("schema_version", 0)) != 1:
                 raise AnalysisError(f"{path}: unsupported run-file schema version {attrs.get('schema_version')}")
             samples = f["samples"]
+            for name in samples:
+                check_size(path, f"channel {name!r}", samples[name].shape)
             channels = {name: samples[name][()] for name in samples}
             units = {name: _text(samples[name].attrs.get("unit", "")) for name in samples}
             n = min((a.size for a in channels.values()), default=0)
@@ -134,6 +150,8 @@ def read_run_file(path: str | Path) -> RunFile:
             if proto is not None:
                 if "parameters" in proto:
                     params = json.loads(_text(proto["parameters"][()]))
+                for k in proto:
+                    check_size(path, f"protocol array {k!r}", proto[k].shape)
                 arrays = {k: proto[k][()] for k in proto if k != "parameters"}
             calibration = json.loads(_text(f["device/calibration"][()])) if "device/calibration" in f else {}
             return RunFile(
@@ -143,5 +161,5 @@ def read_run_file(path: str | Path) -> RunFile:
                 protocol_name=_text(proto.attrs.get("name", "")) if proto is not None else "",
                 protocol_params=params, protocol_arrays=arrays, calibration=calibration,
             )
-    except (KeyError, ValueError) as exc:
-        raise AnalysisError(f"{path}: damaged or incomplete run file ({exc})") from None
+    except (KeyError, ValueError, TypeError, AttributeError, OSError, RuntimeError) as exc:
+        raise AnalysisError(f"{path}: damaged or incomplete run file ({' '.join(str(exc).split())})") from None

@@ -24,6 +24,7 @@ import math
 import os
 import re
 import socket
+import stat
 import sys
 import time
 import uuid
@@ -35,13 +36,19 @@ from typing import Any
 import h5py
 import numpy as np
 
+from hilbench.analysis.errors import AnalysisError
+from hilbench.analysis.run_file import MAX_SAMPLES, check_size
 from hilbench.bench.errors import BenchError
 
 SCHEMA = "hilbench-run"
 SCHEMA_VERSION = 1
 AXES = ("rotary", "linear")
 FINAL_STATUSES = ("completed", "aborted")
-STATUSES = ("running", "completed", "aborted", "crashed")
+#: ``failed``: the writer itself could not go on (disk full, I/O error); the file keeps every flushed sample.
+STATUSES = ("running", "completed", "aborted", "failed", "crashed")
+#: Bytes kept in the lock file while a writer runs, given back when a write fails so that the writer can
+#: still roll the file back and mark it ``failed`` on a full disk (HDF5 needs a few KiB of metadata for it).
+RESERVE_BYTES = 1 << 18
 EVENT_KINDS = ("fault", "pause", "resume", "abort", "error", "info", "crash")
 EVENT_MESSAGE_BYTES = 256
 
@@ -122,9 +129,9 @@ def writer_alive(path: str | os.PathLike) -> bool:
     import fcntl
 
     try:
-        fd = os.open(lock_path(path), os.O_RDONLY)
-    except FileNotFoundError:
-        return False
+        fd = os.open(lock_path(path), os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+    except (FileNotFoundError, OSError):
+        return False  # missing, or a planted symlink or fifo: no writer of ours holds it
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
@@ -245,35 +252,83 @@ class RunWriter:
         self._status = "running"
         self._lock_fd: int | None = None
 
-        if os.path.exists(self.path) and not overwrite:
+        if os.path.lexists(self.path) and not overwrite:
             raise RunFileError(f"{self.path}: file exists (choose another name or allow overwrite)")
+        if os.path.isdir(self.path):
+            raise RunFileError(f"{self.path}: is a directory")
         self._take_lock()
+        # The file is built under a temporary name and appears at its path only once its layout is complete
+        # and it is in SWMR mode, by an atomic rename (overwrite) or link (no overwrite): an old file is never
+        # destroyed before a readable new one replaces it, and a kill at any moment leaves either nothing
+        # new at the path or a repairable run. The protocol arrays (possibly long) are written after that.
+        head, tail = os.path.split(self.path)
+        self._tmp_path = os.path.join(head, f".{tail}.{uuid.uuid4().hex[:12]}.partial")
+        self._file = None
         try:
-            self._file = h5py.File(self.path, "w", libver="latest")
-            self._create_layout(
+            self._file = h5py.File(self._tmp_path, "x", libver="latest")
+            later = self._create_layout(
                 device, config, calibration, protocol_name, protocol_params, protocol_arrays, operator, notes,
                 source, compression, start_time,
             )
+            self._file.flush()
             self._file.swmr_mode = True  # no new objects from here on
-        except BaseException:
+            self._place(overwrite)
+            for ds, array in later:
+                ds[...] = array
+            self._file.flush()
+        except BaseException as exc:
+            if self._file is not None:
+                try:
+                    self._file.close()
+                except (OSError, RuntimeError):
+                    pass
+            if os.path.lexists(self._tmp_path):
+                os.unlink(self._tmp_path)
             self._release_lock()
-            if getattr(self, "_file", None) is not None:
-                self._file.close()
+            if isinstance(exc, OSError):
+                raise RunFileError(f"{self.path}: cannot create the run file: {_one_line(exc)}") from None
             raise
+
+    def _place(self, overwrite: bool) -> None:
+        try:
+            if overwrite:
+                os.replace(self._tmp_path, self.path)
+            else:
+                os.link(self._tmp_path, self.path)  # fails if a file appeared meanwhile: never clobbers
+                os.unlink(self._tmp_path)
+        except FileExistsError:
+            raise RunFileError(f"{self.path}: file exists (choose another name or allow overwrite)") from None
 
     # -- setup ---------------------------------------------------------------------------------------------
 
     def _take_lock(self) -> None:
         import fcntl
 
-        fd = os.open(lock_path(self.path), os.O_RDWR | os.O_CREAT, 0o644)
+        lock = lock_path(self.path)
+        try:  # never follow a planted symlink, never block on a planted fifo
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK, 0o644)
+        except OSError as exc:
+            raise RunFileError(f"{self.path}: cannot use the lock file {lock} ({_one_line(exc)}; a symlink "
+                               f"there is refused)") from None
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode) or st.st_nlink != 1:
+            os.close(fd)
+            raise RunFileError(f"{self.path}: the lock file {lock} is not a plain file of its own "
+                               f"(a link or a device); remove it")
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(fd)
             raise RunFileError(f"{self.path}: another process is writing this run") from None
-        os.ftruncate(fd, 0)
-        os.write(fd, f"{os.getpid()} {socket.gethostname()}\n".encode())
+        try:
+            os.ftruncate(fd, 0)
+            os.write(fd, f"{os.getpid()} {socket.gethostname()}\n".encode())
+            os.posix_fallocate(fd, 0, RESERVE_BYTES)
+        except OSError as exc:
+            os.close(fd)
+            os.unlink(lock)
+            raise RunFileError(f"{self.path}: cannot reserve {RESERVE_BYTES} bytes beside the run "
+                               f"({_one_line(exc)}); is the disk full?") from None
         self._lock_fd = fd
 
     def _release_lock(self) -> None:
@@ -318,6 +373,7 @@ class RunWriter:
         _json_dataset(dev, "config", config)
         _json_dataset(dev, "calibration", calibration)
 
+        later: list[tuple[h5py.Dataset, np.ndarray]] = []
         proto = f.create_group("protocol")
         proto.attrs["name"] = str(protocol_name)
         _json_dataset(proto, "parameters", protocol_params)
@@ -325,12 +381,17 @@ class RunWriter:
             if not _NAME_RE.match(name) or name == "parameters":
                 raise RunFileError(f"{self.path}: bad protocol array name {name!r}")
             array = np.asarray(array)
+            numeric = array.dtype.kind in "biuf" or (array.dtype.names and not array.dtype.hasobject)
+            if not numeric or array.ndim > 2 or array.size > MAX_SAMPLES:
+                raise RunFileError(f"{self.path}: protocol array {name!r} must be numeric, at most 2-D and at "
+                                   f"most {MAX_SAMPLES} values, got {array.dtype} {array.shape}")
             big = array.size > 4096  # e.g. a whole setpoint array: compress it like the samples
-            proto.create_dataset(
-                name, data=array, compression=compression if big else None,
+            ds = proto.create_dataset(
+                name, shape=array.shape, dtype=array.dtype, compression=compression if big else None,
                 compression_opts=1 if big and compression == "gzip" else None,
-                shuffle=big and compression is not None,
+                shuffle=big and compression is not None, chunks=True if big else None,
             )
+            later.append((ds, array))  # written once the file is in SWMR mode and at its path
 
         samples = f.create_group("samples")
         samples.attrs["chunk"] = self.chunk
@@ -348,6 +409,7 @@ class RunWriter:
         self._events = f.create_dataset(
             "events", shape=(0,), maxshape=(None,), chunks=(64,), dtype=EVENT_DTYPE
         )
+        return later
 
     # -- recording -----------------------------------------------------------------------------------------
 
@@ -355,6 +417,11 @@ class RunWriter:
     def n_samples(self) -> int:
         """Samples appended so far (written or still buffered)."""
         return self._n_written + self._n_pending
+
+    @property
+    def status(self) -> str:
+        """``running`` until finished; then ``completed``, ``aborted`` or ``failed``."""
+        return self._status
 
     @property
     def n_flushed(self) -> int:
@@ -404,19 +471,56 @@ class RunWriter:
         if n_write == 0:
             return
         start, stop = self._n_written, self._n_written + n_write
+        if stop > MAX_SAMPLES:
+            self._fail(f"the run reached {MAX_SAMPLES} samples, the bound of a run file channel")
         memory_space = h5py.h5s.create_simple((n_write,))
-        for name, ds in self._datasets.items():
-            pieces = self._pending[name]
-            data = np.concatenate(pieces) if len(pieces) > 1 else pieces[0]
-            ds.id.set_extent((stop,))
-            file_space = ds.id.get_space()
-            file_space.select_hyperslab((start,), (n_write,))
-            ds.id.write(memory_space, file_space, np.ascontiguousarray(data[:n_write]))  # low level: 3x less overhead
+        try:
+            for name, ds in self._datasets.items():
+                pieces = self._pending[name]
+                data = np.concatenate(pieces) if len(pieces) > 1 else pieces[0]
+                self._pending[name] = [data]
+                ds.id.set_extent((stop,))
+                file_space = ds.id.get_space()
+                file_space.select_hyperslab((start,), (n_write,))
+                # low level: 3x less overhead than ds[start:stop] = ...
+                ds.id.write(memory_space, file_space, np.ascontiguousarray(data[:n_write]))
+            self._file.flush()
+        except (OSError, RuntimeError, ValueError) as exc:
+            self._fail(f"write failed: {_one_line(exc)}")
+        for name in self._datasets:  # only samples that reached the disk leave the buffer
+            data = self._pending[name][0]
             self._pending[name] = [data[n_write:]] if n_write < data.size else []
         self._n_written = stop
         self._n_pending -= n_write
-        self._file.flush()
 
+    def _fail(self, reason: str) -> None:
+        """The file cannot take more (disk full, I/O error): give back the reserve, cut every channel back to
+        the samples flushed before, record the reason, mark the run ``failed`` and close. Raises
+        :class:`RunFileError`; samples still in memory are reported lost, never written half."""
+        if self._lock_fd is not None:
+            os.ftruncate(self._lock_fd, 0)  # the reserve: room for the metadata below on a full disk
+        n = self._n_written
+        marked = True
+        try:
+            for ds in self._datasets.values():
+                ds.id.set_extent((n,))
+            self._add_event_row("error", reason, self._last_index, self._last_t)
+            self._file.attrs.modify("end_time", utc_now())
+            self._file.attrs.modify("status", "failed")
+            self._file.flush()
+        except (OSError, RuntimeError, ValueError):
+            marked = False
+        finally:
+            self._status = "failed"
+            try:
+                self._file.close()
+            except (OSError, RuntimeError, ValueError):
+                marked = False
+            self._release_lock()
+        lost = self._n_pending
+        end = "the file says 'failed'" if marked else "the file could not be marked and reads as 'crashed'"
+        raise RunFileError(f"{self.path}: {reason}; the run stopped: {n} flushed samples kept, {lost} not "
+                           f"yet flushed lost, {end}")
     def flush(self) -> None:
         """Write every buffered sample (including a partial chunk) and flush the file."""
         self._check_open()
@@ -437,20 +541,19 @@ class RunWriter:
         self._check_open()
         if kind not in EVENT_KINDS:
             raise RunFileError(f"{self.path}: event kind must be one of {EVENT_KINDS}, got {kind!r}")
-        row = np.array(
-            [(
-                self._last_index if sample_index is None else sample_index,
-                self._last_t if t is None else t,
-                time.time(),
-                kind.encode(),
-                _encode_message(str(message)),
-            )],
-            dtype=EVENT_DTYPE,
-        )
+        try:
+            self._add_event_row(kind, message, self._last_index if sample_index is None else sample_index,
+                                self._last_t if t is None else t)
+            self._file.flush()
+        except (OSError, RuntimeError) as exc:
+            self._fail(f"write failed: {_one_line(exc)}")
+
+    def _add_event_row(self, kind: str, message: str, sample_index: int, t: float) -> None:
+        row = np.array([(sample_index, t, time.time(), kind.encode(), _encode_message(str(message)))],
+                       dtype=EVENT_DTYPE)
         self._events.resize((self._n_events + 1,))
         self._events[self._n_events] = row[0]
         self._n_events += 1
-        self._file.flush()
 
     def finish(self, status: str = "completed") -> None:
         """Write what is buffered, set ``end_time`` and ``status`` (``completed`` or ``aborted``), close.
@@ -461,16 +564,16 @@ class RunWriter:
             return
         if status not in FINAL_STATUSES:
             raise RunFileError(f"{self.path}: finish status must be one of {FINAL_STATUSES}, got {status!r}")
+        self._write(whole_chunks_only=False)  # a failure here ends the run 'failed' (and raises)
         try:
-            self._write(whole_chunks_only=False)
             self._file.attrs.modify("end_time", utc_now())
             self._file.attrs.modify("status", status)
             self._file.flush()
-            self._status = status
-        finally:
-            self._file.close()
-            self._release_lock()
-            self._status = status
+        except (OSError, RuntimeError) as exc:
+            self._fail(f"cannot mark the run {status}: {_one_line(exc)}")
+        self._status = status
+        self._file.close()
+        self._release_lock()
 
     def abort(self, message: str = "aborted by operator") -> None:
         """Record an ``abort`` event and finish with status ``aborted``."""
@@ -584,7 +687,16 @@ class Run:
             if required not in self.channels:
                 raise RunFileError(f"{self.path}: sample channel {required!r} is missing")
         self._units = {name: _text(self._samples[name].attrs["unit"]) for name in self.channels}
+        for name in self.channels:
+            self._check_size(f"channel {name!r}", self._samples[name].shape)
+        self._check_size("events", f["events"].shape)
         self.n_samples = min(self._samples[name].shape[0] for name in self.channels)
+
+    def _check_size(self, what: str, shape: tuple[int, ...]) -> None:
+        try:
+            check_size(self.path, what, shape)
+        except AnalysisError as exc:
+            raise RunFileError(str(exc)) from None
 
     def _json(self, name: str) -> dict[str, Any]:
         raw = self._file[name][()]
@@ -682,7 +794,9 @@ class Run:
         if name not in self.protocol_array_names:
             have = ", ".join(self.protocol_array_names)
             raise RunFileError(f"{self.path}: no protocol array {name!r} (has: {have})")
-        return self._file["protocol"][name][()]
+        ds = self._file["protocol"][name]
+        self._check_size(f"protocol array {name!r}", ds.shape)
+        return ds[()]
 
     def refresh(self) -> int:
         """Pick up samples a live writer has flushed since opening; returns the new ``n_samples``."""

@@ -180,6 +180,8 @@ class Firmware:
 
     # ------------------------------------------------------------------ sample production
     def _take(self, n: int) -> np.ndarray:
+        if n <= 0:  # a fault latched with nothing buffered (host gone, or a tick ending on the trip sample)
+            return np.zeros(0)
         parts, need = [], n
         while need:
             head = self._buffer[0]
@@ -213,11 +215,13 @@ class Firmware:
             due = min(self._buffered, 4 * self.max_block)
             expired = cfg.watchdog_timeout > 0 and now - self.last_rx > cfg.watchdog_timeout
             wd = self.index if expired else None
+        # the watchdog runs on every tick: an expired deadline trips even with nothing due or buffered
+        tripped = wd is not None and wd <= self.index
         out: list[p.Message] = []
-        while due > 0 and self.state == p.State.STREAMING:
+        while (due > 0 or tripped) and self.state == p.State.STREAMING:
             n = min(due, self.max_block)
             pending = 0
-            if wd is not None and wd < self.index + n:
+            if wd is not None and wd < self.index + max(n, 1):
                 n, pending = max(0, wd - self.index), p.Fault.WATCHDOG
             if n > self._buffered and not pending:
                 if self._end_seen:

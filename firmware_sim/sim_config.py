@@ -11,7 +11,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from hilbench.firmware_sim.friction_models import dc_motor, paper_system
-from hilbench.firmware_sim.plant import PlantParameterError, PlantParams, stiffest_eigenvalue, validate
+from hilbench.firmware_sim.plant import (
+    MAX_ELEMENTS,
+    PlantParameterError,
+    PlantParams,
+    stiffest_eigenvalue,
+    validate,
+)
+
+IDENTITY_TEXT_BYTES = 255  # model and serial travel in IDENTITY as strings of at most 255 UTF-8 bytes
+MAX_SUBSTEPS = 10_000  # RK4 sub-steps per sample; beyond it one sample costs more than a realtime tick
 
 DEFAULT_PATH = Path(__file__).with_name("default_sim.toml")
 PRESETS = {"dc_motor": dc_motor, "paper_system": paper_system}
@@ -75,6 +84,22 @@ def sim_config_from_dict(data: dict, seed: int | None = None, source: str = "con
                              f"calibration); inject a deviation with torque_constant_error instead")
     if seed is not None:
         plant["seed"] = seed
+    # sizes are checked against their bounds before anything is allocated
+    if isinstance(elements, bool) or not isinstance(elements, int) or not 1 <= elements <= MAX_ELEMENTS:
+        raise SimConfigError(f"{source}: [plant] elements must be a whole number in 1..{MAX_ELEMENTS} "
+                             f"(the plant's limit), got {elements!r}")
+    if isinstance(substeps, bool) or not isinstance(substeps, int) or not 0 <= substeps <= MAX_SUBSTEPS:
+        raise SimConfigError(f"{source}: [plant] substeps must be a whole number in 0..{MAX_SUBSTEPS} "
+                             f"(0 = automatic), got {substeps!r}")
+    capacity = device.get("buffer_capacity", 8192)
+    if isinstance(capacity, bool) or not isinstance(capacity, int) or not 256 <= capacity <= 2**20:
+        raise SimConfigError(f"{source}: buffer_capacity must be a whole number in 256..1048576 samples, "
+                             f"got {capacity!r}")
+    for key in ("model", "serial"):
+        text = device.get(key, "")
+        if not isinstance(text, str) or len(text.encode("utf-8")) > IDENTITY_TEXT_BYTES:
+            raise SimConfigError(f"{source}: [device] {key} must be a string of at most {IDENTITY_TEXT_BYTES} "
+                                 f"UTF-8 bytes (the IDENTITY message's limit)")
     if preset == "none":
         values = plant
     elif preset in PRESETS:
@@ -88,10 +113,5 @@ def sim_config_from_dict(data: dict, seed: int | None = None, source: str = "con
         validate(params, dt, int(substeps) or substeps_for(params, dt))
     except (PlantParameterError, TypeError) as exc:
         raise SimConfigError(f"{source}: bad [plant]: {exc}") from exc
-    capacity = int(device.get("buffer_capacity", 8192))
-    if not 256 <= capacity <= 2**20:
-        raise SimConfigError(f"{source}: buffer_capacity must be 256..1048576 samples, got {capacity}")
-    if int(substeps) < 0:
-        raise SimConfigError(f"{source}: substeps must be >= 0")
     return SimConfig(plant=params, substeps=int(substeps), model=str(device.get("model", "HB-SIM-1")),
                      serial=str(device.get("serial", "SIM-0001")), buffer_capacity=capacity)

@@ -1,0 +1,3 @@
+"""Fixtures of the reliability suite: the drivers' simulator-process starter."""
+
+from tests.drivers.conftest import simulator  # noqa: F401

@@ -1,0 +1,109 @@
+"""#12 items 1 and 2, black box through the wire protocol against the simulator process: a host that stops
+talking mid-stream gets a latched fault and zero current, never a dead device, in either pacing."""
+
+import time
+
+import numpy as np
+import pytest
+
+from hilbench.drivers import protocol as p
+from hilbench.firmware_sim.firmware import Firmware
+from hilbench.firmware_sim.sim_config import sim_config_from_dict
+from tests.reliability.wire import Wire
+
+
+def test_host_gone_with_the_watchdog_off_latches_underrun_and_the_device_lives(simulator):
+    """Item 1: watchdog 0, 1 kHz, the host vanishes mid-stream. A 0.5 ms tick consumes the buffer one
+    sample at a time, so the tick after the last setpoint always finds the buffer exactly empty (the
+    case that crashed with ``need at least one array to concatenate``)."""
+    for trial in range(5):
+        proc, path = simulator(pacing="realtime", tick="0.0005")
+        wire = Wire(path)
+        wire.start_stream(rate=1000, watchdog=0.0, current=0.1, n=300)
+        wire.drain(0.1)
+        wire.close()  # the host is gone: nothing more arrives, nothing is disarmed
+        time.sleep(0.6)  # the 300 setpoints ran out after 0.3 s
+        assert proc.poll() is None, f"trial {trial}: the simulator died: {proc.stderr.read().decode()[-300:]}"
+        wire = Wire(path)
+        wire.request(p.GetIdentity())
+        status = wire.status()
+        wire.close()
+        assert status.faults == p.Fault.BUFFER_UNDERRUN, trial
+        assert status.state == p.State.DISARMED
+        assert status.current_applied == 0.0
+        assert status.fault_index == 300  # the first sample without a setpoint is the zero-current one
+
+
+def test_lockstep_watchdog_trips_with_an_empty_buffer(simulator):
+    """Item 2: lockstep pacing computes setpoints as fast as they come; once the host is gone and the
+    buffer is empty, the watchdog still zeroes the current and latches WATCHDOG."""
+    timeout = 0.2
+    proc, path = simulator(pacing="lockstep")
+    wire = Wire(path)
+    wire.start_stream(rate=1000, watchdog=timeout, current=0.12, n=500)
+    wire.drain(0.05)
+    last = wire.status()
+    assert last.state == p.State.STREAMING and last.current_applied == pytest.approx(0.12, abs=1e-6)
+    wire.close()  # host SIGKILL: no DISARM is ever sent
+    t_gone = time.monotonic()
+    time.sleep(timeout + 0.3)
+    wire = Wire(path)
+    wire.request(p.GetIdentity())
+    status = wire.status()
+    print(f"lockstep: fault {p.describe_faults(status.faults)} at {status.fault_index}, "
+          f"silence {status.fault_silence} samples, checked {time.monotonic() - t_gone:.2f} s after")
+    assert proc.poll() is None
+    assert status.faults == p.Fault.WATCHDOG
+    assert status.state == p.State.DISARMED
+    assert status.current_applied == 0.0
+    assert status.fault_index == 500  # every setpoint ran; the trip sample is the next one
+    # host silence in samples at the trip: the timeout (200 samples) plus at most the device loop's 10 ms wait
+    assert 200 <= status.fault_silence <= 200 + 10 + 5
+    assert wire.request(p.Arm()).result == p.Result.FAULT_LATCHED
+    wire.close()
+
+
+SIM = sim_config_from_dict({"plant": {"elements": 4}})
+
+
+def _armed(pacing: str, watchdog: float) -> Firmware:
+    fw = Firmware(SIM, pacing, max_block=128)
+    cfg = p.Config(sample_rate=1000, current_limit=5.0, watchdog_timeout=watchdog, torque_constant=0.2,
+                   counts_per_rev=4096)
+    assert fw.handle(cfg, 0.0)[0].result == p.Result.OK
+    assert fw.handle(p.Arm(), 0.0)[0].result == p.Result.OK
+    return fw
+
+
+def test_tick_ending_exactly_on_the_trip_sample():
+    """Item 1, watchdog path: the tick computes up to the sample before the trip sample; the next tick has
+    nothing left but the trip itself."""
+    fw = _armed("realtime", 0.1)
+    fw.handle(p.SetpointBlock(0, np.full(128, 0.1, dtype=np.float32)), 0.0)
+    # trip sample = first k with k/1000 > 0 + 0.1 -> 101; advance to t = 0.101 computes samples 0..100
+    fw.advance(0.101)
+    assert fw.index == 101 and fw.state == p.State.STREAMING
+    out = fw.advance(0.1015)  # nothing more due on the clock, but the deadline has passed: trips now
+    blocks = [m for m in out if isinstance(m, p.SampleBlock)]
+    assert fw.faults == p.Fault.WATCHDOG and fw.state == p.State.DISARMED
+    assert blocks[-1].first_index == 101 and blocks[-1].current_cmd[-1] == 0.0
+    assert fw.safety.fault_index == 101
+
+
+def test_underrun_on_an_exactly_empty_buffer_unit():
+    fw = _armed("realtime", 0.0)
+    fw.handle(p.SetpointBlock(0, np.full(100, 0.1, dtype=np.float32)), 0.0)
+    fw.advance(0.1)  # all 100 due and buffered
+    assert fw.index == 100
+    fw.advance(0.2)
+    assert fw.faults == p.Fault.BUFFER_UNDERRUN and fw.safety.fault_index == 100
+
+
+def test_lockstep_watchdog_unit_runs_on_every_tick():
+    fw = _armed("lockstep", 0.2)
+    fw.handle(p.SetpointBlock(0, np.full(50, 0.12, dtype=np.float32)), 0.0)
+    fw.advance(0.0)
+    assert fw.index == 50 and fw.state == p.State.STREAMING and fw.current_applied == pytest.approx(0.12)
+    assert fw.advance(0.19) == []  # buffer empty, deadline not reached
+    fw.advance(0.21)
+    assert fw.faults == p.Fault.WATCHDOG and fw.current_applied == 0.0 and fw.state == p.State.DISARMED
