@@ -33,9 +33,13 @@ from typing import Any
 
 from hilbench.bench.errors import BenchError
 from hilbench.bench.protocols import PROTOCOLS, Protocol, ProtocolError
-from hilbench.bench.runner import Bench, DeviceSettings, Progress, RunControl, settings_dict
+from hilbench.bench.runfile import writer_alive
+from hilbench.bench.runner import Bench, DeviceSettings, Progress, RunControl, SettingsError, settings_dict
+from hilbench.drivers.device_url import check_device_url
+from hilbench.drivers.errors import DeviceURLError
 
 INDEX_NAME = "index.json"
+LOCK_NAME = ".campaign.lock"
 RUN_KEYS = {"name", "protocol", "repeats"}
 GENERAL_KEYS = {"device", "operator", "notes"}
 SETTING_UNITS = {"current_limit": "A", "velocity_limit": "rad/s", "position_min": "rad", "position_max": "rad",
@@ -125,8 +129,14 @@ def load_campaign(path: str | Path) -> Campaign:
                             f"{unknown_top[0]!r} (expected [defaults] and [[run]])")
     defaults = data.get("defaults", {})
     runs = data.get("run", [])
+    if not isinstance(defaults, dict):
+        raise CampaignError(f"{path}:{_line_of(text, 'defaults', None)}: defaults must be a table "
+                            f"([defaults]), got {defaults!r}")
     if not isinstance(runs, list) or not runs:
         raise CampaignError(f"{path}: no [[run]] tables")
+    if not all(isinstance(t, dict) for t in runs):
+        raise CampaignError(f"{path}:{_line_of(text, 'run', None)}: run must be an array of tables "
+                            f"([[run]]), got {runs!r}")
     campaign = Campaign(path)
     names: set[str] = set()
     for i, table in enumerate(runs):
@@ -173,12 +183,20 @@ def load_campaign(path: str | Path) -> Campaign:
             raise fail(bad, str(exc)) from None
         try:
             settings = DeviceSettings(**setting_values)
+        except SettingsError as exc:
+            raise fail(str(exc).split()[0], str(exc)) from None
+        try:
+            protocol.check_memory()
             protocol.excitation(settings.limit_for(protocol))
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, ProtocolError) as exc:
             raise fail("protocol", str(exc)) from None
         device = merged.get("device", "sim://")
         if not isinstance(device, str) or "://" not in device:
             raise fail("device", f"device must be a URL like sim:// or serial:///dev/ttyUSB0, got {device!r}")
+        try:
+            check_device_url(device)
+        except DeviceURLError as exc:
+            raise fail("device", str(exc)) from None
         for r in range(1, repeats + 1):
             campaign.runs.append(PlannedRun(name, r, protocol, settings, device,
                                             str(merged.get("operator", "")), str(merged.get("notes", ""))))
@@ -233,6 +251,35 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, resume: bool = Fals
     complete (the index says so), unless it was skipped on resume."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    lock_fd = _lock_folder(out_dir)  # one campaign per folder: a second --resume is refused
+    try:
+        return _play(campaign, out_dir, resume, progress, control, bench)
+    finally:
+        os.unlink(out_dir / LOCK_NAME)
+        os.close(lock_fd)
+
+
+def _lock_folder(out_dir: Path) -> int:
+    import fcntl
+
+    lock = out_dir / LOCK_NAME
+    try:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK, 0o644)
+    except OSError as exc:
+        raise CampaignError(f"{lock}: cannot use the campaign lock ({exc.strerror}; a symlink is refused)") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = os.pread(fd, 64, 0).decode(errors="replace").strip() or "?"
+        os.close(fd)
+        raise CampaignError(f"{out_dir}: another campaign is playing into this folder (pid {holder}); "
+                            f"wait for it or stop it first") from None
+    os.ftruncate(fd, 0)
+    os.write(fd, f"{os.getpid()}\n".encode())
+    return fd
+
+
+def _play(campaign: Campaign, out_dir: Path, resume: bool, progress, control, bench) -> dict[str, dict]:
     entries = read_index(out_dir)
     if entries and not resume:
         raise CampaignError(f"{out_dir}: holds a campaign already; use --resume or another folder")
@@ -243,6 +290,8 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, resume: bool = Fals
         for i, planned in enumerate(campaign.runs):
             path = out_dir / f"{planned.key}.h5"
             if path.exists():
+                if writer_alive(path):
+                    raise CampaignError(f"{path}: a live process is still writing this run; not touching it")
                 status = _file_status(path)
                 if status == "completed" and planned.key in entries:
                     if progress:

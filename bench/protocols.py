@@ -19,6 +19,13 @@ from hilbench.bench.errors import BenchError
 
 SAMPLE_RATES = (1000, 2000, 5000, 10000, 20000)
 MODES = ("current", "velocity")
+#: The longest protocol, samples: 1 h at 20 kHz (every protocol's longest duration). Checked from the
+#: parameters alone, before any array is allocated.
+MAX_PROTOCOL_SAMPLES = 72_000_000
+#: Peak memory of building a protocol's excitation plus the runner's copies, bytes per sample (measured
+#: with tracemalloc on 500 000 samples: identification's zero-phase filter 128, a chirp 24, a stepped sine
+#: 32; plus 12 for the runner's float64 setpoints and float32 wire copy).
+PEAK_BYTES_PER_SAMPLE = {"identification": 140, "chirp": 36, "stepped_sine": 44}
 
 
 class ProtocolError(BenchError):
@@ -102,6 +109,33 @@ class Protocol:
             rates = ", ".join(map(str, SAMPLE_RATES))
             raise ProtocolError(f"sample_rate {self.sample_rate} Hz is not one of {rates} Hz")  # type: ignore
         self._check()
+        n = self.n_samples
+        if n > MAX_PROTOCOL_SAMPLES:
+            raise ProtocolError(f"{self.name} would play {n} samples ({n / self.sample_rate:.6g} s at "  # type: ignore
+                                f"{self.sample_rate} Hz, about {_gib(self.memory_bytes)} of memory), above the "  # type: ignore
+                                f"bound of {MAX_PROTOCOL_SAMPLES} samples (MAX_PROTOCOL_SAMPLES, 1 h at 20 kHz)")
+
+    @property
+    def n_samples(self) -> int:
+        """Samples the protocol plays, from its parameters alone (nothing is allocated)."""
+        return int(round(self.duration_parameter * self.sample_rate))  # type: ignore[attr-defined]
+
+    @property
+    def duration_parameter(self) -> float:
+        return float(self.duration)  # type: ignore[attr-defined]
+
+    @property
+    def memory_bytes(self) -> int:
+        """Peak memory a run of this protocol needs for its setpoints, bytes (see PEAK_BYTES_PER_SAMPLE)."""
+        return self.n_samples * PEAK_BYTES_PER_SAMPLE[self.name]
+
+    def check_memory(self, available: int | None = None) -> None:
+        """Raise :class:`ProtocolError` if :attr:`memory_bytes` exceeds the memory available now (bytes,
+        ``MemAvailable`` of /proc/meminfo unless given)."""
+        available = available_memory() if available is None else available
+        if available is not None and self.memory_bytes > available:
+            raise ProtocolError(f"{self.name} needs about {_gib(self.memory_bytes)} of memory for "
+                                f"{self.n_samples} samples; only {_gib(available)} is available")
 
     def _check(self) -> None:
         """Cross-field checks of a subclass."""
@@ -138,7 +172,24 @@ class Protocol:
 
     @property
     def duration(self) -> float:
-        return self.excitation().u.size / self.sample_rate  # type: ignore[attr-defined]
+        """Length of the run, s (samples / sample rate)."""
+        return self.n_samples / self.sample_rate  # type: ignore[attr-defined]
+
+
+def _gib(n: int) -> str:
+    return f"{n / 2**30:.3g} GiB"
+
+
+def available_memory() -> int | None:
+    """Memory available to a new allocation, bytes (``MemAvailable``; None where the system does not say)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
 
 
 @dataclass(frozen=True)
@@ -233,6 +284,13 @@ class SteppedSine(Protocol):
     def segments(self, limit: float | None = None) -> list[tuple[int, int]]:
         w = self.excitation(limit).windows
         return [(int(r["settle_start"]), int(r["measure_stop"])) for r in w]
+
+    @property
+    def n_samples(self) -> int:
+        # the count excitations.stepped_sine plays: g-period blocks of round(g*fs/f) samples
+        g = math.gcd(self.settle_periods, self.measure_periods)
+        per_amplitude = sum(max(1, int(round(g * self.sample_rate / f))) for f in self.frequencies)
+        return (self.settle_periods // g + self.measure_periods // g) * per_amplitude * len(self.amplitudes)
 
 
 PROTOCOLS: dict[str, type[Protocol]] = {p.name: p for p in (Identification, Chirp, SteppedSine)}

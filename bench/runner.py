@@ -11,10 +11,12 @@ happens (an exception, Ctrl-C, an abort, a device fault), shutdown zeroes the cu
 from __future__ import annotations
 
 import math
+import signal
 import threading
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -22,7 +24,7 @@ import numpy as np
 
 from hilbench.bench.errors import BenchError
 from hilbench.bench.protocols import Protocol
-from hilbench.bench.runfile import DEVICE_CHANNELS, RunWriter
+from hilbench.bench.runfile import DEVICE_CHANNELS, RunFileError, RunWriter
 from hilbench.drivers import protocol as wire
 from hilbench.drivers.amplifier import Amplifier
 from hilbench.drivers.device_url import open_device
@@ -33,9 +35,31 @@ DEFAULT_TORQUE_CONSTANT = 0.2  # N*m/A
 DEFAULT_COUNTS_PER_REV = 1 << 20
 
 
+#: Ranges of the device settings: (low, high, unit); a value outside is refused before anything moves.
+#: The highs are far beyond any bench this drives, there only to catch typos (1e9 A) and overflow.
+SETTING_RANGES: dict[str, tuple[float, float, str]] = {
+    "current_limit": (0.0, 1000.0, "A"),
+    "velocity_limit": (0.0, 1e5, "rad/s"),
+    "position_min": (-math.inf, math.inf, "rad"),
+    "position_max": (-math.inf, math.inf, "rad"),
+    "watchdog_timeout": (0.0, 60.0, "s"),
+    "torque_constant": (0.0, 100.0, "N*m/A"),
+    "counts_per_rev": (1, 2**32 - 1, "counts"),
+    "ratio": (0.0, 1e6, "1"),
+}
+
+
+class SettingsError(BenchError, ValueError):
+    """A device setting of the wrong type or out of its range (the message starts with its name)."""
+
+
 @dataclass(frozen=True)
 class DeviceSettings:
-    """Limits and calibration sent to the device with every run (units at the motor shaft)."""
+    """Limits and calibration sent to the device with every run (units at the motor shaft).
+
+    Every field is checked on construction against :data:`SETTING_RANGES` (:class:`SettingsError`):
+    numbers only, limits and calibration > 0, the watchdog >= 0 (0 = off), ``counts_per_rev`` a whole
+    number, a position window with ``position_min < position_max`` (infinite ends allowed)."""
 
     current_limit: float = 20.0          # A
     velocity_limit: float = 300.0        # rad/s
@@ -45,6 +69,30 @@ class DeviceSettings:
     torque_constant: float = DEFAULT_TORQUE_CONSTANT  # N*m/A
     counts_per_rev: int = DEFAULT_COUNTS_PER_REV
     ratio: float = 1.0                   # motor revolutions per load revolution
+
+    def __post_init__(self) -> None:
+        for name, (low, high, unit) in SETTING_RANGES.items():
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+                raise SettingsError(f"{name} must be a number in {unit}, got {value!r}")
+            if name == "counts_per_rev":
+                if int(value) != value:
+                    raise SettingsError(f"counts_per_rev must be a whole number of counts, got {value!r}")
+                object.__setattr__(self, name, int(value))
+            else:
+                object.__setattr__(self, name, float(value))
+            value = getattr(self, name)
+            infinite_ok = name.startswith("position")
+            strict = name not in ("watchdog_timeout",) and not infinite_ok
+            bad = math.isnan(value) or (not infinite_ok and not math.isfinite(value)) or value > high \
+                or value < low or (strict and value <= low)
+            if bad:
+                rel = ">" if strict else ">="
+                raise SettingsError(f"{name} = {value!r} {unit} is out of range: it must be {rel} {low:g} and "
+                                    f"<= {high:g} {unit}")
+        if not self.position_min < self.position_max:
+            raise SettingsError(f"position_min ({self.position_min} rad) must be below position_max "
+                                f"({self.position_max} rad)")
 
     def config(self, protocol: Protocol) -> wire.Config:
         mode = wire.Mode.CURRENT if protocol.mode == "current" else wire.Mode.VELOCITY  # type: ignore
@@ -156,6 +204,7 @@ class Bench:
         :class:`AbortRun` and Ctrl-C are turned into an ``aborted`` result (Ctrl-C is re-raised).
         """
         control = control or RunControl()
+        protocol.check_memory()
         limit = self.settings.limit_for(protocol)
         excitation = protocol.excitation(limit)
         segments = protocol.segments(limit)
@@ -187,9 +236,11 @@ class Bench:
         except AbortRun as exc:
             message = str(exc)
             writer.add_event("abort", message)
-        except KeyboardInterrupt:
-            message = "interrupted (Ctrl-C)"
+        except KeyboardInterrupt as exc:
+            message = f"interrupted ({exc or 'Ctrl-C'})"
             writer.add_event("abort", message)
+            raise
+        except RunFileError:  # the writer failed (disk full): it has recorded why and marked the run failed
             raise
         except DeviceFaultError as exc:
             message = str(exc)
@@ -197,7 +248,8 @@ class Bench:
             raise
         except BaseException as exc:
             message = " ".join(str(exc).split()) or type(exc).__name__
-            writer.add_event("error", message)
+            if writer.status == "running":
+                writer.add_event("error", message)
             raise
         finally:
             # -- shutdown: always zero the current and disarm, then finish the file
@@ -246,6 +298,26 @@ class Bench:
                 if control.aborted:
                     raise AbortRun(f"aborted by operator after {done} of {total} samples")
         return done
+
+
+@contextmanager
+def signals_as_interrupt(signums: tuple[int, ...] = (signal.SIGTERM, signal.SIGHUP)) -> Iterator[None]:
+    """While active, SIGTERM and SIGHUP end a run the way Ctrl-C does: a KeyboardInterrupt naming the
+    signal, so shutdown zeroes the current, disarms and finishes the file ``aborted``. Main thread only
+    (elsewhere Python cannot take signals, and this does nothing)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    previous = {s: signal.signal(s, interrupt) for s in signums}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
 
 def settings_dict(settings: DeviceSettings) -> dict:

@@ -148,6 +148,11 @@ class Amplifier:
             if self.identity.protocol_version != p.PROTOCOL_VERSION:
                 raise DriverError(f"device speaks protocol {self.identity.protocol_version}, "
                                   f"this host {p.PROTOCOL_VERSION}")
+            ident = self.identity
+            if ident.max_block < 1 or ident.buffer_capacity < ident.max_block:
+                # a block of 0 setpoints would make stream() send empty blocks forever
+                raise DriverError(f"device reports max_block={ident.max_block} and buffer_capacity="
+                                  f"{ident.buffer_capacity} samples; it needs 1 <= max_block <= buffer_capacity")
             reply = self._request(p.GetConfig(), (p.MsgType.CONFIG, p.MsgType.REPLY))
             if isinstance(reply, p.Config):
                 self._set_config(reply)

@@ -1,7 +1,7 @@
 """``open_device(url)``: an :class:`Amplifier` from a device URL.
 
-- ``serial:///dev/ttyUSB0?baud=2000000`` -- any pyserial port or URL after ``serial://``
-  (``serial://socket://host:7777``, ``serial://loop://``);
+- ``serial:///dev/ttyUSB0?baud=2000000`` -- any local pyserial port or URL after ``serial://``
+  (``serial://loop://``), opened exclusively; network ports (``socket://``, ``rfc2217://``) are refused;
 - ``can://INTERFACE/CHANNEL?node=1&fd=1&bitrate=1000000`` -- any python-can interface
   (``can://socketcan/can0``, ``can://virtual/bench0``, ``can://pcan/PCAN_USBBUS1``);
 - ``sim://?pacing=lockstep&config=sim.toml&seed=3&tick=0.004`` -- starts the simulated amplifier as a
@@ -40,16 +40,46 @@ def _int(params: dict[str, str], key: str, default: int, url: str) -> int:
         raise DeviceURLError(f"{url}: {key} must be an integer, got {params[key]!r}") from None
 
 
-def open_device(url: str, timeout: float = 2.0) -> Amplifier:
-    """Connect to the device at ``url`` (see the module doc) and return its :class:`Amplifier`."""
+#: pyserial URL schemes that reach a port over the network. Refused: a network port cannot be opened
+#: exclusively (one owner per device), and its latency is unbounded against the device watchdog.
+NETWORK_SERIAL_SCHEMES = ("socket", "rfc2217")
+
+
+def check_device_url(url: str) -> None:
+    """Raise :class:`DeviceURLError` for a URL :func:`open_device` would refuse, without opening anything."""
     scheme, sep, rest = url.partition("://")
     if not sep:
         raise DeviceURLError(f"{url!r} is not a device URL (serial://..., can://..., sim://...)")
     if scheme == "serial":
         port, _, query = rest.rpartition("?") if "?" in rest else (rest, "", "")
-        params = _query(query, {"baud"}, url)
+        _int(_query(query, {"baud"}, url), "baud", 2_000_000, url)
         if not port:
             raise DeviceURLError(f"{url}: no serial port given")
+        inner = port.partition("://")[0].lower() if "://" in port else ""
+        if inner in NETWORK_SERIAL_SCHEMES:
+            raise DeviceURLError(f"{url}: network serial ports ({', '.join(s + '://' for s in NETWORK_SERIAL_SCHEMES)}"
+                                 f") are refused: they cannot be owned exclusively and their latency is "
+                                 f"unbounded against the watchdog; use a local port")
+    elif scheme == "can":
+        parts = urlsplit(url)
+        params = _query(parts.query, {"node", "fd", "bitrate"}, url)
+        _int(params, "node", 1, url)
+        _int(params, "bitrate", 0, url)
+        if not parts.netloc or not parts.path.lstrip("/"):
+            raise DeviceURLError(f"{url}: expected can://INTERFACE/CHANNEL")
+    elif scheme == "sim":
+        _query(urlsplit(url).query, {"pacing", "config", "seed", "tick"}, url)
+    else:
+        raise DeviceURLError(f"{url}: unknown scheme {scheme!r} (serial, can or sim)")
+
+
+def open_device(url: str, timeout: float = 2.0) -> Amplifier:
+    """Connect to the device at ``url`` (see the module doc) and return its :class:`Amplifier`."""
+    check_device_url(url)
+    scheme, sep, rest = url.partition("://")
+    if scheme == "serial":
+        port, _, query = rest.rpartition("?") if "?" in rest else (rest, "", "")
+        params = _query(query, {"baud"}, url)
         return Amplifier(SerialLink(port, _int(params, "baud", 2_000_000, url)), timeout=timeout)
     if scheme == "can":
         parts = urlsplit(url)

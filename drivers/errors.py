@@ -13,6 +13,10 @@ class LinkClosedError(DriverError):
     """The link went away (port closed, device unplugged, simulator exited)."""
 
 
+class PortBusyError(LinkClosedError):
+    """The device port is owned by another program (opened exclusively); nothing was sent to the device."""
+
+
 class DeviceTimeoutError(DriverError, TimeoutError):
     """The device did not answer within the timeout."""
 

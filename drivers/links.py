@@ -1,7 +1,7 @@
 """Links carry protocol messages: ``send(msg)`` and ``recv(timeout) -> Message | None`` (None on timeout).
 
 :class:`SerialLink` frames with COBS+CRC over any pyserial port or URL (``/dev/ttyUSB0``, ``loop://``,
-``socket://host:port``, ``rfc2217://...``). :class:`CanLink` maps messages onto CAN frames over any
+``socket://host:port``, ``rfc2217://...``), opened exclusively. :class:`CanLink` maps messages onto CAN frames over any
 python-can interface (socketcan, pcan, kvaser, vector, virtual...). A link is used by one receiving thread;
 ``send`` may be called from several threads if the caller serialises it (the Amplifier holds a lock).
 """
@@ -16,7 +16,7 @@ from typing import Protocol
 import serial
 
 from hilbench.drivers import protocol as p
-from hilbench.drivers.errors import LinkClosedError
+from hilbench.drivers.errors import LinkClosedError, PortBusyError
 
 
 class Link(Protocol):
@@ -43,8 +43,14 @@ class SerialLink:
     def __init__(self, url: str = "", baudrate: int = 2_000_000, *, port=None) -> None:
         if port is None:
             try:
-                port = serial.serial_for_url(url, baudrate=baudrate, timeout=0, write_timeout=5.0)
+                # exclusive: one owner per device port; a second program is refused here, before it could
+                # send anything (closing an Amplifier disarms, which would end the owner's run)
+                port = serial.serial_for_url(url, baudrate=baudrate, timeout=0, write_timeout=5.0,
+                                             exclusive=True)
             except (serial.SerialException, ValueError) as exc:
+                if "exclusively lock" in str(exc):
+                    raise PortBusyError(f"serial port {url!r} is in use by another program (one owner per "
+                                        f"device port); stop it first") from None
                 raise LinkClosedError(f"cannot open serial port {url!r}: {exc}") from exc
         self._port = port
         self._decoder = p.FrameDecoder()

@@ -86,17 +86,18 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from hilbench.bench.progress import ProgressBar
-    from hilbench.bench.runner import Bench
+    from hilbench.bench.runner import Bench, signals_as_interrupt
 
     protocol = protocol_from_args(args.protocol_class, args)
     settings = settings_from_args(args)
-    with Bench.open(args.device, settings) as bench, ProgressBar(disable=args.quiet) as bar:
+    with signals_as_interrupt(), Bench.open(args.device, settings) as bench, \
+            ProgressBar(disable=args.quiet) as bar:
         try:
             result = bench.run(protocol, args.out, operator=args.operator, notes=args.notes,
                                progress=bar.update, overwrite=args.overwrite)
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:
             bar.close()
-            print("hilbench run: interrupted; device disarmed, run file marked aborted")
+            print(f"hilbench run: interrupted ({exc or 'Ctrl-C'}); device disarmed, run file marked aborted")
             return 130
     print(f"{result.status}: {result.path} ({result.samples} samples, uid {result.uid})")
     return 0 if result.status == "completed" else 1
