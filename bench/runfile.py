@@ -23,6 +23,7 @@ import json
 import math
 import os
 import re
+import shutil
 import socket
 import stat
 import sys
@@ -609,7 +610,9 @@ def _text(value: Any) -> str:
 
 
 def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split())
+    text = " ".join(str(exc).split())
+    m = re.search(r"errno = (\d+), error message = '([^']*)'", text)  # HDF5's long I/O failure report
+    return f"{m.group(2)} (errno {m.group(1)})" if m else text
 
 
 def _open_h5(path: str, mode: str = "r") -> h5py.File:
@@ -953,21 +956,42 @@ def repair(path: str | os.PathLike) -> str:
             return "running"
         raise RunFileError(f"{path}: a live process holds the writer lock; not repairing")
     mtime = datetime.fromtimestamp(os.path.getmtime(path), UTC).isoformat(timespec="microseconds")
-    try:
-        clear_write_flags(path)
-    except OSError as exc:
-        raise RunFileError(f"{path}: cannot repair: {_one_line(exc)}") from None
-    if stored == "running":
+    if stored == "running" or _write_flags_set(path):
+        # repaired on a copy that replaces the file by an atomic rename once complete: a failure (a full
+        # disk) leaves the file as it was, and HDF5 never writes into a file it cannot finish
+        head, tail = os.path.split(path)
+        tmp = os.path.join(head, f".{tail}.{uuid.uuid4().hex[:12]}.repair")
         try:
-            _mark_crashed(path, n, last_index, last_t, mtime)
+            size = os.path.getsize(path)
+            free = os.statvfs(head or ".").f_bavail * os.statvfs(head or ".").f_frsize
+            if free < size + RESERVE_BYTES:
+                raise RunFileError(f"{path}: cannot repair: it needs {size + RESERVE_BYTES} bytes free beside "
+                                   f"the file (a copy plus {RESERVE_BYTES}), {free} are; the file is unchanged")
+            shutil.copyfile(path, tmp)
+            clear_write_flags(tmp)
+            if stored == "running":
+                _mark_crashed(tmp, n, last_index, last_t, mtime)
+            with open(tmp, "rb") as fh:
+                os.fsync(fh.fileno())
+            os.replace(tmp, path)
         except (OSError, RuntimeError, KeyError, ValueError) as exc:
-            raise RunFileError(f"{path}: cannot mark the run crashed: {_one_line(exc)}") from None
-        stored = "crashed"
+            raise RunFileError(f"{path}: cannot repair: {_one_line(exc)}; the file is unchanged") from None
+        finally:
+            if os.path.lexists(tmp):
+                os.unlink(tmp)
+        if stored == "running":
+            stored = "crashed"
     try:
         os.unlink(lock_path(path))
     except FileNotFoundError:
         pass
     return stored
+
+
+def _write_flags_set(path: str) -> bool:
+    with open(path, "rb") as fh:
+        _, block = _superblock(fh, path)
+    return bool(block) and block[11] != 0
 
 
 def _mark_crashed(path: str, n: int, last_index: int, last_t: float, end_time: str) -> None:

@@ -70,9 +70,15 @@ def main(argv: list[str] | None = None, prog: str = "python -m hilbench.firmware
         else:
             import can
 
+            if args.interface not in can.VALID_INTERFACES:
+                raise ValueError(f"--interface {args.interface!r} is not a python-can interface (known: "
+                                 f"{', '.join(sorted(can.VALID_INTERFACES))})")
+            if not 1 <= args.node <= 15:
+                raise ValueError(f"--node must be 1..15, got {args.node}")
+
             bus = can.Bus(interface=args.interface, channel=args.can, fd=args.fd)
             transport = CanTransport(bus, args.node, args.fd)
-    except (ValueError, OSError, ImportError) as exc:
+    except (ValueError, OSError, ImportError, RuntimeError) as exc:  # RuntimeError: python-can's CanError
         print(f"{prog}: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2
     firmware = Firmware(sim, args.pacing, transport.max_block)

@@ -21,12 +21,16 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from hilbench.bench.campaign import load_campaign, run_campaign
     from hilbench.bench.progress import ProgressBar
+    from hilbench.bench.runner import signals_as_interrupt
 
-    campaign = load_campaign(args.file)
+    campaign = load_campaign(args.file)  # checks every run's memory against what is available now
     if args.check:
         for r in campaign.runs:
-            print(f"{r.key}: {r.protocol.name} {r.protocol.duration:.1f} s on {r.device}")
-        print(f"{len(campaign.runs)} runs, {sum(r.protocol.duration for r in campaign.runs):.1f} s of device time")
+            print(f"{r.key}: {r.protocol.name} {r.protocol.duration:.1f} s ({r.protocol.n_samples} samples, "
+                  f"{r.protocol.memory_bytes / 2**20:.1f} MiB peak) on {r.device}")
+        peak = max(r.protocol.memory_bytes for r in campaign.runs)
+        print(f"{len(campaign.runs)} runs, {sum(r.protocol.duration for r in campaign.runs):.1f} s of device time, "
+              f"peak memory {peak / 2**20:.1f} MiB")
         return 0
     out = args.out or args.file.with_suffix("")
     bars: dict[str, ProgressBar] = {}
@@ -42,11 +46,12 @@ def run(args: argparse.Namespace) -> int:
             print(f"[{ev.index + 1}/{ev.total}] {ev.key}: {ev.state}")
 
     try:
-        entries = run_campaign(campaign, out, resume=args.resume, progress=show)
-    except KeyboardInterrupt:
+        with signals_as_interrupt():
+            entries = run_campaign(campaign, out, resume=args.resume, progress=show)
+    except KeyboardInterrupt as exc:
         for bar in bars.values():
             bar.close()
-        print("hilbench campaign: interrupted; device disarmed. Continue with --resume.")
+        print(f"hilbench campaign: interrupted ({exc or 'Ctrl-C'}); device disarmed. Continue with --resume.")
         return 130
     done = sum(e["status"] == "completed" for e in entries.values())
     print(f"{done}/{len(campaign.runs)} runs completed; index: {out / 'index.json'}")

@@ -41,6 +41,18 @@ def firmware_argv(args) -> list[str]:
 def run(args) -> int:
     if args.config is not None and not os.path.isfile(args.config):
         raise ValueError(f"simulator config {args.config} does not exist")
+    if args.config is not None:  # a bad file is one line here, not a traceback in the simulator later
+        from hilbench.firmware_sim.sim_config import load_sim_config
+
+        load_sim_config(args.config, seed=args.seed)
+    if args.can is not None:
+        import can
+
+        if args.interface not in can.VALID_INTERFACES:
+            raise ValueError(f"--interface {args.interface!r} is not a python-can interface (known: "
+                             f"{', '.join(sorted(can.VALID_INTERFACES))})")
+        if not 1 <= args.node <= 15:
+            raise ValueError(f"--node must be 1..15, got {args.node}")
     sys.stdout.flush()
     os.execv(sys.executable, firmware_argv(args))
     return 0  # not reached
