@@ -1,0 +1,63 @@
+"""#12 item 5 (one owner per device port), item 12 (SIGTERM/SIGHUP like Ctrl-C; ``hilbench fault``)."""
+
+import signal
+
+import pytest
+
+from hilbench.bench.runfile import lock_path, open_run
+from hilbench.drivers import protocol as p
+from tests.reliability.cli import hilbench, one_line_error, start, wait_for_samples
+from tests.reliability.wire import Wire
+
+
+def test_a_second_program_on_the_port_is_refused_and_the_run_completes(simulator, tmp_path):
+    _, pty = simulator(pacing="realtime")
+    out = tmp_path / "run.h5"
+    run = start("run", "identify", "--device", f"serial://{pty}", "--sample-rate", "1000", "--duration", "8",
+                "--quiet", "-o", out)
+    wait_for_samples(out, 1000)
+    for args in (["info"], ["fault", "clear"], ["run", "chirp", "--duration", "1", "-o", tmp_path / "b.h5"]):
+        line = one_line_error(hilbench(*args, "--device", f"serial://{pty}"))
+        assert "in use by another program" in line, line
+    stdout, stderr = run.communicate(timeout=60)
+    assert run.returncode == 0, stderr
+    with open_run(out) as r:
+        assert r.status == "completed" and r.n_samples == 8000
+        assert [e for e in r.events if e["kind"] in ("abort", "fault")] == []
+    assert hilbench("info", "--device", f"serial://{pty}").returncode == 0  # free again
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
+def test_sigterm_and_sighup_end_a_run_like_ctrl_c(tmp_path, signum):
+    out = tmp_path / "run.h5"
+    run = start("run", "identify", "--device", "sim://", "--sample-rate", "1000", "--duration", "30", "--quiet",
+                "-o", out)
+    wait_for_samples(out, 1000)
+    run.send_signal(signum)
+    stdout, stderr = run.communicate(timeout=30)
+    name = signal.Signals(signum).name
+    assert run.returncode == 130, stderr
+    assert f"interrupted ({name}); device disarmed" in stdout
+    with open_run(out) as r:
+        assert r.status == "aborted" and 1000 <= r.n_samples < 30000
+        assert r.events["kind"][-1] == "abort" and name in r.events["message"][-1]
+    assert not (tmp_path / lock_path("run.h5")).exists()
+
+
+def test_fault_show_and_clear(simulator):
+    _, pty = simulator(pacing="lockstep")
+    wire = Wire(pty)
+    wire.request(p.GetIdentity())
+    wire.request(p.Config(sample_rate=1000, current_limit=3.0, torque_constant=0.2, counts_per_rev=4096))
+    assert wire.request(p.EStop()).result == p.Result.OK
+    wire.close()
+    shown = hilbench("fault", "show", "--device", f"serial://{pty}")
+    assert shown.returncode == 0 and shown.stdout.startswith("faults: ESTOP"), shown
+    cleared = hilbench("fault", "clear", "--device", f"serial://{pty}")
+    assert cleared.returncode == 0, cleared.stderr
+    assert cleared.stdout.splitlines() == ["faults: ESTOP (first at sample 0)", "cleared; faults now: none"]
+    wire = Wire(pty)
+    wire.request(p.GetIdentity())
+    assert wire.status().faults == 0
+    assert wire.request(p.Arm()).result == p.Result.OK
+    wire.close()
