@@ -19,6 +19,7 @@ while nobody holds the lock is a crashed run. :func:`repair` marks it ``crashed`
 
 from __future__ import annotations
 
+import glob
 import json
 import math
 import os
@@ -253,6 +254,12 @@ class RunWriter:
         self._status = "running"
         self._lock_fd: int | None = None
 
+        for name, text in (("operator", operator), ("notes", notes), ("source", source),
+                           ("protocol_name", protocol_name)):
+            try:
+                str(text).encode("utf-8")
+            except UnicodeEncodeError:
+                raise RunFileError(f"{self.path}: {name} is not valid UTF-8 text") from None
         if os.path.lexists(self.path) and not overwrite:
             raise RunFileError(f"{self.path}: file exists (choose another name or allow overwrite)")
         if os.path.isdir(self.path):
@@ -263,6 +270,8 @@ class RunWriter:
         # destroyed before a readable new one replaces it, and a kill at any moment leaves either nothing
         # new at the path or a repairable run. The protocol arrays (possibly long) are written after that.
         head, tail = os.path.split(self.path)
+        for stale in glob.glob(os.path.join(glob.escape(head or "."), f".{glob.escape(tail)}.*.partial")):
+            os.unlink(stale)  # left by a writer of this path killed while creating it (we hold its lock)
         self._tmp_path = os.path.join(head, f".{tail}.{uuid.uuid4().hex[:12]}.partial")
         self._file = None
         try:
