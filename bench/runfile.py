@@ -51,6 +51,9 @@ STATUSES = ("running", "completed", "aborted", "failed", "crashed")
 #: Bytes kept in the lock file while a writer runs, given back when a write fails so that the writer can
 #: still roll the file back and mark it ``failed`` on a full disk (HDF5 needs a few KiB of metadata for it).
 RESERVE_BYTES = 1 << 18
+#: The largest chunk, samples: the writer buffers one chunk per channel (``flush_interval`` of device time,
+#: capped here so that an absurd sample rate cannot ask for absurd memory).
+MAX_CHUNK = 1 << 20
 EVENT_KINDS = ("fault", "pause", "resume", "abort", "error", "info", "crash")
 EVENT_MESSAGE_BYTES = 256
 
@@ -159,6 +162,16 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
 
 
+def _check_text(path: str, name: str, text: Any) -> None:
+    """Text stored as an HDF5 string attribute: valid UTF-8 (no lone surrogates) and no NUL character."""
+    try:
+        str(text).encode("utf-8")
+    except UnicodeEncodeError:
+        raise RunFileError(f"{path}: {name} is not valid UTF-8 text") from None
+    if "\0" in str(text):
+        raise RunFileError(f"{path}: {name} contains a NUL character")
+
+
 def _encode_message(message: str) -> bytes:
     raw = message.encode("utf-8")[:EVENT_MESSAGE_BYTES]
     return raw.decode("utf-8", errors="ignore").encode("utf-8")  # never cut a character in half
@@ -186,7 +199,8 @@ class RunWriter:
         protocol_arrays: arrays stored under ``/protocol`` (e.g. a stepped sine's ``step_windows``).
         operator, notes: free text.
         source: ``"device"`` for a measured run, ``"import:<format>"`` for imported data.
-        flush_interval: largest span of device time (s) kept only in memory; chunks hold this many seconds.
+        flush_interval: largest span of device time (s) kept only in memory; chunks hold this many seconds
+            (at most :data:`MAX_CHUNK` samples).
         compression: ``"lzf"`` (fast; h5py's built-in filter), ``"gzip"`` (level 1; readable by every HDF5
             tool, about 2x slower) or ``None``; always with the shuffle filter.
         start_time: ISO 8601 UTC start time (default: now).
@@ -243,7 +257,8 @@ class RunWriter:
         if missing:
             raise RunFileError(f"{self.path}: channels must include {', '.join(missing)}")
         self.channels = tuple(self.units)
-        self.chunk = max(1, int(flush_interval * self.sample_rate))
+        # at most MAX_CHUNK samples (8 MiB of float64 per channel) held in memory, whatever the rate
+        self.chunk = max(1, min(MAX_CHUNK, int(flush_interval * self.sample_rate)))
         self.flush_interval = float(flush_interval)
         self._pending: dict[str, list[np.ndarray]] = {c: [] for c in self.channels}
         self._n_pending = 0
@@ -255,11 +270,9 @@ class RunWriter:
         self._lock_fd: int | None = None
 
         for name, text in (("operator", operator), ("notes", notes), ("source", source),
-                           ("protocol_name", protocol_name)):
-            try:
-                str(text).encode("utf-8")
-            except UnicodeEncodeError:
-                raise RunFileError(f"{self.path}: {name} is not valid UTF-8 text") from None
+                           ("protocol_name", protocol_name), *((f"unit of {k!r}", u) for k, u in
+                                                               (custom_channels or {}).items())):
+            _check_text(self.path, name, text)
         if os.path.lexists(self.path) and not overwrite:
             raise RunFileError(f"{self.path}: file exists (choose another name or allow overwrite)")
         if os.path.isdir(self.path):
@@ -461,7 +474,7 @@ class RunWriter:
         arrays = {}
         n = None
         for name in self.channels:
-            a = np.array(block[name], dtype=self._dtypes[name], copy=True, ndmin=1)
+            a = self._as_channel(name, block[name])
             if a.ndim != 1 or (n is not None and a.size != n):
                 raise RunFileError(f"{self.path}: block channel {name!r} must be 1-D, as long as the others")
             n = a.size
@@ -475,6 +488,25 @@ class RunWriter:
         self._last_index = int(arrays["sample_index"][-1])
         if self._n_pending >= self.chunk:
             self._write(whole_chunks_only=True)
+
+    def _as_channel(self, name: str, value: Any) -> np.ndarray:
+        """``value`` as the channel's dtype, refusing what the cast would change silently: text, complex
+        values (the imaginary part), non-integral or non-finite values in an integer channel, overflow."""
+        dtype = self._dtypes[name]
+        try:
+            raw = np.asarray(value)
+            if raw.dtype.kind not in "biuf":
+                raise TypeError(f"{raw.dtype} values")
+            if dtype.kind == "i" and raw.dtype.kind in "uf":
+                info = np.iinfo(dtype)
+                exact = np.isfinite(raw) & (raw == np.round(raw)) & (raw >= info.min) & (raw <= info.max) \
+                    if raw.dtype.kind == "f" else raw <= info.max
+                if not np.all(exact):
+                    raise ValueError("values that are not whole numbers within int64")
+            return np.array(raw, dtype=dtype, copy=True, ndmin=1)
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise RunFileError(f"{self.path}: block channel {name!r} must hold real numbers "
+                               f"({dtype.name}); got {_one_line(exc)}") from None
 
     def _write(self, whole_chunks_only: bool) -> None:
         n_write = self._n_pending - self._n_pending % self.chunk if whole_chunks_only else self._n_pending
