@@ -52,14 +52,14 @@ def check_file(path: Path, killed: bool) -> dict[str, int]:
         return out
     out["samples"] = n
     steps = np.diff(np.concatenate([[-1], index]))
-    out["lost"] += int(np.sum(steps[steps > 1] - 1))
     repeated = int(np.sum(steps < 1))
+    # lost: device samples missing from the file, within what it holds (all the setpoints once completed)
+    expected = setpoints.size if status == "completed" else (int(index.max()) + 1 if n else 0)
+    out["lost"] += int(np.setdiff1d(np.arange(expected), index).size)
     m = min(n, setpoints.size)
     wrong = int(np.sum(cmd[:m] != setpoints[index[:m].clip(0, setpoints.size - 1)]))
     beyond = max(0, n - setpoints.size)
     out["invented"] += repeated + wrong + beyond
-    if status == "completed" and n != setpoints.size:
-        out["lost"] += max(0, setpoints.size - n)
     if killed and status != "crashed":
         out["unreadable"] += 1  # a killed run must say so
     return out
