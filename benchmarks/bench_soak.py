@@ -112,6 +112,10 @@ def soak(seconds: float, seed: int = 12, work: Path | None = None) -> dict:
                 totals[key] += value
             if not killed and checked["unreadable"] == 0 and host.returncode == 0:
                 totals["completed"] += 1
+            if proc.poll() is not None:
+                err = proc.stderr.read().decode(errors="replace").strip().splitlines()
+                raise RuntimeError(f"soak: the simulator died after run {i} (exit {proc.returncode}): "
+                                   f"{' | '.join(err[-6:])}")
             if checked["unreadable"] == 0 and out.exists():
                 for p in (out, Path(str(out) + ".lock")):
                     if p.exists():

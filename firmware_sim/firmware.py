@@ -223,11 +223,8 @@ class Firmware:
             pending = 0
             if wd is not None and wd < self.index + max(n, 1):
                 n, pending = max(0, wd - self.index), p.Fault.WATCHDOG
-            if n > self._buffered and not pending:
-                if self._end_seen:
-                    n = self._buffered
-                else:
-                    n, pending = self._buffered, p.Fault.BUFFER_UNDERRUN
+            if n > self._buffered:  # the setpoints run out first: that ends the stream, or is the fault
+                n, pending = self._buffered, 0 if self._end_seen else p.Fault.BUFFER_UNDERRUN
             if n == 0 and not pending:
                 break
             out.append(self._execute(self._take(n), pending, now))

@@ -107,3 +107,32 @@ def test_lockstep_watchdog_unit_runs_on_every_tick():
     assert fw.advance(0.19) == []  # buffer empty, deadline not reached
     fw.advance(0.21)
     assert fw.faults == p.Fault.WATCHDOG and fw.current_applied == 0.0 and fw.state == p.State.DISARMED
+
+
+def test_watchdog_deadline_after_the_buffer_runs_dry_in_one_tick_unit():
+    """A long tick (a stalled device loop) that holds both the end of the setpoints and the watchdog
+    deadline: the underrun comes first in sample order and latches; nothing is taken that is not there."""
+    fw = _armed("realtime", 0.1)
+    fw.handle(p.SetpointBlock(0, np.full(50, 0.1, dtype=np.float32)), 0.0)
+    fw.advance(0.3)  # 300 samples due, the watchdog trip sample is 101, only 50 setpoints buffered
+    assert fw.faults == p.Fault.BUFFER_UNDERRUN and fw.safety.fault_index == 50
+    assert fw.index == 51 and fw.current_applied == 0.0
+
+
+def test_host_gone_during_a_long_device_tick(simulator):
+    """Black box: a 100 ms device loop (``--tick 0.1``), a 50 ms watchdog, 20 setpoints, then silence. The
+    first tick after the host vanished often covers both the buffer's end and the watchdog deadline (this
+    killed the simulator with an IndexError)."""
+    for trial in range(4):
+        proc, path = simulator(pacing="realtime", tick="0.1")
+        wire = Wire(path)
+        wire.start_stream(rate=1000, watchdog=0.05, current=0.1, n=20, block=20)
+        wire.close()
+        time.sleep(0.4)
+        assert proc.poll() is None, f"trial {trial}: the simulator died: {proc.stderr.read().decode()[-300:]}"
+        wire = Wire(path)
+        wire.request(p.GetIdentity())
+        status = wire.status()
+        wire.close()
+        assert status.faults == p.Fault.BUFFER_UNDERRUN and status.fault_index == 20, trial
+        assert status.state == p.State.DISARMED and status.current_applied == 0.0
