@@ -296,9 +296,6 @@ class RunWriter:
             self._file.flush()
             self._file.swmr_mode = True  # no new objects from here on
             self._place(overwrite)
-            for ds, array in later:
-                ds[...] = array
-            self._file.flush()
         except BaseException as exc:
             if self._file is not None:
                 try:
@@ -311,6 +308,12 @@ class RunWriter:
             if isinstance(exc, OSError):
                 raise RunFileError(f"{self.path}: cannot create the run file: {_one_line(exc)}") from None
             raise
+        try:  # the file is at its path now: a failure from here on ends it 'failed', never half-made
+            for ds, array in later:
+                ds[...] = array
+            self._file.flush()
+        except (OSError, RuntimeError, ValueError, TypeError) as exc:
+            self._fail(f"cannot write the protocol arrays: {_one_line(exc)}")
 
     def _place(self, overwrite: bool) -> None:
         try:
