@@ -288,7 +288,9 @@ class RunWriter:
         self._tmp_path = os.path.join(head, f".{tail}.{uuid.uuid4().hex[:12]}.partial")
         self._file = None
         try:
-            self._file = h5py.File(self._tmp_path, "x", libver="latest")
+            # no raw-data chunk cache: every chunk goes to the disk when written, so a full disk shows at
+            # that write and nothing dirty is left that a later flush (marking the run failed) would need
+            self._file = h5py.File(self._tmp_path, "x", libver="latest", rdcc_nbytes=0)
             later = self._create_layout(
                 device, config, calibration, protocol_name, protocol_params, protocol_arrays, operator, notes,
                 source, compression, start_time,

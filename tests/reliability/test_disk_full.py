@@ -84,3 +84,21 @@ def test_repair_and_import_on_a_full_disk(small_disk, tmp_path):
     assert not (disk.path / "imp.h5").exists()
     left = sorted(p.name for p in disk.path.iterdir())
     assert left == ["ballast", "c.h5", "c.h5.lock"], left  # the killed run's lock stays until repaired
+
+
+def test_setpoints_that_do_not_fit_end_the_new_file_failed(small_disk):
+    """The file appears complete, then its (long) setpoint array does not fit: it says 'failed', it does not
+    pretend to be a run in progress."""
+    import pytest
+
+    from hilbench.bench.runfile import RunFileError, RunWriter
+
+    disk = small_disk(2 << 20, "tiny")
+    if not disk.mounted:
+        pytest.skip("needs a tmpfs (root)")
+    u = np.random.default_rng(1).normal(size=1_000_000)  # 8 MB that does not compress
+    with pytest.raises(RunFileError, match="cannot write the protocol arrays.*the file says 'failed'"):
+        RunWriter(disk.path / "big.h5", sample_rate=10000.0, protocol_arrays={"setpoints": u})
+    with open_run(disk.path / "big.h5") as run:
+        assert run.status == "failed" and run.n_samples == 0
+    assert sorted(p.name for p in disk.path.iterdir()) == ["big.h5"]
