@@ -96,6 +96,7 @@ def run(args: argparse.Namespace) -> int:
     for r in runs:
         x = np.asarray(r.channel("position"), float)
         force = centred_force(r.channel("torque"), r.torque_timing)
+        print(f"{r.path.name}: torque timing {r.torque_timing} ({'declared' if r.declared_timing else 'default'})")
         results.append(forcevib(x, force, r.sample_rate, mass, args.method, spring=args.spring, **options))
         v = results[-1].valid
         print(
