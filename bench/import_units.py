@@ -61,7 +61,8 @@ ALIASES: dict[str, tuple[str, ...]] = {
 }
 _CHANNEL_OF = {alias: channel for channel, names in ALIASES.items() for alias in names}
 
-_BRACKET = re.compile(r"^(?P<name>.*?)\s*[\[(](?P<unit>[^\])]*)[\])]\s*$")
+#: a header's bracketed unit: ``[ms]`` or ``(deg)``; never ``(:,2)``, a MAT matrix column
+_BRACKET = re.compile(r"^(?P<name>.*?)\s*[\[(](?P<unit>[^\]),:]*)[\])]\s*$")
 
 
 class UnitError(BenchError):

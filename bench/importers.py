@@ -419,7 +419,7 @@ def _check_rate(t: np.ndarray, time_stated: bool, path: str) -> float:
                               f"{MAX_IMPORT_RATE_HZ:.6g} Hz (MAX_IMPORT_RATE_HZ); is t in another unit? (--unit t=ms)")
     if not time_stated and fs < MIN_UNSTATED_RATE_HZ:
         raise ImportDataError(f"{path}: t has no unit and read as seconds gives {fs:.6g} Hz; state it: "
-                              "--unit t=s, or t=ms if the column is in milliseconds")
+                              "--unit t=s, or --unit t=ms if the column is in milliseconds")
     return fs
 
 
@@ -478,7 +478,7 @@ def table_run(columns: Mapping[str, np.ndarray], path: str, fmt: str, options: T
         units["t"] = "s"
     _check_finite(samples, path, labels)
     source_units = {}
-    for channel in samples:
+    for channel in list(samples):
         factor = factor_to_si(channel, units[channel], axis) if channel in units else 1.0
         source_units[channel] = units.get(channel, CHANNELS[channel].unit(axis))
         if factor == COUNTS:
