@@ -431,7 +431,7 @@ def _require(column_of: Mapping[str, str], o: TableOptions, names: list[str], pa
         missing.append("torque (or current with --torque-constant)")
     if missing:
         raise ImportDataError(f"{path}: missing column(s): {', '.join(missing)} (columns: {', '.join(names)}); "
-                              "name them in the header or with --map CHANNEL=COLUMN")
+                              "map them with --map CHANNEL=COLUMN")
 
 
 def table_run(columns: Mapping[str, np.ndarray], path: str, fmt: str, options: TableOptions,
@@ -529,7 +529,7 @@ def table_run(columns: Mapping[str, np.ndarray], path: str, fmt: str, options: T
         "source_sha256": _sha256(path),
         "variables": variables,
         "source_units": source_units,
-        "units_assumed": sorted(ch for ch in source_units if ch not in units and ch in column_of),
+        "units_assumed": sorted(ch for ch in source_units if ch not in units and ch in column_of and ch != "counts"),
         "ignored_columns": [c for c in names if c not in used],
         "sample_rate_note": "nominal: (n-1)/(t[-1]-t[0])",
     }
