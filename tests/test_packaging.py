@@ -92,3 +92,22 @@ def test_installed_command_help_and_demo_outside_the_source_tree(installed):
     runs = sorted((cwd / "demo-out").rglob("*.h5"))
     assert len(runs) >= 2 and (cwd / "demo-out" / "model.json").is_file(), res.stdout[-2000:]
     assert "done: everything is in demo-out" in res.stdout
+
+
+def test_a_users_own_generic_folders_do_not_shadow_ours(installed, tmp_path):
+    # Why: "A user's own analysis/ folder next to their script shadows ours (ModuleNotFoundError). The bench
+    # module and command clash with a well-known PyPI package."
+    for name in GENERIC:
+        (tmp_path / name).mkdir()
+    script = tmp_path / "my_analysis.py"
+    script.write_text(
+        "import analysis, bench  # the user's own, next to the script\n"
+        "from hilbench.analysis.identification.regressors import held_torque\n"
+        "from hilbench.bench.runfile import CHANNELS\n"
+        "print(held_torque([1.0, 2.0, 4.0], 'instant').tolist(), CHANNELS['torque'].unit('rotary'))\n"
+    )
+    for name in GENERIC:  # make the user's packages importable (their own code), not raising
+        (tmp_path / name / "__init__.py").write_text("")
+    out = _run([str(installed["py"]), str(script)], tmp_path, installed["env"]).stdout
+    assert out.strip() == "[1.5, 3.0, 4.0] N*m"
+    assert not (installed["venv"] / "bin" / "bench").exists()  # no `bench` command to clash with
