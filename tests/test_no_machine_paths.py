@@ -20,8 +20,8 @@ def _tracked_text_files() -> list[Path]:
 
 
 def test_no_development_machine_path_in_the_repository():
-    # Why: "Tests, examples and docstrings read /work/shared/data/real or cite shared/docs/science.md, which a
-    # clone does not have"
+    # Why: "Tests, examples and docstrings read [the development machine's data folder] or cite [its science
+    # notes], which a clone does not have"
     hits = []
     for path in _tracked_text_files():
         text = path.read_text(errors="replace")
