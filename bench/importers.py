@@ -434,6 +434,47 @@ def _require(column_of: Mapping[str, str], o: TableOptions, names: list[str], pa
                               "map them with --map CHANNEL=COLUMN")
 
 
+def _convert_to_si(samples: dict[str, np.ndarray], units: dict[str, str], labels: Mapping[str, str], axis: str,
+                   counts_per_rev: float | None, path: str) -> dict[str, str]:
+    """Scale every channel in place to its run-file SI unit; a position in counts also fills ``counts``.
+    Returns channel -> the unit the source used."""
+    if "counts" in samples:
+        units.setdefault("counts", COUNTS)
+    source_units = {}
+    for channel in list(samples):
+        factor = factor_to_si(channel, units[channel], axis) if channel in units else 1.0
+        source_units[channel] = units.get(channel, CHANNELS[channel].unit(axis))
+        if factor == COUNTS:
+            if np.any(samples[channel] != np.round(samples[channel])):
+                raise ImportDataError(f"{path}: column {labels.get(channel, channel)!r} (counts) must hold whole "
+                                      "numbers")
+            if channel != "counts":
+                samples.setdefault("counts", samples[channel].copy())
+                samples[channel] = samples[channel] * (2 * math.pi / float(counts_per_rev))
+        elif factor != 1.0:
+            samples[channel] = samples[channel] * factor
+    return source_units
+
+
+def _make_uniform(samples: dict[str, np.ndarray], resample: str | None, row: Any,
+                  path: str) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """(samples, {}) when the time stamps are uniform; refuses a gap naming its place, or resamples it when
+    ``resample`` says how (then returns what was done, for ``protocol_params["resampled"]``)."""
+    gap = _first_gap(samples["t"])
+    if gap is None:
+        return samples, {}
+    k, dt_k, step = gap
+    where = f"sample {k} ({row(k) + ', ' if row else ''}t = {samples['t'][k]:.9g} s)"
+    if resample is None:
+        raise ImportDataError(f"{path}: time stamps are not uniform: a step of {dt_k:.6g} s after {where}, against a "
+                              f"typical {step:.6g} s; fix the file or give --resample linear")
+    t_source = samples["t"]
+    out = _resample_linear(samples, step, path)
+    return out, {"method": "linear interpolation of every channel onto t0 + k*step (counts rounded)",
+                 "step_s": step, "samples_before": int(t_source.size), "samples_after": int(out["t"].size),
+                 "largest_step_s": float(np.max(np.diff(t_source))), "first_gap_after": where}
+
+
 def table_run(columns: Mapping[str, np.ndarray], path: str, fmt: str, options: TableOptions,
               row: Any = None) -> ImportedRun:
     """Turn named 1-D columns (a CSV's or a MAT file's) into an :class:`ImportedRun` in SI units.
@@ -477,37 +518,11 @@ def table_run(columns: Mapping[str, np.ndarray], path: str, fmt: str, options: T
         labels["t"] = f"k/{o.sample_rate:g} Hz"
         units["t"] = "s"
     _check_finite(samples, path, labels)
-    source_units = {}
-    for channel in list(samples):
-        factor = factor_to_si(channel, units[channel], axis) if channel in units else 1.0
-        source_units[channel] = units.get(channel, CHANNELS[channel].unit(axis))
-        if factor == COUNTS:
-            if np.any(samples[channel] != np.round(samples[channel])):
-                raise ImportDataError(f"{path}: column {labels.get(channel, channel)!r} (counts) must hold whole "
-                                      "numbers")
-            if channel != "counts":
-                samples.setdefault("counts", samples[channel].copy())
-                samples[channel] = samples[channel] * (2 * math.pi / float(o.counts_per_rev))
-        elif factor != 1.0:
-            samples[channel] = samples[channel] * factor
-    if "counts" in samples and np.any(samples["counts"] != np.round(samples["counts"])):
-        raise ImportDataError(f"{path}: column {column_of.get('counts', 'counts')!r} (counts) must hold whole numbers")
+    source_units = _convert_to_si(samples, units, labels, axis, o.counts_per_rev, path)
     fs = _check_rate(samples["t"], "t" in units, path)
-    resampled: dict[str, Any] = {}
-    gap = _first_gap(samples["t"])
-    if gap is not None:
-        k, dt_k, step = gap
-        where = f"sample {k} ({row(k) + ', ' if row else ''}t = {samples['t'][k]:.9g} s)"
-        if o.resample is None:
-            raise ImportDataError(
-                f"{path}: time stamps are not uniform: a step of {dt_k:.6g} s after {where}, against a typical "
-                f"{step:.6g} s; fix the file or give --resample linear")
-        t_source = samples["t"]
-        samples = _resample_linear(samples, step, path)
+    samples, resampled = _make_uniform(samples, o.resample, row, path)
+    if resampled:
         fs = _check_rate(samples["t"], True, path)
-        resampled = {"method": "linear interpolation of every channel onto t0 + k*step (counts rounded)",
-                     "step_s": step, "samples_before": int(t_source.size), "samples_after": int(samples["t"].size),
-                     "largest_step_s": float(np.max(np.diff(t_source))), "first_gap_after": where}
     calibration: dict[str, Any] = {}
     torque_unit = "N" if o.linear else "N*m"
     if o.torque_constant is not None:
