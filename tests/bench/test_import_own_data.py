@@ -162,6 +162,9 @@ def test_declared_torque_timing_gives_the_device_model(tmp_path, device_run, cap
     # measured: device b = 0.00437 (truth 0.004), undeclared 0.0151 and 10 elements instead of 13
     assert abs(device["viscous"] / params.viscous - 1) < 0.15
     assert abs(other["viscous"] / params.viscous - 1) > 1.0
+    # residual reads the same attribute and says so
+    assert main(["residual", str(declared), "--json", str(tmp_path / "r.json")]) == 0
+    assert f"{declared}: torque timing of torque: hold_previous (declared in the run file)" in capsys.readouterr().out
 
 
 def test_run_torque_timing_precedence():
