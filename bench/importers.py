@@ -424,6 +424,9 @@ def _check_rate(t: np.ndarray, time_stated: bool, path: str) -> float:
 
 
 def _require(column_of: Mapping[str, str], o: TableOptions, names: list[str], path: str) -> None:
+    if "t" in column_of and o.sample_rate is not None:
+        raise ImportDataError(f"{path}: column {column_of['t']!r} is the time already; --sample-rate is for a "
+                              "file without one")
     from_counts = "counts" in column_of and o.counts_per_rev is not None and not o.linear
     missing = [c for c in ("t", "position") if c not in column_of and not (c == "t" and o.sample_rate is not None)
                and not (c == "position" and from_counts)]

@@ -17,6 +17,7 @@ from hilbench.analysis.run_file import read_run_file, run_torque_timing
 from hilbench.bench import importers
 from hilbench.bench.cli import main
 from hilbench.bench.runfile import open_run
+from tests import real_data
 from tests.bench.test_identify_command import _write_run
 
 
@@ -113,6 +114,18 @@ def test_encoder_counts_with_counts_per_rev(tmp_path, capsys):
                comments="", fmt="%.17g")
     imp = importers.load_csv(src2, counts_per_rev=4096)
     np.testing.assert_allclose(imp.samples["position"], counts * 2 * math.pi / 4096, rtol=1e-15)
+
+
+def test_file_without_time_column_takes_a_sample_rate(tmp_path, capsys):
+    src = tmp_path / "nt.csv"
+    src.write_text("theta,torque\n" + "".join(f"{0.1 * k},{k % 3}\n" for k in range(50)))
+    _one_line_error(capsys, ["import", "csv", str(src)], "missing column(s): t")
+    imp = importers.load_csv(src, sample_rate=500.0)
+    np.testing.assert_array_equal(imp.samples["t"], np.arange(50) / 500.0)
+    assert imp.sample_rate == pytest.approx(500.0) and imp.protocol_params["variables"]["t"] == "k/500 Hz"
+    timed = tmp_path / "timed.csv"
+    timed.write_text("t,theta,torque\n0,0,1\n0.001,0.1,1\n0.002,0.2,1\n")
+    _one_line_error(capsys, ["import", "csv", str(timed), "--sample-rate", "1000"], "is the time already")
 
 
 def test_unit_mistakes_are_one_line_errors(tmp_path, capsys):
@@ -279,6 +292,18 @@ def test_mat_mistakes_are_one_line_errors(tmp_path, capsys):
     _one_line_error(capsys, ["import", "mat", str(src), "--map", "torque=nope(:,1)"], "no variable 'nope'")
     (tmp_path / "junk.mat").write_bytes(b"not a mat file at all" * 10)
     _one_line_error(capsys, ["import", "mat", str(tmp_path / "junk.mat")], "junk.mat")
+
+
+@real_data.needs("hsm150")
+def test_generic_mat_import_of_a_real_hsm150_run_matches_its_own_importer(tmp_path):
+    # a real lab file read by the generic importer, columns picked from its matrix, against the dedicated loader
+    source = sorted(real_data.real_data("hsm150").glob("idf_*.mat"))[0]
+    own = importers.load_hsm150(source)
+    generic = importers.load_mat(source, mapping={"t": "data(:,1)", "position": "data(:,3)", "velocity": "data(:,4)",
+                                                  "torque": "data(:,6)"}, torque_timing="instant")
+    assert generic.sample_rate == own.sample_rate == 1000.0
+    for name in ("t", "position", "velocity", "torque"):
+        np.testing.assert_array_equal(generic.samples[name], own.samples[name])
 
 
 # ---- size bounds (#12 item 8) ------------------------------------------------------------------------------------
