@@ -572,6 +572,16 @@ def _sniff_delimiter(header: str) -> str:
     return ","
 
 
+def _count_lines(path: str) -> int:
+    """Lines in a text file, counted in 1 MiB blocks (nothing the size of the file is allocated)."""
+    lines, last = 0, b"\n"
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            lines += block.count(b"\n")
+            last = block[-1:]
+    return lines + (last != b"\n")
+
+
 def load_csv(path: str | os.PathLike, options: TableOptions | None = None, *, delimiter: str | None = None,
              **kwargs: Any) -> ImportedRun:
     """Load a CSV file with a header row (see :class:`TableOptions`; keyword arguments are its fields).
@@ -598,6 +608,10 @@ def load_csv(path: str | os.PathLike, options: TableOptions | None = None, *, de
         raise ImportDataError(f"{path}: duplicate column names in the header: {names}")
     column_of, _ = _assign_channels(names, options.mapping, path)
     _require(column_of, options, names, path)
+    rows = _count_lines(path) - 1
+    if rows > MAX_IMPORT_SAMPLES:
+        raise ImportDataError(f"{path}: {rows} rows, above the import bound of {MAX_IMPORT_SAMPLES} samples "
+                              "(MAX_IMPORT_SAMPLES)")
     used = list(dict.fromkeys(column_of.values()))
     try:
         table = np.loadtxt(path, delimiter=sep, skiprows=1, usecols=[names.index(c) for c in used], ndmin=2,

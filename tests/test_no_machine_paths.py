@@ -15,8 +15,10 @@ def _tracked_text_files() -> list[Path]:
         names = subprocess.run(["git", "ls-files", "-z"], cwd=REPO, capture_output=True, check=True).stdout
         files = [REPO / n for n in names.decode().split("\0") if n]
     except (OSError, subprocess.CalledProcessError):  # not a git checkout (an sdist): every file
-        files = [p for p in REPO.rglob("*") if p.is_file() and ".venv" not in p.parts]
-    return [f for f in files if f.is_file() and f.suffix not in (".mat", ".png", ".pdf", ".h5", ".so")]
+        built = {".venv", ".git", "build", "__pycache__", "demo-out", ".pytest_cache", ".hypothesis"}
+        files = [p for p in REPO.rglob("*") if p.is_file() and not built & set(p.parts)
+                 and not any(part.endswith(".egg-info") for part in p.parts)]
+    return [f for f in files if f.is_file() and f.suffix not in (".mat", ".png", ".pdf", ".h5", ".so", ".o", ".pyc")]
 
 
 def test_no_development_machine_path_in_the_repository():

@@ -309,7 +309,7 @@ def test_generic_mat_import_of_a_real_hsm150_run_matches_its_own_importer(tmp_pa
 # ---- size bounds (#12 item 8) ------------------------------------------------------------------------------------
 
 
-def test_nanosecond_step_is_refused_naming_the_bound(tmp_path, capsys):
+def test_nanosecond_step_is_refused_naming_the_bound(tmp_path, capsys, monkeypatch):
     # Why (#12 item 8): "A CSV with a 1 ns step writes a 16 GB file"
     src = tmp_path / "ns.csv"
     src.write_text("t,position,torque\n" + "".join(f"{k * 1e-9!r},{k},1\n" for k in range(4)))
@@ -321,6 +321,10 @@ def test_nanosecond_step_is_refused_naming_the_bound(tmp_path, capsys):
     fast.write_text("t,position,torque\n" + "".join(f"{k * 1e-6!r},{k},1\n" for k in range(4)))
     assert main(["import", "csv", str(fast), "-o", str(tmp_path / "us.h5")]) == 0
     assert (tmp_path / "us.h5").stat().st_size < 64 * 1024  # 201 KB before; grew with the rate
+    # a file with more rows than the bound is refused before it is parsed
+    monkeypatch.setattr(importers, "MAX_IMPORT_SAMPLES", 3)
+    _one_line_error(capsys, ["import", "csv", str(fast)], "4 rows, above the import bound of 3 samples")
+    monkeypatch.undo()
     # resampling is bounded before the grid is allocated
     spread = tmp_path / "spread.csv"
     spread.write_text("t,position,torque\n0,0,1\n1e-6,0,1\n2e-6,0,1\n1000,1,1\n")
