@@ -294,6 +294,17 @@ def test_mat_mistakes_are_one_line_errors(tmp_path, capsys):
     _one_line_error(capsys, ["import", "mat", str(tmp_path / "junk.mat")], "junk.mat")
 
 
+
+def test_mat_variable_size_is_bounded_before_it_is_read(tmp_path, capsys, monkeypatch):
+    t = np.arange(40)[:, None] * 1e-3
+    savemat(tmp_path / "v5.mat", {"t": t, "position": t, "torque": t})
+    _mat73(tmp_path / "v73.mat", {"t": t, "position": t, "torque": t})
+    monkeypatch.setattr(importers, "MAX_IMPORT_SAMPLES", 2)
+    for name in ("v5.mat", "v73.mat"):
+        _one_line_error(capsys, ["import", "mat", str(tmp_path / name)],
+                        "has 40 elements, above the import bound of 32 (16 x MAX_IMPORT_SAMPLES)")
+
+
 @real_data.needs("hsm150")
 def test_generic_mat_import_of_a_real_hsm150_run_matches_its_own_importer(tmp_path):
     # a real lab file read by the generic importer, columns picked from its matrix, against the dedicated loader
