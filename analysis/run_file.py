@@ -48,6 +48,24 @@ def torque_timing_for(source: str, timing: str = "auto", channel: str = "torque"
     return TORQUE_TIMING.get(source, "instant")
 
 
+def run_torque_timing(attrs: Any, timing: str = "auto", channel: str = "torque") -> tuple[str, str]:
+    """(timing, where it comes from) for ``channel`` of a run whose root attributes are ``attrs`` (a mapping:
+    ``h5py`` attrs or ``Run.meta``). In order: ``timing`` when it is not ``auto`` ("given"); for the torque
+    channel, the ``torque_timing`` the file declares ("declared in the run file", written by ``hilbench
+    import --torque-timing``); else :func:`torque_timing_for` the file's ``source`` ("default for <source>")."""
+    source = _text(attrs.get("source", "device"))
+    resolved = torque_timing_for(source, timing, channel)
+    if timing != "auto":
+        return resolved, "given"
+    declared = attrs.get("torque_timing")
+    if declared is not None and not channel.endswith("_cmd"):
+        declared = _text(declared)
+        if declared not in TIMINGS or declared == "auto":
+            raise AnalysisError(f"run file declares an unknown torque timing {declared!r}")
+        return declared, "declared in the run file"
+    return resolved, f"default for {source} runs"
+
+
 @dataclass
 class RunFile:
     """One run file's samples and metadata.
@@ -63,7 +81,8 @@ class RunFile:
         protocol_name, protocol_params: what the run played.
         protocol_arrays: e.g. ``setpoints``, ``step_windows``.
         torque_timing: ``hold_previous`` (torque from the current sampled at t_k), ``hold_next`` (a command
-            held over the next interval) or ``instant``.
+            held over the next interval) or ``instant``: as declared in the file, else from its source.
+        declared_timing: the file's ``torque_timing`` attribute, None when it declares none.
     """
 
     path: Path
@@ -77,6 +96,7 @@ class RunFile:
     protocol_params: dict[str, Any] = field(default_factory=dict)
     protocol_arrays: dict[str, np.ndarray] = field(default_factory=dict)
     calibration: dict[str, Any] = field(default_factory=dict)
+    declared_timing: str | None = None
 
     @property
     def name(self) -> str:
@@ -84,7 +104,8 @@ class RunFile:
 
     @property
     def torque_timing(self) -> str:
-        return torque_timing_for(self.source)
+        attrs = {"source": self.source, "torque_timing": self.declared_timing}
+        return run_torque_timing({k: v for k, v in attrs.items() if v is not None})[0]
 
     @property
     def t(self) -> np.ndarray:
@@ -160,6 +181,7 @@ def read_run_file(path: str | Path) -> RunFile:
                 channels=channels, units=units,
                 protocol_name=_text(proto.attrs.get("name", "")) if proto is not None else "",
                 protocol_params=params, protocol_arrays=arrays, calibration=calibration,
+                declared_timing=_text(attrs["torque_timing"]) if "torque_timing" in attrs else None,
             )
     except (KeyError, ValueError, TypeError, AttributeError, OSError, RuntimeError) as exc:
         raise AnalysisError(f"{path}: damaged or incomplete run file ({' '.join(str(exc).split())})") from None

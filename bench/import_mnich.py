@@ -1,4 +1,4 @@
-"""Import of the Mnich rack-and-pinion friction rig (``../shared/data/real/mnich_rack_pinion``).
+"""Import of the Mnich rack-and-pinion friction rig (K. Mnich, github.com/KonradMnich/friction-identification).
 
 Two unsynchronised exports of one short motion (0 -> 0.66 m/s -> 0):
 

@@ -9,8 +9,10 @@ Loaders read a source file into an :class:`ImportedRun` (arrays + metadata, noth
 - ``hsm150``: HSM150 DC-servo identification runs (``data`` 20000 × 7, 1 kHz). **Rotary**: position (rad),
   velocity (rad/s), commanded torque (N*m), measured torque = Cu·current (N*m), current (A), encoder counts
   (position / (2π/10000)).
-- ``csv``: a header row naming ``t`` (s), ``position`` (rad, or m with ``linear``), ``torque`` (N*m or N) or
-  ``current`` (A, with a torque constant), optional ``velocity``; other columns mapped by name.
+- ``csv`` and ``mat``: a lab's own table (:func:`load_csv`, :func:`load_mat`, :func:`table_run`): columns found
+  by their usual names (``t``, ``time``, ``Time [ms]``, ``theta``, ``torque``...) or mapped, converted to SI from
+  stated units (``--unit t=ms``, encoder counts with counts per rev), refused or resampled when the time stamps
+  have gaps, with a declared torque timing stored in the run file. docs/data.md is the user's guide.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -25,7 +28,8 @@ from typing import Any
 import numpy as np
 
 from hilbench.bench.errors import BenchError
-from hilbench.bench.runfile import CHANNELS, RunWriter
+from hilbench.bench.import_units import COUNTS, factor_to_si
+from hilbench.bench.runfile import CHANNELS, TORQUE_TIMINGS, RunWriter
 
 EMPS_CITATION = (
     "A. Janot, M. Gautier, M. Brunot, 'Data Set and Reference Models of EMPS', 2019 Workshop on Nonlinear "
@@ -47,6 +51,8 @@ class ImportedRun:
         sample_rate: Hz.
         samples: channel name -> 1-D array, equal lengths; includes ``sample_index`` and ``t`` (s).
         custom_units: units of channels outside :data:`bench.runfile.CHANNELS`.
+        torque_timing: the declared timing of the torque channel (docs/science.md §6), stored in the run file;
+            None when the source does not say.
         device, calibration, protocol_params: JSON-able dicts; protocol_name is ``import:<format>``.
     """
 
@@ -58,6 +64,7 @@ class ImportedRun:
     device: dict[str, Any] = field(default_factory=dict)
     calibration: dict[str, Any] = field(default_factory=dict)
     custom_units: dict[str, str] = field(default_factory=dict)
+    torque_timing: str | None = None
 
     @property
     def n_samples(self) -> int:
@@ -72,13 +79,13 @@ def _sha256(path: str) -> str:
     return h.hexdigest()
 
 
-def _loadmat(path: str) -> dict[str, Any]:
+def _loadmat(path: str, **kwargs: Any) -> dict[str, Any]:
     from scipy.io import loadmat
 
     if not os.path.isfile(path):
         raise ImportDataError(f"{path}: no such file")
     try:
-        return loadmat(path)
+        return loadmat(path, **kwargs)
     except Exception as exc:  # scipy raises ValueError, TypeError, OSError, MatReadError... for bad files
         raise ImportDataError(f"{path}: not a readable MAT v5 file ({' '.join(str(exc).split())})") from None
 
@@ -87,6 +94,7 @@ def _column(mat: Mapping[str, Any], name: str, path: str, n: int | None = None) 
     if name not in mat:
         raise ImportDataError(f"{path}: variable {name!r} is missing")
     a = np.asarray(mat[name])
+    _refuse_complex(a, name, path)
     if a.ndim != 2 or 1 not in a.shape:
         raise ImportDataError(f"{path}: variable {name!r} should be a column vector, has shape {a.shape}")
     a = a.ravel().astype(float)
@@ -95,9 +103,16 @@ def _column(mat: Mapping[str, Any], name: str, path: str, n: int | None = None) 
     return a
 
 
+def _refuse_complex(a: np.ndarray, name: str, path: str) -> None:
+    if np.iscomplexobj(a) or (a.dtype.names is not None and {"real", "imag"} <= set(a.dtype.names)):
+        raise ImportDataError(f"{path}: variable {name!r} is complex; hilbench imports real signals only "
+                              "(store its real and imaginary parts as two variables)")
+
+
 def _scalar(mat: Mapping[str, Any], name: str, path: str) -> float:
     if name not in mat or np.asarray(mat[name]).size != 1:
         raise ImportDataError(f"{path}: scalar {name!r} is missing")
+    _refuse_complex(np.asarray(mat[name]), name, path)
     return float(np.asarray(mat[name]).ravel()[0])
 
 
@@ -162,6 +177,7 @@ def load_emps(path: str | os.PathLike) -> ImportedRun:
         samples=samples,
         custom_units=custom,
         protocol_name="import:emps",
+        torque_timing="hold_next",  # vir is the controller output, held by the drive over the next period
         protocol_params={
             "format": "emps",
             "source_file": os.path.basename(path),
@@ -196,6 +212,7 @@ def load_hsm150(path: str | os.PathLike) -> ImportedRun:
     mat = _loadmat(path)
     if "data" not in mat:
         raise ImportDataError(f"{path}: variable 'data' is missing")
+    _refuse_complex(np.asarray(mat["data"]), "data", path)
     data = np.asarray(mat["data"], dtype=float)
     if data.ndim != 2 or data.shape[1] != 7:
         raise ImportDataError(f"{path}: 'data' should have 7 columns, has shape {data.shape}")
@@ -263,6 +280,291 @@ def load_hsm150(path: str | os.PathLike) -> ImportedRun:
     )
 
 
+#: Largest number of samples an import creates (each channel: 8 bytes a sample, so 400 MB a channel).
+MAX_IMPORT_SAMPLES = 50_000_000
+#: Highest sample rate an import accepts, Hz: well above any friction bench; a faster "rate" is a time unit
+#: mistake (a 1 ns step in a file of seconds), and the run file's chunks scale with it.
+MAX_IMPORT_RATE_HZ = 10e6
+#: Lowest sample rate accepted when the time column has no stated unit: a slower file is far more often in ms.
+MIN_UNSTATED_RATE_HZ = 10.0
+#: Time stamps are uniform when every one lies within this fraction of a period of the nominal grid
+#: (the criterion hilbench.analysis.identification.identify applies; float32 time stamps pass).
+GRID_TOLERANCE = 0.01
+RESAMPLE_METHODS = ("linear",)
+
+
+@dataclass(frozen=True)
+class TableOptions:
+    """How to read a table of columns (CSV or MAT) into a run.
+
+    Attributes:
+        mapping: run-file channel -> column (CSV header or MAT variable, ``VAR(:,k)`` for column k of a matrix),
+            for columns whose names are not among the aliases of :mod:`hilbench.bench.import_units`.
+        units: channel (or column) -> unit of the source values, e.g. ``{"t": "ms", "position": "deg"}``; a unit in
+            the header (``Time [ms]``) counts as stated. Unstated units are taken as the run file's SI unit.
+        torque_constant: N*m/A (N/A when linear): makes ``torque`` from ``current`` when there is no torque column.
+        counts_per_rev: encoder counts per revolution, for a position given in counts (rotary axis).
+        linear: linear axis (m, N, m/s) instead of rotary (rad, N*m, rad/s).
+        torque_timing: what torque sample k means (docs/science.md §6): ``hold_next``, ``hold_previous``,
+            ``instant``; stored in the run file. None: not declared (analyses then assume ``instant``).
+        resample: None refuses non-uniform time stamps (naming the first gap); ``"linear"`` interpolates every
+            channel linearly onto the uniform grid of the median step (counts rounded to whole counts).
+        sample_rate: Hz, for a file without a time column (t = k/sample_rate).
+    """
+
+    mapping: Mapping[str, str] = field(default_factory=dict)
+    units: Mapping[str, str] = field(default_factory=dict)
+    torque_constant: float | None = None
+    counts_per_rev: float | None = None
+    linear: bool = False
+    torque_timing: str | None = None
+    resample: str | None = None
+    sample_rate: float | None = None
+
+
+def _assign_channels(names: list[str], mapping: Mapping[str, str], path: str) -> tuple[dict[str, str], dict]:
+    """channel -> column, and column -> unit stated in its header; aliases first, then ``mapping`` overrides."""
+    from hilbench.bench.import_units import channel_of
+
+    header_unit: dict[str, str] = {}
+    found: dict[str, list[str]] = {}
+    for name in names:
+        channel, unit = channel_of(name)
+        if unit:
+            header_unit[name] = unit
+        if channel is not None:
+            found.setdefault(channel, []).append(name)
+    for channel, column in mapping.items():
+        if channel not in CHANNELS or channel == "sample_index":
+            raise ImportDataError(f"--map {channel}={column}: {channel!r} is not a run-file channel")
+        if column not in names:
+            raise ImportDataError(f"{path}: --map {channel}={column}: no column {column!r} (has: {', '.join(names)})")
+    mapped = set(mapping.values())
+    column_of: dict[str, str] = {}
+    for channel, columns in found.items():
+        columns = [c for c in columns if c not in mapped]
+        if channel in mapping or not columns:
+            continue
+        if len(columns) > 1:
+            raise ImportDataError(f"{path}: columns {', '.join(map(repr, columns))} all look like {channel}; "
+                                  f"choose one with --map {channel}=COLUMN")
+        column_of[channel] = columns[0]
+    column_of.update(mapping)
+    return column_of, header_unit
+
+
+def _units(column_of: Mapping[str, str], header_unit: Mapping[str, str], given: Mapping[str, str], axis: str,
+           path: str) -> dict[str, str]:
+    """channel -> unit of the source values, from --unit (by channel or column) or the header; refuses a conflict."""
+    by_column = {column: channel for channel, column in column_of.items()}
+    stated: dict[str, str] = {}
+    for key, unit in given.items():
+        channel = key if key in column_of else by_column.get(key)
+        if channel is None:
+            raise ImportDataError(f"--unit {key}={unit}: no channel or column {key!r} in {path} "
+                                  f"(channels: {', '.join(column_of)})")
+        stated[channel] = unit
+    for channel, column in column_of.items():
+        head = header_unit.get(column)
+        if head is None:
+            continue
+        if channel in stated and _same_unit(stated[channel], head) is False:
+            raise ImportDataError(f"{path}: column {column!r} says {head}, --unit {channel}={stated[channel]}; "
+                                  "drop one")
+        stated.setdefault(channel, head)
+    for channel, unit in stated.items():
+        factor_to_si(channel, unit, axis)  # refuses a unit of the wrong quantity, listing the accepted ones
+    return stated
+
+
+def _same_unit(a: str, b: str) -> bool:
+    from hilbench.bench.import_units import normalise_unit
+
+    return normalise_unit(a) == normalise_unit(b)
+
+
+def _first_gap(t: np.ndarray) -> tuple[int, float, float] | None:
+    """None when every time stamp lies within GRID_TOLERANCE of a period of the nominal uniform grid; else
+    (k, dt[k], typical step): the sample after which the step differs most from the median step."""
+    period = (t[-1] - t[0]) / (t.size - 1)
+    off_grid = np.abs(t - (t[0] + period * np.arange(t.size)))
+    if off_grid.max() <= GRID_TOLERANCE * period:
+        return None
+    dt = np.diff(t)
+    step = float(np.median(dt))
+    k = int(np.argmax(np.abs(dt - step)))
+    return k, float(dt[k]), step
+
+
+def _resample_linear(samples: dict[str, np.ndarray], step: float, path: str) -> dict[str, np.ndarray]:
+    t = samples["t"]
+    n = int(math.floor((t[-1] - t[0]) / step * (1 + 1e-12))) + 1
+    if n > MAX_IMPORT_SAMPLES:
+        raise ImportDataError(f"{path}: resampling onto a {step:.6g} s grid would make {n} samples, above the "
+                              f"import bound of {MAX_IMPORT_SAMPLES} samples (MAX_IMPORT_SAMPLES)")
+    grid = t[0] + step * np.arange(n)
+    out = {"t": grid}
+    for name, values in samples.items():
+        if name != "t":
+            out[name] = np.interp(grid, t, values)
+    if "counts" in out:
+        out["counts"] = np.round(out["counts"])
+    return out
+
+
+def _check_rate(t: np.ndarray, time_stated: bool, path: str) -> float:
+    fs = _sample_rate(t, path)
+    if fs > MAX_IMPORT_RATE_HZ:
+        raise ImportDataError(f"{path}: sample rate {fs:.6g} Hz (step {1 / fs:.3g} s) is above the import bound of "
+                              f"{MAX_IMPORT_RATE_HZ:.6g} Hz (MAX_IMPORT_RATE_HZ); is t in another unit? (--unit t=ms)")
+    if not time_stated and fs < MIN_UNSTATED_RATE_HZ:
+        raise ImportDataError(f"{path}: t has no unit and read as seconds gives {fs:.6g} Hz; state it: "
+                              "--unit t=s, or --unit t=ms if the column is in milliseconds")
+    return fs
+
+
+def _require(column_of: Mapping[str, str], o: TableOptions, names: list[str], path: str) -> None:
+    if "t" in column_of and o.sample_rate is not None:
+        raise ImportDataError(f"{path}: column {column_of['t']!r} is the time already; --sample-rate is for a "
+                              "file without one")
+    from_counts = "counts" in column_of and o.counts_per_rev is not None and not o.linear
+    missing = [c for c in ("t", "position") if c not in column_of and not (c == "t" and o.sample_rate is not None)
+               and not (c == "position" and from_counts)]
+    if "torque" not in column_of and not ("current" in column_of and o.torque_constant is not None):
+        missing.append("torque (or current with --torque-constant)")
+    if missing:
+        raise ImportDataError(f"{path}: missing column(s): {', '.join(missing)} (columns: {', '.join(names)}); "
+                              "map them with --map CHANNEL=COLUMN")
+
+
+def _convert_to_si(samples: dict[str, np.ndarray], units: dict[str, str], labels: Mapping[str, str], axis: str,
+                   counts_per_rev: float | None, path: str) -> dict[str, str]:
+    """Scale every channel in place to its run-file SI unit; a position in counts also fills ``counts``.
+    Returns channel -> the unit the source used."""
+    if "counts" in samples:
+        units.setdefault("counts", COUNTS)
+    source_units = {}
+    for channel in list(samples):
+        factor = factor_to_si(channel, units[channel], axis) if channel in units else 1.0
+        source_units[channel] = units.get(channel, CHANNELS[channel].unit(axis))
+        if factor == COUNTS:
+            if np.any(samples[channel] != np.round(samples[channel])):
+                raise ImportDataError(f"{path}: column {labels.get(channel, channel)!r} (counts) must hold whole "
+                                      "numbers")
+            if channel != "counts":
+                samples.setdefault("counts", samples[channel].copy())
+                samples[channel] = samples[channel] * (2 * math.pi / float(counts_per_rev))
+        elif factor != 1.0:
+            samples[channel] = samples[channel] * factor
+    return source_units
+
+
+def _make_uniform(samples: dict[str, np.ndarray], resample: str | None, row: Any,
+                  path: str) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """(samples, {}) when the time stamps are uniform; refuses a gap naming its place, or resamples it when
+    ``resample`` says how (then returns what was done, for ``protocol_params["resampled"]``)."""
+    gap = _first_gap(samples["t"])
+    if gap is None:
+        return samples, {}
+    k, dt_k, step = gap
+    where = f"sample {k} ({row(k) + ', ' if row else ''}t = {samples['t'][k]:.9g} s)"
+    if resample is None:
+        raise ImportDataError(f"{path}: time stamps are not uniform: a step of {dt_k:.6g} s after {where}, against a "
+                              f"typical {step:.6g} s; fix the file or give --resample linear")
+    t_source = samples["t"]
+    out = _resample_linear(samples, step, path)
+    return out, {"method": "linear interpolation of every channel onto t0 + k*step (counts rounded)",
+                 "step_s": step, "samples_before": int(t_source.size), "samples_after": int(out["t"].size),
+                 "largest_step_s": float(np.max(np.diff(t_source))), "first_gap_after": where}
+
+
+def table_run(columns: Mapping[str, np.ndarray], path: str, fmt: str, options: TableOptions,
+              row: Any = None) -> ImportedRun:
+    """Turn named 1-D columns (a CSV's or a MAT file's) into an :class:`ImportedRun` in SI units.
+
+    Channels come from the column names (aliases, see :mod:`hilbench.bench.import_units`) and
+    ``options.mapping``; units from ``options.units`` and the header; every size is checked against
+    :data:`MAX_IMPORT_SAMPLES` and the rate against :data:`MAX_IMPORT_RATE_HZ` before anything is allocated
+    from it. ``row(k)`` names where sample k is in the source, for error messages (e.g. ``line 12``).
+    """
+    o = options
+    axis = "linear" if o.linear else "rotary"
+    names = list(columns)
+    column_of, header_unit = _assign_channels(names, o.mapping, path)
+    units = _units(column_of, header_unit, o.units, axis, path)
+    if o.torque_timing is not None and o.torque_timing not in TORQUE_TIMINGS:
+        raise ImportDataError(f"torque timing must be one of {', '.join(TORQUE_TIMINGS)}, got {o.torque_timing!r}")
+    if o.resample is not None and o.resample not in RESAMPLE_METHODS:
+        raise ImportDataError(f"--resample must be one of {', '.join(RESAMPLE_METHODS)}, got {o.resample!r}")
+    if o.torque_constant is not None and not (math.isfinite(o.torque_constant) and o.torque_constant != 0):
+        raise ImportDataError(f"torque constant must be finite and non-zero, got {o.torque_constant}")
+    if o.counts_per_rev is not None and not (math.isfinite(o.counts_per_rev) and o.counts_per_rev > 0):
+        raise ImportDataError(f"counts per rev must be finite and > 0, got {o.counts_per_rev}")
+    counts_unit = [ch for ch, u in units.items() if factor_to_si(ch, u, axis) == COUNTS and ch != "counts"]
+    if counts_unit and o.counts_per_rev is None:
+        raise ImportDataError(f"{', '.join(counts_unit)} in counts: give --counts-per-rev N")
+    _require(column_of, o, names, path)
+
+    samples = {ch: np.asarray(columns[col], dtype=float) for ch, col in column_of.items()}
+    if "position" not in samples:  # from the encoder counts (_require checked counts_per_rev)
+        samples["position"] = samples["counts"].copy()
+        units["position"] = COUNTS
+    n = next(iter(samples.values())).size
+    if n > MAX_IMPORT_SAMPLES:
+        raise ImportDataError(f"{path}: {n} samples, above the import bound of {MAX_IMPORT_SAMPLES} samples "
+                              "(MAX_IMPORT_SAMPLES)")
+    labels = dict(column_of)
+    if "t" not in samples:
+        if not (o.sample_rate is not None and math.isfinite(o.sample_rate) and 0 < o.sample_rate):
+            raise ImportDataError(f"--sample-rate must be finite and > 0 Hz, got {o.sample_rate}")
+        samples["t"] = np.arange(n) / float(o.sample_rate)
+        labels["t"] = f"k/{o.sample_rate:g} Hz"
+        units["t"] = "s"
+    _check_finite(samples, path, labels)
+    source_units = _convert_to_si(samples, units, labels, axis, o.counts_per_rev, path)
+    fs = _check_rate(samples["t"], "t" in units, path)
+    samples, resampled = _make_uniform(samples, o.resample, row, path)
+    if resampled:
+        fs = _check_rate(samples["t"], True, path)
+    calibration: dict[str, Any] = {}
+    torque_unit = "N" if o.linear else "N*m"
+    if o.torque_constant is not None:
+        calibration = {"torque_constant": o.torque_constant, "torque_constant_unit": f"{torque_unit}/A"}
+        if "torque" not in samples:
+            samples["torque"] = o.torque_constant * samples["current"]
+    if o.counts_per_rev is not None:
+        calibration["counts_per_rev"] = o.counts_per_rev
+    if "counts" in samples:
+        samples["counts"] = samples["counts"].astype(np.int64)
+    samples["sample_index"] = np.arange(samples["t"].size, dtype=np.int64)
+    variables = dict(labels)
+    if "torque" not in column_of:
+        variables["torque"] = f"{o.torque_constant}*{column_of['current']}"
+    used = set(column_of.values())
+    params: dict[str, Any] = {
+        "format": fmt,
+        "source_file": os.path.basename(path),
+        "source_sha256": _sha256(path),
+        "variables": variables,
+        "source_units": source_units,
+        "units_assumed": sorted(ch for ch in source_units if ch not in units and ch in column_of and ch != "counts"),
+        "ignored_columns": [c for c in names if c not in used],
+        "sample_rate_note": "nominal: (n-1)/(t[-1]-t[0])",
+    }
+    if resampled:
+        params["resampled"] = resampled
+    return ImportedRun(
+        axis=axis,
+        sample_rate=fs,
+        samples=samples,
+        protocol_name=f"import:{fmt}",
+        protocol_params=params,
+        device={"name": os.path.splitext(os.path.basename(path))[0], "source": fmt},
+        calibration=calibration,
+        torque_timing=o.torque_timing,
+    )
+
+
 def _sniff_delimiter(header: str) -> str:
     for candidate in (",", ";", "\t"):
         if candidate in header:
@@ -270,28 +572,26 @@ def _sniff_delimiter(header: str) -> str:
     return ","
 
 
-def load_csv(
-    path: str | os.PathLike,
-    *,
-    torque_constant: float | None = None,
-    mapping: Mapping[str, str] | None = None,
-    linear: bool = False,
-    delimiter: str | None = None,
-) -> ImportedRun:
-    """Load a CSV file with a header row.
+def _count_lines(path: str) -> int:
+    """Lines in a text file, counted in 1 MiB blocks (nothing the size of the file is allocated)."""
+    lines, last = 0, b"\n"
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            lines += block.count(b"\n")
+            last = block[-1:]
+    return lines + (last != b"\n")
 
-    Args:
-        path: the CSV file.
-        torque_constant: N*m/A (N/A when ``linear``); turns a ``current`` column into ``torque`` when the
-            file has no torque column.
-        mapping: run-file channel -> CSV column name, for columns not already named after a channel.
-        linear: the axis is linear: position in m, torque column in N, velocity in m/s.
-        delimiter: field separator (default: guessed from the header among ``,``, ``;`` and tab).
 
-    Required: ``t`` (s, strictly increasing), ``position`` and ``torque`` (or ``current`` with
-    ``torque_constant``). Any other column named after a run-file channel is kept; the rest are ignored and
-    listed in ``protocol_params["ignored_columns"]``.
+def load_csv(path: str | os.PathLike, options: TableOptions | None = None, *, delimiter: str | None = None,
+             **kwargs: Any) -> ImportedRun:
+    """Load a CSV file with a header row (see :class:`TableOptions`; keyword arguments are its fields).
+
+    Required: time (``t``, ``time``, ``Time [ms]``...; or ``sample_rate``), position (or counts with
+    ``counts_per_rev``) and torque (or current with ``torque_constant``). Columns named after no channel are
+    kept out and listed in ``protocol_params["ignored_columns"]``. ``delimiter``: default guessed from the
+    header among ``,``, ``;`` and tab.
     """
+    options = options or TableOptions(**kwargs)
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise ImportDataError(f"{path}: no such file")
@@ -306,70 +606,122 @@ def load_csv(
     names = [h.strip().strip('"').strip("'") for h in header.rstrip("\r\n").split(sep)]
     if len(set(names)) != len(names):
         raise ImportDataError(f"{path}: duplicate column names in the header: {names}")
-    mapping = dict(mapping or {})
-    for channel, column in mapping.items():
-        if channel not in CHANNELS or channel in ("sample_index",):
-            raise ImportDataError(f"--map {channel}={column}: {channel!r} is not a run-file channel")
-        if column not in names:
-            raise ImportDataError(f"{path}: --map {channel}={column}: no column {column!r} (header: {names})")
-    column_of = {name: name for name in names if name in CHANNELS and name != "sample_index"}
-    for channel, column in mapping.items():
-        column_of = {k: v for k, v in column_of.items() if v != column}
-        column_of[channel] = column
-    missing = [c for c in ("t", "position") if c not in column_of]
-    if "torque" not in column_of and not ("current" in column_of and torque_constant is not None):
-        missing.append("torque (or current with --torque-constant)")
-    if missing:
-        raise ImportDataError(f"{path}: missing column(s): {', '.join(missing)} (header: {', '.join(names)})")
-    if torque_constant is not None and not (math.isfinite(torque_constant) and torque_constant != 0):
-        raise ImportDataError(f"torque constant must be finite and non-zero, got {torque_constant}")
-
-    used = list(column_of.values())
+    column_of, _ = _assign_channels(names, options.mapping, path)
+    _require(column_of, options, names, path)
+    rows = _count_lines(path) - 1
+    if rows > MAX_IMPORT_SAMPLES:
+        raise ImportDataError(f"{path}: {rows} rows, above the import bound of {MAX_IMPORT_SAMPLES} samples "
+                              "(MAX_IMPORT_SAMPLES)")
+    used = list(dict.fromkeys(column_of.values()))
     try:
-        table = np.loadtxt(
-            path,
-            delimiter=sep,
-            skiprows=1,
-            usecols=[names.index(c) for c in used],
-            ndmin=2,
-            encoding="utf-8-sig",
-            comments=None,
-        )
+        table = np.loadtxt(path, delimiter=sep, skiprows=1, usecols=[names.index(c) for c in used], ndmin=2,
+                           encoding="utf-8-sig", comments=None)
     except ValueError as exc:
         raise ImportDataError(f"{path}: {' '.join(str(exc).split())}") from None
-    samples = {channel: table[:, i].astype(float) for i, channel in enumerate(column_of)}
-    _check_finite(samples, path, {ch: col for ch, col in column_of.items()})
-    n = samples["t"].size
-    fs = _sample_rate(samples["t"], path)
-    calibration: dict[str, Any] = {}
-    torque_unit = "N" if linear else "N*m"
-    if torque_constant is not None:
-        calibration = {"torque_constant": torque_constant, "torque_constant_unit": f"{torque_unit}/A"}
-        if "torque" not in samples:
-            samples["torque"] = torque_constant * samples["current"]
-    if "counts" in samples:
-        if np.any(samples["counts"] != np.round(samples["counts"])):
-            raise ImportDataError(f"{path}: column {column_of['counts']!r} (counts) must hold whole numbers")
-        samples["counts"] = samples["counts"].astype(np.int64)
-    samples["sample_index"] = np.arange(n, dtype=np.int64)
-    ignored = [c for c in names if c not in used]
-    return ImportedRun(
-        axis="linear" if linear else "rotary",
-        sample_rate=fs,
-        samples=samples,
-        protocol_name="import:csv",
-        protocol_params={
-            "format": "csv",
-            "source_file": os.path.basename(path),
-            "source_sha256": _sha256(path),
-            "variables": {ch: col for ch, col in column_of.items()}
-            | ({"torque": f"{torque_constant}*{column_of['current']}"} if "torque" not in column_of else {}),
-            "ignored_columns": ignored,
-            "sample_rate_note": "nominal: (n-1)/(t[-1]-t[0])",
-        },
-        device={"name": os.path.splitext(os.path.basename(path))[0], "source": "csv"},
-        calibration=calibration,
-    )
+    columns = {name: table[:, used.index(name)] if name in used else np.empty(0) for name in names}
+    return table_run(columns, path, "csv", options, row=lambda k: f"line {k + 2}")
+
+
+_MATRIX_COLUMN = re.compile(r"^(?P<var>[A-Za-z]\w*)\(\s*:\s*,\s*(?P<col>\d+)\s*\)$")
+
+
+def _mat_variables(path: str) -> dict[str, np.ndarray]:
+    """Numeric variables of a MAT file (v5/v7 with scipy, v7.3 with h5py), as MATLAB shows them (rows = samples
+    for a column vector). Sizes are checked against MAX_IMPORT_SAMPLES before any variable is read; complex
+    ones are refused; structs, cells and text are left out."""
+    from scipy.io import matlab
+
+    if not os.path.isfile(path):
+        raise ImportDataError(f"{path}: no such file")
+    try:
+        with open(path, "rb") as fh:
+            major, _ = matlab.matfile_version(fh)
+    except Exception as exc:  # scipy raises ValueError / MatReadError for what is not a MAT file
+        raise ImportDataError(f"{path}: not a MAT file ({' '.join(str(exc).split())})") from None
+    if major == 2:
+        return _mat73_variables(path)
+    try:
+        listing = matlab.whosmat(path)
+    except Exception as exc:
+        raise ImportDataError(f"{path}: not a readable MAT file ({' '.join(str(exc).split())})") from None
+    numeric = []
+    for name, shape, cls in listing:
+        size = math.prod(shape)
+        if size > MAX_IMPORT_SAMPLES * 16:
+            raise ImportDataError(f"{path}: variable {name!r} has {size} elements, above the import bound of "
+                                  f"{MAX_IMPORT_SAMPLES * 16} (16 x MAX_IMPORT_SAMPLES)")
+        if cls not in ("struct", "cell", "char", "object", "function_handle", "opaque"):
+            numeric.append(name)
+    mat = _loadmat(path, variable_names=numeric) if numeric else {}
+    out = {}
+    for name in numeric:
+        a = np.asarray(mat[name])
+        _refuse_complex(a, name, path)
+        out[name] = a
+    return out
+
+
+def _mat73_variables(path: str) -> dict[str, np.ndarray]:
+    import h5py
+
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise ImportDataError(f"{path}: not a readable MAT v7.3 (HDF5) file ({' '.join(str(exc).split())})") from None
+    out = {}
+    with f:
+        for name, obj in f.items():
+            if not isinstance(obj, h5py.Dataset) or name.startswith("#"):
+                continue
+            cls = obj.attrs.get("MATLAB_class", b"")
+            cls = cls.decode() if isinstance(cls, bytes) else str(cls)
+            if cls in ("char", "cell", "struct", "function_handle") or obj.attrs.get("MATLAB_empty", 0):
+                continue
+            if obj.size > MAX_IMPORT_SAMPLES * 16:
+                raise ImportDataError(f"{path}: variable {name!r} has {obj.size} elements, above the import bound "
+                                      f"of {MAX_IMPORT_SAMPLES * 16} (16 x MAX_IMPORT_SAMPLES)")
+            _refuse_complex(np.empty(0, obj.dtype), name, path)
+            if obj.dtype.kind not in "biuf":
+                continue
+            out[name] = np.asarray(obj[()]).T  # HDF5 stores MATLAB's column-major arrays transposed
+    return out
+
+
+def load_mat(path: str | os.PathLike, options: TableOptions | None = None, **kwargs: Any) -> ImportedRun:
+    """Load a MAT file (v5/v7 or v7.3) of vectors into a run (see :class:`TableOptions`; keyword arguments are
+    its fields).
+
+    Every numeric vector whose name is a channel alias (``t``, ``time``, ``position``, ``theta``, ``torque``...)
+    becomes that channel; ``options.mapping`` names other variables, and ``VAR(:,k)`` column k (1-based, as in
+    MATLAB) of a matrix. All vectors used must have the same length. MAT files carry no units: give them with
+    ``options.units``; unstated ones are taken as SI.
+    """
+    options = options or TableOptions(**kwargs)
+    path = os.fspath(path)
+    variables = _mat_variables(path)
+    columns: dict[str, np.ndarray] = {}
+    for name, a in variables.items():
+        if a.ndim == 2 and 1 in a.shape and a.size > 1:
+            columns[name] = a.ravel()
+    for channel, ref in options.mapping.items():
+        m = _MATRIX_COLUMN.match(ref)
+        if ref in columns or not m:
+            continue
+        var, col = m.group("var"), int(m.group("col"))
+        if var not in variables:
+            raise ImportDataError(f"{path}: --map {channel}={ref}: no variable {var!r} (has: {', '.join(variables)})")
+        a = variables[var]
+        if a.ndim != 2 or not 1 <= col <= a.shape[1]:
+            raise ImportDataError(f"{path}: --map {channel}={ref}: {var!r} has shape {a.shape}, no column {col}")
+        columns[ref] = np.ascontiguousarray(a[:, col - 1])
+    lengths = {}
+    column_of, _ = _assign_channels(list(columns), options.mapping, path)
+    for name in column_of.values():
+        lengths.setdefault(columns[name].size, []).append(name)
+    if len(lengths) > 1:
+        detail = "; ".join(f"{', '.join(names)}: {n}" for n, names in sorted(lengths.items()))
+        raise ImportDataError(f"{path}: the variables used have different lengths ({detail})")
+    return table_run(columns, path, "mat", options)
 
 
 LOADERS = {"emps": load_emps, "hsm150": load_hsm150}
@@ -387,6 +739,10 @@ def write_run(
     out = os.fspath(out)
     if os.path.exists(out) and not overwrite:
         raise ImportDataError(f"{out}: file exists (use --force to overwrite)")
+    n = imported.n_samples
+    if n > MAX_IMPORT_SAMPLES:
+        raise ImportDataError(f"{out}: {n} samples, above the import bound of {MAX_IMPORT_SAMPLES} samples "
+                              "(MAX_IMPORT_SAMPLES)")
     custom = dict(imported.custom_units)
     channels = [name for name in imported.samples if name not in custom]
     with RunWriter(
@@ -403,6 +759,10 @@ def write_run(
         notes=notes,
         source=imported.protocol_name,
         overwrite=overwrite,
+        # chunks hold flush_interval*sample_rate samples: never more than the file has (a 1 MHz file of four
+        # samples would otherwise allocate half a million per channel)
+        flush_interval=min(0.5, max(n, 1) / imported.sample_rate),
+        torque_timing=imported.torque_timing,
     ) as writer:
         writer.append(imported.samples)
     return out

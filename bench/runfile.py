@@ -56,6 +56,7 @@ RESERVE_BYTES = 1 << 18
 MAX_CHUNK = 1 << 20
 EVENT_KINDS = ("fault", "pause", "resume", "abort", "error", "info", "crash")
 EVENT_MESSAGE_BYTES = 256
+TORQUE_TIMINGS = ("hold_next", "hold_previous", "instant")  # docs/science.md §6
 
 
 @dataclass(frozen=True)
@@ -204,6 +205,8 @@ class RunWriter:
         compression: ``"lzf"`` (fast; h5py's built-in filter), ``"gzip"`` (level 1; readable by every HDF5
             tool, about 2x slower) or ``None``; always with the shuffle filter.
         start_time: ISO 8601 UTC start time (default: now).
+        torque_timing: what torque sample k means (``hold_next``, ``hold_previous``, ``instant``; docs/science.md
+            §6), stored as the root attribute ``torque_timing``; None (default) stores nothing.
     """
 
     def __init__(
@@ -227,8 +230,12 @@ class RunWriter:
         compression: str | None = "lzf",
         overwrite: bool = False,
         start_time: str | None = None,
+        torque_timing: str | None = None,
     ) -> None:
         self.path = os.fspath(path)
+        if torque_timing not in (None, *TORQUE_TIMINGS):
+            raise RunFileError(f"{self.path}: torque_timing must be one of {TORQUE_TIMINGS}, got {torque_timing!r}")
+        self.torque_timing = torque_timing
         if not (isinstance(sample_rate, int | float) and math.isfinite(sample_rate) and sample_rate > 0):
             raise RunFileError(f"{self.path}: sample_rate must be finite and > 0 Hz, got {sample_rate!r}")
         if axis not in AXES:
@@ -393,6 +400,8 @@ class RunWriter:
         }
         for key, value in software_versions().items():
             attrs[f"software_{key}"] = value
+        if self.torque_timing is not None:
+            attrs["torque_timing"] = self.torque_timing
         for key, value in attrs.items():
             f.attrs[key] = value
 

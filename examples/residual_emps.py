@@ -2,6 +2,9 @@
 
     .venv/bin/python examples/residual_emps.py [OUT_DIR]
 
+EMPS ships with the repository (tests/data/emps/, Janot, Gautier and Brunot 2019); HSM150 is read from
+$HILBENCH_REAL_DATA/hsm150/ and left out, with a note, when that variable is not set.
+
 EMPS starts from the benchmark's reference model (mass, Coulomb, viscous, offset) and uses the IDIM-LS
 filter band (cutoff 40 Hz ~ the decimate anti-alias band, decimation 10). HSM150 trains on repeats 1 and 2
 of all four step files (both directions) and validates on repeat 3, with the commanded torque.
@@ -10,6 +13,7 @@ of all four step files (both directions) and validates on repeat 3, with the com
 from __future__ import annotations
 
 import glob
+import os
 import sys
 from pathlib import Path
 
@@ -20,11 +24,11 @@ from hilbench.analysis.reproductions.emps import PUBLISHED, fit_idim, idim_obser
 from hilbench.analysis.residual import EMPS_START, prepare_run, residual_loop
 from hilbench.analysis.residual.report import write_json, write_report
 
-DATA = Path("/work/shared/data/real")
+EMPS = Path(__file__).resolve().parent.parent / "tests" / "data" / "emps"
 
 
 def emps(out: Path) -> None:
-    a, b = load_emps(DATA / "emps/DATA_EMPS.mat"), load_emps(DATA / "emps/DATA_EMPS_PULSES.mat")
+    a, b = load_emps(EMPS / "DATA_EMPS.mat"), load_emps(EMPS / "DATA_EMPS_PULSES.mat")
     fs = 1.0 / (a.t[1] - a.t[0])
     kw = {"axis": "linear", "cutoff": 40.0, "decimation": 10}
     result = residual_loop(prepare_run(a.qm, a.force, fs, name="DATA_EMPS", **kw),
@@ -51,8 +55,13 @@ def emps(out: Path) -> None:
 
 
 def hsm150(out: Path) -> None:
+    root = os.environ.get("HILBENCH_REAL_DATA")
+    files = sorted(glob.glob(os.path.join(root, "hsm150", "idf_*.mat"))) if root else []
+    if not files:
+        print("HSM150: skipped (set HILBENCH_REAL_DATA to the folder holding hsm150/idf_*.mat)")
+        return
     runs = []
-    for f in sorted(glob.glob(str(DATA / "hsm150/idf_*.mat"))):
+    for f in files:
         d = loadmat(f)["data"]
         runs.append(prepare_run(d[:, 2], d[:, 4], 1000.0, name=Path(f).stem, cutoff=50.0))
     train = [r for r in runs if not r.name.endswith("_3")]

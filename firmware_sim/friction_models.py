@@ -1,6 +1,6 @@
 """Rolling-friction virgin curve, its exact Maxwell-slip discretisation, and reference parameter sets.
 
-References: ``shared/docs/science.md`` §2 (virgin curve, Masing rules, discretisation) and §6 (DC motor).
+References: ``docs/science.md`` §2 (virgin curve, Masing rules, discretisation) and §6 (DC motor).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The EMPS benchmark's reference model, fitted by IDIM-LS as in its description paper.
 
 Janot, Gautier, Brunot, "Data Set and Reference Models of EMPS", Nonlinear System Identification
-Benchmarks workshop, 2019. Data: ``/work/shared/data/real/emps/`` (see its README.md).
+Benchmarks workshop, 2019. Data: ``tests/data/emps/`` in the repository (see its README.md).
 
 Model (linear axis, SI units):
 

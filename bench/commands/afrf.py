@@ -10,7 +10,7 @@ def register(subparsers) -> None:
         "afrf",
         help="absolute frequency response of the 1st-3rd harmonic (stepped-sine run or simulated model)",
         description="Magnitude of the displacement at f, 2f and 3f over whole periods of each step's "
-        "steady state (science.md §5). Give a stepped-sine RUN.h5 (hilbench run stepped_sine), or --model "
+        "steady state (docs/science.md §5). Give a stepped-sine RUN.h5 (hilbench run stepped_sine), or --model "
         "to simulate the paper's Maxwell-slip system, a Coulomb system or the closed-form equivalent.",
     )
     parser.add_argument("run", nargs="?", help="stepped-sine run file (.h5)")

@@ -69,13 +69,14 @@ def run(args) -> int:
     from hilbench.analysis.identification.identify import identify
     from hilbench.analysis.identification.maxwell_fit import LipSettings
     from hilbench.analysis.models.model_file import model_document, write_model
-    from hilbench.analysis.run_file import torque_timing_for
+    from hilbench.analysis.run_file import run_torque_timing
     from hilbench.bench.runfile import open_run
 
     train = _arrays(args.run)
     val = _arrays(args.validate) if args.validate else None
     with open_run(args.run) as r:
-        timing = torque_timing_for(str(r.meta.get("source", "device")), args.torque_timing)
+        timing, timing_origin = run_torque_timing(r.meta, args.torque_timing)
+    print(f"torque timing: {timing} ({timing_origin})")
     settings = LipSettings(
         n_thresholds=args.thresholds,
         cutoff=args.cutoff,

@@ -1,4 +1,4 @@
-"""``hilbench import {emps,hsm150,mnich,csv} FILE [-o RUN.h5]``: convert measured data into a run file (schema v1)."""
+"""``hilbench import {emps,hsm150,mnich,csv,mat} FILE [-o RUN.h5]``: measured data into a run file (schema v1)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import os
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "import",
-        help="import real data (EMPS, HSM150, Mnich rig, CSV) into a run file",
+        help="import real data (EMPS, HSM150, Mnich rig, your own CSV or MAT) into a run file",
         description="Convert measured data from another bench into a hilbench run file (HDF5 schema v1).",
     )
     formats = parser.add_subparsers(dest="format", metavar="FORMAT", required=True)
@@ -56,48 +56,99 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     csv = formats.add_parser(
         "csv",
-        help="CSV with a header row (t, position, torque or current, optional velocity)",
+        help="your own CSV with a header row (t, position, torque or current; units per column)",
         description=(
-            "Import a CSV file whose header names the columns: t (s), position (rad; m with --linear), "
-            "torque (N*m; N with --linear) or current (A) with --torque-constant, optional velocity "
-            "(rad/s; m/s with --linear). Columns with other names are mapped with --map CHANNEL=COLUMN. "
-            "Values must all be finite and t strictly increasing."
+            "Import a CSV file whose header names the columns. Usual names are found by themselves (t, time, "
+            "Time [s], position, theta, torque, tau, current, velocity, speed, counts...; see docs/data.md); "
+            "others are mapped with --map CHANNEL=COLUMN. Units: from the header (Time [ms], pos_deg) or "
+            "--unit CHANNEL=UNIT; unstated means SI (s, rad or m, N*m or N, A). Time stamps must be uniform "
+            "(or give --resample linear); values finite."
         ),
     )
     csv.add_argument("file", metavar="FILE.csv")
-    csv.add_argument(
+    csv.add_argument("--delimiter", help="field separator (default: guessed from the header: , ; or tab)")
+    table_options(csv)
+    common(csv)
+
+    mat = formats.add_parser(
+        "mat",
+        help="your own MAT file of vectors (v5/v7 or v7.3; units per variable)",
+        description=(
+            "Import a MATLAB file (v5/v7 with scipy, v7.3 with h5py) whose vectors are named like channels "
+            "(t, time, position, theta, torque, current...; see docs/data.md), or mapped with --map "
+            "CHANNEL=VAR, or CHANNEL='VAR(:,K)' for column K of a matrix. MAT files carry no units: give them "
+            "with --unit CHANNEL=UNIT (unstated means SI). Complex variables are refused."
+        ),
+    )
+    mat.add_argument("file", metavar="FILE.mat")
+    table_options(mat)
+    common(mat)
+
+
+def table_options(p: argparse.ArgumentParser) -> None:
+    """Options of the table importers (csv, mat): channels, units, timing, gaps."""
+    from hilbench.bench.importers import RESAMPLE_METHODS, TORQUE_TIMINGS
+
+    p.add_argument(
+        "--map", action="append", default=[], metavar="CHANNEL=COLUMN",
+        help="read run-file channel CHANNEL from COLUMN (repeatable), e.g. --map torque=Tq",
+    )
+    p.add_argument(
+        "--unit", action="append", default=[], metavar="CHANNEL=UNIT",
+        help="unit of a channel's source values (repeatable): t=ms, position=deg, torque=mN*m, velocity=rpm, "
+        "current=mA, position=counts (with --counts-per-rev)...; docs/data.md lists them all",
+    )
+    p.add_argument("--counts-per-rev", type=float, metavar="N", help="encoder counts per revolution, for a "
+                   "position in counts (or a counts column and no position)")
+    p.add_argument(
         "--torque-constant", type=float, metavar="K",
         help="torque constant in N*m/A (N/A with --linear) to turn a current column into torque",
     )
-    csv.add_argument(
-        "--map", action="append", default=[], metavar="CHANNEL=COLUMN",
-        help="read run-file channel CHANNEL from CSV column COLUMN (repeatable), e.g. --map torque=Tq_Nm",
+    p.add_argument("--linear", action="store_true", help="linear axis: position in m, force in N")
+    p.add_argument(
+        "--torque-timing", choices=TORQUE_TIMINGS,
+        help="what torque sample k means, stored in the run file: hold_next = held over [t_k, t_k+1) (a "
+        "command); hold_previous = mean over [t_k-1, t_k) (a current sampled at t_k); instant = value at t_k. "
+        "Not given: analyses assume instant (docs/science.md section 6)",
     )
-    csv.add_argument("--linear", action="store_true", help="linear axis: position in m, force in N")
-    csv.add_argument("--delimiter", help="field separator (default: guessed from the header: , ; or tab)")
-    common(csv)
+    p.add_argument(
+        "--resample", choices=RESAMPLE_METHODS,
+        help="non-uniform time stamps: linear = interpolate every channel linearly onto a uniform grid of the "
+        "median step (default: refuse, naming the first gap)",
+    )
+    p.add_argument("--sample-rate", type=float, metavar="HZ", help="sample rate for a file without a time column")
 
 
-def _parse_map(items: list[str]) -> dict[str, str]:
+def _options(args: argparse.Namespace):
+    from hilbench.bench.importers import TableOptions
+
+    return TableOptions(
+        mapping=_parse_pairs(args.map, "--map", "CHANNEL=COLUMN"),
+        units=_parse_pairs(args.unit, "--unit", "CHANNEL=UNIT"),
+        torque_constant=args.torque_constant, counts_per_rev=args.counts_per_rev, linear=args.linear,
+        torque_timing=args.torque_timing, resample=args.resample, sample_rate=args.sample_rate,
+    )
+
+
+def _parse_pairs(items: list[str], option: str, form: str) -> dict[str, str]:
     from hilbench.bench.importers import ImportDataError
 
-    mapping = {}
+    pairs = {}
     for item in items:
-        channel, sep, column = item.partition("=")
-        if not sep or not channel.strip() or not column.strip():
-            raise ImportDataError(f"--map {item!r}: expected CHANNEL=COLUMN")
-        mapping[channel.strip()] = column.strip()
-    return mapping
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip() or not value.strip():
+            raise ImportDataError(f"{option} {item!r}: expected {form}")
+        pairs[key.strip()] = value.strip()
+    return pairs
 
 
 def run(args: argparse.Namespace) -> int:
     from hilbench.bench import importers
 
     if args.format == "csv":
-        imported = importers.load_csv(
-            args.file, torque_constant=args.torque_constant, mapping=_parse_map(args.map), linear=args.linear,
-            delimiter=args.delimiter,
-        )
+        imported = importers.load_csv(args.file, _options(args), delimiter=args.delimiter)
+    elif args.format == "mat":
+        imported = importers.load_mat(args.file, _options(args))
     elif args.format == "mnich":
         from hilbench.bench.import_mnich import load_mnich
 
@@ -113,9 +164,19 @@ def run(args: argparse.Namespace) -> int:
         f"wrote {out}: {imported.n_samples} samples at {imported.sample_rate:g} Hz, {imported.axis} axis; "
         f"channels {channels}"
     )
-    ignored = imported.protocol_params.get("ignored_columns")
-    if ignored:
-        print(f"ignored columns: {', '.join(ignored)}")
+    params = imported.protocol_params
+    if params.get("ignored_columns"):
+        print(f"ignored columns: {', '.join(params['ignored_columns'])}")
+    if params.get("units_assumed"):
+        print(f"no unit stated for {', '.join(params['units_assumed'])}: taken as SI (--unit CHANNEL=UNIT if not)")
+    if params.get("resampled"):
+        r = params["resampled"]
+        print(f"resampled: {r['method']}, step {r['step_s']:.6g} s, {r['samples_before']} -> {r['samples_after']} "
+              f"samples (largest source step {r['largest_step_s']:.6g} s)")
+    if imported.torque_timing:
+        print(f"torque timing: {imported.torque_timing} (stored in the run file)")
+    elif "torque" in imported.samples:
+        print("torque timing: not declared; analyses will assume instant (--torque-timing to declare it)")
     return 0
 
 

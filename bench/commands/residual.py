@@ -47,7 +47,7 @@ def _load(path: str, channel: str | None, timing: str | None, cutoff: float | No
     import numpy as np
 
     from hilbench.analysis.residual import prepare_run
-    from hilbench.analysis.run_file import torque_timing_for
+    from hilbench.analysis.run_file import run_torque_timing
     from hilbench.bench.errors import BenchError
     from hilbench.bench.runfile import open_run
 
@@ -58,7 +58,8 @@ def _load(path: str, channel: str | None, timing: str | None, cutoff: float | No
         position = np.asarray(r.channel("position"), float)
         torque = np.asarray(r.channel(name), float)
         fs, axis = r.sample_rate, r.axis
-        timing = torque_timing_for(str(r.meta.get("source", "device")), timing or "auto", name)
+        timing, timing_origin = run_torque_timing(r.meta, timing or "auto", name)
+    print(f"{path}: torque timing of {name}: {timing} ({timing_origin})")
     return prepare_run(position, torque, fs, axis=axis, name=path, cutoff=cutoff, timing=timing), name, timing
 
 

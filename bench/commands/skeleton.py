@@ -13,7 +13,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="equivalent stiffness and damping (skeleton curves) from chirp runs, composed across runs",
         description="ForceVib on each run (x = position channel, force = torque channel), then composition "
         "across runs into k_eq(A), restoring force k_eq*A against displacement amplitude, and "
-        "damping force c_eq*V against velocity amplitude (science.md §4).",
+        "damping force c_eq*V against velocity amplitude (docs/science.md §4).",
     )
     parser.add_argument("runs", nargs="+", metavar="RUN.h5", help="chirp run files (same axis)")
     parser.add_argument(
@@ -96,6 +96,7 @@ def run(args: argparse.Namespace) -> int:
     for r in runs:
         x = np.asarray(r.channel("position"), float)
         force = centred_force(r.channel("torque"), r.torque_timing)
+        print(f"{r.path.name}: torque timing {r.torque_timing} ({'declared' if r.declared_timing else 'default'})")
         results.append(forcevib(x, force, r.sample_rate, mass, args.method, spring=args.spring, **options))
         v = results[-1].valid
         print(

@@ -1,16 +1,14 @@
 """``hilbench identify`` end to end on run files written with bench.runfile (bench uses analysis)."""
 
 import json
-import os
-from pathlib import Path
 
 import numpy as np
-import pytest
 
 from hilbench.bench.cli import main
 from hilbench.bench.runfile import RunWriter
 from hilbench.firmware_sim.friction_models import dc_motor
 from hilbench.firmware_sim.plant import simulate
+from tests import real_data
 from tests.analysis.identification.test_identification import random_enveloped
 
 
@@ -61,10 +59,9 @@ def test_identify_cli_missing_torque_is_a_one_line_error(tmp_path, capsys):
     assert "missing channel(s) torque" in err and "\n" not in err
 
 
-REAL_EMPS = Path(os.environ.get("HILBENCH_REAL_DATA", "/work/shared/data/real")) / "emps"
+REAL_EMPS = real_data.EMPS  # ships in tests/data/emps: never skipped
 
 
-@pytest.mark.skipif(not (REAL_EMPS / "DATA_EMPS.mat").exists(), reason="EMPS data set not available")
 def test_identify_imported_emps_with_and_without_maxwell_slip(tmp_path, capsys):
     # EMPS stores time in float32 (4e-5 of dt off a uniform grid); identification must accept it. The
     # reference model (J, Fc, b, offset: --thresholds 0) and the one with Maxwell-slip, trained on DATA_EMPS

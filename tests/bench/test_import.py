@@ -1,10 +1,11 @@
 """Imports of real data (EMPS, HSM150) and CSV: round trips, and units/lengths/ranges checked against the
-source READMEs in /work/shared/data/real/."""
+data sets' READMEs (EMPS ships in tests/data/emps/; the others come from $HILBENCH_REAL_DATA, see
+tests/real_data.py)."""
 
 from __future__ import annotations
 
+import hashlib
 import math
-import os
 from pathlib import Path
 
 import numpy as np
@@ -14,13 +15,12 @@ from scipy.io import loadmat, savemat
 from hilbench.bench import importers
 from hilbench.bench.cli import main as bench_main
 from hilbench.bench.runfile import open_run
+from tests import real_data
 
-REAL = Path(os.environ.get("HILBENCH_REAL_DATA", "/work/shared/data/real"))
-EMPS = REAL / "emps" / "DATA_EMPS.mat"
-EMPS_PULSES = REAL / "emps" / "DATA_EMPS_PULSES.mat"
-HSM = sorted((REAL / "hsm150").glob("idf_*.mat"))
-
-needs_real = pytest.mark.skipif(not EMPS.exists() or not HSM, reason="real data set not available")
+EMPS, EMPS_PULSES = real_data.EMPS_TRAIN, real_data.EMPS_TEST
+_HSM_DIR = real_data.real_data("hsm150")
+HSM = sorted(_HSM_DIR.glob("idf_*.mat")) if _HSM_DIR else []
+needs_hsm = real_data.needs("hsm150")
 
 
 def _one_line_error(capsys, argv, pattern):
@@ -33,7 +33,15 @@ def _one_line_error(capsys, argv, pattern):
 # ---- EMPS -------------------------------------------------------------------------------------------------
 
 
-@needs_real
+def test_emps_vendored_files_are_the_published_ones():
+    # tests/data/emps/README.md lists the digests of the benchmark's files; a clone has them (no skip)
+    readme = (real_data.EMPS / "README.md").read_text()
+    for path in (EMPS, EMPS_PULSES):
+        digest = hashlib.sha256(path.read_bytes()).hexdigest()
+        assert f"| {path.name} | {digest} |" in readme
+    assert "Janot" in readme and "Licence" in readme
+
+
 @pytest.mark.parametrize("source", [EMPS, EMPS_PULSES], ids=["train", "pulses"])
 def test_emps_import_round_trip_and_readme_facts(tmp_path, capsys, source):
     out = tmp_path / "emps.h5"
@@ -96,7 +104,7 @@ HSM_BEFORE = {"neg": (-171, -143), "pos": (139, 147)}
 HSM_OPERATING_POINT = {"neg": -0.03, "pos": 0.05}
 
 
-@needs_real
+@needs_hsm
 @pytest.mark.parametrize("source", HSM, ids=[p.stem for p in HSM])
 def test_hsm150_loader_matches_readme(source):
     imp = importers.load_hsm150(source)
@@ -126,7 +134,7 @@ def test_hsm150_loader_matches_readme(source):
     assert lo - 1 <= s["velocity"][(s["t"] >= 9.0) & (s["t"] < 10.0)].mean() <= hi + 1
 
 
-@needs_real
+@needs_hsm
 def test_hsm150_import_round_trip(tmp_path, capsys):
     source = HSM[0]
     out = tmp_path / "hsm.h5"
@@ -268,12 +276,9 @@ def test_corrupt_mat_is_one_line_error(tmp_path, capsys):
     _one_line_error(
         capsys, ["import", "hsm150", str(partial), "-o", str(tmp_path / "o.h5")], "'data' is missing"
     )
-    if EMPS.exists():
-        truncated = tmp_path / "truncated.mat"
-        truncated.write_bytes(EMPS.read_bytes()[:50_000])
-        _one_line_error(
-            capsys, ["import", "emps", str(truncated), "-o", str(tmp_path / "o.h5")], "truncated.mat"
-        )
+    truncated = tmp_path / "truncated.mat"
+    truncated.write_bytes(EMPS.read_bytes()[:50_000])
+    _one_line_error(capsys, ["import", "emps", str(truncated), "-o", str(tmp_path / "o.h5")], "truncated.mat")
     nan_mat = tmp_path / "nan.mat"
     data = np.zeros((10, 7))
     data[:, 0] = np.arange(10) / 1000
@@ -285,10 +290,11 @@ def test_corrupt_mat_is_one_line_error(tmp_path, capsys):
 
 # ---- Mnich rack-and-pinion ----------------------------------------------------------------------------------
 
-MNICH = REAL / "mnich_rack_pinion" / "a3MR.csv"
+_MNICH_DIR = real_data.real_data("mnich_rack_pinion")
+MNICH = _MNICH_DIR / "a3MR.csv" if _MNICH_DIR else Path("a3MR.csv")
 
 
-@pytest.mark.skipif(not MNICH.exists(), reason="Mnich data set not available")
+@real_data.needs("mnich_rack_pinion")
 def test_mnich_import_matches_readme_and_identifies_the_mass(tmp_path, capsys):
     # README facts: one motion to -1981 rpm (0.66 m/s after the -rpm*20/1000/60 conversion), the load cell at
     # 2 kHz (0.539 s), reduced mass 24.7 kg. The identified mass from force and integrated speed is an

@@ -1,4 +1,4 @@
-"""The C plant against closed forms (shared/docs/science.md §2-§3)."""
+"""The C plant against closed forms (docs/science.md §2-§3)."""
 
 import numpy as np
 import pytest

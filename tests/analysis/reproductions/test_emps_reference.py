@@ -1,6 +1,5 @@
 """EMPS benchmark: reproduce the published IDIM-LS reference model, then add Maxwell-slip."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,9 +15,9 @@ from hilbench.analysis.reproductions.emps import (
     idim_observation,
     load_emps,
 )
+from tests import real_data
 
-EMPS = Path("/work/shared/data/real/emps")
-pytestmark = pytest.mark.skipif(not (EMPS / "DATA_EMPS.mat").is_file(), reason="EMPS data not available")
+EMPS = real_data.EMPS  # ships in tests/data/emps (Janot, Gautier, Brunot 2019): every clone runs these
 
 
 @pytest.fixture(scope="module")
