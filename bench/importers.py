@@ -386,7 +386,7 @@ def write_run(
     """Write an :class:`ImportedRun` as a completed run file; returns the path written."""
     out = os.fspath(out)
     if os.path.exists(out) and not overwrite:
-        raise ImportDataError(f"{out}: file exists (use --force to overwrite)")
+        raise ImportDataError(f"{out}: file exists (use --overwrite to replace it)")
     custom = dict(imported.custom_units)
     channels = [name for name in imported.samples if name not in custom]
     with RunWriter(

@@ -15,8 +15,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "analyse run files, and play campaigns. Device I/O never runs in the GUI thread."
         ),
     )
-    parser.add_argument("--device", default="sim://",
-                        help="device URL shown in the connection panel (default sim://, the simulated bench)")
+    parser.add_argument("--device", default=None,
+                        help="device URL shown in the connection panel (default $HILBENCH_DEVICE, the config "
+                             "file's 'device', else sim://, the simulated bench)")
     parser.add_argument("--connect", action="store_true", help="connect to --device at start-up")
     parser.add_argument("--runs", default="runs", metavar="DIR",
                         help="folder for new run files and the run browser (default runs)")
