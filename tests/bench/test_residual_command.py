@@ -50,7 +50,8 @@ def test_cli_writes_json_and_report(runs, capsys):
     for name in ("diagnostics_before.png", "diagnostics_after.png", "summary.md"):
         assert (report / name).stat().st_size > 0
     assert "viscous" in (report / "summary.md").read_text()
-    assert "validation torque error" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "validation torque NRMSE" in text and "verdict: " in text and (report / "hysteresis.png").is_file()
 
 
 def test_cli_bad_input_is_one_line(runs, capsys):
