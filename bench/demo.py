@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
+from urllib.parse import quote
 from pathlib import Path
 
 import numpy as np
@@ -60,7 +61,8 @@ def measure(out: Path, duration: float = 20.0) -> dict[str, Path]:
     }
     files = {}
     _say(f"[1] simulated bench: sim://?pacing=lockstep&config={config.name} (plant effects kept private)")
-    with Bench.open(f"sim://?pacing=lockstep&config={config}") as bench:
+    # the path is percent-encoded: a folder named 'a+b' or 'a&b' must not change the URL's meaning
+    with Bench.open(f"sim://?pacing=lockstep&config={quote(str(config), safe='/')}") as bench:
         ident = bench.identity()
         _say(f"    device {ident.get('model')} serial {ident.get('serial')}, firmware {ident.get('firmware')}")
         for role, protocol in plan.items():
@@ -83,6 +85,7 @@ def paper_figure(out: Path) -> Path:
     import matplotlib.pyplot as plt
 
     from hilbench.analysis.models.simulation import paper_system, simulate_chirp
+    from hilbench.bench.outputs import save_figure
 
     params = paper_system()
     run = simulate_chirp(params, 5.0)
@@ -93,11 +96,11 @@ def paper_figure(out: Path) -> Path:
                 title=f"Maxwell-slip hysteresis, N={params.n_elements}, chirp G=5 N")
     axes[1].plot(run.t, run.force, lw=0.5, label="force F (N)")
     axes[1].plot(run.t, x * params.spring, lw=0.8, label="k*x (N)")
-    axes[1].set(xlabel="t (s)", title="response to F = G sin(0.1 pi t^2)")
+    axes[1].set(xlabel="time t (s)", ylabel="force (N)", title="response to F = G sin(0.1 pi t^2)")
     axes[1].legend(loc="upper left")
     fig.tight_layout()
     path = out / "paper_chirp_hysteresis.png"
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
     _say(f"[3] paper system (m=1 kg, k=50 N/m, h=1.64 N, d=0.656 m, N=16), chirp G=5 N: peak x "
          f"{np.max(np.abs(x)):.3f} m, peak friction {np.max(np.abs(f_fr)):.3f} N -> {path}")
