@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from urllib.parse import quote
 from pathlib import Path
+from urllib.parse import quote
 
 import numpy as np
 

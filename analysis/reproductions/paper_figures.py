@@ -343,10 +343,9 @@ def _afrf_grid(study: Study, path: Path, unit: str, orders=HARMONICS) -> Path:
             a.set_ylabel(f"|H{orders[hi]}| (dB re 1 {unit})")
             if not drawn:
                 a.set_ylim(floor - 10, floor + 90)
-                a.text(0.5, 0.5, f"H{orders[hi]} = 0: every value is more than {AFRF_FLOOR_DB:g} dB below the "
-                       f"largest H1\n(a symmetric loop has no even harmonics)" if orders[hi] % 2 == 0 else
-                       f"H{orders[hi]} below the numerical floor", transform=a.transAxes, ha="center",
-                       va="center", fontsize=9, wrap=True)
+                a.text(0.5, 0.5, f"H{orders[hi]} = 0\n(more than {AFRF_FLOOR_DB:g} dB below the largest H1"
+                       + (":\na symmetric loop has no even harmonics)" if orders[hi] % 2 == 0 else ")"),
+                       transform=a.transAxes, ha="center", va="center", fontsize=9)
             elif orders[hi] % 2 == 0:
                 a.set_title("(even harmonic: numerical noise of a symmetric loop)", fontsize=8, color="0.4")
         ax[0, j].set_title(name)

@@ -71,8 +71,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--device {args.device!r} is not a device URL (sim://, serial:///dev/ttyUSB0, "
                          f"can://socketcan/can0)")
     try:
-        import PySide6  # noqa: F401
         import pyqtgraph  # noqa: F401
+        import PySide6  # noqa: F401
     except ImportError as exc:
         raise OSError(f"the GUI needs PySide6 and pyqtgraph: {exc}") from None
     problem = display_problem()
