@@ -89,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     args.traceback = "traceback" in flags
-    outputs.verbosity = 0 if "quiet" in flags else 2 if "verbose" in flags else 1
+    previous, outputs.verbosity = outputs.verbosity, 0 if "quiet" in flags else 2 if "verbose" in flags else 1
     if "quiet" in flags and hasattr(args, "quiet"):
         args.quiet = True
     show_tb = args.traceback or bool(os.environ.get("HILBENCH_TRACEBACK"))
@@ -113,6 +113,8 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"hilbench {args.command}: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2
+    finally:
+        outputs.verbosity = previous
 
 
 if __name__ == "__main__":

@@ -40,7 +40,9 @@ phase = 0.3
 
 
 def _say(msg: str) -> None:
-    print(msg, flush=True)
+    from hilbench.bench.outputs import say
+
+    say(msg)
 
 
 def measure(out: Path, duration: float = 20.0) -> dict[str, Path]:
@@ -108,9 +110,11 @@ def paper_figure(out: Path) -> Path:
 
 
 def _cli(*argv: str) -> None:
+    from hilbench.bench import outputs
     from hilbench.bench.cli import main
 
-    rc = main([str(a) for a in argv])
+    level = {0: ["-q"], 2: ["-v"]}.get(outputs.verbosity, [])  # the demo's -q/-v reach its steps
+    rc = main([*level, *(str(a) for a in argv)])
     if rc != 0:
         raise RuntimeError(f"bench {' '.join(map(str, argv))} exited {rc}")
 

@@ -75,6 +75,8 @@ def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
         else:
             os.chmod(tmp_path, 0o666 & ~_umask())
         os.replace(tmp_path, target)
+        if verbosity >= 2:
+            print(f"hilbench: wrote {target}", file=sys.stderr, flush=True)
     except BaseException:
         with contextlib.suppress(OSError):
             tmp_path.unlink()
