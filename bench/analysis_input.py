@@ -27,6 +27,17 @@ MAX_THRESHOLDS = 1024
 MAX_BINS = 10_000
 
 
+def whole_number(text: str) -> int:
+    """argparse type for a count: ``64``, ``1e6`` (a whole number written in floating point) are accepted."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"{text!r} is not a number") from None
+    if not math.isfinite(value) or value != int(value):
+        raise ValueError(f"{text!r} is not a whole number")
+    return int(value)
+
+
 def torque_channel(channels, requested: str | None, path: str, axis: str = "rotary") -> str:
     """The torque channel to analyse: ``requested`` if given (must exist), else ``torque``, else
     ``torque_cmd``."""

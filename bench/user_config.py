@@ -2,7 +2,7 @@
 
 Order: the environment variable ``HILBENCH_DEVICE``; else the key ``device`` in the config file (TOML) named by
 ``HILBENCH_CONFIG``, else ``$XDG_CONFIG_HOME/hilbench/config.toml`` (``~/.config/hilbench/config.toml`` when
-``XDG_CONFIG_HOME`` is unset); else ``sim://``, the simulated bench. See docs/configuration.md.
+``XDG_CONFIG_HOME`` is unset); else ``sim://``, the simulated bench. See docs/cli.md.
 """
 
 from __future__ import annotations

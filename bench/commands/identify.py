@@ -6,7 +6,7 @@ from pathlib import Path
 
 
 def register(subparsers) -> None:
-    from hilbench.bench.analysis_input import MAX_THRESHOLDS
+    from hilbench.bench.analysis_input import MAX_THRESHOLDS, whole_number
 
     parser = subparsers.add_parser(
         "identify",
@@ -26,7 +26,7 @@ def register(subparsers) -> None:
     parser.add_argument("--json", required=True, metavar="OUT.json", help="model file to write ('-': stdout)")
     parser.add_argument("--plots", metavar="DIR", help="write PNG plots into DIR")
     parser.add_argument(
-        "--thresholds", type=int, default=64,
+        "--thresholds", type=whole_number, default=64,
         help=f"candidate thresholds (default 64, at most {MAX_THRESHOLDS}; 0: no Maxwell-slip elements)"
     )
     parser.add_argument("--cutoff", type=float, help="zero-phase filter cutoff, Hz (default fs/20)")

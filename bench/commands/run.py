@@ -45,7 +45,7 @@ def add_device_options(parser: argparse.ArgumentParser) -> None:
     from hilbench.bench.runner import DeviceSettings
 
     parser.add_argument("--device", default=None, help="device URL (default $HILBENCH_DEVICE, the config file's "
-                        "'device', else sim://: the simulated bench; docs/configuration.md)")
+                        "'device', else sim://: the simulated bench; docs/cli.md)")
     defaults = DeviceSettings()
     for name, (unit, text) in DEVICE_OPTIONS.items():
         parser.add_argument("--" + name.replace("_", "-"), dest=name, default=None,

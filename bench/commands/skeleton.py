@@ -8,6 +8,8 @@ import sys
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from hilbench.bench.analysis_input import whole_number
+
     parser = subparsers.add_parser(
         "skeleton",
         help="equivalent stiffness and damping (skeleton curves) from chirp runs, composed across runs",
@@ -34,7 +36,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar=("F_MIN", "F_MAX"),
         help="analysed band in Hz (default: from the spectrum of each run)",
     )
-    parser.add_argument("--bins", type=int, default=30, help="log-spaced bins per curve (default 30, at most 10000)")
+    parser.add_argument("--bins", type=whole_number, default=30, help="log-spaced bins per curve (default 30, at most 10000)")
     parser.add_argument(
         "--compose",
         choices=("rate", "updown", "median"),
