@@ -36,7 +36,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar=("F_MIN", "F_MAX"),
         help="analysed band in Hz (default: from the spectrum of each run)",
     )
-    parser.add_argument("--bins", type=whole_number, default=30, help="log-spaced bins per curve (default 30, at most 10000)")
+    parser.add_argument("--bins", type=whole_number, default=30,
+                        help="log-spaced bins per curve (default 30, at most 10000)")
     parser.add_argument(
         "--compose",
         choices=("rate", "updown", "median"),
