@@ -33,9 +33,9 @@ def figure_problems(fig: Figure) -> list[str]:
         colorbar = ax.get_label() == "<colorbar>"
         if not colorbar and not _has_data(ax) and not ax.texts:
             continue
-        for name, label, ticks in (("x", ax.get_xlabel(), ax.get_xticklabels()),
-                                   ("y", ax.get_ylabel(), ax.get_yticklabels())):
-            if not _shows_ticks(ticks):
+        for name, axis, label, ticks in (("x", ax.xaxis, ax.get_xlabel(), ax.get_xticklabels()),
+                                         ("y", ax.yaxis, ax.get_ylabel(), ax.get_yticklabels())):
+            if not axis.get_visible() or not _shows_ticks(ticks):  # e.g. the hidden x axis of a twinx
                 continue
             if not label.strip():
                 problems.append(f"{where}: {name} axis has tick labels but no label")
