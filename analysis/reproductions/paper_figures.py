@@ -351,9 +351,9 @@ def _afrf_grid(study: Study, path: Path, unit: str, orders=HARMONICS) -> Path:
         ax[0, j].set_title(name)
         ax[-1, j].set_xlabel("frequency (Hz)")
     handles, labels = ax[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, title="drive amplitude", loc="lower center", ncol=len(labels), fontsize=8,
-               frameon=False)
-    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    fig.tight_layout()
+    fig.legend(handles, labels, title="drive amplitude", loc="upper center", bbox_to_anchor=(0.5, 0.0),
+               ncol=len(labels), fontsize=8, frameon=False)  # below the panels; _save's tight bbox keeps it
     return _save(fig, path)
 
 
