@@ -9,8 +9,13 @@ import pkgutil
 import sys
 
 import hilbench.bench.commands as commands
-from hilbench.bench import __version__
+from hilbench.bench import __version__, outputs
 from hilbench.bench.errors import BenchError
+
+# Options of the whole command that are accepted anywhere on the line (before a "--"), e.g.
+# ``hilbench show RUN.h5 --traceback`` as well as ``hilbench --traceback show RUN.h5``.
+GLOBAL_FLAGS = {"-v": "verbose", "--verbose": "verbose", "-q": "quiet", "--quiet": "quiet",
+                "--traceback": "traceback"}
 
 
 def _user_errors() -> tuple[type[BaseException], ...]:
@@ -28,8 +33,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="hilbench",
         description="hilbench: hardware-in-the-loop friction test bench (device, runs, analysis).",
+        epilog="-v/--verbose, -q/--quiet and --traceback are accepted anywhere on the line. The default device "
+        "is $HILBENCH_DEVICE, else 'device' in the config file ($HILBENCH_CONFIG, else "
+        "$XDG_CONFIG_HOME/hilbench/config.toml, else ~/.config/hilbench/config.toml), else sim://.",
     )
     parser.add_argument("--version", action="version", version=f"hilbench {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="print more (every file written)")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress bars, no summary lines")
     parser.add_argument(
         "--traceback", action="store_true", help="show the full traceback on errors (for bug reports)"
     )
@@ -42,21 +52,69 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    show_tb = args.traceback or bool(os.environ.get("HILBENCH_TRACEBACK"))
+def split_global_flags(argv: list[str]) -> tuple[list[str], set[str]]:
+    """Take the global flags out of ``argv`` wherever they stand (not after ``--``); returns the rest and the
+    names of the flags found (``verbose``, ``quiet``, ``traceback``)."""
+    rest: list[str] = []
+    found: set[str] = set()
+    for i, arg in enumerate(argv):
+        if arg == "--":
+            rest += argv[i:]
+            break
+        if arg in GLOBAL_FLAGS:
+            found.add(GLOBAL_FLAGS[arg])
+        else:
+            rest.append(arg)
+    return rest, found
+
+
+def _run(args: argparse.Namespace, show_tb: bool) -> int:
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print("hilbench: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        raise
     except _user_errors() as exc:
         if show_tb:
             raise
         msg = " ".join(str(exc).split()) or type(exc).__name__
         print(f"hilbench {args.command}: error: {msg}", file=sys.stderr)
         return 2
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv, flags = split_global_flags(list(sys.argv[1:] if argv is None else argv))
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    args.traceback = "traceback" in flags
+    previous, outputs.verbosity = outputs.verbosity, 0 if "quiet" in flags else 2 if "verbose" in flags else 1
+    if "quiet" in flags and hasattr(args, "quiet"):
+        args.quiet = True
+    show_tb = args.traceback or bool(os.environ.get("HILBENCH_TRACEBACK"))
+    try:
+        if hasattr(args, "device") and args.device is None:
+            from hilbench.bench.user_config import default_device
+
+            args.device = default_device()
+        rc = _run(args, show_tb)
+        sys.stdout.flush()
+        return rc
+    except BrokenPipeError:
+        # The reader went away (``hilbench show RUN.h5 | head``): stop quietly, as a Unix filter does. Point
+        # stdout at /dev/null so that the interpreter's final flush does not complain either.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+        return 141
+    except _user_errors() as exc:  # from the default-device look-up
+        if show_tb:
+            raise
+        print(f"hilbench {args.command}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    finally:
+        outputs.verbosity = previous
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from pathlib import Path
+from urllib.parse import quote
 
 import numpy as np
 
@@ -39,7 +40,9 @@ phase = 0.3
 
 
 def _say(msg: str) -> None:
-    print(msg, flush=True)
+    from hilbench.bench.outputs import say
+
+    say(msg)
 
 
 def measure(out: Path, duration: float = 20.0) -> dict[str, Path]:
@@ -60,7 +63,8 @@ def measure(out: Path, duration: float = 20.0) -> dict[str, Path]:
     }
     files = {}
     _say(f"[1] simulated bench: sim://?pacing=lockstep&config={config.name} (plant effects kept private)")
-    with Bench.open(f"sim://?pacing=lockstep&config={config}") as bench:
+    # the path is percent-encoded: a folder named 'a+b' or 'a&b' must not change the URL's meaning
+    with Bench.open(f"sim://?pacing=lockstep&config={quote(str(config), safe='/')}") as bench:
         ident = bench.identity()
         _say(f"    device {ident.get('model')} serial {ident.get('serial')}, firmware {ident.get('firmware')}")
         for role, protocol in plan.items():
@@ -83,6 +87,7 @@ def paper_figure(out: Path) -> Path:
     import matplotlib.pyplot as plt
 
     from hilbench.analysis.models.simulation import paper_system, simulate_chirp
+    from hilbench.bench.outputs import save_figure
 
     params = paper_system()
     run = simulate_chirp(params, 5.0)
@@ -93,11 +98,11 @@ def paper_figure(out: Path) -> Path:
                 title=f"Maxwell-slip hysteresis, N={params.n_elements}, chirp G=5 N")
     axes[1].plot(run.t, run.force, lw=0.5, label="force F (N)")
     axes[1].plot(run.t, x * params.spring, lw=0.8, label="k*x (N)")
-    axes[1].set(xlabel="t (s)", title="response to F = G sin(0.1 pi t^2)")
+    axes[1].set(xlabel="time t (s)", ylabel="force (N)", title="response to F = G sin(0.1 pi t^2)")
     axes[1].legend(loc="upper left")
     fig.tight_layout()
     path = out / "paper_chirp_hysteresis.png"
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
     _say(f"[3] paper system (m=1 kg, k=50 N/m, h=1.64 N, d=0.656 m, N=16), chirp G=5 N: peak x "
          f"{np.max(np.abs(x)):.3f} m, peak friction {np.max(np.abs(f_fr)):.3f} N -> {path}")
@@ -105,9 +110,11 @@ def paper_figure(out: Path) -> Path:
 
 
 def _cli(*argv: str) -> None:
+    from hilbench.bench import outputs
     from hilbench.bench.cli import main
 
-    rc = main([str(a) for a in argv])
+    level = {0: ["-q"], 2: ["-v"]}.get(outputs.verbosity, [])  # the demo's -q/-v reach its steps
+    rc = main([*level, *(str(a) for a in argv)])
     if rc != 0:
         raise RuntimeError(f"bench {' '.join(map(str, argv))} exited {rc}")
 

@@ -738,7 +738,7 @@ def write_run(
     """Write an :class:`ImportedRun` as a completed run file; returns the path written."""
     out = os.fspath(out)
     if os.path.exists(out) and not overwrite:
-        raise ImportDataError(f"{out}: file exists (use --force to overwrite)")
+        raise ImportDataError(f"{out}: file exists (use --overwrite to replace it)")
     n = imported.n_samples
     if n > MAX_IMPORT_SAMPLES:
         raise ImportDataError(f"{out}: {n} samples, above the import bound of {MAX_IMPORT_SAMPLES} samples "

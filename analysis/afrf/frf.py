@@ -566,45 +566,59 @@ def afrf_from_run(path: str | Path, n_harmonics: int = 3) -> AfrfResult:
 
 
 def plot_afrf(results: AfrfResult | Sequence[AfrfResult], path: str | Path | None = None,
-              title: str | None = None):
-    """Paper-style AFRF figure (Fig 13): one log-log panel per harmonic, |c_k| against frequency, one curve
-    per amplitude (colour), one line style per result (solid, dashed, dotted, dash-dot). Magnitudes below
-    1e-12 of a result's largest are numerical zeros (a Coulomb system that sticks) and are left out. Saves
-    a PNG when ``path`` is given. Uses the Agg canvas directly (no pyplot state). Returns the Figure."""
+              title: str | None = None, measured: bool = False):
+    """Paper-style AFRF figure (Fig 13): one log-log panel per harmonic, |c_k| against frequency, one colour
+    per amplitude, one line style per result (solid, dashed, dotted, dash-dot), one legend for the figure.
+    Magnitudes below 1e-12 of a result's largest are numerical zeros (a Coulomb system that sticks) and are
+    left out. ``measured``: the points are discrete steps of a run, drawn as markers; the first harmonic is
+    joined by lines, the higher ones are not (at most steps they are the noise floor, not a response curve).
+    Frequency ticks at 1, 2, 5 per decade, labelled in plain numbers. Saves a PNG when ``path`` is given.
+    Uses the Agg canvas directly (no pyplot state). Returns the Figure."""
     from matplotlib import colormaps
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-    from matplotlib.ticker import NullFormatter
+    from matplotlib.lines import Line2D
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
     results = [results] if isinstance(results, AfrfResult) else list(results)
     if not results:
         raise AnalysisError("plot_afrf: nothing to plot")
     n_h = max(r.n_harmonics for r in results)
-    fig = Figure(figsize=(4.2 * n_h, 4.2))
+    fig = Figure(figsize=(4.0 * n_h + 1.8, 4.2))
     FigureCanvasAgg(fig)
     axes = fig.subplots(1, n_h, sharex=True, squeeze=False)[0]
     styles = ("-", "--", ":", "-.")
     cmap = colormaps["viridis"]
+    handles: dict[str, Line2D] = {}
     for r_i, r in enumerate(results):
         mags = r.magnitudes
         floor = 1e-12 * float(np.nanmax(mags)) if np.any(np.isfinite(mags)) else 0.0
         for a_i, amp in enumerate(r.amplitudes):
-            colour = cmap(a_i / max(1, r.amplitudes.size - 1))
+            colour = cmap(0.9 * a_i / max(1, r.amplitudes.size - 1))
             for k in range(r.n_harmonics):
                 y = mags[a_i, :, k]
                 ok = np.isfinite(y) & (y > floor)
-                axes[k].loglog(r.frequencies[ok], y[ok], styles[r_i % len(styles)], color=colour, lw=1.0,
-                               label=f"{r.label} G={amp:g} {r.amplitude_unit}" if k == 0 else None)
+                ls = styles[r_i % len(styles)] if not measured or k == 0 else "none"
+                axes[k].loglog(r.frequencies[ok], y[ok], ls=ls, marker="o" if measured else None, ms=4,
+                               color=colour, lw=1.2)
+            handles.setdefault(f"G = {amp:g} {r.amplitude_unit}",
+                               Line2D([], [], color=colour, lw=1.2, marker="o" if measured else None, ms=4))
+        if len(results) > 1:
+            handles[r.label or f"result {r_i + 1}"] = Line2D([], [], color="0.3", lw=1.2,
+                                                            ls=styles[r_i % len(styles)])
     for k in range(n_h):
         axes[k].set_title(f"harmonic {k + 1} ({k + 1}f)")
         axes[k].set_xlabel("frequency f (Hz)")
         axes[k].set_ylabel(f"|X({k + 1}f)| ({results[0].displacement_unit})")
         axes[k].grid(True, which="both", alpha=0.3)
-        axes[k].xaxis.set_minor_formatter(NullFormatter())  # a short decade range would label every minor tick
-    axes[0].legend(fontsize=5, ncol=len(results))
+        axes[k].xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+        axes[k].xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+        axes[k].xaxis.set_minor_formatter(NullFormatter())
+    fig.legend(list(handles.values()), list(handles), loc="center right", fontsize=9,
+               title="drive amplitude" if len(results) == 1 else None, frameon=False)
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1 - 1.7 / fig.get_figwidth(), 1))
     if path is not None:
         fig.savefig(path, dpi=120)
     return fig

@@ -311,31 +311,49 @@ def fig12(study: Study, out: Path) -> Path:
     return _save(fig, out / "fig12_fits.png")
 
 
+# AFRF magnitudes more than this far below the largest first harmonic are numerical zeros (dB).
+AFRF_FLOOR_DB = 200.0
+
+
 def _afrf_grid(study: Study, path: Path, unit: str, orders=HARMONICS) -> Path:
+    """One row per harmonic order, one column per system (original, Coulomb, equivalent). Points below
+    the numerical floor (AFRF_FLOOR_DB under the largest H1) are not drawn; a panel with none above it says
+    so in words instead of staying empty (a symmetric loop has no even harmonics: the Coulomb system's H2 is
+    exactly zero)."""
     plt = _plt()
     names = ("original", "coulomb", "equivalent")
-    fig, ax = plt.subplots(len(orders), 3, figsize=(12, 3 * len(orders)), sharex=True, squeeze=False)
+    force = "N" if unit == "m" else "N*m"
+    fig, ax = plt.subplots(len(orders), 3, figsize=(13, 3 * len(orders) + 0.4), sharex=True, squeeze=False)
     cmap = plt.get_cmap("plasma")
     f = study.afrf_frequencies
+    top = max(float(np.nanmax(study.afrf[name][i][:, 0])) for name in names for i in range(len(study.afrf_amplitudes)))
+    floor = 20 * np.log10(max(top, 1e-300)) - AFRF_FLOOR_DB
     for j, name in enumerate(names):
         data = study.afrf[name]
         for hi in range(len(orders)):
+            drawn = 0
             for i, g in enumerate(study.afrf_amplitudes):
-                y = 20 * np.log10(np.maximum(data[i][:, hi], 1e-12))
-                ax[hi, j].semilogx(
-                    f,
-                    y,
-                    color=cmap(i / max(len(study.afrf_amplitudes), 1)),
-                    lw=1,
-                    label=f"{g:g}" if hi == 0 and j == 0 else None,
-                )
-            ax[hi, j].grid(alpha=0.3, which="both")
-            ax[hi, j].set_ylim(bottom=max(ax[hi, j].get_ylim()[0], -200))
-            if j == 0:
-                ax[hi, j].set_ylabel(f"AFRF H{orders[hi]} (dB {unit})")
+                y = 20 * np.log10(np.maximum(data[i][:, hi], 1e-300))
+                y = np.where(y > floor, y, np.nan)
+                drawn += int(np.isfinite(y).sum())
+                ax[hi, j].semilogx(f, y, color=cmap(0.9 * i / max(len(study.afrf_amplitudes) - 1, 1)), lw=1,
+                                   label=f"G = {g:g} {force}" if hi == 0 and j == 0 else None)
+            a = ax[hi, j]
+            a.grid(alpha=0.3, which="both")
+            a.set_ylabel(f"|H{orders[hi]}| (dB re 1 {unit})")
+            if not drawn:
+                a.set_ylim(floor - 10, floor + 90)
+                a.text(0.5, 0.5, f"H{orders[hi]} = 0\n(more than {AFRF_FLOOR_DB:g} dB below the largest H1"
+                       + (":\na symmetric loop has no even harmonics)" if orders[hi] % 2 == 0 else ")"),
+                       transform=a.transAxes, ha="center", va="center", fontsize=9)
+            elif orders[hi] % 2 == 0:
+                a.set_title("(even harmonic: numerical noise of a symmetric loop)", fontsize=8, color="0.4")
         ax[0, j].set_title(name)
         ax[-1, j].set_xlabel("frequency (Hz)")
-    ax[0, 0].legend(title="amplitude", fontsize=6, ncol=2)
+    handles, labels = ax[0, 0].get_legend_handles_labels()
+    fig.tight_layout()
+    fig.legend(handles, labels, title="drive amplitude", loc="upper center", bbox_to_anchor=(0.5, 0.0),
+               ncol=len(labels), fontsize=8, frameon=False)  # below the panels; _save's tight bbox keeps it
     return _save(fig, path)
 
 

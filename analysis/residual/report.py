@@ -97,8 +97,8 @@ def plot_diagnostics(s: Signals, diags: dict[str, Diagnostic], title: str, path:
     d = diags["input_xcorr"]
     if "lags_s" in d.detail:
         a.plot(1e3 * np.asarray(d.detail["lags_s"]), d.detail["rho"], marker=".")
-    a.set_xlabel("lag (ms), > 0: input earlier")
-    a.set_ylabel("correlation")
+    a.set_xlabel("lag, > 0: input earlier (ms)")
+    a.set_ylabel("correlation (1)")
     a.set_title(f"input_xcorr: rho={d.statistic:+.2f}, p={d.p_value:.2g}", fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 MODELS = ("paper", "coulomb", "equivalent")
+MAX_FREQUENCIES = 1000  # simulated grid points per amplitude: each is a separate simulation
 
 
 def register(subparsers) -> None:
@@ -19,8 +20,11 @@ def register(subparsers) -> None:
                         "m=1 with Fc=--coulomb, equivalent = closed-form F_k, F_d tables of the paper system")
     parser.add_argument("--amplitudes", type=float, nargs="+", default=[0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0],
                         metavar="G", help="drive amplitudes, N (simulation; default the paper's range)")
-    parser.add_argument("--frequencies", type=float, nargs=3, default=[0.1, 10.0, 20],
-                        metavar=("F_MIN", "F_MAX", "N"), help="log-spaced frequencies, Hz (simulation)")
+    parser.add_argument("--frequencies", type=float, nargs="+", default=None, metavar="F",
+                        help="frequencies, Hz (simulation; a list, as in `hilbench run stepped_sine`; default 20 "
+                        "log-spaced from 0.1 to 10 Hz, see --log-frequencies)")
+    parser.add_argument("--log-frequencies", type=float, nargs=3, default=None, metavar=("F_MIN", "F_MAX", "N"),
+                        help="instead of --frequencies: N log-spaced frequencies from F_MIN to F_MAX, Hz")
     parser.add_argument("--spring", type=float, default=0.0, help="linear spring k, N/m (default 0, as Fig 13)")
     parser.add_argument("--coulomb", type=float, default=1.5, help="Coulomb level Fc, N (default 1.5)")
     parser.add_argument("--samples-per-period", type=int, default=400, help="simulation (default 400)")
@@ -29,7 +33,7 @@ def register(subparsers) -> None:
                         help="minimum settle time, s, for slow modes (default 60)")
     parser.add_argument("--measure-periods", type=int, default=10, help="measured periods (default 10)")
     parser.add_argument("--workers", type=int, help="processes (default: all cores)")
-    parser.add_argument("--json", metavar="OUT.json", help="write the AFRF as JSON")
+    parser.add_argument("--json", metavar="OUT.json", help="write the AFRF as JSON ('-': stdout)")
     parser.add_argument("--plot", metavar="OUT.png", help="write the paper-style figure")
     parser.set_defaults(func=run)
 
@@ -40,10 +44,19 @@ def _simulate(args):
     from hilbench.analysis.afrf.frf import closed_form_equivalent, coulomb_system, settle_schedule, simulate_afrf
     from hilbench.firmware_sim.friction_models import PAPER_D, PAPER_H, paper_system
 
-    f_min, f_max, n = args.frequencies
-    if not (0 < f_min <= f_max) or n < 1 or n != int(n):
-        raise ValueError("--frequencies needs 0 < F_MIN <= F_MAX and a whole N >= 1")
-    freqs = np.geomspace(f_min, f_max, int(n))
+    if args.frequencies is not None and args.log_frequencies is not None:
+        raise ValueError("give --frequencies or --log-frequencies, not both")
+    if args.frequencies is not None:
+        freqs = np.asarray(args.frequencies, float)
+        if not np.all(np.isfinite(freqs) & (freqs > 0)):
+            raise ValueError("--frequencies must all be positive, finite Hz")
+    else:
+        f_min, f_max, n = args.log_frequencies or (0.1, 10.0, 20)
+        if not (0 < f_min <= f_max < float("inf")) or not (1 <= n <= MAX_FREQUENCIES) or n != int(n):
+            raise ValueError(f"--log-frequencies needs 0 < F_MIN <= F_MAX and a whole N in [1, {MAX_FREQUENCIES}]")
+        freqs = np.geomspace(f_min, f_max, int(n))
+    if freqs.size > MAX_FREQUENCIES:
+        raise ValueError(f"{freqs.size} frequencies: at most {MAX_FREQUENCIES}")
     params = {
         "paper": lambda: paper_system(spring=args.spring),
         "coulomb": lambda: coulomb_system(args.coulomb, 1.0, args.spring),
@@ -83,19 +96,20 @@ def _summary(result) -> str:
 
 
 def run(args) -> int:
-    import json
-
     from hilbench.analysis.afrf.frf import afrf_from_run, plot_afrf
+    from hilbench.bench import outputs
 
     if (args.run is None) == (args.model is None):
         raise ValueError("give either a stepped-sine RUN.h5 or --model (not both)")
+    outputs.refuse_inputs({"--json": args.json, "--plot": args.plot}, [args.run])
     result = afrf_from_run(args.run) if args.run else _simulate(args)
-    print(_summary(result))
+    outputs.say(_summary(result), args.json)
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(result.to_dict(), fh, indent=1)
-        print(f"wrote {args.json}")
+        outputs.write_json(args.json, result.to_dict())
+        if args.json != outputs.STDOUT:
+            outputs.say(f"wrote {args.json}", args.json)
     if args.plot:
-        plot_afrf(result, args.plot, title=f"AFRF {result.label}")
-        print(f"wrote {args.plot}")
+        fig = plot_afrf(result, title=f"AFRF {result.label}", measured=args.run is not None)
+        outputs.save_figure(fig, args.plot, dpi=120)
+        outputs.say(f"wrote {args.plot}", args.json)
     return 0

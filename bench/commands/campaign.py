@@ -11,7 +11,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Validate the whole campaign first (file:line: reason), then play every "
                                    "run into OUT/<name>-<repeat>.h5 with OUT/index.json.")
     p.add_argument("file", type=Path, help="campaign TOML (see docs/campaign.md)")
-    p.add_argument("-o", "--out", type=Path, default=None, help="output folder (default: the file's stem)")
+    p.add_argument("-o", "--output", dest="out", type=Path, default=None,
+                   help="output folder (default: the file's stem)")
     p.add_argument("--resume", action="store_true", help="skip completed runs, redo crashed or aborted ones")
     p.add_argument("--check", action="store_true", help="only validate the file and list the runs")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

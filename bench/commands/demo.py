@@ -14,7 +14,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Start the simulated amplifier (with an effect the demo does not declare), run an "
                     "identification, a validation and a stepped-sine run, list the files, then analyse them.",
     )
-    p.add_argument("-o", "--out", type=Path, default=Path("demo-out"), help="output folder (default: demo-out)")
+    p.add_argument("-o", "--output", dest="out", type=Path, default=Path("demo-out"),
+                   help="output folder (default: demo-out)")
     p.add_argument("--duration", type=float, default=20.0, help="identification run length in s (default 20)")
     p.set_defaults(func=run)
 

@@ -6,6 +6,8 @@ from pathlib import Path
 
 
 def register(subparsers) -> None:
+    from hilbench.bench.analysis_input import MAX_THRESHOLDS, whole_number
+
     parser = subparsers.add_parser(
         "identify",
         help="identify a Maxwell-slip friction model (J, k_i, Delta_i, b) from a run file",
@@ -21,62 +23,72 @@ def register(subparsers) -> None:
         help="lip: NNLS on filtered regressors (default, fast); oe: lip then simulation-error "
         "refinement; paper: differential evolution + Nelder-Mead, N=16 (slow)",
     )
-    parser.add_argument("--json", required=True, metavar="OUT.json", help="model file to write")
+    parser.add_argument("--json", required=True, metavar="OUT.json", help="model file to write ('-': stdout)")
     parser.add_argument("--plots", metavar="DIR", help="write PNG plots into DIR")
     parser.add_argument(
-        "--thresholds", type=int, default=64, help="candidate thresholds (default 64; 0: no Maxwell-slip elements)"
+        "--thresholds", type=whole_number, default=64,
+        help=f"candidate thresholds (default 64, at most {MAX_THRESHOLDS}; 0: no Maxwell-slip elements)"
     )
     parser.add_argument("--cutoff", type=float, help="zero-phase filter cutoff, Hz (default fs/20)")
     parser.add_argument("--coulomb", action="store_true", help="add a Coulomb term Fc*sign(velocity)")
     parser.add_argument("--offset", action="store_true", help="add a constant torque offset")
     parser.add_argument("--spring", action="store_true", help="add a linear spring K*position")
+    parser.add_argument("--torque-channel", default=None, metavar="NAME",
+                        help="torque channel (default: torque if present, else torque_cmd; as residual)")
     parser.add_argument(
         "--torque-timing",
         choices=("auto", "hold_previous", "hold_next", "instant"),
         default="auto",
         help="what torque sample k means: auto (default) = from the file's source (device runs: "
-        "hold_previous; EMPS imports: hold_next); hold_previous = mean over [t_k-1, t_k) (a measured "
-        "current); hold_next = held over [t_k, t_k+1) (a command); instant = value at t_k",
+        "hold_previous; EMPS imports: hold_next; a *_cmd channel: hold_next); hold_previous = mean over "
+        "[t_k-1, t_k) (a measured current); hold_next = held over [t_k, t_k+1) (a command); instant = value at t_k",
     )
     parser.add_argument("--refine", action="store_true", help="refine the thresholds (variable projection)")
     parser.set_defaults(func=run)
 
 
-def _arrays(path: str):
-    import numpy as np
-
+def _arrays(path: str, requested: str | None, timing: str):
     from hilbench.analysis.identification.identify import RunArrays
+    from hilbench.analysis.run_file import run_torque_timing
+    from hilbench.bench.analysis_input import numeric, torque_channel
     from hilbench.bench.errors import BenchError
     from hilbench.bench.runfile import open_run
 
-    run = open_run(path)
-    missing = [c for c in ("t", "position", "torque") if c not in run.channels]
-    if missing:
-        raise BenchError(
-            f"{path}: missing channel(s) {', '.join(missing)}; identification needs the "
-            "position and the torque (or force)"
+    with open_run(path) as run:
+        missing = [c for c in ("t", "position") if c not in run.channels]
+        if missing:
+            raise BenchError(
+                f"{path}: missing channel(s) {', '.join(missing)}; identification needs the "
+                "position and the torque (or force)"
+            )
+        name = torque_channel(run.channels, requested, path, run.axis)
+        arrays = RunArrays(
+            t=numeric(run.channel("t"), "t", path),
+            torque=numeric(run.channel(name), name, path),
+            position=numeric(run.channel("position"), "position", path),
+            axis=run.axis,
+            name=Path(path).name,
         )
-    return RunArrays(
-        t=np.asarray(run.channel("t"), float),
-        torque=np.asarray(run.channel("torque"), float),
-        position=np.asarray(run.channel("position"), float),
-        axis=run.axis,
-        name=Path(path).name,
-    )
+        timing, origin = run_torque_timing(run.meta, timing, name)
+    return arrays, name, timing, origin
 
 
 def run(args) -> int:
     from hilbench.analysis.identification.identify import identify
     from hilbench.analysis.identification.maxwell_fit import LipSettings
-    from hilbench.analysis.models.model_file import model_document, write_model
-    from hilbench.analysis.run_file import run_torque_timing
-    from hilbench.bench.runfile import open_run
+    from hilbench.analysis.models.friction_model import AXES
+    from hilbench.analysis.models.model_file import model_document
+    from hilbench.bench import outputs
+    from hilbench.bench.analysis_input import MAX_THRESHOLDS, check_count, check_cutoff
+    from hilbench.bench.verdict import judge
 
-    train = _arrays(args.run)
-    val = _arrays(args.validate) if args.validate else None
-    with open_run(args.run) as r:
-        timing, timing_origin = run_torque_timing(r.meta, args.torque_timing)
-    print(f"torque timing: {timing} ({timing_origin})")
+    outputs.refuse_inputs({"--json": args.json, "--plots": args.plots}, [args.run, args.validate])
+    check_count(args.thresholds, "--thresholds", 0, MAX_THRESHOLDS,
+                "candidate thresholds; a model must fit the plant's element limit")
+    train, channel, timing, origin = _arrays(args.run, args.torque_channel, args.torque_timing)
+    outputs.say(f"torque timing: {timing} ({origin})", args.json)
+    val = _arrays(args.validate, args.torque_channel, args.torque_timing)[0] if args.validate else None
+    check_cutoff(args.cutoff, train.fs)
     settings = LipSettings(
         n_thresholds=args.thresholds,
         cutoff=args.cutoff,
@@ -93,6 +105,8 @@ def run(args) -> int:
             "samples": int(train.t.size),
             "sample_rate_hz": train.fs,
             "axis": train.axis,
+            "torque_channel": channel,
+            "torque_timing": timing,
         }
     }
     if val is not None:
@@ -102,23 +116,41 @@ def run(args) -> int:
             "sample_rate_hz": val.fs,
         }
     doc = model_document(res.model, method=res.method, settings=res.settings, figures=res.figures, data=data)
-    write_model(args.json, doc)
-    f = res.figures
-    line = (
-        f"{res.method}: J = {res.model.inertia:.6g}, {res.model.ms_stiffness.size} elements, "
-        f"break-away {res.model.breakaway:.4g}, b = {res.model.viscous:.4g}; "
-        f"train NRMSE torque {f['train_torque_nrmse']:.4f} position {f['train_position_nrmse']:.4f}"
-    )
-    if val is not None:
-        line += (
-            f"; validation NRMSE torque {f['validation_torque_nrmse']:.4f} "
-            f"position {f['validation_position_nrmse']:.4f} "
-            f"(segmented {f['validation_position_nrmse_segmented']:.4f})"
-        )
-    print(line + f" ({res.wall_time:.2f} s) -> {args.json}")
+    outputs.write_json(args.json, doc, indent=2, allow_nan=False)
+    f, u = res.figures, AXES[res.model.axis]
+    say = lambda text: outputs.say(text, args.json)  # noqa: E731
+    say(summary_line(res, u, channel, timing) + f" ({res.wall_time:.2f} s) -> {args.json}")
+    where = "validation" if val is not None else "train"
+    say(judge(100 * f[f"{where}_torque_nrmse"], 100 * f[f"{where}_position_nrmse"],
+              100 * f[f"{where}_position_nrmse_segmented"], where))
     if args.plots:
         from hilbench.analysis.identification.plots import write_plots
 
         for p in write_plots(res, args.plots):
-            print(f"plot: {p}")
+            say(f"plot: {p}")
     return 0
+
+
+def summary_line(res, u: dict, channel: str, timing: str) -> str:
+    """The identification in one line, every number with its unit."""
+    m, f = res.model, res.figures
+    pos, trq = u["position"], u["torque"]
+    line = (
+        f"{res.method} on {channel} ({timing}): J = {m.inertia:.6g} {u['inertia']}, {m.ms_stiffness.size} elements, "
+        f"break-away {m.breakaway:.4g} {trq}, b = {m.viscous:.4g} {trq}*s/{pos}"
+    )
+    if m.coulomb:
+        line += f", Fc = {m.coulomb:.4g} {trq}"
+    if m.spring:
+        line += f", K = {m.spring:.4g} {trq}/{pos}"
+    if m.offset:
+        line += f", offset {m.offset:.4g} {trq}"
+    line += (f"; train NRMSE torque {100 * f['train_torque_nrmse']:.3g} % "
+             f"position {100 * f['train_position_nrmse']:.3g} %")
+    if "validation_torque_nrmse" in f:
+        line += (
+            f"; validation NRMSE torque {100 * f['validation_torque_nrmse']:.3g} % "
+            f"position {100 * f['validation_position_nrmse']:.3g} % "
+            f"(segmented {100 * f['validation_position_nrmse_segmented']:.3g} %)"
+        )
+    return line

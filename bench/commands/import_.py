@@ -16,7 +16,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     def common(p: argparse.ArgumentParser) -> None:
         p.add_argument("-o", "--output", metavar="RUN.h5", help="run file to write (default: ./<name>.h5)")
-        p.add_argument("--force", action="store_true", help="overwrite the output file if it exists")
+        p.add_argument("--overwrite", dest="force", action="store_true", help="replace the output file if it exists")
+        p.add_argument("--force", dest="force", action="store_true", help=argparse.SUPPRESS)  # old name
         p.add_argument("--operator", default="", help="operator recorded in the run file")
         p.add_argument("--notes", default="", help="notes recorded in the run file")
         p.set_defaults(func=run)

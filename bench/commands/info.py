@@ -10,9 +10,9 @@ def register(subparsers) -> None:
                                    help="show a device's identity, configuration, faults and counters",
                                    description="Connect to a device, print what it reports, disconnect "
                                                "(closing disarms it).")
-    parser.add_argument("--device", required=True,
+    parser.add_argument("--device", default=None,
                         help="device URL: serial:///dev/ttyUSB0?baud=2000000, can://socketcan/can0?node=1, "
-                             "sim://")
+                             "sim:// (default $HILBENCH_DEVICE, the config file's 'device', else sim://)")
     parser.set_defaults(func=run)
 
 

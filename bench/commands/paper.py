@@ -18,7 +18,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "summary.md (figure map, key numbers, inferred settings) and summary.json.",
     )
     parser.add_argument(
-        "-o", "--out", type=Path, required=True, metavar="DIR", help="output folder (created)"
+        "-o", "--output", dest="out", type=Path, required=True, metavar="DIR", help="output folder (created)"
     )
     parser.add_argument("--quick", action="store_true", help="smaller grid (fewer levels and frequencies)")
     parser.add_argument("--json", metavar="PATH", help="also copy summary.json to PATH")

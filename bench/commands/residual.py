@@ -28,11 +28,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--json", required=True, metavar="OUT.json", help="write the JSON report here")
     parser.add_argument("--report", metavar="DIR", help="write diagnostics PNGs and summary.md into DIR")
     parser.add_argument("--torque-channel", default=None, metavar="NAME",
-                        help="torque channel (default: torque_cmd if present, else torque)")
-    parser.add_argument("--timing", choices=("auto", "hold_next", "hold_previous", "instant"), default="auto",
+                        help="torque channel (default: torque if present, else torque_cmd; as identify)")
+    parser.add_argument("--torque-timing", "--timing", dest="timing",
+                        choices=("auto", "hold_next", "hold_previous", "instant"), default="auto",
                         help="torque sample timing: auto (default: from the file's source; device runs are "
-                             "hold_previous, EMPS imports hold_next), hold_next (sample k held over "
-                             "[t_k, t_k+1), a command), hold_previous (mean over the previous interval), instant")
+                             "hold_previous, EMPS imports and *_cmd channels hold_next), hold_next (sample k held "
+                             "over [t_k, t_k+1), a command), hold_previous (mean over the previous interval), "
+                             "instant")
     parser.add_argument("--cutoff", type=float, default=None, metavar="HZ",
                         help="regression low-pass cutoff in Hz (default fs/20)")
     parser.add_argument("--inertia", type=float, default=None, metavar="J",
@@ -44,29 +46,59 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _load(path: str, channel: str | None, timing: str | None, cutoff: float | None):
-    import numpy as np
-
     from hilbench.analysis.residual import prepare_run
     from hilbench.analysis.run_file import run_torque_timing
-    from hilbench.bench.errors import BenchError
+    from hilbench.bench import outputs
+    from hilbench.bench.analysis_input import check_cutoff, numeric, torque_channel
     from hilbench.bench.runfile import open_run
 
     with open_run(path) as r:
-        name = channel or ("torque_cmd" if "torque_cmd" in r.channels else "torque")
-        if name not in r.channels and not (r.axis == "linear" and name in ("force", "force_cmd")):
-            raise BenchError(f"{path}: no torque channel {name!r} (has: {', '.join(r.channels)})")
-        position = np.asarray(r.channel("position"), float)
-        torque = np.asarray(r.channel(name), float)
+        name = torque_channel(r.channels, channel, path, r.axis)
+        position = numeric(r.channel("position"), "position", path)
+        torque = numeric(r.channel(name), name, path)
         fs, axis = r.sample_rate, r.axis
-        timing, timing_origin = run_torque_timing(r.meta, timing or "auto", name)
-    print(f"{path}: torque timing of {name}: {timing} ({timing_origin})")
+        timing, origin = run_torque_timing(r.meta, timing or "auto", name)
+    check_cutoff(cutoff, fs)
+    outputs.say(f"{path}: torque timing of {name}: {timing} ({origin})")
     return prepare_run(position, torque, fs, axis=axis, name=path, cutoff=cutoff, timing=timing), name, timing
+
+
+def _inertia(model: dict, fixed: float | None) -> float:
+    term = model.get("inertia")
+    if term is not None:
+        return float(term["parameters"]["inertia"])
+    return float(fixed or 0.0)
+
+
+def write_hysteresis(result, directory, title: str, fixed_inertia: float | None):
+    """Friction against displacement on the first training run: measured (torque - J*acceleration, J of the
+    final model) against the starting and the final model (measured minus each one's residual)."""
+    from pathlib import Path
+
+    from hilbench.analysis.identification.plots import hysteresis_figure
+    from hilbench.analysis.models.friction_model import AXES
+
+    before, after = result.signals_before, result.signals_after
+    i0, i1 = after.run_rows[0]
+    j_after = _inertia(result.model_after, fixed_inertia)
+    j_before = _inertia(result.model_before, fixed_inertia)
+    measured = (after.command - j_after * after.acceleration)[i0:i1]
+    model_after = measured - after.residual[i0:i1]
+    model_before = (before.command - j_before * before.acceleration - before.residual)[i0:i1]
+    added = ", ".join(result.names_added) or "nothing added"
+    return hysteresis_figure(after.position[i0:i1], measured,
+                             [(f"final model (+ {added})", model_after),
+                              (f"starting model ({', '.join(result.start)})", model_before)],
+                             AXES[after.axis], title, Path(directory) / "hysteresis.png", t=after.time[i0:i1])
 
 
 def run(args: argparse.Namespace) -> int:
     from hilbench.analysis.residual import LoopOptions, residual_loop
-    from hilbench.analysis.residual.report import write_json, write_report
+    from hilbench.analysis.residual.report import report_dict, write_report
+    from hilbench.bench import outputs
+    from hilbench.bench.verdict import judge
 
+    outputs.refuse_inputs({"--json": args.json, "--report": args.report}, [args.run, *args.validate])
     start = tuple(t.strip() for t in args.start.split(",") if t.strip())
     cands = None if args.candidates is None else tuple(t.strip() for t in args.candidates.split(",") if t.strip())
     train, channel, timing = _load(args.run, args.torque_channel, args.timing, args.cutoff)
@@ -76,12 +108,20 @@ def run(args: argparse.Namespace) -> int:
     inputs = {"run": args.run, "validate": list(args.validate), "start": list(start), "torque_channel": channel,
               "timing": timing, "cutoff_hz": train.data.cutoff, "decimation": train.data.decimation,
               "fixed_inertia": args.inertia}
-    write_json(result, args.json, inputs)
+    outputs.write_json(args.json, report_dict(result, inputs), indent=2, allow_nan=False)
+    say = lambda text: outputs.say(text, args.json)  # noqa: E731
     if args.report:
         write_report(result, args.report, title=f"Residual loop on {args.run}")
-    before = result.error_before["validation"]["torque_rel_pct"]
-    after = result.error_after["validation"]["torque_rel_pct"]
-    print(f"{result.verdict}; validation torque error {before:.3g} % -> {after:.3g} %")
+        path = write_hysteresis(result, args.report, f"Residual loop on {args.run}: friction against displacement",
+                                args.inertia)
+        say(f"report: {args.report} (summary.md, diagnostics_before.png, diagnostics_after.png, {path.name})")
+    before, after = result.error_before["validation"], result.error_after["validation"]
+    pct = lambda v: None if v is None else 100.0 * v  # noqa: E731
+    say(f"{result.verdict}; on {channel} ({timing}): validation torque NRMSE "
+        f"{pct(before['torque_nrmse']):.3g} % -> {pct(after['torque_nrmse']):.3g} % "
+        f"(relative error |e|/|y| {before['torque_rel_pct']:.3g} % -> {after['torque_rel_pct']:.3g} %)")
     for u in result.unexplained:
-        print(f"  unexplained: {u['description']}")
+        say(f"  unexplained: {u['description']}")
+    where = "validation" if args.validate else "cross-validation"
+    say(judge(pct(after["torque_nrmse"]), pct(after.get("position_nrmse")), None, where, residual_hint=False))
     return 0

@@ -8,7 +8,9 @@ from pathlib import Path
 
 from hilbench.bench.protocols import Chirp, Identification, Protocol, SteppedSine
 
-RUNNABLE: dict[str, type[Protocol]] = {"identify": Identification, "chirp": Chirp, "afrf": SteppedSine}
+RUNNABLE: dict[str, type[Protocol]] = {cls.name: cls for cls in (Identification, Chirp, SteppedSine)}
+# Old spellings of `run`'s protocol names, kept as argparse aliases (they map onto the one name; docs/cli.md).
+ALIASES = {"identification": ["identify"], "stepped_sine": ["afrf"]}
 DEVICE_OPTIONS = {
     "current_limit": ("A", "device current limit"),
     "velocity_limit": ("rad/s", "device velocity limit"),
@@ -42,7 +44,8 @@ def add_protocol_options(parser: argparse.ArgumentParser, cls: type[Protocol]) -
 def add_device_options(parser: argparse.ArgumentParser) -> None:
     from hilbench.bench.runner import DeviceSettings
 
-    parser.add_argument("--device", default="sim://", help="device URL (default sim://: the simulated bench)")
+    parser.add_argument("--device", default=None, help="device URL (default $HILBENCH_DEVICE, the config file's "
+                        "'device', else sim://: the simulated bench; docs/cli.md)")
     defaults = DeviceSettings()
     for name, (unit, text) in DEVICE_OPTIONS.items():
         parser.add_argument("--" + name.replace("_", "-"), dest=name, default=None,
@@ -71,9 +74,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "shutdown (always: zero current, disarm). Ctrl-C stops safely.")
     kinds = p.add_subparsers(dest="protocol", metavar="PROTOCOL", required=True)
     for cmd, cls in RUNNABLE.items():
-        q = kinds.add_parser(cmd, help=(cls.__doc__ or "").split("\n")[0],
+        q = kinds.add_parser(cmd, aliases=ALIASES.get(cmd, []), help=(cls.__doc__ or "").split("\n")[0],
                              description=" ".join((cls.__doc__ or "").split()))
-        q.add_argument("-o", "--out", type=Path, default=None,
+        q.add_argument("-o", "--output", dest="out", type=Path, default=None,
                        help="run file to write (default runs/<protocol>-<uid>.h5)")
         q.add_argument("--overwrite", action="store_true", help="replace an existing run file")
         q.add_argument("--operator", default="", help="operator name, stored in the run file")

@@ -22,7 +22,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--events", type=int, default=20, metavar="N", help="show at most N events (default 20)"
     )
-    parser.add_argument("--json", metavar="PATH", help="also write the summary as JSON to PATH")
+    parser.add_argument("--json", metavar="PATH", help="also write the summary as JSON to PATH ('-': stdout)")
     parser.set_defaults(func=run)
 
 
@@ -31,8 +31,10 @@ def _fmt(value: float | None) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hilbench.bench import outputs
     from hilbench.bench.runfile import channel_summary, open_run, repair
 
+    outputs.refuse_inputs({"--json": args.json}, [args.run])
     repaired = None
     if args.repair:
         repaired = repair(args.run)
@@ -87,8 +89,7 @@ def run(args: argparse.Namespace) -> int:
             lines.append(f"  t={e['t']:<12.6g} #{e['sample_index']:<10} {e['kind']:<8} {e['message']}")
         if len(events) > args.events:
             lines.append(f"  ... {len(events) - args.events} more")
-    print("\n".join(lines))
+    outputs.say("\n".join(lines), args.json, level=0)
     if args.json:
-        with open(args.json, "w", encoding="utf-8") as fh:
-            json.dump(summary, fh, indent=2, sort_keys=True)
+        outputs.write_json(args.json, summary, indent=2, sort_keys=True)
     return 0

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
+import sys
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from hilbench.bench.analysis_input import whole_number
+
     parser = subparsers.add_parser(
         "skeleton",
         help="equivalent stiffness and damping (skeleton curves) from chirp runs, composed across runs",
@@ -34,7 +36,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar=("F_MIN", "F_MAX"),
         help="analysed band in Hz (default: from the spectrum of each run)",
     )
-    parser.add_argument("--bins", type=int, default=30, help="log-spaced bins per curve (default 30)")
+    parser.add_argument("--bins", type=whole_number, default=30,
+                        help="log-spaced bins per curve (default 30, at most 10000)")
     parser.add_argument(
         "--compose",
         choices=("rate", "updown", "median"),
@@ -42,7 +45,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="per-bin energy estimate: rate-extrapolated fit (default), mean of growing/decaying medians, or the "
         "plain median (the paper's pooling); see hilbench.analysis.skeleton.forcevib.compose",
     )
-    parser.add_argument("--json", metavar="OUT.json", help="write the composed curves as JSON")
+    parser.add_argument("--json", metavar="OUT.json", help="write the composed curves as JSON ('-': stdout)")
     parser.add_argument("--plot", metavar="OUT.png", help="write the skeleton plot")
     parser.set_defaults(func=run)
 
@@ -77,12 +80,15 @@ def centred_force(torque, timing: str):
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
 
     from hilbench.analysis.run_file import read_run_file
     from hilbench.analysis.skeleton.forcevib import compose, forcevib
+    from hilbench.bench import outputs
+    from hilbench.bench.analysis_input import MAX_BINS, check_count, numeric
     from hilbench.bench.errors import BenchError
 
+    outputs.refuse_inputs({"--json": args.json, "--plot": args.plot}, args.runs)
+    check_count(args.bins, "--bins", 1, MAX_BINS, "log-spaced bins per skeleton curve")
     runs = [read_run_file(p) for p in args.runs]
     if len({r.axis for r in runs}) > 1:
         raise BenchError("runs mix rotary and linear axes")
@@ -94,17 +100,17 @@ def run(args: argparse.Namespace) -> int:
         options["freq_range"] = tuple(args.band)
     results = []
     for r in runs:
-        x = np.asarray(r.channel("position"), float)
-        force = centred_force(r.channel("torque"), r.torque_timing)
-        print(f"{r.path.name}: torque timing {r.torque_timing} ({'declared' if r.declared_timing else 'default'})")
+        x = numeric(r.channel("position"), "position", str(r.path))
+        force = centred_force(numeric(r.channel("torque"), "torque", str(r.path)), r.torque_timing)
+        outputs.say(f"{r.path.name}: torque timing {r.torque_timing} ({'declared' if r.declared_timing else 'default'})")
         results.append(forcevib(x, force, r.sample_rate, mass, args.method, spring=args.spring, **options))
-        v = results[-1].valid
-        print(
-            f"{r.path.name}: {v.sum()} valid samples, A {results[-1].amplitude[v].min():.4g} .. "
-            f"{results[-1].amplitude[v].max():.4g}"
-        )
-    curves = compose(results, n_bins=args.bins, method=args.compose)
     pos, trq = ("rad", "N*m") if runs[0].axis == "rotary" else ("m", "N")
+    for r, res in zip(runs, results, strict=True):
+        v = res.valid
+        outputs.say(f"{r.path.name}: {v.sum()} valid samples, A {res.amplitude[v].min():.4g} .. "
+                    f"{res.amplitude[v].max():.4g} {pos}", args.json)
+    curves = compose(results, n_bins=args.bins, method=args.compose)
+    warnings = _stiffness_warnings(curves, pos, trq, args.spring, mass)
     doc = {
         "runs": [str(p) for p in args.runs],
         "mass": mass,
@@ -135,37 +141,75 @@ def run(args: argparse.Namespace) -> int:
             )
         },
     }
-    print(
+    doc["warnings"] = warnings
+    outputs.say(
         f"composed {len(results)} runs: {curves.amplitude.size} amplitude bins "
         f"({curves.amplitude.min():.4g} .. {curves.amplitude.max():.4g} {pos}), k_eq "
-        f"{curves.stiffness.max():.4g} .. {curves.stiffness.min():.4g} {trq}/{pos}"
+        f"{curves.stiffness.max():.4g} .. {curves.stiffness.min():.4g} {trq}/{pos}", args.json
     )
+    for w in warnings:
+        print(f"hilbench skeleton: warning: {w}", file=sys.stderr)
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(doc, fh, indent=1)
+        outputs.write_json(args.json, doc)
     if args.plot:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        fig, ax = plt.subplots(1, 2, figsize=(11, 4))
-        for i in np.unique(curves.points_run):
-            m = curves.points_run == i
-            ax[0].plot(
-                curves.points_amplitude[m], curves.points_restoring_force[m], ".", ms=1, label=runs[i].name
-            )
-            ax[1].plot(curves.points_velocity[m], curves.points_damping_force[m], ".", ms=1)
-        ax[0].plot(curves.amplitude, curves.restoring_force, "ko", ms=3, label="composed")
-        ax[1].plot(curves.velocity, curves.damping_force, "ko", ms=3)
-        ax[0].set_xscale("log")
-        ax[0].set_xlabel(f"displacement amplitude ({pos})")
-        ax[0].set_ylabel(f"restoring force k_eq*A ({trq})")
-        ax[1].set_xlabel(f"velocity amplitude ({pos}/s)")
-        ax[1].set_ylabel(f"damping force c_eq*V ({trq})")
-        ax[0].legend(fontsize=7, markerscale=8)
-        for a in ax:
-            a.grid(alpha=0.3)
-        fig.savefig(args.plot, dpi=100, bbox_inches="tight")
-        plt.close(fig)
+        outputs.save_figure(skeleton_figure(curves, [r.name for r in runs], pos, trq), args.plot, dpi=110,
+                            bbox_inches="tight")
     return 0
+
+
+def _stiffness_warnings(curves, pos: str, trq: str, spring: float, mass: float) -> list[str]:
+    """A negative k_eq is no stiffness: say so, and refuse when no bin is positive."""
+    import numpy as np
+
+    from hilbench.bench.errors import BenchError
+
+    k = np.asarray(curves.stiffness, float)
+    neg = np.isfinite(k) & (k < 0)
+    if not neg.any():
+        return []
+    a = np.asarray(curves.amplitude, float)[neg]
+    mass_unit = "kg*m^2" if pos == "rad" else "kg"
+    why = (f"the restoring force is negative: --spring {spring:g} {trq}/{pos} is larger than the system's spring, "
+           f"--mass {mass:g} {mass_unit} is too large, or the system has no restoring force at these amplitudes "
+           "(no spring, free sliding), where the skeleton method does not apply")
+    if neg.all():
+        raise BenchError(f"k_eq < 0 in every amplitude bin: {why}")
+    return [f"k_eq < 0 in {int(neg.sum())} of {k.size} amplitude bins (A {a.min():.3g} .. {a.max():.3g} {pos}): "
+            f"{why}"]
+
+
+def skeleton_figure(curves, names: list[str], pos: str, trq: str):
+    """Restoring force against displacement amplitude and damping force against velocity amplitude: each run's
+    instantaneous points (small dots, one colour per run) under the composed curve (black)."""
+    import numpy as np
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+    from matplotlib.ticker import LogLocator
+
+    fig = Figure(figsize=(11, 4.4))
+    FigureCanvasAgg(fig)
+    ax = fig.subplots(1, 2)
+    handles = []
+    for i in np.unique(curves.points_run):
+        m = curves.points_run == i
+        dots = ax[0].plot(curves.points_amplitude[m], curves.points_restoring_force[m], ".", ms=1.5,
+                          alpha=0.5, rasterized=True)
+        ax[1].plot(curves.points_velocity[m], curves.points_damping_force[m], ".", ms=1.5, alpha=0.5,
+                   color=dots[0].get_color(), rasterized=True)
+        handles.append(Line2D([], [], ls="none", marker="o", ms=5, color=dots[0].get_color(), label=names[i]))
+    ax[0].plot(curves.amplitude, curves.restoring_force, "ko-", ms=3, lw=1)
+    ax[1].plot(curves.velocity, curves.damping_force, "ko-", ms=3, lw=1)
+    handles.append(Line2D([], [], color="k", marker="o", ms=4, lw=1, label="composed"))
+    ax[0].set_xscale("log")
+    ax[0].xaxis.set_major_locator(LogLocator(base=10))
+    ax[0].set_xlabel(f"displacement amplitude A ({pos})")
+    ax[0].set_ylabel(f"restoring force k_eq*A ({trq})")
+    ax[1].set_xlabel(f"velocity amplitude V ({pos}/s)")
+    ax[1].set_ylabel(f"damping force c_eq*V ({trq})")
+    ax[0].legend(handles=handles, fontsize=8, loc="upper left")
+    for a in ax:
+        a.grid(alpha=0.3, which="both")
+        a.tick_params(labelsize=9)
+    fig.tight_layout()
+    return fig

@@ -80,8 +80,8 @@ class ConnectionPanel(QtWidgets.QGroupBox):
         self.clear_button.setToolTip("clear every latched fault (e-stop included)")
         self.clear_button.clicked.connect(self.clear_faults_requested)
         self.clear_button.setEnabled(False)
-        self.counters_table = QtWidgets.QTableWidget(0, 2)
-        self.counters_table.setHorizontalHeaderLabels(["counter", "value"])
+        self.counters_table = QtWidgets.QTableWidget(0, 3)
+        self.counters_table.setHorizontalHeaderLabels(["counter", "value", "unit"])
         self.counters_table.verticalHeader().setVisible(False)
         self.counters_table.horizontalHeader().setStretchLastSection(True)
         self.counters_table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
@@ -177,6 +177,8 @@ class ConnectionPanel(QtWidgets.QGroupBox):
             item = QtWidgets.QTableWidgetItem(str(value))
             item.setTextAlignment(QtCore.Qt.AlignmentFlag.AlignRight | QtCore.Qt.AlignmentFlag.AlignVCenter)
             self.counters_table.setItem(row, 1, item)
+            self.counters_table.setItem(row, 2, QtWidgets.QTableWidgetItem(counter_unit(name)))
+        self.counters_table.resizeColumnsToContents()
 
     def show_disconnected(self, reason: str = "") -> None:
         self.connected = False
@@ -190,3 +192,8 @@ class ConnectionPanel(QtWidgets.QGroupBox):
         """A connection attempt failed: allow another one."""
         if not self.connected:
             self.show_disconnected("connection failed (see the message above)")
+
+
+def counter_unit(name: str) -> str:
+    """Unit of a link counter (``host_*``/``device_*`` from :attr:`drivers.amplifier.Amplifier.counters`)."""
+    return "samples" if name.endswith("_samples") else "frames"

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtCore, QtGui, QtWidgets
 
 from hilbench.bench.gui import analyses
 from hilbench.bench.gui.worker import one_line
@@ -71,15 +71,15 @@ class RunBrowser(QtWidgets.QWidget):
 
         self.info = QtWidgets.QPlainTextEdit()
         self.info.setReadOnly(True)
+        self.info.setLineWrapMode(QtWidgets.QPlainTextEdit.LineWrapMode.NoWrap)
+        self.info.setFont(QtGui.QFontDatabase.systemFont(QtGui.QFontDatabase.SystemFont.FixedFont))
         self.channels = QtWidgets.QListWidget()
         self.channels.setSelectionMode(QtWidgets.QAbstractItemView.SelectionMode.ExtendedSelection)
         self.channels.itemSelectionChanged.connect(self.plot_selected)
-        self.plot = pg.PlotWidget(background="w")
-        self.plot.showGrid(x=True, y=True, alpha=0.3)
-        self.plot.setLabel("bottom", "t (s)")
-        self.plot.addLegend(offset=(5, 5))
-        self.plot.setClipToView(True)
-        self.plot.setDownsampling(auto=True, mode="peak")
+        # one stacked plot per unit (position and torque never share an axis), time axes linked
+        self.plot = pg.GraphicsLayoutWidget()
+        self.plot.setBackground("w")
+        self.unit_plots: dict[str, pg.PlotItem] = {}
 
         # analysis controls
         self.analysis_buttons: dict[str, QtWidgets.QPushButton] = {}
@@ -223,16 +223,7 @@ class RunBrowser(QtWidgets.QWidget):
         r = self.run
         if r is None:
             return
-        lines = [
-            f"{r.path}", f"status     {r.status}", f"protocol   {r.protocol_name or '-'}",
-            f"samples    {r.n_samples} at {r.sample_rate:g} Hz ({r.duration:.6g} s)",
-            f"start      {r.start_time}", f"end        {r.end_time or '-'}",
-            f"operator   {r.meta.get('operator', '') or '-'}", f"notes      {r.meta.get('notes', '') or '-'}",
-            f"device     {r.device}", f"parameters {r.protocol_params}", "events:",
-        ]
-        for e in r.events:
-            lines.append(f"  t={e['t']:<10.6g} #{e['sample_index']:<9} {e['kind']:<7} {e['message']}")
-        self.info.setPlainText("\n".join(lines))
+        self.info.setPlainText("\n".join(describe_run(r)))
 
     def _on_follow(self, on: bool) -> None:
         if on:
@@ -260,21 +251,33 @@ class RunBrowser(QtWidgets.QWidget):
     # ------------------------------------------------------------- plotting
     def plot_selected(self) -> None:
         self.plot.clear()
+        self.unit_plots = {}
         if self.run is None:
             return
         names = [item.text() for item in self.channels.selectedItems()]
         try:
             t = self.run.channel("t")
-            for i, name in enumerate(names):
-                y = self.run.channel(name)
-                n = min(t.size, y.size)
-                self.plot.plot(t[:n], np.asarray(y[:n], dtype=float), pen=pg.mkPen(COLOURS[i % len(COLOURS)]),
-                               name=f"{name} ({self.run.unit(name)})")
+            groups: dict[str, list[str]] = {}
+            for name in names:
+                groups.setdefault(self.run.unit(name), []).append(name)
+            for row, (unit, members) in enumerate(groups.items()):
+                item = self.plot.addPlot(row=row, col=0)
+                item.showGrid(x=True, y=True, alpha=0.3)
+                item.addLegend(offset=(5, 5))
+                item.setClipToView(True)
+                item.setDownsampling(auto=True, mode="peak")
+                item.setLabel("left", f"{', '.join(members)} ({unit})")
+                item.setLabel("bottom", "t (s)")
+                if self.unit_plots:
+                    item.setXLink(next(iter(self.unit_plots.values())))
+                self.unit_plots[unit] = item
+                for name in members:
+                    y = self.run.channel(name)
+                    n = min(t.size, y.size)
+                    colour = COLOURS[names.index(name) % len(COLOURS)]
+                    item.plot(t[:n], np.asarray(y[:n], dtype=float), pen=pg.mkPen(colour), name=f"{name} ({unit})")
         except Exception as exc:
             self.message.emit(f"cannot plot: {one_line(exc)}", True)
-            return
-        units = sorted({self.run.unit(n) for n in names})
-        self.plot.setLabel("left", ", ".join(units))
 
     # ------------------------------------------------------------- analyses
     def analyse(self, name: str) -> None:
@@ -348,3 +351,64 @@ class RunBrowser(QtWidgets.QWidget):
                 else:
                     p.plot(x, y, pen=pg.mkPen(colour), name=label)
         self.message.emit(f"{result.title}: done", False)
+
+
+def _value(value) -> str:
+    return f"{value:.6g}" if isinstance(value, float) else str(value)
+
+
+def _entries(values: dict, units: dict[str, str], indent: str = "  ") -> list[str]:
+    """``key = value unit`` lines, one per entry, keys aligned; nested dicts indented."""
+    width = max((len(str(k)) for k in values), default=0)
+    lines = []
+    for key, value in sorted(values.items()):
+        if isinstance(value, dict):
+            lines.append(f"{indent}{key}:")
+            lines += _entries(value, units, indent + "  ")
+            continue
+        if isinstance(value, list | tuple):
+            text = ", ".join(_value(v) for v in value)
+        else:
+            text = _value(value)
+        unit = units.get(str(key), "")
+        lines.append(f"{indent}{str(key):<{width}} = {text}{' ' + unit if unit and unit != '1' else ''}")
+    return lines
+
+
+def describe_run(r) -> list[str]:
+    """The metadata pane: one fact per line, units named, dicts spelled out as ``key = value unit``."""
+    from hilbench.bench.commands.run import DEVICE_OPTIONS
+    from hilbench.bench.protocols import PROTOCOLS
+
+    device_units = {k: unit for k, (unit, _text) in DEVICE_OPTIONS.items()}
+    device_units.update({"sample_rate": "Hz", "sample_period": "s"})
+    params = dict(r.protocol_params) if isinstance(r.protocol_params, dict) else {}
+    proto_units = params.pop("units", None)
+    if not isinstance(proto_units, dict):
+        cls = PROTOCOLS.get(r.protocol_name or "")
+        mode = str(params.get("mode", "current"))
+        proto_units = {k: spec.unit_for(mode) for k, spec in cls.specs().items()} if cls is not None else {}
+    config = getattr(r, "config", None)
+    lines = [
+        f"{r.path}",
+        f"status      {r.status}",
+        f"protocol    {r.protocol_name or '-'}",
+        f"samples     {r.n_samples} at {r.sample_rate:g} Hz ({r.duration:.6g} s)",
+        f"axis        {r.axis}",
+        f"start       {r.start_time}",
+        f"end         {r.end_time or '-'}",
+        f"operator    {r.meta.get('operator', '') or '-'}",
+        f"notes       {r.meta.get('notes', '') or '-'}",
+        "device:",
+        *(_entries(r.device, device_units) if isinstance(r.device, dict) else [f"  {r.device}"]),
+        "device configuration:",
+        *(_entries(config, device_units) if isinstance(config, dict) and config else ["  -"]),
+        "protocol parameters:",
+        *(_entries(params, proto_units) if params else ["  -"]),
+        "channels:",
+        *[f"  {name:<14} {r.unit(name)}" for name in r.channels],
+        f"events: {len(r.events)}",
+    ]
+    for e in r.events:
+        lines.append(f"  t = {e['t']:<10.6g} s  #{e['sample_index']:<9} {e['kind']:<7} {e['message']}")
+    return lines

@@ -7,6 +7,7 @@ from hilbench.bench.cli import main
 
 
 def test_demo_runs_everything_and_finds_the_undeclared_cogging(tmp_path, capsys):
+    tmp_path = tmp_path / "a+b &c=d"  # characters that mean something in a URL query (issue 12 item 12)
     assert main(["demo", "-o", str(tmp_path)]) == 0
     for role in ("identification", "validation", "afrf"):
         assert read_run_file(tmp_path / "runs" / f"{role}.h5").status == "completed"

@@ -10,6 +10,7 @@ from hilbench.firmware_sim.friction_models import dc_motor
 from hilbench.firmware_sim.plant import simulate
 from tests import real_data
 from tests.analysis.identification.test_identification import random_enveloped
+from tests.figure_checks import recording_figures
 
 
 def _write_run(path, seed, channels=("sample_index", "t", "torque", "position")):
@@ -30,19 +31,23 @@ def _write_run(path, seed, channels=("sample_index", "t", "torque", "position"))
 def test_identify_cli_writes_model_and_plots(tmp_path, capsys):
     p = _write_run(tmp_path / "a.h5", 1)
     _write_run(tmp_path / "b.h5", 2)
-    rc = main(
-        [
-            "identify",
-            str(tmp_path / "a.h5"),
-            "--validate",
-            str(tmp_path / "b.h5"),
-            "--json",
-            str(tmp_path / "m.json"),
-            "--plots",
-            str(tmp_path / "plots"),
-        ]
-    )
+    with recording_figures() as seen:  # issue 13: every axis labelled with a unit, no empty legend
+        rc = main(
+            [
+                "identify",
+                str(tmp_path / "a.h5"),
+                "--validate",
+                str(tmp_path / "b.h5"),
+                "--json",
+                str(tmp_path / "m.json"),
+                "--plots",
+                str(tmp_path / "plots"),
+            ]
+        )
     assert rc == 0
+    assert set(seen) == {"virgin_curve.png", *(f"{p}_{k}.png" for p in ("train", "validation")
+                                               for k in ("fit", "residuals", "hysteresis"))}
+    assert not any(seen.values()), seen
     doc = json.loads((tmp_path / "m.json").read_text())
     # 2 kHz undersamples the 187 Hz presliding mode a little: J within 2 % here (1 % at 4 kHz)
     assert abs(doc["parameters"]["inertia"] / p.inertia - 1) < 0.02
@@ -56,7 +61,7 @@ def test_identify_cli_missing_torque_is_a_one_line_error(tmp_path, capsys):
     rc = main(["identify", str(tmp_path / "a.h5"), "--json", str(tmp_path / "m.json")])
     assert rc == 2
     err = capsys.readouterr().err.strip()
-    assert "missing channel(s) torque" in err and "\n" not in err
+    assert "no torque channel (torque or torque_cmd" in err and "\n" not in err
 
 
 REAL_EMPS = real_data.EMPS  # ships in tests/data/emps: never skipped

@@ -12,6 +12,7 @@ from hilbench.bench.runfile import RunWriter
 from hilbench.firmware_sim.friction_models import dc_motor
 from hilbench.firmware_sim.plant import simulate
 from tests.analysis.residual.test_residual_loop import FS, excitation
+from tests.figure_checks import recording_figures
 
 
 def write_run(path, seed: int) -> None:
@@ -34,9 +35,12 @@ def runs(tmp_path_factory):
 
 def test_cli_writes_json_and_report(runs, capsys):
     out_json, report = runs / "out.json", runs / "report"
-    rc = main(["residual", str(runs / "train.h5"), "--validate", str(runs / "valid.h5"),
-               "--json", str(out_json), "--report", str(report)])
+    with recording_figures() as seen:  # issue 13: every axis labelled with a unit, no empty legend
+        rc = main(["residual", str(runs / "train.h5"), "--validate", str(runs / "valid.h5"),
+                   "--json", str(out_json), "--report", str(report)])
     assert rc == 0
+    assert set(seen) == {"diagnostics_before.png", "diagnostics_after.png", "hysteresis.png"}
+    assert not any(seen.values()), seen
     doc = json.loads(out_json.read_text())
     assert [e["name"] for e in doc["effects_added"]] == ["viscous"]
     e = doc["effects_added"][0]
@@ -50,7 +54,8 @@ def test_cli_writes_json_and_report(runs, capsys):
     for name in ("diagnostics_before.png", "diagnostics_after.png", "summary.md"):
         assert (report / name).stat().st_size > 0
     assert "viscous" in (report / "summary.md").read_text()
-    assert "validation torque error" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "validation torque NRMSE" in text and "verdict: " in text and (report / "hysteresis.png").is_file()
 
 
 def test_cli_bad_input_is_one_line(runs, capsys):

@@ -117,7 +117,7 @@ def test_cli_run_json_plot(tmp_path, capsys):
 
 def test_cli_model(tmp_path, capsys):
     out = tmp_path / "c.json"
-    argv = ["afrf", "--model", "coulomb", "--amplitudes", "1", "10", "--frequencies", "0.5", "2", "2",
+    argv = ["afrf", "--model", "coulomb", "--amplitudes", "1", "10", "--log-frequencies", "0.5", "2", "2",
             "--settle-periods", "10", "--settle-time", "0", "--measure-periods", "2",
             "--samples-per-period", "200", "--workers", "1", "--json", str(out)]
     assert bench_main(argv) == 0

@@ -10,6 +10,7 @@ from hilbench.analysis.reproductions.paper_figures import FIGURES
 from hilbench.bench.cli import main
 from hilbench.firmware_sim.friction_models import paper_system
 from hilbench.firmware_sim.plant import stop_operator
+from tests.figure_checks import recording_figures
 
 
 def test_maxwell_slip_closed_form_against_simulated_loops():
@@ -44,12 +45,15 @@ def test_afrf_db_error():
 @pytest.fixture(scope="module")
 def quick_paper(tmp_path_factory):
     out = tmp_path_factory.mktemp("paper")
-    assert main(["paper", "--quick", "-o", str(out), "--json", str(out / "copy.json")]) == 0
-    return out, json.loads((out / "summary.json").read_text())
+    with recording_figures() as seen:  # issue 13: every axis labelled with a unit, no empty legend
+        assert main(["paper", "--quick", "-o", str(out), "--json", str(out / "copy.json")]) == 0
+    return out, json.loads((out / "summary.json").read_text()), seen
 
 
 def test_paper_quick_writes_every_figure_and_summary(quick_paper):
-    out, doc = quick_paper
+    out, doc, seen = quick_paper
+    assert set(seen) == set(FIGURES)
+    assert not any(seen.values()), {k: v for k, v in seen.items() if v}
     for name in FIGURES:
         assert (out / name).stat().st_size > 10_000, name
     md = (out / "summary.md").read_text()
@@ -59,7 +63,7 @@ def test_paper_quick_writes_every_figure_and_summary(quick_paper):
 
 
 def test_paper_quick_numbers_meet_the_tolerances(quick_paper):
-    _, doc = quick_paper
+    _, doc, _ = quick_paper
     assert all(doc["checks"].values()), doc["checks"]
     sk = doc["skeleton"]
     # k_eq within 5 % of the 16-element and of the continuous closed forms over the excited range

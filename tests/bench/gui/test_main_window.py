@@ -130,7 +130,14 @@ def test_run_browser_opens_the_file_and_shows_identification(window, qtbot, runs
     browser = window.browser
     assert browser.open(str(runs / "id.h5"))
     assert {"torque", "position"} <= {i.text() for i in browser.channels.selectedItems()}
-    assert len(browser.plot.getPlotItem().listDataItems()) == 2
+    # position and torque on separate axes, each labelled with its channel and unit (issue 13)
+    assert set(browser.unit_plots) == {"rad", "N*m"}
+    for unit, item in browser.unit_plots.items():
+        assert len(item.listDataItems()) == 1
+        assert item.getAxis("left").labelText.endswith(f"({unit})")
+    # metadata readable: no raw Python dicts, units named
+    text = browser.info.toPlainText()
+    assert "{" not in text and "current_limit" in text and " A" in text
     assert "completed" in browser.info.toPlainText()
     browser.analyse("identification")
     qtbot.waitUntil(lambda: browser.last_result is not None, timeout=30000)
