@@ -89,10 +89,16 @@ def _table_odd(x: float, gx: list[float], gf: list[float]) -> float:
 def _stribeck_curve(fc: float, fs: float, vs: float, delta: float, v: float) -> float:
     if vs <= 0.0 or fs == fc:
         return fc
-    try:
-        e = abs(v / vs) ** delta
-    except OverflowError:  # C's pow() returns inf here
-        e = math.inf
+    r = abs(v / vs)
+    if delta == 2.0:
+        e = r * r
+    elif delta == 1.0:
+        e = r
+    else:
+        try:
+            e = r**delta
+        except OverflowError:  # C's pow() returns inf here
+            e = math.inf
     return fc + (fs - fc) * math.exp(-e)
 
 

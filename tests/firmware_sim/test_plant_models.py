@@ -188,12 +188,13 @@ def test_bounded_stack_on_a_long_random_reversal_run():
 def _model_plants():
     lugre = st.builds(LuGre, sigma0=st.floats(10, 1e3), coulomb=st.floats(0.05, 0.5), sigma1=st.floats(0, 2),
                       sigma2=st.floats(0, 0.1), static=st.sampled_from([None, 0.7]),
-                      stribeck_velocity=st.floats(0, 0.5), exponent=st.floats(0.5, 3))
+                      stribeck_velocity=st.floats(0, 0.5), exponent=st.sampled_from([1.0, 2.0, 0.7, 2.5]))
     gms = st.integers(1, 4).flatmap(lambda n: st.builds(
         GMS, stiffness=st.lists(st.floats(10, 500), min_size=n, max_size=n).map(tuple),
         fractions=st.lists(st.floats(0.1, 1), min_size=n, max_size=n).map(tuple),
         coulomb=st.floats(0.05, 0.5), static=st.sampled_from([None, 0.7]), stribeck_velocity=st.floats(0, 0.5),
-        exponent=st.floats(0.5, 3), attraction=st.sampled_from([np.inf, 5.0, 100.0]), viscous=st.floats(0, 0.1)))
+        exponent=st.sampled_from([1.0, 2.0, 0.7, 2.5]), attraction=st.sampled_from([np.inf, 5.0, 100.0]),
+        viscous=st.floats(0, 0.1)))
     hysteresis = st.builds(Hysteresis, h=st.floats(0.05, 1), d=st.floats(1e-3, 0.1), stack=st.integers(3, 6))
     return st.builds(
         PlantParams, inertia=st.floats(0.05, 1.0), lugre=st.one_of(st.none(), lugre),
