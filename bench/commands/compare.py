@@ -32,20 +32,23 @@ def register(subparsers) -> None:
                         help="restart interval of the segmented simulation, s (default 1)")
     parser.add_argument("--max-evaluations", type=int, default=40,
                         help="output-error refinement budget per family (default 40)")
+    parser.add_argument("--torque-channel", default="torque",
+                        help="channel holding the drive torque or force (default torque; e.g. torque_cmd for "
+                        "a commanded torque, which is then held over the next interval)")
     parser.add_argument("--torque-timing", choices=("auto", "hold_previous", "hold_next", "instant"),
                         default="auto", help="what torque sample k means (as in hilbench identify)")
     parser.set_defaults(func=run)
 
 
-def _load(path: str, timing_option: str):
+def _load(path: str, channel: str, timing_option: str):
     from hilbench.analysis.models.families import RunData
     from hilbench.analysis.run_file import read_run_file, torque_timing_for
 
     rf = read_run_file(path)
-    torque = rf.channel("torque")
-    timing = torque_timing_for(rf.source, timing_option)
-    return rf, RunData.from_arrays(Path(path).name, rf.axis, rf.sample_rate, rf.channel("position"), torque,
-                                   timing), timing
+    torque = rf.channel(channel)
+    timing = torque_timing_for(rf.source, timing_option, channel)
+    run = RunData.from_arrays(Path(path).name, rf.axis, rf.sample_rate, rf.channel("position"), torque, timing)
+    return torque, run, timing
 
 
 def run(args) -> int:
@@ -69,8 +72,8 @@ def run(args) -> int:
     for src in (args.run, args.validate):
         if Path(src).resolve() in outputs or Path(src).resolve() == out.resolve():
             raise BenchError(f"output folder {out} would overwrite the input {src}")
-    train_rf, train, timing = _load(args.run, args.torque_timing)
-    val_rf, val, _ = _load(args.validate, args.torque_timing)
+    train_torque, train, timing = _load(args.run, args.torque_channel, args.torque_timing)
+    _, val, _ = _load(args.validate, args.torque_channel, args.torque_timing)
     if val.axis != train.axis:
         raise AnalysisError(f"validation run axis {val.axis!r} differs from the training run's {train.axis!r}")
     published = {}
@@ -79,14 +82,14 @@ def run(args) -> int:
         if train.axis != "linear":
             raise BenchError(f"--published {key} is a linear-axis model; {args.run} is {train.axis}")
         published[name] = published_plant(*values)
-    result = compare(train, val, timing=timing, train_position=train_rf.channel("position"),
-                     train_torque=train_rf.channel("torque"), families=families, segment=args.segment,
+    result = compare(train, val, timing=timing, train_position=train.x, train_torque=train_torque,
+                     families=families, segment=args.segment,
                      max_nfev=args.max_evaluations, published=published)
     out.mkdir(parents=True, exist_ok=True)
     table = markdown_table(result)
     (out / "compare.md").write_text(table)
     data = {"train": {"file": str(Path(args.run).resolve()), "samples": int(train.x.size),
-                      "sample_rate_hz": train.fs, "torque_timing": timing},
+                      "sample_rate_hz": train.fs, "torque_channel": args.torque_channel, "torque_timing": timing},
             "validation": {"file": str(Path(args.validate).resolve()), "samples": int(val.x.size),
                            "sample_rate_hz": val.fs}}
     write_json(out / "compare.json", document(result, data))
