@@ -76,7 +76,7 @@ def _row(name: str, n_par: int, fit_time: float, plant: PlantParams, train: RunD
          segment: float, fit: FamilyFit | None) -> Row:
     tr = evaluate(plant, train, segment)
     va = evaluate(plant, validation, segment)
-    keys = ("torque_nrmse", "position_nrmse_segmented")
+    keys = ("torque_nrmse", "position_nrmse_segmented", "position_rms_segmented")
     return Row(name, n_par, fit_time, {k: tr[k] for k in keys}, {k: va[k] for k in keys}, fit, plant,
                curves={"torque_predicted": va["torque_predicted"], "position_simulated": va["position_simulated"],
                        "friction_predicted": va["torque_predicted"] - plant.inertia * validation.data.acceleration
@@ -93,9 +93,9 @@ def markdown_table(result: Comparison) -> str:
         f"{result.validation.name} ({result.validation.x.size} samples). NRMSE = rms(error)/std(measured); "
         f"position simulated with restarts every {result.segment_s:g} s ({unit}).",
         "",
-        "| model | parameters | fit time (s) | validation torque NRMSE | validation position NRMSE (segmented) "
-        "| train torque NRMSE | train position NRMSE (segmented) |",
-        "|---|---|---|---|---|---|---|",
+        f"| model | parameters | fit time (s) | validation torque NRMSE | validation position NRMSE (segmented) "
+        f"| validation position rms error ({unit}) | train torque NRMSE | train position NRMSE (segmented) |",
+        "|---|---|---|---|---|---|---|---|",
     ]
 
     def f(v: float) -> str:
@@ -103,7 +103,8 @@ def markdown_table(result: Comparison) -> str:
 
     for r in result.rows:
         lines.append(f"| {r.name} | {r.n_parameters} | {f(r.fit_time_s)} | {f(r.validation['torque_nrmse'])} | "
-                     f"{f(r.validation['position_nrmse_segmented'])} | {f(r.train['torque_nrmse'])} | "
+                     f"{f(r.validation['position_nrmse_segmented'])} | {f(r.validation['position_rms_segmented'])} | "
+                     f"{f(r.train['torque_nrmse'])} | "
                      f"{f(r.train['position_nrmse_segmented'])} |")
     return "\n".join(lines) + "\n"
 

@@ -169,9 +169,11 @@ def evaluate(params: PlantParams, run: RunData, segment: float = 1.0) -> dict:
     try:
         sim = segmented_position(params, run, segment)
         pos = nrmse(run.x, sim)
+        rms = float(np.sqrt(np.mean((run.x - sim) ** 2)))
     except (PlantParameterError, FloatingPointError, AnalysisError):
-        sim, pos = np.full_like(run.x, np.nan), math.nan
+        sim, pos, rms = np.full_like(run.x, np.nan), math.nan, math.nan
     return {"torque_nrmse": nrmse(run.data.torque, torque), "position_nrmse_segmented": pos,
+            "position_rms_segmented": rms,
             "torque_measured": run.data.torque, "torque_predicted": torque, "position_simulated": sim}
 
 

@@ -27,7 +27,7 @@ def test_compare_writes_table_json_and_plots(tmp_path, capsys):
                "--families", "coulomb_viscous,continuous", "--torque-timing", "hold_next", "--max-evaluations", "30"])
     assert rc == 0
     table = (tmp_path / "out" / "compare.md").read_text()
-    assert "| continuous | 5 |" in table and "| coulomb_viscous | 4 |" in table
+    assert "| continuous | 5 |" in table and "| coulomb_viscous | 4 |" in table and "rms error (rad)" in table
     doc = json.loads((tmp_path / "out" / "compare.json").read_text())
     assert doc["schema"] == "hilbench.compare/1"
     rows = {r["model"]: r for r in doc["rows"]}
