@@ -244,3 +244,23 @@ def test_models_round_trip_through_dict():
 def test_bad_model_parameters_are_refused(change, match):
     with pytest.raises(PlantParameterError, match=match):
         Plant(PlantParams(inertia=1.0, **change), 1e-3)
+
+
+def test_simulated_device_config_takes_the_models(tmp_path):
+    # the simulated amplifier's TOML builds its plant with PlantParams.from_dict: nested tables select a model,
+    # and a bad value is refused with one line naming it
+    from hilbench.firmware_sim.sim_config import SimConfigError, load_sim_config
+
+    base = ('[device]\nmodel = "HB-SIM-1"\nserial = "S"\nbuffer_capacity = 8192\n'
+            '[plant]\npreset = "none"\ninertia = 0.0022\nviscous = 0.004\n')
+    good = tmp_path / "lugre.toml"
+    good.write_text(base + "[plant.lugre]\nsigma0 = 3000.0\ncoulomb = 0.76\nsigma1 = 0.5\nstatic = 0.9\n"
+                    "stribeck_velocity = 0.05\n[plant.hysteresis]\nh = 0.2\nd = 5e-4\nstack = 16\n")
+    cfg = load_sim_config(good)
+    assert cfg.plant.lugre == LuGre(sigma0=3000.0, coulomb=0.76, sigma1=0.5, static=0.9, stribeck_velocity=0.05)
+    assert cfg.plant.hysteresis == Hysteresis(0.2, 5e-4, 16)
+    bad = tmp_path / "bad.toml"
+    bad.write_text(base + "[plant.gms]\nstiffness = [100.0]\nfractions = [1.0]\ncoulomb = -1.0\n")
+    with pytest.raises(SimConfigError, match="gms.coulomb") as err:
+        load_sim_config(bad)
+    assert "\n" not in str(err.value)
