@@ -278,14 +278,18 @@ def _starts(run: RunData, ms) -> dict[str, dict[str, float]]:
     scale = float(np.std(run.data.torque)) or 1.0
     fc = _pos(cv["coulomb"], 1e-3 * scale)
     fc_st = _pos(st["coulomb"], 1e-3 * scale)
-    excess = _pos(st["static"] - st["coulomb"], 1e-3 * fc_st)
+    # floors keep the Stribeck term alive for the refinement: from a vanishing excess (its log far below the
+    # data's scale) least squares sees no gradient and never recovers a real one
+    excess = _pos(st["static"] - st["coulomb"], 0.1 * fc_st)
+    vmax = float(np.max(np.abs(run.v)))
+    v_s = float(np.clip(st["stribeck_velocity"], vmax / 100, vmax / 2))
     j = _pos(cv["inertia"], 1e-12)
     b = _pos(cv["viscous"], 1e-9 * scale)
     k_sum = float(np.sum(ms.ms_stiffness))
     w_sum = float(np.sum(ms.ms_slip))
     sigma0 = k_sum if k_sum > 0 else fc / (1e-3 * float(np.ptp(run.x)))
     common = {"inertia": j, "offset": cv["offset"]}
-    stb = {"coulomb": fc_st, "static_excess": excess, "stribeck_velocity": st["stribeck_velocity"],
+    stb = {"coulomb": fc_st, "static_excess": excess, "stribeck_velocity": v_s,
            "viscous": _pos(st["viscous"], 1e-9 * scale)}
     h = w_sum if w_sum > 0 else fc
     return {
@@ -321,8 +325,17 @@ def _refine(fam: _Family, start: dict[str, float], run: RunData, segment: float,
         r = (sim - run.x) / x_scale
         return r if np.all(np.isfinite(r)) else np.full(run.x.size, 10.0)
 
+    # (F_s - F_c)*exp(-(v/v_s)^2) with v_s -> 0 and F_s - F_c -> inf changes the model only where |v| < v_s: a
+    # degenerate valley the search otherwise follows. Bound both to the data: F_s - F_c <= 3*F_c (start) and
+    # v_s in [max|v|/1000, 10*max|v|]
+    vmax = float(np.max(np.abs(run.v)))
+    limits = {"static_excess": (1e-6 * start.get("coulomb", 1.0), 3.0 * start.get("coulomb", 1.0)),
+              "stribeck_velocity": (vmax / 1000, 10 * vmax)}
+    lo = np.array([math.log(limits[n][0]) if n in limits else -np.inf for n in names])
+    hi = np.array([math.log(limits[n][1]) if n in limits else np.inf for n in names])
     v0 = np.array([start[n] / c0_scale if n == "offset" else math.log(start[n]) for n in names])
-    sol = least_squares(residual, v0, method="trf", diff_step=1e-3, max_nfev=max_nfev)
+    v0 = np.clip(v0, lo + 1e-9, hi - 1e-9)
+    sol = least_squares(residual, v0, method="trf", diff_step=1e-3, max_nfev=max_nfev, bounds=(lo, hi))
     p = unpack(sol.x)
     r = sol.fun
     s2 = float(r @ r) / max(1, r.size - sol.x.size)
