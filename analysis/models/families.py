@@ -315,7 +315,8 @@ def _refine(fam: _Family, start: dict[str, float], run: RunData, segment: float,
     x_scale = float(np.std(run.x)) or 1.0
 
     def unpack(vec: np.ndarray) -> dict[str, float]:
-        return {n: float(vec[i] * c0_scale if n == "offset" else np.exp(vec[i])) for i, n in enumerate(names)}
+        with np.errstate(over="ignore"):  # an overflowing step gives inf, which the plant refuses: residual 10
+            return {n: float(vec[i] * c0_scale if n == "offset" else np.exp(vec[i])) for i, n in enumerate(names)}
 
     def residual(vec: np.ndarray) -> np.ndarray:
         try:
