@@ -255,9 +255,178 @@ void hb_deflections(const hb_params *p, const hb_state *s, double *out) {
     }
 }
 
+/* ---- state-variable friction models: LuGre, generalized Maxwell-slip, continuous hysteresis ----
+ * Each is evaluated inside the RK4 stages like the Maxwell-slip elements: the state committed at the start of
+ * the sub-step is advanced over the stage's displacement dx (monotone within a sub-step) and time offset t,
+ * without being changed; the sub-step's displacement then commits it (docs/plant.md, "Friction models"). */
+
+/* Stribeck curve Fc + (Fs - Fc)*exp(-|v/vs|^delta), N*m. */
+static inline double stribeck_curve(double fc, double fs, double vs, double delta, double v) {
+    if (vs <= 0.0 || fs == fc) return fc;
+    double r = fabs(v / vs);
+    double e = delta == 2.0 ? r * r : (delta == 1.0 ? r : pow(r, delta)); /* pow() costs ~10x a product */
+    return fc + (fs - fc) * exp(-e);
+}
+
+/* LuGre bristle deflection after the displacement dx from z0 at a constant g: dz/dx = 1 - s0*sgn(dx)*z/g is
+ * integrated exactly, z = zs + (z0 - zs)*exp(-s0*|dx|/g) with zs = sgn(dx)*g/s0. */
+static inline double lugre_z(const hb_params *p, double z0, double dx, double g) {
+    if (dx == 0.0) return z0;
+    double zs = (dx > 0.0 ? g : -g) / p->lg_sigma0;
+    return zs + (z0 - zs) * exp(-(p->lg_sigma0 * fabs(dx) / g));
+}
+
+static inline double lugre_force(const hb_params *p, double z0, double dx, double omega) {
+    double g = stribeck_curve(p->lg_coulomb, p->lg_static, p->lg_stribeck_velocity, p->lg_exponent, omega);
+    double z = lugre_z(p, z0, dx, g);
+    double zdot = omega - p->lg_sigma0 * fabs(omega) * z / g;
+    return p->lg_sigma0 * z + p->lg_sigma1 * zdot + p->lg_sigma2 * omega;
+}
+
+/* One GMS element from force f0 and slip state slip0, after the displacement dx over the time t at velocity
+ * omega. Sticking: f0 + k*dx, until it reaches +-alpha*s; slipping on in the same direction: the exact
+ * solution of dF/dt = C*(dir - F/(alpha*s)) at constant s, F = target + (f0 - target)*exp(-C*t/(alpha*s)). */
+static inline double gms_element(const hb_params *p, int i, double f0, int slip0, double dx, double t,
+                                 double s_omega, int *slip_out) {
+    *slip_out = slip0;
+    if (dx == 0.0) return f0;
+    int dir = dx > 0.0 ? 1 : -1;
+    double cap = p->gms_alpha[i] * s_omega;
+    if (slip0 == dir) {
+        double target = dir > 0 ? cap : -cap;
+        if (isinf(p->gms_attraction)) return target;
+        return target + (f0 - target) * exp(-(p->gms_attraction * t / cap));
+    }
+    double f = f0 + p->gms_k[i] * dx;
+    *slip_out = 0;
+    if (f >= cap) {
+        f = cap;
+        *slip_out = 1;
+    } else if (f <= -cap) {
+        f = -cap;
+        *slip_out = -1;
+    }
+    return f;
+}
+
+static inline double gms_force(const hb_params *p, const hb_state *s, double dx, double t, double omega) {
+    double sv = stribeck_curve(p->gms_coulomb, p->gms_static, p->gms_stribeck_velocity, p->gms_exponent, omega);
+    double f = 0.0;
+    int slip;
+    for (int i = 0; i < p->gms_n; i++) f += gms_element(p, i, s->gms_f[i], s->gms_slip[i], dx, t, sv, &slip);
+    return f + p->gms_sigma2 * omega;
+}
+
+static void gms_commit(const hb_params *p, hb_state *s, double dx, double t, double omega) {
+    double sv = stribeck_curve(p->gms_coulomb, p->gms_static, p->gms_stribeck_velocity, p->gms_exponent, omega);
+    for (int i = 0; i < p->gms_n; i++) {
+        int slip;
+        s->gms_f[i] = gms_element(p, i, s->gms_f[i], s->gms_slip[i], dx, t, sv, &slip);
+        s->gms_slip[i] = slip;
+    }
+}
+
+/* Virgin curve phi(x) = h*(1 - (d/(d+|x|))^2)*sgn(x), N*m. */
+static inline double hy_phi(const hb_params *p, double x) {
+    double r = p->hy_d / (p->hy_d + fabs(x));
+    double f = p->hy_h * (1.0 - r * r);
+    return x < 0.0 ? -f : f;
+}
+
+/* The reversal stack as a walk sees it: the committed points, plus one pending reversal point on top. */
+typedef struct {
+    const double *xs, *fs;
+    int m;          /* points in use, the pending one included */
+    int pending;    /* index of the pending point, or -1 */
+    double px, pf;  /* the pending point */
+} hy_view;
+
+static inline double hy_x_at(const hy_view *w, int j) { return j == w->pending ? w->px : w->xs[j]; }
+static inline double hy_f_at(const hy_view *w, int j) { return j == w->pending ? w->pf : w->fs[j]; }
+
+/* Force on the branch that starts at the top reversal point (the virgin curve on an empty stack): Masing,
+ * F = F_r + 2*phi((x - x_r)/2). */
+static inline double hy_branch(const hb_params *p, const hy_view *w, double x) {
+    if (w->m == 0) return hy_phi(p, x);
+    return hy_f_at(w, w->m - 1) + 2.0 * hy_phi(p, 0.5 * (x - hy_x_at(w, w->m - 1)));
+}
+
+/* Walk the stack over the monotone displacement dx from the committed position: a reversal pushes the start
+ * point (when the stack is full, the newest and smallest loop is closed instead: the last reversal point is
+ * forgotten and the force rejoins the enclosing branch), and every loop the path closes is wiped out
+ * (the top pair is popped when the path reaches the second point from the top; a single point x_1 when it
+ * reaches -x_1, where the branch meets the virgin curve). Returns the view after the walk. */
+static inline hy_view hy_walk(const hb_params *p, const hb_state *s, double dx, int *dropped) {
+    hy_view w = {s->hy_xs, s->hy_fs, s->hy_m, -1, 0.0, 0.0};
+    *dropped = 0;
+    if (dx == 0.0) return w;
+    int dir = dx > 0.0 ? 1 : -1;
+    double x = s->hy_x;
+    if (s->hy_dir != 0 && dir != s->hy_dir) {
+        double f = hy_branch(p, &w, x);
+        if (w.m == p->hy_stack) {
+            w.m -= 2;
+            *dropped = 1;
+        }
+        w.pf = f;
+        w.px = x;
+        w.pending = w.m;
+        w.m += 1;
+    }
+    double xe = x + dx;
+    while (w.m > 0) {
+        double wipe = w.m == 1 ? -hy_x_at(&w, 0) : hy_x_at(&w, w.m - 2);
+        if ((xe - wipe) * dir < 0.0) break;
+        w.m -= w.m == 1 ? 1 : 2;
+    }
+    return w;
+}
+
+static inline double hy_force(const hb_params *p, const hb_state *s, double dx) {
+    int dropped;
+    hy_view w = hy_walk(p, s, dx, &dropped);
+    return hy_branch(p, &w, s->hy_x + dx);
+}
+
+static void hy_commit(const hb_params *p, hb_state *s, double dx) {
+    if (dx == 0.0) return;
+    int dropped;
+    hy_view w = hy_walk(p, s, dx, &dropped);
+    if (w.pending >= 0 && w.pending < w.m) {
+        s->hy_xs[w.pending] = w.px;
+        s->hy_fs[w.pending] = w.pf;
+    }
+    s->hy_m = w.m;
+    s->hy_dropped += dropped;
+    if (w.pending >= 0 && w.pending + 1 > s->hy_depth_max) s->hy_depth_max = w.pending + 1;
+    s->hy_x += dx;
+    s->hy_dir = dx > 0.0 ? 1 : -1;
+}
+
+/* Force of every state-variable model after the displacement dx and time t from the committed state, at
+ * velocity omega, N*m. */
+static inline double model_force(const hb_params *p, const hb_state *s, double dx, double t, double omega) {
+    double f = 0.0;
+    if (p->lugre) f += lugre_force(p, s->lg_z, dx, omega);
+    if (p->gms_n > 0) f += gms_force(p, s, dx, t, omega);
+    if (p->hy_stack > 0) f += hy_force(p, s, dx);
+    return f;
+}
+
+/* Commit the displacement dx over the time t, ending at velocity omega. */
+static void model_commit(const hb_params *p, hb_state *s, double dx, double t, double omega) {
+    if (p->lugre) {
+        double g = stribeck_curve(p->lg_coulomb, p->lg_static, p->lg_stribeck_velocity, p->lg_exponent, omega);
+        s->lg_z = lugre_z(p, s->lg_z, dx, g);
+    }
+    if (p->gms_n > 0) gms_commit(p, s, dx, t, omega);
+    if (p->hy_stack > 0) hy_commit(p, s, dx);
+}
+
 /* What a run's parameters switch on, decided once per hb_run call instead of in every RK4 stage. */
 typedef struct {
     int extras;        /* cogging or tables present */
+    int models;        /* LuGre, GMS or the continuous hysteresis present */
     int dry;           /* Coulomb or Stribeck present */
     int asym_viscous;  /* viscous differs by direction */
     int spring;        /* a linear spring is present */
@@ -274,15 +443,17 @@ static hb_features features_of(const hb_params *p) {
     f.k_spring = p->spring;
     f.b_pos = p->viscous_pos;
     f.b_neg = p->viscous_neg;
-    f.affine = !f.extras && !f.dry && !f.asym_viscous;
+    f.models = p->lugre || p->gms_n > 0 || p->hy_stack > 0;
+    f.affine = !f.extras && !f.dry && !f.asym_viscous && !f.models;
     return f;
 }
 
 /* Every smooth (single-valued) force resisting motion, at angle theta and velocity omega. */
 static inline __attribute__((always_inline)) double smooth_force(const hb_params *p, const hb_state *s,
                                                                   ms_cache *c, const hb_features ft,
-                                                                  double theta, double omega) {
+                                                                  double theta, double omega, double t) {
     double f = maxwell_force(p, s, c, theta - s->theta);
+    if (ft.models) f += model_force(p, s, theta - s->theta, t, omega);
     if (ft.spring) f += ft.k_spring * theta;
     f += (ft.asym_viscous && omega < 0.0 ? ft.b_neg : ft.b_pos) * omega;
     if (ft.extras) {
@@ -301,6 +472,7 @@ static double friction_now(const hb_params *p, const hb_state *s, ms_cache *c) {
     f += s->coulomb_force;
     if (p->n_restoring > 0) f += table_odd(s->theta, p->n_restoring, p->restoring_x, p->restoring_f);
     if (p->n_damping > 0) f += table_odd(s->omega, p->n_damping, p->damping_v, p->damping_f);
+    f += model_force(p, s, 0.0, 0.0, s->omega);
     return f;
 }
 
@@ -321,19 +493,19 @@ static inline __attribute__((always_inline)) void rk4(const hb_params *p, const 
     const double inv_j = 1.0 / p->inertia;
     double th = s->theta, om = s->omega;
     double k1x = om;
-    double f1 = smooth_force(p, s, c, ft, th, om);
+    double f1 = smooth_force(p, s, c, ft, th, om, 0.0);
     if (dir != 0.0) f1 += dir * coulomb_level(p, dir, om);
     double k1v = (tau - f1) * inv_j;
     double k2x = om + 0.5 * h * k1v;
-    double f2 = smooth_force(p, s, c, ft, th + 0.5 * h * k1x, k2x);
+    double f2 = smooth_force(p, s, c, ft, th + 0.5 * h * k1x, k2x, 0.5 * h);
     if (dir != 0.0) f2 += dir * coulomb_level(p, dir, k2x);
     double k2v = (tau - f2) * inv_j;
     double k3x = om + 0.5 * h * k2v;
-    double f3 = smooth_force(p, s, c, ft, th + 0.5 * h * k2x, k3x);
+    double f3 = smooth_force(p, s, c, ft, th + 0.5 * h * k2x, k3x, 0.5 * h);
     if (dir != 0.0) f3 += dir * coulomb_level(p, dir, k3x);
     double k3v = (tau - f3) * inv_j;
     double k4x = om + h * k3v;
-    double f4 = smooth_force(p, s, c, ft, th + h * k3x, k4x);
+    double f4 = smooth_force(p, s, c, ft, th + h * k3x, k4x, h);
     if (dir != 0.0) f4 += dir * coulomb_level(p, dir, k4x);
     double k4v = (tau - f4) * inv_j;
     *th_out = th + h / 6.0 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x);
@@ -436,6 +608,7 @@ static inline __attribute__((always_inline)) void substep(const hb_params *p, hb
                 s->coulomb_force = dir * coulomb_level(p, dir, 0.0);
                 ms_commit(p, s, c, th1 - th);
                 ms_segments(c, s->ms_offset);
+                if (ft.models) model_commit(p, s, th1 - th, t1, 0.0);
                 h -= t1;
                 th = th1;
                 om = 0.0;
@@ -461,6 +634,7 @@ static inline __attribute__((always_inline)) void substep(const hb_params *p, hb
     s->omega = om_new;
     ms_commit(p, s, c, th_new - th);
     ms_segments(c, s->ms_offset);
+    if (ft.models) model_commit(p, s, th_new - th, h, om_new);
 }
 
 int hb_run(const hb_params *p, hb_state *s, const double *u, int64_t n, double dt, int substeps,
@@ -545,6 +719,27 @@ int hb_run(const hb_params *p, hb_state *s, const double *u, int64_t n, double d
         if (!isfinite(s->theta) || !isfinite(s->omega)) return -1;
     }
     return 0;
+}
+
+void hb_friction_path(const hb_params *p, hb_state *s, const double *x, const double *v, int64_t n, double dt,
+                      double *out) {
+    ms_cache cache;
+    ms_fill(p, s, &cache);
+    ms_segments(&cache, s->ms_offset);
+    for (int64_t k = 0; k < n; k++) {
+        if (k > 0) {
+            double dx = x[k] - x[k - 1];
+            ms_commit(p, s, &cache, dx);
+            ms_segments(&cache, s->ms_offset);
+            model_commit(p, s, dx, dt, v[k]);
+            s->time += dt;
+        }
+        s->theta = x[k];
+        s->omega = v[k];
+        double dir = v[k] > 0.0 ? 1.0 : (v[k] < 0.0 ? -1.0 : 0.0);
+        s->coulomb_force = dir == 0.0 ? 0.0 : dir * coulomb_level(p, dir, v[k]);
+        out[k] = friction_now(p, s, &cache);
+    }
 }
 
 void hb_stop_operator(const double *x, int64_t n, const double *deltas, int m, double *state,

@@ -10,6 +10,8 @@
 
 #define HB_MAX_ELEMENTS 1024
 #define HB_MAX_DELAY 4096
+#define HB_MAX_GMS 256
+#define HB_MAX_STACK 1024
 #define HB_MODE_CURRENT 0
 #define HB_MODE_VELOCITY 1
 
@@ -47,6 +49,28 @@ typedef struct {
     int n_damping;               /* tabulated odd damping force F_d(v), v >= 0 grid */
     const double *damping_v;
     const double *damping_f;
+    /* LuGre: F = s0*z + s1*dz/dt + s2*omega, dz/dt = omega - s0*|omega|*z/g(omega),
+     * g(omega) = Fc + (Fs - Fc)*exp(-|omega/vs|^delta). lugre = 0: off. */
+    int lugre;
+    double lg_sigma0;            /* N*m/rad */
+    double lg_sigma1;            /* N*m*s/rad */
+    double lg_sigma2;            /* N*m*s/rad */
+    double lg_coulomb, lg_static;/* Fc, Fs, N*m */
+    double lg_stribeck_velocity; /* vs, rad/s (0: g = Fc) */
+    double lg_exponent;          /* delta, > 0 */
+    /* Generalized Maxwell-slip: F = sum F_i + s2*omega; element i sticks (dF_i/dt = k_i*omega) until
+     * |F_i| reaches alpha_i*s(omega), then slips with dF_i/dt = C*(sgn(omega) - F_i/(alpha_i*s(omega)))
+     * until the motion reverses. s(omega) = Fc + (Fs - Fc)*exp(-|omega/vs|^delta). gms_n = 0: off. */
+    int gms_n;                   /* 0..HB_MAX_GMS */
+    const double *gms_k;         /* k_i, N*m/rad */
+    const double *gms_alpha;     /* alpha_i, dimensionless */
+    double gms_attraction;       /* C, N*m/s; +inf: the force follows alpha_i*s(omega) at once */
+    double gms_coulomb, gms_static, gms_stribeck_velocity, gms_exponent, gms_sigma2;
+    /* Continuous virgin-curve hysteresis phi(x) = h*(1 - (d/(d+|x|))^2)*sgn(x), Masing branches and
+     * wiping-out over a stack of at most hy_stack reversal points. hy_stack = 0: off. */
+    int hy_stack;                /* 0..HB_MAX_STACK */
+    double hy_h;                 /* N*m */
+    double hy_d;                 /* rad */
 } hb_params;
 
 typedef struct {
@@ -66,6 +90,16 @@ typedef struct {
     int32_t n_elements;
     double delay_buf[HB_MAX_DELAY];
     double deflection[HB_MAX_ELEMENTS];  /* Maxwell-slip deflections at the last commit, rad */
+    double lg_z;         /* LuGre bristle deflection, rad */
+    double hy_x;         /* hysteresis path coordinate (displacement since the start), rad */
+    int32_t hy_dir;      /* direction of the current branch: +1, -1, 0 before the first motion */
+    int32_t hy_m;        /* reversal points on the stack */
+    int32_t hy_depth_max;/* most reversal points ever held */
+    int32_t hy_dropped;  /* reversals forgotten because the stack was full */
+    double hy_xs[HB_MAX_STACK];  /* reversal points, rad */
+    double hy_fs[HB_MAX_STACK];  /* force at each reversal point, N*m */
+    double gms_f[HB_MAX_GMS];    /* GMS element forces, N*m */
+    int32_t gms_slip[HB_MAX_GMS];/* 0: sticking; +1/-1: slipping in that direction */
 } hb_state;
 
 typedef struct {
@@ -85,6 +119,12 @@ void hb_state_init(hb_state *s, const hb_params *p, double theta0, double omega0
  * integrated in `substeps` RK4 sub-steps. Returns 0, or -1 if the state became non-finite. */
 int hb_run(const hb_params *p, hb_state *s, const double *u, int64_t n, double dt, int substeps,
            int mode, hb_outputs *out);
+
+/* Friction along an imposed motion: position x[k] (rad) and velocity v[k] (rad/s), the path linear between
+ * samples. out[k] is the friction at sample k (as the `friction` output of hb_run, with the Coulomb force
+ * sgn(v)*level and 0 at v = 0). The state's theta/omega follow the path. */
+void hb_friction_path(const hb_params *p, hb_state *s, const double *x, const double *v, int64_t n, double dt,
+                      double *out);
 
 /* Stop (play) operator for m thresholds over a path x[0..n): out is n*m, row-major.
  * state[j] is the deflection at x[0] on entry and at x[n-1] on exit. */

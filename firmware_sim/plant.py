@@ -17,6 +17,8 @@ from hilbench.firmware_sim._plant import ffi, lib
 
 MAX_ELEMENTS: int = lib.HB_MAX_ELEMENTS
 MAX_DELAY_SAMPLES: int = lib.HB_MAX_DELAY
+MAX_GMS_ELEMENTS: int = lib.HB_MAX_GMS
+MAX_STACK: int = lib.HB_MAX_STACK
 MODES = {"current": lib.HB_MODE_CURRENT, "velocity": lib.HB_MODE_VELOCITY}
 #: |lambda*h| bound for the RK4 sub-step; RK4's stability region contains the closed left half-disc of
 #: radius 2.5 (checked in tests/firmware_sim/test_plant_validation.py).
@@ -46,6 +48,54 @@ class Cogging:
     order: float
     amplitude: float
     phase: float = 0.0
+
+
+@dataclass(frozen=True)
+class LuGre:
+    """LuGre friction (Canudas de Wit, Olsson, Astrom, Lischinsky 1995), docs/plant.md "Friction models":
+    ``F = sigma0*z + sigma1*dz/dt + sigma2*omega``, ``dz/dt = omega - sigma0*|omega|*z/g(omega)``,
+    ``g(omega) = coulomb + (static - coulomb)*exp(-|omega/stribeck_velocity|**exponent)``.
+    Steady sliding at omega gives ``F = sgn(omega)*g(omega) + sigma2*omega``."""
+
+    sigma0: float                 # bristle stiffness, N*m/rad
+    coulomb: float                # Fc, N*m
+    sigma1: float = 0.0           # bristle damping, N*m*s/rad
+    sigma2: float = 0.0           # viscous, N*m*s/rad
+    static: float | None = None   # Fs, N*m (None: Fc, no Stribeck)
+    stribeck_velocity: float = 0.0  # vs, rad/s
+    exponent: float = 2.0         # delta
+
+
+@dataclass(frozen=True)
+class GMS:
+    """Generalized Maxwell-slip (Al-Bender, Lampaert, Swevers 2005), docs/plant.md "Friction models".
+    N elements k_i, alpha_i; an element sticks (dF_i/dt = k_i*omega) until |F_i| = alpha_i*s(omega), then
+    slips with ``dF_i/dt = attraction*(sgn(omega) - F_i/(alpha_i*s(omega)))`` until the motion reverses;
+    ``F = sum(F_i) + viscous*omega``, ``s(omega) = coulomb + (static - coulomb)*exp(-|omega/vs|**exponent)``.
+    With ``attraction = inf`` and no Stribeck it is the Maxwell-slip model with W_i = alpha_i*coulomb."""
+
+    stiffness: Sequence[float]    # k_i, N*m/rad
+    fractions: Sequence[float]    # alpha_i, dimensionless (sum 1 for s(omega) to be the total)
+    coulomb: float                # Fc, N*m
+    static: float | None = None   # Fs, N*m (None: Fc)
+    stribeck_velocity: float = 0.0  # vs, rad/s
+    exponent: float = 2.0         # delta
+    attraction: float = math.inf  # C, N*m/s
+    viscous: float = 0.0          # sigma2, N*m*s/rad
+
+
+@dataclass(frozen=True)
+class Hysteresis:
+    """Continuous rate-independent hysteresis on the rolling-friction virgin curve
+    ``phi(x) = h*(1 - (d/(d+|x|))**2)*sgn(x)`` with Masing branches and wiping-out over a stack of at most
+    ``stack`` reversal points; when full, the newest (smallest) loop is closed (docs/plant.md)."""
+
+    h: float          # limit force, N*m
+    d: float          # characteristic displacement, rad
+    stack: int = 64   # reversal points kept, 1..MAX_STACK
+
+
+_MODEL_TYPES = {"lugre": LuGre, "gms": GMS, "hysteresis": Hysteresis}
 
 
 @dataclass(frozen=True)
@@ -79,6 +129,9 @@ class PlantParams:
     current_limit: float = math.inf
     restoring_table: tuple[Sequence[float], Sequence[float]] | None = None
     damping_table: tuple[Sequence[float], Sequence[float]] | None = None
+    lugre: LuGre | None = None
+    gms: GMS | None = None
+    hysteresis: Hysteresis | None = None
 
     @property
     def n_elements(self) -> int:
@@ -107,6 +160,11 @@ class PlantParams:
             v = getattr(self, f.name)
             if f.name == "cogging":
                 v = [{"order": c.order, "amplitude": c.amplitude, "phase": c.phase} for c in v]
+            elif f.name in _MODEL_TYPES and v is not None:
+                v = {m.name: (np.asarray(getattr(v, m.name), float).tolist()
+                              if m.name in ("stiffness", "fractions") else
+                              ("inf" if getattr(v, m.name) == math.inf else getattr(v, m.name)))
+                     for m in fields(v)}
             elif f.name in ("restoring_table", "damping_table") and v is not None:
                 v = [np.asarray(v[0], float).tolist(), np.asarray(v[1], float).tolist()]
             elif isinstance(v, (np.ndarray, tuple, list)):
@@ -133,6 +191,16 @@ class PlantParams:
         for name in ("restoring_table", "damping_table"):
             if values.get(name) is not None:
                 values[name] = (tuple(values[name][0]), tuple(values[name][1]))
+        for name, kind in _MODEL_TYPES.items():
+            if isinstance(values.get(name), dict):
+                model = {key: (math.inf if val == "inf" else val) for key, val in values[name].items()}
+                for key in ("stiffness", "fractions"):
+                    if key in model:
+                        model[key] = tuple(float(x) for x in model[key])
+                try:
+                    values[name] = kind(**model)
+                except TypeError as exc:
+                    raise PlantParameterError(f"{name}: {exc}") from None
         if values.get("current_limit") == "inf":
             values["current_limit"] = math.inf
         return cls(**values)
@@ -209,8 +277,65 @@ def stiffest_eigenvalue(params: PlantParams) -> float:
     K += _max_slope(_table("restoring_table", params.restoring_table))
     viscous_neg = params.viscous if params.viscous_neg is None else params.viscous_neg
     B = max(params.viscous, viscous_neg) + _max_slope(_table("damping_table", params.damping_table))
+    # state-variable models, linearised at rest: LuGre sigma0 and sigma1*dz/dt (slope up to 2*sigma1 in
+    # sliding, since |sigma0*z| <= g), GMS sum(k_i), the hysteresis' initial slope 2h/d
+    if params.lugre is not None:
+        K += params.lugre.sigma0
+        B += 2.0 * params.lugre.sigma1 + params.lugre.sigma2
+    if params.gms is not None:
+        K += float(np.sum(params.gms.stiffness))
+        B += params.gms.viscous
+    if params.hysteresis is not None:
+        K += 2.0 * params.hysteresis.h / params.hysteresis.d
     roots = np.roots([J, B, K]) if (B > 0 or K > 0) else np.zeros(1)
     return float(np.max(np.abs(roots)))
+
+
+def _positive(name: str, value: float, allow_inf: bool = False) -> float:
+    value = _non_negative(name, value, allow_inf)
+    if value == 0:
+        raise PlantParameterError(f"{name} must be > 0, got {value}")
+    return value
+
+
+def _stribeck(name: str, model) -> None:
+    _positive(f"{name}.coulomb", model.coulomb)
+    if model.static is not None:
+        _positive(f"{name}.static", model.static)
+    _non_negative(f"{name}.stribeck_velocity", model.stribeck_velocity)
+    _positive(f"{name}.exponent", model.exponent)
+
+
+def validate_models(params: PlantParams) -> None:
+    """Raise :class:`PlantParameterError` for a bad LuGre, GMS or hysteresis parameter."""
+    for name, kind in _MODEL_TYPES.items():
+        model = getattr(params, name)
+        if model is not None and not isinstance(model, kind):
+            raise PlantParameterError(f"{name} must be {kind.__name__} or None, got {type(model).__name__}")
+    if params.lugre is not None:
+        lg = params.lugre
+        _positive("lugre.sigma0", lg.sigma0)
+        _non_negative("lugre.sigma1", lg.sigma1)
+        _non_negative("lugre.sigma2", lg.sigma2)
+        _stribeck("lugre", lg)
+    if params.gms is not None:
+        g = params.gms
+        k = np.asarray(g.stiffness, float)
+        a = np.asarray(g.fractions, float)
+        if k.ndim != 1 or k.shape != a.shape or not 1 <= k.size <= MAX_GMS_ELEMENTS:
+            raise PlantParameterError(
+                f"gms.stiffness and gms.fractions must be 1-D of equal length 1..{MAX_GMS_ELEMENTS}")
+        if not (np.all(np.isfinite(k)) and np.all(np.isfinite(a)) and np.all(k > 0) and np.all(a > 0)):
+            raise PlantParameterError("gms.stiffness and gms.fractions must be > 0 and finite")
+        _positive("gms.attraction", g.attraction, allow_inf=True)
+        _non_negative("gms.viscous", g.viscous)
+        _stribeck("gms", g)
+    if params.hysteresis is not None:
+        hy = params.hysteresis
+        _positive("hysteresis.h", hy.h)
+        _positive("hysteresis.d", hy.d)
+        if int(hy.stack) != hy.stack or not 3 <= hy.stack <= MAX_STACK:
+            raise PlantParameterError(f"hysteresis.stack must be an integer in 3..{MAX_STACK}, got {hy.stack}")
 
 
 def validate(params: PlantParams, dt: float, substeps: int = 1, mode: str = "current") -> None:
@@ -273,6 +398,7 @@ def validate(params: PlantParams, dt: float, substeps: int = 1, mode: str = "cur
             raise PlantParameterError(f"cogging order must be > 0, got {c.order}")
     _table("restoring_table", params.restoring_table)
     _table("damping_table", params.damping_table)
+    validate_models(params)
     if mode not in MODES:
         raise PlantParameterError(f"mode must be one of {sorted(MODES)}, got {mode!r}")
     dt = float(dt)
@@ -335,6 +461,25 @@ class _CParams:
             setattr(s, f"n_{prefix}", 0 if t is None else t[0].size)
             setattr(s, xname, self._ptr(() if t is None else t[0]))
             setattr(s, fname, self._ptr(() if t is None else t[1]))
+        if p.lugre is not None:
+            lg = p.lugre
+            s.lugre = 1
+            s.lg_sigma0, s.lg_sigma1, s.lg_sigma2 = lg.sigma0, lg.sigma1, lg.sigma2
+            s.lg_coulomb = lg.coulomb
+            s.lg_static = lg.coulomb if lg.static is None else lg.static
+            s.lg_stribeck_velocity, s.lg_exponent = lg.stribeck_velocity, lg.exponent
+        if p.gms is not None:
+            g = p.gms
+            s.gms_n = len(g.stiffness)
+            s.gms_k = self._ptr(g.stiffness)
+            s.gms_alpha = self._ptr(g.fractions)
+            s.gms_attraction = g.attraction
+            s.gms_coulomb = g.coulomb
+            s.gms_static = g.coulomb if g.static is None else g.static
+            s.gms_stribeck_velocity, s.gms_exponent, s.gms_sigma2 = g.stribeck_velocity, g.exponent, g.viscous
+        if p.hysteresis is not None:
+            s.hy_stack = int(p.hysteresis.stack)
+            s.hy_h, s.hy_d = p.hysteresis.h, p.hysteresis.d
 
     def _ptr(self, values):
         arr = np.ascontiguousarray(values, dtype=np.float64)
@@ -412,6 +557,29 @@ class Plant:
         self._state.ms_offset = 0.0
         for i, value in enumerate(v):
             self._state.deflection[i] = float(value)
+
+    @property
+    def hysteresis_stack(self) -> dict[str, int]:
+        """Reversal stack of the continuous hysteresis: ``depth`` (points held now), ``depth_max`` (most ever
+        held) and ``dropped`` (reversals forgotten because the stack was full)."""
+        s = self._state
+        return {"depth": int(s.hy_m), "depth_max": int(s.hy_depth_max), "dropped": int(s.hy_dropped)}
+
+    def friction_path(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Friction (N*m) along an imposed motion: positions ``x`` (rad) and velocities ``v`` (rad/s), shape (n,),
+        one sample every ``dt``, the path linear between samples. Continues from the plant's state (the first
+        sample moves the plant to x[0] without committing the step). See docs/plant.md."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        v = np.ascontiguousarray(v, dtype=np.float64)
+        if x.ndim != 1 or x.shape != v.shape:
+            raise PlantParameterError(f"x and v must be 1-D of equal length, got {x.shape} and {v.shape}")
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(v))):
+            raise PlantParameterError("x or v contains NaN or inf")
+        out = np.empty(x.size)
+        lib.hb_friction_path(self._c.struct, self._state, ffi.cast("const double *", ffi.from_buffer(x)),
+                             ffi.cast("const double *", ffi.from_buffer(v)), x.size, self.dt,
+                             ffi.cast("double *", ffi.from_buffer(out)))
+        return out
 
     def get_state(self) -> bytes:
         """The complete state (mechanics, effects, generator) as bytes."""

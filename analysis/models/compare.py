@@ -1,0 +1,138 @@
+"""Every friction family fitted on one run and scored on another, side by side (``hilbench compare``).
+
+Figures on the validation run (docs/compare.md):
+
+- ``torque_nrmse`` is the equation error: rms(L[tau] - L[tau_model])/std(L[tau]) on the filtered rows. The
+  model's friction is evaluated along the measured path.
+- ``position_nrmse_segmented`` is the simulation error, restarted every ``segment`` s from the measured state
+  (``families.segmented_position``).
+- ``n_parameters`` is the parameter count. ``fit_time_s`` is the wall time of the identification on the
+  training run (the Maxwell-slip NNLS fit that several families start from is timed once, in its own row).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from hilbench.analysis.models.families import (
+    FAMILIES,
+    FamilyFit,
+    RunData,
+    evaluate,
+    fit_family,
+    maxwell_slip_start,
+)
+from hilbench.firmware_sim.plant import PlantParams
+
+SCHEMA = "hilbench.compare/1"
+
+
+@dataclass
+class Row:
+    name: str
+    n_parameters: int
+    fit_time_s: float
+    train: dict
+    validation: dict
+    fit: FamilyFit | None = None
+    plant: PlantParams | None = None
+    curves: dict = field(default_factory=dict)
+
+
+@dataclass
+class Comparison:
+    train: RunData
+    validation: RunData
+    rows: list[Row]
+    segment_s: float
+
+
+def compare(train: RunData, validation: RunData, *, timing: str, train_position: np.ndarray,
+            train_torque: np.ndarray, families: tuple[str, ...] = FAMILIES, segment: float = 1.0,
+            max_nfev: int = 40, published: dict[str, PlantParams] | None = None) -> Comparison:
+    """Fit every family in ``families`` on ``train``; score it (and each ``published`` model) on both runs."""
+    rows: list[Row] = []
+    t0 = time.perf_counter()
+    ms = maxwell_slip_start(train, timing, train_position, train_torque)
+    ms_time = time.perf_counter() - t0
+    for family in families:
+        fit = fit_family(family, train, timing=timing, position=train_position, torque=train_torque,
+                         segment=segment, max_nfev=max_nfev, ms_fit=ms)
+        if family == "maxwell_slip":
+            fit.fit_time_s = ms_time
+        rows.append(_row(family, fit.n_parameters, fit.fit_time_s, fit.plant, train, validation, segment, fit))
+    for name, plant in (published or {}).items():
+        rows.append(_row(name, 4, math.nan, plant, train, validation, segment, None))
+    return Comparison(train, validation, rows, segment)
+
+
+def _row(name: str, n_par: int, fit_time: float, plant: PlantParams, train: RunData, validation: RunData,
+         segment: float, fit: FamilyFit | None) -> Row:
+    tr = evaluate(plant, train, segment)
+    va = evaluate(plant, validation, segment)
+    keys = ("torque_nrmse", "position_nrmse_segmented", "position_rms_segmented")
+    return Row(name, n_par, fit_time, {k: tr[k] for k in keys}, {k: va[k] for k in keys}, fit, plant,
+               curves={"torque_predicted": va["torque_predicted"], "position_simulated": va["position_simulated"],
+                       "friction_predicted": va["torque_predicted"] - plant.inertia * validation.data.acceleration
+                       + plant.torque_offset,
+                       "friction_measured": validation.data.torque - plant.inertia * validation.data.acceleration
+                       + plant.torque_offset})
+
+
+def markdown_table(result: Comparison) -> str:
+    """The comparison as a Markdown table (validation figures first)."""
+    unit = "rad" if result.train.axis == "rotary" else "m"
+    lines = [
+        f"Train: {result.train.name} ({result.train.x.size} samples at {result.train.fs:g} Hz); validation: "
+        f"{result.validation.name} ({result.validation.x.size} samples). NRMSE = rms(error)/std(measured); "
+        f"position simulated with restarts every {result.segment_s:g} s ({unit}).",
+        "",
+        f"| model | parameters | fit time (s) | validation torque NRMSE | validation position NRMSE (segmented) "
+        f"| validation position rms error ({unit}) | train torque NRMSE | train position NRMSE (segmented) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+
+    def f(v: float) -> str:
+        return "–" if v is None or not math.isfinite(v) else f"{v:.4g}"
+
+    for r in result.rows:
+        lines.append(f"| {r.name} | {r.n_parameters} | {f(r.fit_time_s)} | {f(r.validation['torque_nrmse'])} | "
+                     f"{f(r.validation['position_nrmse_segmented'])} | {f(r.validation['position_rms_segmented'])} | "
+                     f"{f(r.train['torque_nrmse'])} | "
+                     f"{f(r.train['position_nrmse_segmented'])} |")
+    return "\n".join(lines) + "\n"
+
+
+def _clean(value):
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, list | tuple | np.ndarray):
+        return [_clean(v) for v in value]
+    if isinstance(value, float | np.floating):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
+def document(result: Comparison, data: dict) -> dict:
+    """The JSON document (schema ``hilbench.compare/1``, docs/compare.md)."""
+    return _clean({
+        "schema": SCHEMA,
+        "axis": result.train.axis,
+        "segment_s": result.segment_s,
+        "data": data,
+        "rows": [{"model": r.name, "n_parameters": r.n_parameters, "fit_time_s": r.fit_time_s, "train": r.train,
+                  "validation": r.validation, "fit": None if r.fit is None else r.fit.to_dict(),
+                  "plant": None if r.plant is None else r.plant.to_dict()} for r in result.rows],
+    })
+
+
+def write_json(path: str | Path, doc: dict) -> None:
+    Path(path).write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")

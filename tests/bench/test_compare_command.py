@@ -1,0 +1,62 @@
+"""``hilbench compare`` end to end on run files; bad input is one line and exit 2."""
+
+import json
+
+import numpy as np
+import pytest
+
+from hilbench.bench.cli import main
+from hilbench.bench.runfile import RunWriter
+from hilbench.firmware_sim.plant import Hysteresis, PlantParams, simulate
+from tests.analysis.identification.test_identification import random_enveloped
+
+TRUTH = PlantParams(inertia=0.01, viscous=0.05, hysteresis=Hysteresis(0.3, 2e-3, 64))
+
+
+def _write(path, seed, fs=1000.0, n=6000):
+    u = random_enveloped(n, fs, seed, 2.0, period=2.0)
+    out = simulate(TRUTH, u, 1 / fs, substeps=4)
+    with RunWriter(path, sample_rate=fs, channels=("sample_index", "t", "torque", "position")) as w:
+        w.append({"sample_index": np.arange(n), "t": np.arange(n) / fs, "torque": u, "position": out.theta})
+
+
+def test_compare_writes_table_json_and_plots(tmp_path, capsys):
+    _write(tmp_path / "a.h5", 1)
+    _write(tmp_path / "b.h5", 2)
+    rc = main(["compare", str(tmp_path / "a.h5"), "--validate", str(tmp_path / "b.h5"), "-o", str(tmp_path / "out"),
+               "--families", "coulomb_viscous,continuous", "--torque-timing", "hold_next", "--max-evaluations", "30"])
+    assert rc == 0
+    table = (tmp_path / "out" / "compare.md").read_text()
+    assert "| continuous | 5 |" in table and "| coulomb_viscous | 4 |" in table and "rms error (rad)" in table
+    doc = json.loads((tmp_path / "out" / "compare.json").read_text())
+    assert doc["schema"] == "hilbench.compare/1"
+    rows = {r["model"]: r for r in doc["rows"]}
+    # the data come from the continuous model: it must beat Coulomb+viscous on the validation run, and recover h
+    assert (rows["continuous"]["validation"]["position_nrmse_segmented"]
+            < rows["coulomb_viscous"]["validation"]["position_nrmse_segmented"])
+    fit = rows["continuous"]["fit"]
+    assert fit["parameters"]["h"] == pytest.approx(0.3, rel=0.05)
+    assert fit["units"]["h"] == "N*m" and fit["units"]["d"] == "rad"
+    assert fit["std_errors"]["h"] > 0
+    for name in ("compare_hysteresis.png", "compare_time.png"):
+        assert (tmp_path / "out" / name).stat().st_size > 1000
+    assert "plot:" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--families", "coulomb_viscous,bogus"], "unknown family bogus"),
+    (["--segment", "0"], "--segment must be > 0"),
+    (["--published", "emps"], "linear-axis model"),
+])
+def test_compare_bad_input_is_one_line_exit_2(tmp_path, capsys, extra, message):
+    _write(tmp_path / "a.h5", 1, n=2000)
+    rc = main(["compare", str(tmp_path / "a.h5"), "--validate", str(tmp_path / "a.h5"), "-o", str(tmp_path / "o"),
+               "--max-evaluations", "1", "--families", "coulomb_viscous", *extra])
+    err = capsys.readouterr().err
+    assert rc == 2 and message in err and len(err.strip().splitlines()) == 1
+
+
+def test_compare_missing_file_is_one_line_exit_2(tmp_path, capsys):
+    rc = main(["compare", str(tmp_path / "nope.h5"), "--validate", str(tmp_path / "nope.h5"), "-o", str(tmp_path)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "no such run file" in err and len(err.strip().splitlines()) == 1
