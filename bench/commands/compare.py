@@ -22,7 +22,7 @@ def register(subparsers) -> None:
     )
     parser.add_argument("run", help="training run file (.h5) with 't', 'position' and 'torque' channels")
     parser.add_argument("--validate", required=True, metavar="RUN2.h5", help="validation run (same axis)")
-    parser.add_argument("-o", "--out", required=True, metavar="DIR",
+    parser.add_argument("-o", "--output", dest="out", required=True, metavar="DIR",
                         help="output folder: compare.md, compare.json, compare_*.png")
     parser.add_argument("--families", default=",".join(FAMILIES),
                         help=f"comma-separated subset (default all: {','.join(FAMILIES)})")
@@ -42,20 +42,24 @@ def register(subparsers) -> None:
 
 def _load(path: str, channel: str, timing_option: str):
     from hilbench.analysis.models.families import RunData
-    from hilbench.analysis.run_file import read_run_file, torque_timing_for
+    from hilbench.analysis.run_file import read_run_file, run_torque_timing
+    from hilbench.bench import outputs
 
     rf = read_run_file(path)
     torque = rf.channel(channel)
-    timing = torque_timing_for(rf.source, timing_option, channel)
+    declared = {"source": rf.source, "torque_timing": rf.declared_timing}
+    timing, origin = run_torque_timing({k: v for k, v in declared.items() if v is not None}, timing_option, channel)
+    outputs.say(f"{path}: torque timing of {channel}: {timing} ({origin})")
     run = RunData.from_arrays(Path(path).name, rf.axis, rf.sample_rate, rf.channel("position"), torque, timing)
     return torque, run, timing
 
 
 def run(args) -> int:
     from hilbench.analysis.errors import AnalysisError
-    from hilbench.analysis.models.compare import compare, document, markdown_table, write_json
+    from hilbench.analysis.models.compare import compare, document, markdown_table
     from hilbench.analysis.models.compare_plots import write_plots
     from hilbench.analysis.models.families import FAMILIES, published_plant
+    from hilbench.bench import outputs
     from hilbench.bench.errors import BenchError
 
     families = tuple(f.strip() for f in args.families.split(",") if f.strip())
@@ -68,10 +72,8 @@ def run(args) -> int:
     if args.max_evaluations < 1:
         raise BenchError(f"--max-evaluations must be >= 1, got {args.max_evaluations}")
     out = Path(args.out)
-    outputs = {(out / name).resolve() for name in OUTPUTS}
-    for src in (args.run, args.validate):
-        if Path(src).resolve() in outputs or Path(src).resolve() == out.resolve():
-            raise BenchError(f"output folder {out} would overwrite the input {src}")
+    outputs.refuse_inputs({"--output": out, **{f"--output {out / name}": out / name for name in OUTPUTS}},
+                          [args.run, args.validate])
     train_torque, train, timing = _load(args.run, args.torque_channel, args.torque_timing)
     _, val, _ = _load(args.validate, args.torque_channel, args.torque_timing)
     if val.axis != train.axis:
@@ -87,12 +89,12 @@ def run(args) -> int:
                      max_nfev=args.max_evaluations, published=published)
     out.mkdir(parents=True, exist_ok=True)
     table = markdown_table(result)
-    (out / "compare.md").write_text(table)
+    outputs.write_text(out / "compare.md", table)
     data = {"train": {"file": str(Path(args.run).resolve()), "samples": int(train.x.size),
                       "sample_rate_hz": train.fs, "torque_channel": args.torque_channel, "torque_timing": timing},
             "validation": {"file": str(Path(args.validate).resolve()), "samples": int(val.x.size),
                            "sample_rate_hz": val.fs}}
-    write_json(out / "compare.json", document(result, data))
+    outputs.write_json(out / "compare.json", document(result, data), indent=2, allow_nan=False)
     print(table, end="")
     for p in write_plots(result, out):
         print(f"plot: {p}")

@@ -102,7 +102,8 @@ def run(args: argparse.Namespace) -> int:
     for r in runs:
         x = numeric(r.channel("position"), "position", str(r.path))
         force = centred_force(numeric(r.channel("torque"), "torque", str(r.path)), r.torque_timing)
-        outputs.say(f"{r.path.name}: torque timing {r.torque_timing} ({'declared' if r.declared_timing else 'default'})")
+        origin = "declared" if r.declared_timing else "default"
+        outputs.say(f"{r.path.name}: torque timing {r.torque_timing} ({origin})")
         results.append(forcevib(x, force, r.sample_rate, mass, args.method, spring=args.spring, **options))
     pos, trq = ("rad", "N*m") if runs[0].axis == "rotary" else ("m", "N")
     for r, res in zip(runs, results, strict=True):
