@@ -45,7 +45,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def _load(path: str, channel: str | None, timing: str | None, cutoff: float | None):
+def _load(path: str, channel: str | None, timing: str | None, cutoff: float | None, json_target=None):
     from hilbench.analysis.residual import prepare_run
     from hilbench.analysis.run_file import run_torque_timing
     from hilbench.bench import outputs
@@ -59,7 +59,7 @@ def _load(path: str, channel: str | None, timing: str | None, cutoff: float | No
         fs, axis = r.sample_rate, r.axis
         timing, origin = run_torque_timing(r.meta, timing or "auto", name)
     check_cutoff(cutoff, fs)
-    outputs.say(f"{path}: torque timing of {name}: {timing} ({origin})")
+    outputs.say(f"{path}: torque timing of {name}: {timing} ({origin})", json_target)
     return prepare_run(position, torque, fs, axis=axis, name=path, cutoff=cutoff, timing=timing), name, timing
 
 
@@ -101,8 +101,8 @@ def run(args: argparse.Namespace) -> int:
     outputs.refuse_inputs({"--json": args.json, "--report": args.report}, [args.run, *args.validate])
     start = tuple(t.strip() for t in args.start.split(",") if t.strip())
     cands = None if args.candidates is None else tuple(t.strip() for t in args.candidates.split(",") if t.strip())
-    train, channel, timing = _load(args.run, args.torque_channel, args.timing, args.cutoff)
-    validation = [_load(p, args.torque_channel, args.timing, args.cutoff)[0] for p in args.validate]
+    train, channel, timing = _load(args.run, args.torque_channel, args.timing, args.cutoff, args.json)
+    validation = [_load(p, args.torque_channel, args.timing, args.cutoff, args.json)[0] for p in args.validate]
     opts = LoopOptions(fixed_inertia=args.inertia, candidates=cands)
     result = residual_loop(train, validation or None, start=start, options=opts)
     inputs = {"run": args.run, "validate": list(args.validate), "start": list(start), "torque_channel": channel,
