@@ -20,6 +20,19 @@ SCHEMA = "hilbench-run"
 #: [t_k, t_k+1)), by the file's ``source``; see hilbench.analysis.identification.regressors.held_torque.
 TORQUE_TIMING = {"device": "hold_previous", "import:emps": "hold_next"}
 TIMINGS = ("auto", "hold_previous", "hold_next", "instant")
+#: the root attribute ``record``: ``torque-driven`` (absent means this) or ``displacement-driven`` (force
+#: measured against an imposed displacement); the analysis picks its mode from it
+RECORDS = ("torque-driven", "displacement-driven")
+
+
+def record_kind(value: object, path: object = "") -> str:
+    """The record kind from a ``record`` attribute value (None: torque-driven); AnalysisError if unknown."""
+    if value is None:
+        return RECORDS[0]
+    text = _text(value)
+    if text not in RECORDS:
+        raise AnalysisError(f"{path}: unknown record kind {text!r} (expected {' or '.join(RECORDS)})")
+    return text
 
 
 def torque_timing_for(source: str, timing: str = "auto", channel: str = "torque") -> str:
@@ -48,6 +61,7 @@ class RunFile:
         units: name -> unit string.
         protocol_name, protocol_params: what the run played.
         protocol_arrays: e.g. ``setpoints``, ``step_windows``.
+        record: ``torque-driven`` or ``displacement-driven`` (root attribute ``record``; absent: torque-driven).
         torque_timing: ``hold_previous`` (torque from the current sampled at t_k), ``hold_next`` (a command
             held over the next interval) or ``instant``.
     """
@@ -63,6 +77,7 @@ class RunFile:
     protocol_params: dict[str, Any] = field(default_factory=dict)
     protocol_arrays: dict[str, np.ndarray] = field(default_factory=dict)
     calibration: dict[str, Any] = field(default_factory=dict)
+    record: str = "torque-driven"
 
     @property
     def name(self) -> str:
@@ -142,6 +157,7 @@ def read_run_file(path: str | Path) -> RunFile:
                 channels=channels, units=units,
                 protocol_name=_text(proto.attrs.get("name", "")) if proto is not None else "",
                 protocol_params=params, protocol_arrays=arrays, calibration=calibration,
+                record=record_kind(attrs.get("record"), path),
             )
     except (KeyError, ValueError) as exc:
         raise AnalysisError(f"{path}: damaged or incomplete run file ({exc})") from None

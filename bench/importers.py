@@ -58,6 +58,7 @@ class ImportedRun:
     device: dict[str, Any] = field(default_factory=dict)
     calibration: dict[str, Any] = field(default_factory=dict)
     custom_units: dict[str, str] = field(default_factory=dict)
+    record: str = "torque-driven"  # or "displacement-driven": force measured against an imposed displacement
 
     @property
     def n_samples(self) -> int:
@@ -277,6 +278,7 @@ def load_csv(
     mapping: Mapping[str, str] | None = None,
     linear: bool = False,
     delimiter: str | None = None,
+    record: str = "torque-driven",
 ) -> ImportedRun:
     """Load a CSV file with a header row.
 
@@ -287,6 +289,8 @@ def load_csv(
         mapping: run-file channel -> CSV column name, for columns not already named after a channel.
         linear: the axis is linear: position in m, torque column in N, velocity in m/s.
         delimiter: field separator (default: guessed from the header among ``,``, ``;`` and tab).
+        record: ``torque-driven`` (the torque drives the motion) or ``displacement-driven`` (force measured
+            against an imposed displacement, e.g. a tribometer), stored as the run file's ``record``.
 
     Required: ``t`` (s, strictly increasing), ``position`` and ``torque`` (or ``current`` with
     ``torque_constant``). Any other column named after a run-file channel is kept; the rest are ignored and
@@ -369,6 +373,7 @@ def load_csv(
         },
         device={"name": os.path.splitext(os.path.basename(path))[0], "source": "csv"},
         calibration=calibration,
+        record=record,
     )
 
 
@@ -403,6 +408,7 @@ def write_run(
         notes=notes,
         source=imported.protocol_name,
         overwrite=overwrite,
+        record=imported.record,
     ) as writer:
         writer.append(imported.samples)
     return out

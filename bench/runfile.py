@@ -38,6 +38,8 @@ import numpy as np
 from hilbench.bench.errors import BenchError
 
 SCHEMA = "hilbench-run"
+#: root attribute ``record``: what drives the run (absent in older files: torque-driven)
+RECORDS = ("torque-driven", "displacement-driven")
 SCHEMA_VERSION = 1
 AXES = ("rotary", "linear")
 FINAL_STATUSES = ("completed", "aborted")
@@ -204,8 +206,12 @@ class RunWriter:
         compression: str | None = "lzf",
         overwrite: bool = False,
         start_time: str | None = None,
+        record: str = "torque-driven",
     ) -> None:
         self.path = os.fspath(path)
+        if record not in RECORDS:
+            raise RunFileError(f"{self.path}: record must be one of {', '.join(RECORDS)}, got {record!r}")
+        self.record = record
         if not (isinstance(sample_rate, int | float) and math.isfinite(sample_rate) and sample_rate > 0):
             raise RunFileError(f"{self.path}: sample_rate must be finite and > 0 Hz, got {sample_rate!r}")
         if axis not in AXES:
@@ -305,6 +311,7 @@ class RunWriter:
             "operator": str(operator),
             "notes": str(notes),
             "source": str(source),
+            "record": self.record,
             "writer_pid": os.getpid(),
             "writer_host": socket.gethostname(),
         }

@@ -415,6 +415,8 @@ class TorqueGain(Term):
         if setting.fixed_inertia is None:
             return ("not identifiable without a known inertia: a torque gain only rescales J and every "
                     "friction parameter (pass a known inertia)")
+        if setting.fixed_inertia == 0:
+            return "not identifiable with zero inertia: a gain only rescales every friction parameter"
         return None
 
     def columns(self, run, nl, setting):

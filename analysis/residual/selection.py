@@ -19,7 +19,7 @@ Whatever the final residual's diagnostics still flag is reported as unexplained 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -59,6 +59,8 @@ class LoopOptions:
     folds: int = 5
     sim_window: float | None = 1.0
     candidates: tuple[str, ...] | None = None  # None: every registered candidate term
+    moving_only: bool = True  # candidates are judged on the held-out rows not at rest (see docs)
+    record: str = "torque-driven"  # or "displacement-driven": the model maps displacement to force (J fixed, 0)
 
 
 @dataclass
@@ -99,6 +101,8 @@ class LoopResult:
     signals_after: Signals
     validation_mode: str
     fit_after: Fit = field(repr=False, default=None)
+    fit_before: Fit = field(repr=False, default=None)
+    record: str = "torque-driven"
 
     @property
     def names_added(self) -> list[str]:
@@ -112,6 +116,7 @@ class LoopResult:
 
     def to_dict(self) -> dict:
         return {
+            "record": self.record,
             "start": list(self.start),
             "effects_added": self.effects_added,
             "error_before": self.error_before,
@@ -128,13 +133,18 @@ class LoopResult:
 
 
 def _held_out(model: list, train: list[RunData], validation: list[RunData] | None, setting: Setting,
-              folds: int, fit: Fit | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(held-out y, held-out residual)."""
+              folds: int, fit: Fit | None = None, moving_only: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(held-out y, held-out residual); ``moving_only``: the rows not at rest only."""
     if validation:
         fit = fit or fit_model(model, train, setting, covariance=False)
-        return predict(fit, validation)
-    d = build_design(model, train, setting)
-    return d.y, blocked_cv_residual(model, train, setting, folds)
+        y, e = predict(fit, validation)
+        rest = build_design(model, validation, fit.setting).rest if moving_only else None
+    else:
+        d = build_design(model, train, setting)
+        y, e, rest = d.y, blocked_cv_residual(model, train, setting, folds), d.rest
+    if moving_only:
+        return y[~rest], e[~rest]
+    return y, e
 
 
 def _dm_test(e0: np.ndarray, e1: np.ndarray) -> float:
@@ -218,12 +228,25 @@ def _sim_metrics(fit: Fit, runs: list[RunData], window: float | None) -> dict:
     return out
 
 
+FORCE_NOTE = ("displacement-driven record: the model maps the measured displacement to the force, so the "
+              "force simulated from the measured displacement is the prediction itself (force_rel_pct, "
+              "force_nrmse); there is no position to simulate")
+
+
+def _sim_or_force(fit: Fit, runs: list[RunData], opts: LoopOptions, m: dict) -> dict:
+    if opts.record == "displacement-driven":
+        return {"force_rel_pct": m["torque_rel_pct"], "force_nrmse": m["torque_nrmse"], "position_nrmse": None,
+                "velocity_nrmse": None, "simulation_note": FORCE_NOTE}
+    return _sim_metrics(fit, runs, opts.sim_window)
+
+
 def _errors(fit: Fit, model: list, train, validation, setting, opts: LoopOptions) -> dict:
-    tr = {**metrics(fit.y, fit.residual), **_sim_metrics(fit, train, opts.sim_window)}
+    m = metrics(fit.y, fit.residual)
+    tr = {**m, **_sim_or_force(fit, train, opts, m)}
     yv, ev = _held_out(model, train, validation, setting, opts.folds, fit)
     va = metrics(yv, ev)
     if validation:
-        va.update(_sim_metrics(fit, validation, opts.sim_window))
+        va.update(_sim_or_force(fit, validation, opts, va))
     else:
         va.update({"position_nrmse": None, "velocity_nrmse": None,
                    "note": f"blocked {opts.folds}-fold cross-validation of the training run (torque only)"})
@@ -278,6 +301,10 @@ def residual_loop(
         :class:`LoopResult` (``to_dict()`` is the JSON report, docs/residual-report.md).
     """
     opts = options or LoopOptions()
+    if opts.record not in ("torque-driven", "displacement-driven"):
+        raise AnalysisError(f"record must be torque-driven or displacement-driven, got {opts.record!r}")
+    if opts.record == "displacement-driven" and opts.fixed_inertia is None:
+        opts = replace(opts, fixed_inertia=0.0)  # force against an imposed displacement: no inertia term
     train = [train] if isinstance(train, RunData) else list(train)
     validation = [validation] if isinstance(validation, RunData) else list(validation or [])
     if not train:
@@ -306,7 +333,7 @@ def residual_loop(
         in_model = {t.name for t, _ in model}
         replaced = {r for t, _ in model for r in t.replaces}
         cur = _setting_for(model, setting)
-        _, e0 = _held_out(model, train, validation, cur, opts.folds, fit)
+        _, e0 = _held_out(model, train, validation, cur, opts.folds, fit, opts.moving_only)
         attempts = []
         for n in names:
             term = REGISTRY[n]
@@ -323,7 +350,8 @@ def residual_loop(
                 continue
             nl, fit_c = _search(model, term, settings, train, setting)
             new_model = _with(model, term, nl)
-            _, e1 = _held_out(new_model, train, validation, _setting_for(new_model, setting), opts.folds, fit_c)
+            _, e1 = _held_out(new_model, train, validation, _setting_for(new_model, setting), opts.folds, fit_c,
+                              opts.moving_only)
             att.nl, att.gain, att.p_value = nl, 1.0 - float(e1 @ e1) / float(e0 @ e0), _dm_test(e0, e1)
             att._fit, att._model = fit_c, new_model  # type: ignore[attr-defined]
             attempts.append(att)
@@ -369,5 +397,5 @@ def residual_loop(
         model_after=describe_model(fit, axis), diagnostics_before=diags0, diagnostics_after=diags,
         signals_before=Signals.from_runs(train, fit0.residual), signals_after=Signals.from_runs(train, fit.residual),
         validation_mode="validation runs" if validation else f"blocked {opts.folds}-fold cross-validation",
-        fit_after=fit,
+        fit_after=fit, fit_before=fit0, record=opts.record,
     )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 
@@ -39,6 +40,11 @@ def register(subparsers) -> None:
         "current); hold_next = held over [t_k, t_k+1) (a command); instant = value at t_k",
     )
     parser.add_argument("--refine", action="store_true", help="refine the thresholds (variable projection)")
+    parser.add_argument(
+        "--inertia", type=float, metavar="VALUE",
+        help="known inertia (kg*m^2, or kg on a linear axis), not estimated; 0 allowed: force against displacement. "
+        "Default: estimated, or 0 for a displacement-driven record (run-file attribute record)",
+    )
     parser.set_defaults(func=run)
 
 
@@ -74,8 +80,15 @@ def run(args) -> int:
 
     train = _arrays(args.run)
     val = _arrays(args.validate) if args.validate else None
+    from hilbench.analysis.run_file import record_kind
+    from hilbench.bench.errors import BenchError
+
+    if args.inertia is not None and not (math.isfinite(args.inertia) and args.inertia >= 0):
+        raise BenchError(f"--inertia must be finite and >= 0, got {args.inertia}")
     with open_run(args.run) as r:
         timing = torque_timing_for(str(r.meta.get("source", "device")), args.torque_timing)
+        record = record_kind(r.meta.get("record"), args.run)
+    inertia = 0.0 if args.inertia is None and record == "displacement-driven" else args.inertia
     settings = LipSettings(
         n_thresholds=args.thresholds,
         cutoff=args.cutoff,
@@ -84,8 +97,9 @@ def run(args) -> int:
         spring=args.spring,
         timing=timing,
         refine=args.refine,
+        fixed_inertia=inertia,
     )
-    res = identify(train, method=args.method, validate=val, settings=settings)
+    res = identify(train, method=args.method, validate=val, settings=settings, record=record)
     data = {
         "train": {
             "file": str(Path(args.run).resolve()),
@@ -103,6 +117,15 @@ def run(args) -> int:
     doc = model_document(res.model, method=res.method, settings=res.settings, figures=res.figures, data=data)
     write_model(args.json, doc)
     f = res.figures
+    if "train_force_nrmse" in f:
+        line = (f"{res.method} ({record}, J fixed at {res.model.inertia:.6g}): {res.model.ms_stiffness.size} "
+                f"elements, break-away {res.model.breakaway:.4g}, b = {res.model.viscous:.4g}; force simulated from "
+                f"the measured displacement: train NRMSE {f['train_force_nrmse']:.4f} "
+                f"({f['train_force_rel_pct']:.3g} %)")
+        if val is not None:
+            line += f"; validation NRMSE {f['validation_force_nrmse']:.4f} ({f['validation_force_rel_pct']:.3g} %)"
+        print(line + f" ({res.wall_time:.2f} s) -> {args.json}")
+        return 0
     line = (
         f"{res.method}: J = {res.model.inertia:.6g}, {res.model.ms_stiffness.size} elements, "
         f"break-away {res.model.breakaway:.4g}, b = {res.model.viscous:.4g}; "

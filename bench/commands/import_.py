@@ -75,6 +75,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     csv.add_argument("--linear", action="store_true", help="linear axis: position in m, force in N")
     csv.add_argument("--delimiter", help="field separator (default: guessed from the header: , ; or tab)")
+    csv.add_argument(
+        "--record", choices=("torque-driven", "displacement-driven"), default="torque-driven",
+        help="torque-driven (default: the torque drives the motion) or displacement-driven (force measured "
+        "against an imposed displacement, e.g. a tribometer); the analysis picks its mode from it",
+    )
     common(csv)
 
 
@@ -96,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     if args.format == "csv":
         imported = importers.load_csv(
             args.file, torque_constant=args.torque_constant, mapping=_parse_map(args.map), linear=args.linear,
-            delimiter=args.delimiter,
+            delimiter=args.delimiter, record=args.record,
         )
     elif args.format == "mnich":
         from hilbench.bench.import_mnich import load_mnich

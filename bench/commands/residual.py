@@ -5,6 +5,7 @@ and reports the error before and after (docs/residual-report.md)."""
 from __future__ import annotations
 
 import argparse
+import math
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -37,7 +38,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="regression low-pass cutoff in Hz (default fs/20)")
     parser.add_argument("--inertia", type=float, default=None, metavar="J",
                         help="known inertia (kg*m^2, or kg on a linear axis): fixes J and makes a torque-gain "
-                             "error identifiable")
+                             "error identifiable; 0 allowed (force against displacement). Default: estimated, "
+                             "or 0 for a displacement-driven record (run-file attribute record)")
     parser.add_argument("--candidates", default=None, metavar="TERMS",
                         help="comma-separated candidate terms to try (default: all registered)")
     parser.set_defaults(func=run)
@@ -47,7 +49,7 @@ def _load(path: str, channel: str | None, timing: str | None, cutoff: float | No
     import numpy as np
 
     from hilbench.analysis.residual import prepare_run
-    from hilbench.analysis.run_file import torque_timing_for
+    from hilbench.analysis.run_file import record_kind, torque_timing_for
     from hilbench.bench.errors import BenchError
     from hilbench.bench.runfile import open_run
 
@@ -59,7 +61,9 @@ def _load(path: str, channel: str | None, timing: str | None, cutoff: float | No
         torque = np.asarray(r.channel(name), float)
         fs, axis = r.sample_rate, r.axis
         timing = torque_timing_for(str(r.meta.get("source", "device")), timing or "auto", name)
-    return prepare_run(position, torque, fs, axis=axis, name=path, cutoff=cutoff, timing=timing), name, timing
+        record = record_kind(r.meta.get("record"), path)
+    run = prepare_run(position, torque, fs, axis=axis, name=path, cutoff=cutoff, timing=timing)
+    return run, name, timing, record
 
 
 def run(args: argparse.Namespace) -> int:
@@ -68,19 +72,28 @@ def run(args: argparse.Namespace) -> int:
 
     start = tuple(t.strip() for t in args.start.split(",") if t.strip())
     cands = None if args.candidates is None else tuple(t.strip() for t in args.candidates.split(",") if t.strip())
-    train, channel, timing = _load(args.run, args.torque_channel, args.timing, args.cutoff)
-    validation = [_load(p, args.torque_channel, args.timing, args.cutoff)[0] for p in args.validate]
-    opts = LoopOptions(fixed_inertia=args.inertia, candidates=cands)
+    from hilbench.bench.errors import BenchError
+
+    if args.inertia is not None and not (math.isfinite(args.inertia) and args.inertia >= 0):
+        raise BenchError(f"--inertia must be finite and >= 0, got {args.inertia}")
+    train, channel, timing, record = _load(args.run, args.torque_channel, args.timing, args.cutoff)
+    loaded = [_load(p, args.torque_channel, args.timing, args.cutoff) for p in args.validate]
+    if any(v[3] != record for v in loaded):
+        raise BenchError(f"{args.run} is {record}; every --validate run must be too")
+    validation = [v[0] for v in loaded]
+    opts = LoopOptions(fixed_inertia=args.inertia, candidates=cands, record=record)
     result = residual_loop(train, validation or None, start=start, options=opts)
     inputs = {"run": args.run, "validate": list(args.validate), "start": list(start), "torque_channel": channel,
               "timing": timing, "cutoff_hz": train.data.cutoff, "decimation": train.data.decimation,
-              "fixed_inertia": args.inertia}
+              "fixed_inertia": args.inertia if record == "torque-driven" or args.inertia is not None else 0.0,
+              "record": record}
     write_json(result, args.json, inputs)
     if args.report:
         write_report(result, args.report, title=f"Residual loop on {args.run}")
     before = result.error_before["validation"]["torque_rel_pct"]
     after = result.error_after["validation"]["torque_rel_pct"]
-    print(f"{result.verdict}; validation torque error {before:.3g} % -> {after:.3g} %")
+    what = "force simulated from the measured displacement" if record == "displacement-driven" else "torque"
+    print(f"{result.verdict}; validation {what} error {before:.3g} % -> {after:.3g} %")
     for u in result.unexplained:
         print(f"  unexplained: {u['description']}")
     return 0
