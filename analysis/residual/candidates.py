@@ -342,10 +342,17 @@ class PositionPeriodic(Term):
 
     def settings(self, runs, diagnostics):
         diag = diagnostics.get(self.spectrum)
-        if diag is None or not diag.detail.get("peaks"):
+        if diag is None:
             return []
-        # every significant peak of the spectrum (strongest first) enters as one harmonic
-        return [{"wavenumbers": [p["wavenumber"] for p in diag.detail["peaks"][: self.max_harmonics]]}]
+        if diag.detail.get("peaks"):
+            # every significant peak of the spectrum (strongest first) enters as one harmonic
+            return [{"wavenumbers": [p["wavenumber"] for p in diag.detail["peaks"][: self.max_harmonics]]}]
+        spec = diag.detail.get("spectrum")
+        if spec is None or not len(spec["effect"]):
+            return []
+        # no line passed the spectrum's own test: the strongest line is still fitted and judged on held-out
+        # data (a line in the angle spectrum always leads to a fitted candidate)
+        return [{"wavenumbers": [float(spec["wavenumber"][int(np.argmax(spec["effect"]))])]}]
 
     def parameters(self, fit, nl, axis):
         return _harmonic_parameters(fit, self.name, nl, axis)

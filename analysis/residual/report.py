@@ -159,6 +159,13 @@ def markdown_summary(result: LoopResult, title: str = "Residual loop", notes: li
         for key in keys:
             lines.append(f"| {part} | {key} | {_fmt(d['error_before'][part].get(key))} | "
                          f"{_fmt(d['error_after'][part].get(key))} |")
+    pm = d.get("published_metric")
+    if pm:
+        lines += ["", f"Published metric: {pm['metric']} ({pm['reference']}).", "",
+                  "| set | published | before | after |", "|---|---|---|---|"]
+        for part in ("train", "validation"):
+            lines.append(f"| {part} | {_fmt(pm['published'][part])} | {_fmt(pm['before'][part])} | "
+                         f"{_fmt(pm['after'][part])} |")
     lines += ["", "## Effects added (in order)", ""]
     if not d["effects_added"]:
         lines.append("None.")

@@ -103,6 +103,7 @@ class LoopResult:
     fit_after: Fit = field(repr=False, default=None)
     fit_before: Fit = field(repr=False, default=None)
     record: str = "torque-driven"
+    published_metric: dict | None = None  # analysis.residual.published, set by the caller that knows the data set
 
     @property
     def names_added(self) -> list[str]:
@@ -117,6 +118,7 @@ class LoopResult:
     def to_dict(self) -> dict:
         return {
             "record": self.record,
+            **({"published_metric": self.published_metric} if self.published_metric else {}),
             "start": list(self.start),
             "effects_added": self.effects_added,
             "error_before": self.error_before,
@@ -157,6 +159,40 @@ def _dm_test(e0: np.ndarray, e1: np.ndarray) -> float:
         return 0.5
     z = float(np.mean(d)) / (sd / np.sqrt(effective_sample_count(d)))
     return float(stats.norm.sf(z))
+
+
+def _dm_two_sided(e1: np.ndarray, e2: np.ndarray) -> float:
+    """Two-sided Diebold-Mariano p-value that e1 and e2 have different mean squares."""
+    return float(min(1.0, 2.0 * min(_dm_test(e1, e2), _dm_test(e2, e1))))
+
+
+def _pair_search(model: list, fitted: list, train, validation, setting: Setting, opts, e0: np.ndarray):
+    """Single additions failed but a diagnostic stays significant: try every pair of the (up to) four
+    candidates with the largest single held-out gains, each at its single-fit setting, jointly. A pair is
+    kept like a single candidate (gain >= min_gain, one-sided DM p below alpha/(pairs x rounds)); the best
+    gain wins. Returns (attempts, model, fit) or None."""
+    pool = sorted((a for a in fitted if a.gain is not None and a.gain > 0), key=lambda a: -a.gain)[:4]
+    trials = []
+    for i, a in enumerate(pool):
+        for b in pool[i + 1:]:
+            ta, tb = REGISTRY[a.name], REGISTRY[b.name]
+            if a.name in tb.replaces or b.name in ta.replaces:
+                continue
+            m2 = _with(_with(model, ta, a.nl), tb, b.nl)
+            f2 = fit_model(m2, train, setting)
+            _, e2 = _held_out(m2, train, validation, _setting_for(m2, setting), opts.folds, f2, opts.moving_only)
+            trials.append((1.0 - float(e2 @ e2) / float(e0 @ e0), _dm_test(e0, e2), a, b, m2, f2))
+    if not trials:
+        return None
+    level = opts.alpha / (len(trials) * opts.max_effects)
+    good = [t for t in trials if t[0] >= opts.min_gain and t[1] < level]
+    if not good:
+        return None
+    gain, p, a, b, m2, f2 = max(good, key=lambda t: t[0])
+    for att in (a, b):
+        att.note = f"kept as a pair ({a.name} + {b.name}): joint held-out MSE change {-100 * gain:+.1f} % (p {p:.2g})"
+        att.gain, att.p_value = gain, p
+    return [a, b], m2, f2
 
 
 def _setting_for(model: list, setting: Setting) -> Setting:
@@ -353,40 +389,57 @@ def residual_loop(
             _, e1 = _held_out(new_model, train, validation, _setting_for(new_model, setting), opts.folds, fit_c,
                               opts.moving_only)
             att.nl, att.gain, att.p_value = nl, 1.0 - float(e1 @ e1) / float(e0 @ e0), _dm_test(e0, e1)
-            att._fit, att._model = fit_c, new_model  # type: ignore[attr-defined]
+            att._fit, att._model, att._e1 = fit_c, new_model, e1  # type: ignore[attr-defined]
             attempts.append(att)
         fitted = [a for a in attempts if a.gain is not None]
-        level = opts.alpha / max(len(fitted), 1)
+        # family-wise error control: Bonferroni over the candidates of a round AND over the rounds allowed
+        level = opts.alpha / (max(len(fitted), 1) * opts.max_effects)
         ok = [a for a in fitted if a.gain >= opts.min_gain and a.p_value < level]
         for a in fitted:
             if a not in ok:
                 a.note = (f"held-out MSE change {-100 * a.gain:+.1f} % (p {a.p_value:.2g}): "
-                          f"not a significant gain of at least {100 * opts.min_gain:.0f} %")
+                          f"not a significant gain of at least {100 * opts.min_gain:.0f} % "
+                          f"(level {level:.2g})")
                 tried[a.name] = a.note
         attempts.sort(key=lambda a: -a.score)
-        if not ok:
+        picks: list[Attempt] = []
+        if ok:
+            top = max(a.gain for a in ok)
+            near = [a for a in ok if a.gain >= opts.parsimony * top]
+            pick = min(near, key=lambda a: (_complexity(REGISTRY[a.name], a.nl, model, train, setting), -a.gain))
+            pick.indistinguishable = [a.name for a in near if a is not pick  # type: ignore[attr-defined]
+                                      and _dm_two_sided(pick._e1, a._e1) > opts.alpha]  # type: ignore[attr-defined]
+            picks = [pick]
+            new_model, new_fit = pick._model, pick._fit  # type: ignore[attr-defined]
+        elif any(d.significant for d in diags.values()):
+            pair = _pair_search(model, fitted, train, validation, setting, opts, e0)
+            if pair is not None:
+                picks, new_model, new_fit = pair
+        if not picks:
             rounds.append({"diagnostics": {k: d.to_dict() for k, d in diags.items() if d.significant},
                            "candidates": [a.to_dict() for a in attempts]})
             break
-        top = max(a.gain for a in ok)
-        near = [a for a in ok if a.gain >= opts.parsimony * top]
-        pick = min(near, key=lambda a: (_complexity(REGISTRY[a.name], a.nl, model, train, setting), -a.gain))
-        pick.kept = True
-        tried.pop(pick.name, None)
+        for pick in picks:
+            pick.kept = True
+            tried.pop(pick.name, None)
         rounds.append({"diagnostics": {k: d.to_dict() for k, d in diags.items() if d.significant},
                        "candidates": [a.to_dict() for a in attempts]})
-        model, fit = pick._model, pick._fit  # type: ignore[attr-defined]
-        term = REGISTRY[pick.name]
-        params, unc = term.parameters(fit, pick.nl, axis)
+        model, fit = new_model, new_fit
         errors = _errors(fit, model, train, validation, setting, opts)
-        effects.append({"name": pick.name, "physics": term.physics, "parameters": params, "uncertainty": unc,
-                        "main_parameter": term.main, "validation_gain": pick.gain, "p_value": pick.p_value,
-                        "error_after": errors})
+        for pick in picks:
+            term = REGISTRY[pick.name]
+            params, unc = term.parameters(fit, pick.nl, axis)
+            effects.append({"name": pick.name, "physics": term.physics, "parameters": params, "uncertainty": unc,
+                            "main_parameter": term.main, "validation_gain": pick.gain, "p_value": pick.p_value,
+                            "indistinguishable_from": list(getattr(pick, "indistinguishable", [])),
+                            "error_after": errors})
         diags = run_diagnostics(Signals.from_runs(train, fit.residual), opts.alpha, opts.min_effect)
 
     unexplained = _unexplained(diags, tried)
     if effects:
-        verdict = "missing effect(s) found: " + ", ".join(e["name"] for e in effects)
+        verdict = "missing effect(s) found: " + ", ".join(
+            e["name"] + (f" (indistinguishable on these data from {' or '.join(e['indistinguishable_from'])})"
+                         if e["indistinguishable_from"] else "") for e in effects)
         if unexplained:
             verdict += "; structure remains that no candidate explains"
     else:

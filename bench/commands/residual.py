@@ -62,12 +62,14 @@ def _load(path: str, channel: str | None, timing: str | None, cutoff: float | No
         fs, axis = r.sample_rate, r.axis
         timing = torque_timing_for(str(r.meta.get("source", "device")), timing or "auto", name)
         record = record_kind(r.meta.get("record"), path)
+        source = str(r.meta.get("source", "device"))
     run = prepare_run(position, torque, fs, axis=axis, name=path, cutoff=cutoff, timing=timing)
-    return run, name, timing, record
+    return run, name, timing, record, source
 
 
 def run(args: argparse.Namespace) -> int:
     from hilbench.analysis.residual import LoopOptions, residual_loop
+    from hilbench.analysis.residual.published import published_metric
     from hilbench.analysis.residual.report import write_json, write_report
 
     start = tuple(t.strip() for t in args.start.split(",") if t.strip())
@@ -76,13 +78,14 @@ def run(args: argparse.Namespace) -> int:
 
     if args.inertia is not None and not (math.isfinite(args.inertia) and args.inertia >= 0):
         raise BenchError(f"--inertia must be finite and >= 0, got {args.inertia}")
-    train, channel, timing, record = _load(args.run, args.torque_channel, args.timing, args.cutoff)
+    train, channel, timing, record, source = _load(args.run, args.torque_channel, args.timing, args.cutoff)
     loaded = [_load(p, args.torque_channel, args.timing, args.cutoff) for p in args.validate]
     if any(v[3] != record for v in loaded):
         raise BenchError(f"{args.run} is {record}; every --validate run must be too")
     validation = [v[0] for v in loaded]
     opts = LoopOptions(fixed_inertia=args.inertia, candidates=cands, record=record)
     result = residual_loop(train, validation or None, start=start, options=opts)
+    result.published_metric = published_metric(source, result.fit_before, result.fit_after, [train], validation)
     inputs = {"run": args.run, "validate": list(args.validate), "start": list(start), "torque_channel": channel,
               "timing": timing, "cutoff_hz": train.data.cutoff, "decimation": train.data.decimation,
               "fixed_inertia": args.inertia if record == "torque-driven" or args.inertia is not None else 0.0,
@@ -94,6 +97,13 @@ def run(args: argparse.Namespace) -> int:
     after = result.error_after["validation"]["torque_rel_pct"]
     what = "force simulated from the measured displacement" if record == "displacement-driven" else "torque"
     print(f"{result.verdict}; validation {what} error {before:.3g} % -> {after:.3g} %")
+    pm = result.published_metric
+    if pm:
+        print(f"  {pm['metric']}: train {pm['before']['train']:.3g} % -> {pm['after']['train']:.3g} % "
+              f"(published {pm['published']['train']:.3g} %)" + (
+                  f", validation {pm['before']['validation']:.3g} % -> {pm['after']['validation']:.3g} % "
+                  f"(published {pm['published']['validation']:.3g} %)" if pm["before"]["validation"] is not None
+                  else ""))
     for u in result.unexplained:
         print(f"  unexplained: {u['description']}")
     return 0

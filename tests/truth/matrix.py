@@ -77,7 +77,7 @@ _case("angle-level+cogging", _t("lugre", angle_level=(4.0, 0.2, 0.0), cogging=(1
 
 SEEDS = (1, 2, 3)
 #: the representative subset run by ``make test`` (one seed; the whole matrix is benchmarks/bench_residual.py)
-QUICK = ("clean-lugre", "clean-gms", "stribeck-exp1", "angle-level", "current-lag", "stribeck+cogging")
+QUICK = ("clean-dahl", "stribeck-exp1", "angle-level", "current-lag", "stribeck+cogging")
 
 
 def _cache_dir() -> Path:
