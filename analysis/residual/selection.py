@@ -166,10 +166,11 @@ def _dm_two_sided(e1: np.ndarray, e2: np.ndarray) -> float:
     return float(min(1.0, 2.0 * min(_dm_test(e1, e2), _dm_test(e2, e1))))
 
 
-def _pair_search(model: list, fitted: list, train, validation, setting: Setting, opts, e0: np.ndarray):
+def _pair_search(model: list, fitted: list, train, validation, setting: Setting, opts, e0: np.ndarray,
+                 spend: float):
     """Single additions failed but a diagnostic stays significant: try every pair of the (up to) four
     candidates with the largest single held-out gains, each at its single-fit setting, jointly. A pair is
-    kept like a single candidate (gain >= min_gain, one-sided DM p below alpha/(pairs x rounds)); the best
+    kept like a single candidate (gain >= min_gain, one-sided DM p below the round's level / pairs); the best
     gain wins. Returns (attempts, model, fit) or None."""
     pool = sorted((a for a in fitted if a.gain is not None and a.gain > 0), key=lambda a: -a.gain)[:4]
     trials = []
@@ -184,7 +185,7 @@ def _pair_search(model: list, fitted: list, train, validation, setting: Setting,
             trials.append((1.0 - float(e2 @ e2) / float(e0 @ e0), _dm_test(e0, e2), a, b, m2, f2))
     if not trials:
         return None
-    level = opts.alpha / (len(trials) * opts.max_effects)
+    level = spend / len(trials)
     good = [t for t in trials if t[0] >= opts.min_gain and t[1] < level]
     if not good:
         return None
@@ -392,8 +393,10 @@ def residual_loop(
             att._fit, att._model, att._e1 = fit_c, new_model, e1  # type: ignore[attr-defined]
             attempts.append(att)
         fitted = [a for a in attempts if a.gain is not None]
-        # family-wise error control: Bonferroni over the candidates of a round AND over the rounds allowed
-        level = opts.alpha / (max(len(fitted), 1) * opts.max_effects)
+        # family-wise error control over candidates and rounds: round r (from 1) spends alpha/2^r, split
+        # over its candidates (Bonferroni); the levels of all rounds sum to less than alpha
+        spend = opts.alpha * 0.5 ** (len(rounds) + 1)
+        level = spend / max(len(fitted), 1)
         ok = [a for a in fitted if a.gain >= opts.min_gain and a.p_value < level]
         for a in fitted:
             if a not in ok:
@@ -412,7 +415,7 @@ def residual_loop(
             picks = [pick]
             new_model, new_fit = pick._model, pick._fit  # type: ignore[attr-defined]
         elif any(d.significant for d in diags.values()):
-            pair = _pair_search(model, fitted, train, validation, setting, opts, e0)
+            pair = _pair_search(model, fitted, train, validation, setting, opts, e0, spend)
             if pair is not None:
                 picks, new_model, new_fit = pair
         if not picks:
