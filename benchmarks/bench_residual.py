@@ -15,13 +15,18 @@ from collections import Counter
 
 
 def confusion(outcomes) -> dict[str, Counter]:
-    """Per expected term (or ``none``): how often each term was added (``nothing`` when nothing was)."""
+    """Rows: each truth term (``none`` for runs whose truth needs no addition); columns: ``runs`` with it,
+    ``found`` (the term was added), ``missed``, and every term added that the truth lacks (``+name``)."""
     table: dict[str, Counter] = {}
     for o in outcomes:
+        extra = [f"+{a}" for a in o.added if a not in o.expected]
         for exp in sorted(o.expected) or ["none"]:
             row = table.setdefault(exp, Counter())
-            for got in o.added or ("nothing",):
-                row[got] += 1
+            row["runs"] += 1
+            if exp != "none":
+                row["found" if exp in o.added else "missed"] += 1
+            for x in extra:
+                row[x] += 1
     return table
 
 
@@ -89,8 +94,8 @@ def main() -> None:
     n_right = sum(o.right for o in outcomes)
     print(f"\nexactly right: {n_right}/{len(outcomes)} ({100 * n_right / len(outcomes):.1f} %)\n")
     table = confusion(outcomes)
-    cols = sorted({k for row in table.values() for k in row})
-    print("| expected \\ added | " + " | ".join(cols) + " |")
+    cols = ["runs", "found", "missed"] + sorted({k for row in table.values() for k in row if k.startswith("+")})
+    print("| truth term | " + " | ".join(cols) + " |")
     print("|---|" + "---|" * len(cols))
     for exp, row in sorted(table.items()):
         print(f"| {exp} | " + " | ".join(str(row.get(c, 0)) for c in cols) + " |")
