@@ -123,7 +123,8 @@ class MaxwellSlip(Term):
     replaces = ("coulomb",)
 
     def columns(self, run, nl, setting):
-        return np.column_stack([_sym_col(run, "sign", np.sign), run.stop(setting.thresholds)])
+        return run.cached(("maxwell_slip", setting.thresholds.tobytes()), lambda: np.column_stack(
+            [_sym_col(run, "sign", np.sign), run.stop(setting.thresholds)]))
 
     def static_level(self, coef):
         return float(coef[0])
