@@ -72,3 +72,13 @@ def test_residual_report_gives_force_figures(tribometer):
     assert doc["effects_added"] == []  # the truth is pure Maxwell-slip: nothing is missing
     assert (rep / "force.png").stat().st_size > 10_000
     assert "force_rel_pct" in (rep / "summary.md").read_text()
+
+
+def test_negative_inertia_is_one_line_and_exit_2(tribometer, capsys):
+    d, paths, _, _ = tribometer
+    for cmd in (["identify", str(paths["train"]), "--inertia", "-1", "--json", str(d / "bad.json")],
+                ["residual", str(paths["train"]), "--inertia", "-1", "--json", str(d / "bad2.json")]):
+        assert main(cmd) == 2
+        err = capsys.readouterr().err.strip()
+        assert "--inertia must be finite and >= 0" in err and "\n" not in err
+    assert not (d / "bad.json").exists() and not (d / "bad2.json").exists()
