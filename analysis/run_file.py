@@ -34,6 +34,19 @@ def check_size(path: Any, name: str, shape: tuple[int, ...]) -> None:
     if size > MAX_SAMPLES:
         raise AnalysisError(f"{path}: {name} claims {size} values, above the bound of {MAX_SAMPLES} "
                             f"(MAX_SAMPLES); refusing to read it")
+#: the root attribute ``record``: ``torque-driven`` (absent means this) or ``displacement-driven`` (force
+#: measured against an imposed displacement); the analysis picks its mode from it
+RECORDS = ("torque-driven", "displacement-driven")
+
+
+def record_kind(value: object, path: object = "") -> str:
+    """The record kind from a ``record`` attribute value (None: torque-driven); AnalysisError if unknown."""
+    if value is None:
+        return RECORDS[0]
+    text = _text(value)
+    if text not in RECORDS:
+        raise AnalysisError(f"{path}: unknown record kind {text!r} (expected {' or '.join(RECORDS)})")
+    return text
 
 
 def torque_timing_for(source: str, timing: str = "auto", channel: str = "torque") -> str:
@@ -80,6 +93,7 @@ class RunFile:
         units: name -> unit string.
         protocol_name, protocol_params: what the run played.
         protocol_arrays: e.g. ``setpoints``, ``step_windows``.
+        record: ``torque-driven`` or ``displacement-driven`` (root attribute ``record``; absent: torque-driven).
         torque_timing: ``hold_previous`` (torque from the current sampled at t_k), ``hold_next`` (a command
             held over the next interval) or ``instant``: as declared in the file, else from its source.
         declared_timing: the file's ``torque_timing`` attribute, None when it declares none.
@@ -97,6 +111,7 @@ class RunFile:
     protocol_arrays: dict[str, np.ndarray] = field(default_factory=dict)
     calibration: dict[str, Any] = field(default_factory=dict)
     declared_timing: str | None = None
+    record: str = "torque-driven"
 
     @property
     def name(self) -> str:
@@ -182,6 +197,7 @@ def read_run_file(path: str | Path) -> RunFile:
                 protocol_name=_text(proto.attrs.get("name", "")) if proto is not None else "",
                 protocol_params=params, protocol_arrays=arrays, calibration=calibration,
                 declared_timing=_text(attrs["torque_timing"]) if "torque_timing" in attrs else None,
+                record=record_kind(attrs.get("record"), path),
             )
     except (KeyError, ValueError, TypeError, AttributeError, OSError, RuntimeError) as exc:
         raise AnalysisError(f"{path}: damaged or incomplete run file ({' '.join(str(exc).split())})") from None

@@ -65,6 +65,7 @@ class ImportedRun:
     calibration: dict[str, Any] = field(default_factory=dict)
     custom_units: dict[str, str] = field(default_factory=dict)
     torque_timing: str | None = None
+    record: str = "torque-driven"  # or "displacement-driven": force measured against an imposed displacement
 
     @property
     def n_samples(self) -> int:
@@ -310,6 +311,8 @@ class TableOptions:
         resample: None refuses non-uniform time stamps (naming the first gap); ``"linear"`` interpolates every
             channel linearly onto the uniform grid of the median step (counts rounded to whole counts).
         sample_rate: Hz, for a file without a time column (t = k/sample_rate).
+        record: ``torque-driven`` (the torque drives the motion) or ``displacement-driven`` (force measured
+            against an imposed displacement, e.g. a tribometer), stored as the run file's ``record``.
     """
 
     mapping: Mapping[str, str] = field(default_factory=dict)
@@ -320,6 +323,7 @@ class TableOptions:
     torque_timing: str | None = None
     resample: str | None = None
     sample_rate: float | None = None
+    record: str = "torque-driven"
 
 
 def _assign_channels(names: list[str], mapping: Mapping[str, str], path: str) -> tuple[dict[str, str], dict]:
@@ -562,6 +566,7 @@ def table_run(columns: Mapping[str, np.ndarray], path: str, fmt: str, options: T
         device={"name": os.path.splitext(os.path.basename(path))[0], "source": fmt},
         calibration=calibration,
         torque_timing=o.torque_timing,
+        record=o.record,
     )
 
 
@@ -763,6 +768,7 @@ def write_run(
         # samples would otherwise allocate half a million per channel)
         flush_interval=min(0.5, max(n, 1) / imported.sample_rate),
         torque_timing=imported.torque_timing,
+        record=imported.record,
     ) as writer:
         writer.append(imported.samples)
     return out

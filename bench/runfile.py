@@ -43,6 +43,8 @@ from hilbench.analysis.run_file import MAX_SAMPLES, check_size
 from hilbench.bench.errors import BenchError
 
 SCHEMA = "hilbench-run"
+#: root attribute ``record``: what drives the run (absent in older files: torque-driven)
+RECORDS = ("torque-driven", "displacement-driven")
 SCHEMA_VERSION = 1
 AXES = ("rotary", "linear")
 FINAL_STATUSES = ("completed", "aborted")
@@ -231,11 +233,15 @@ class RunWriter:
         overwrite: bool = False,
         start_time: str | None = None,
         torque_timing: str | None = None,
+        record: str = "torque-driven",
     ) -> None:
         self.path = os.fspath(path)
         if torque_timing not in (None, *TORQUE_TIMINGS):
             raise RunFileError(f"{self.path}: torque_timing must be one of {TORQUE_TIMINGS}, got {torque_timing!r}")
         self.torque_timing = torque_timing
+        if record not in RECORDS:
+            raise RunFileError(f"{self.path}: record must be one of {', '.join(RECORDS)}, got {record!r}")
+        self.record = record
         if not (isinstance(sample_rate, int | float) and math.isfinite(sample_rate) and sample_rate > 0):
             raise RunFileError(f"{self.path}: sample_rate must be finite and > 0 Hz, got {sample_rate!r}")
         if axis not in AXES:
@@ -395,6 +401,7 @@ class RunWriter:
             "operator": str(operator),
             "notes": str(notes),
             "source": str(source),
+            "record": self.record,
             "writer_pid": os.getpid(),
             "writer_host": socket.gethostname(),
         }

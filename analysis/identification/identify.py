@@ -101,7 +101,8 @@ class Identification:
 
 
 def _figures(
-    model: FrictionModel, run: RunArrays, lip: LipFit, timing: str, prefix: str, curves: dict, segment: float
+    model: FrictionModel, run: RunArrays, lip: LipFit, timing: str, prefix: str, curves: dict, segment: float,
+    force_mode: bool = False,
 ) -> dict:
     meas, pred, rows = predict_filtered(
         model,
@@ -115,6 +116,13 @@ def _figures(
     )
     from hilbench.analysis.identification.maxwell_fit import nrmse
 
+    if force_mode:  # the model maps the measured displacement to the force: no integration, nothing drifts
+        curves[prefix] = {"t": run.t, "position": run.position, "t_rows": run.t[rows],
+                          "position_rows": run.position[rows],
+                          "torque_filtered": meas, "torque_predicted": pred}
+        return {f"{prefix}_force_nrmse": nrmse(meas, pred),
+                f"{prefix}_force_rel_pct": 100.0 * float(np.linalg.norm(meas - pred) / np.linalg.norm(meas)),
+                f"{prefix}_samples": int(run.t.size)}
     pos_nrmse, sim = simulation_error(model, run.position, run.torque, run.fs, timing=timing)
     seg_nrmse, _ = segmented_simulation_error(
         model, run.position, run.torque, run.fs, timing=timing, segment=segment
@@ -144,10 +152,15 @@ def identify(
     oe_max_nfev: int = 100,
     paper_options: dict | None = None,
     segment: float = 1.0,
+    record: str = "torque-driven",
 ) -> Identification:
     """Identify the friction model of ``run`` (see the module docstring); optionally validate.
 
     ``segment`` (s): restart interval of the segmented simulation figure (output_error.segmented_simulation_error).
+    ``record``: ``torque-driven`` or ``displacement-driven`` (force measured against an imposed displacement;
+    give ``settings.fixed_inertia``, usually 0). A displacement-driven record, or a fixed inertia of 0, gets
+    force figures (``*_force_nrmse``, ``*_force_rel_pct``: the force the model computes from the measured
+    displacement against the measured force, filtered rows) instead of position simulations.
     """
     if method not in METHODS:
         raise AnalysisError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -157,6 +170,10 @@ def identify(
         if validate.axis != run.axis:
             raise AnalysisError(f"validation run axis {validate.axis!r} differs from {run.axis!r}")
     s = settings or LipSettings()
+    force_mode = record == "displacement-driven" or s.fixed_inertia == 0
+    if force_mode and method != "lip":
+        raise AnalysisError(f"method {method!r} refines a simulated position; a force-against-displacement "
+                            "fit (displacement-driven record or inertia 0) uses method 'lip'")
     t0 = time.perf_counter()
     extra: dict = {}
     lip = fit_lip(run.position, run.torque, run.fs, run.axis, s)
@@ -181,13 +198,14 @@ def identify(
         "condition_number": lip.condition_number,
         **extra,
     }
-    figures.update(_figures(model, run, lip, s.timing, "train", curves, segment))
+    figures.update(_figures(model, run, lip, s.timing, "train", curves, segment, force_mode))
     if validate is not None:
-        figures.update(_figures(model, validate, lip, s.timing, "validation", curves, segment))
+        figures.update(_figures(model, validate, lip, s.timing, "validation", curves, segment, force_mode))
     settings_dict = {
         "method": method,
         **s.to_dict(),
         "segment_s": float(segment),
+        "record": record,
         "candidate_deltas": lip.candidate_deltas.tolist(),
     }
     if method == "paper":

@@ -50,6 +50,7 @@ class LipSettings:
     prune_fraction: float = 1e-3  # drop elements whose W_i is below this fraction of sum W
     refine: bool = False
     max_inertia_rse: float = 0.2  # relative standard error of J above which J is unidentifiable
+    fixed_inertia: float | None = None  # known J (kg*m^2 or kg; 0: a force-against-displacement record)
 
     def resolved(self, fs: float) -> tuple[float, int]:
         cutoff = self.cutoff if self.cutoff is not None else fs / 20.0
@@ -95,7 +96,7 @@ class _Design:
     """The linear columns (all but the stop operator) and their parameter names."""
 
     def __init__(self, data: FilteredData, s: LipSettings):
-        cols, names = [data.acceleration], ["inertia"]
+        cols, names = ([data.acceleration], ["inertia"]) if s.fixed_inertia is None else ([], [])
         if s.viscous:
             cols.append(data.velocity)
             names.append("viscous")
@@ -109,7 +110,7 @@ class _Design:
             one = np.ones_like(data.torque)
             cols += [one, -one]
             names += ["offset+", "offset-"]
-        self.columns = np.column_stack(cols)
+        self.columns = np.column_stack(cols) if cols else np.zeros((data.torque.size, 0))
         self.names = names
 
 
@@ -175,7 +176,9 @@ def fit_lip(
     design = _Design(data, s)
     # n_thresholds 0: no Maxwell-slip elements (e.g. the EMPS reference model J, Fc, b, offset)
     grid = threshold_grid(x, s.n_thresholds, s.delta_range) if s.n_thresholds > 0 else np.empty(0)
-    y = data.torque
+    if s.fixed_inertia is not None and not (np.isfinite(s.fixed_inertia) and s.fixed_inertia >= 0):
+        raise AnalysisError(f"a fixed inertia must be finite and >= 0, got {s.fixed_inertia}")
+    y = data.torque if s.fixed_inertia is None else data.torque - s.fixed_inertia * data.acceleration
     lin = design.columns
     nl = lin.shape[1]
 
@@ -210,6 +213,8 @@ def fit_lip(
 
     values = dict(zip(design.names, coef[:nl], strict=True))
     ses = dict(zip(design.names, se_all[:nl], strict=True))
+    if s.fixed_inertia is not None:
+        values["inertia"], ses["inertia"] = float(s.fixed_inertia), 0.0  # known, not estimated
     offset = values.pop("offset+", 0.0) - values.pop("offset-", 0.0)
     if s.offset:
         se_p, se_m = ses.pop("offset+"), ses.pop("offset-")
@@ -229,13 +234,15 @@ def fit_lip(
         std_errors=std_errors,
     )
     warnings = _identifiability(model, data, s)
-    return LipFit(model, s, cutoff, dec, grid, y, a @ coef, data.rows, n_eff, cond, warnings)
+    predicted = a @ coef + (data.torque - y)  # plus the known J*acceleration, if any
+    return LipFit(model, s, cutoff, dec, grid, data.torque, predicted, data.rows, n_eff, cond, warnings)
 
 
 def _identifiability(model: FrictionModel, data: FilteredData, s: LipSettings) -> list[str]:
     """Raise for an unidentifiable inertia; return warnings for the other parameters."""
     j, se_j = model.inertia, model.std_errors.get("inertia", np.nan)
-    if not (j > 0) or not np.isfinite(se_j) or se_j > s.max_inertia_rse * j:
+    known = s.fixed_inertia is not None
+    if not known and (not (j > 0) or not np.isfinite(se_j) or se_j > s.max_inertia_rse * j):
         rse = "inf" if not (j > 0 and np.isfinite(se_j)) else f"{100 * se_j / j:.0f} %"
         raise AnalysisError(
             f"inertia J is unidentifiable from this run (estimate {j:.4g}, relative standard error {rse}): "

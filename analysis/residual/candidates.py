@@ -123,7 +123,8 @@ class MaxwellSlip(Term):
     replaces = ("coulomb",)
 
     def columns(self, run, nl, setting):
-        return np.column_stack([_sym_col(run, "sign", np.sign), run.stop(setting.thresholds)])
+        return run.cached(("maxwell_slip", setting.thresholds.tobytes()), lambda: np.column_stack(
+            [_sym_col(run, "sign", np.sign), run.stop(setting.thresholds)]))
 
     def static_level(self, coef):
         return float(coef[0])
@@ -342,10 +343,17 @@ class PositionPeriodic(Term):
 
     def settings(self, runs, diagnostics):
         diag = diagnostics.get(self.spectrum)
-        if diag is None or not diag.detail.get("peaks"):
+        if diag is None:
             return []
-        # every significant peak of the spectrum (strongest first) enters as one harmonic
-        return [{"wavenumbers": [p["wavenumber"] for p in diag.detail["peaks"][: self.max_harmonics]]}]
+        if diag.detail.get("peaks"):
+            # every significant peak of the spectrum (strongest first) enters as one harmonic
+            return [{"wavenumbers": [p["wavenumber"] for p in diag.detail["peaks"][: self.max_harmonics]]}]
+        spec = diag.detail.get("spectrum")
+        if spec is None or not len(spec["effect"]):
+            return []
+        # no line passed the spectrum's own test: the strongest line is still fitted and judged on held-out
+        # data (a line in the angle spectrum always leads to a fitted candidate)
+        return [{"wavenumbers": [float(spec["wavenumber"][int(np.argmax(spec["effect"]))])]}]
 
     def parameters(self, fit, nl, axis):
         return _harmonic_parameters(fit, self.name, nl, axis)
@@ -415,6 +423,8 @@ class TorqueGain(Term):
         if setting.fixed_inertia is None:
             return ("not identifiable without a known inertia: a torque gain only rescales J and every "
                     "friction parameter (pass a known inertia)")
+        if setting.fixed_inertia == 0:
+            return "not identifiable with zero inertia: a gain only rescales every friction parameter"
         return None
 
     def columns(self, run, nl, setting):

@@ -106,6 +106,40 @@ def plot_diagnostics(s: Signals, diags: dict[str, Diagnostic], title: str, path:
     plt.close(fig)
 
 
+def plot_force(result: LoopResult, path: str | Path, units: dict[str, str]) -> None:
+    """Displacement-driven records: measured force and the force the model computes from the measured
+    displacement (filtered rows), against displacement and against time, before and after."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    tu, pu = units["torque"], units["position"]
+    fig, ax = plt.subplots(2, 2, figsize=(12, 8))
+    for row, (fit, sig, label) in enumerate(((result.fit_before, result.signals_before, "before"),
+                                              (result.fit_after, result.signals_after, "after"))):
+        sim = fit.y - fit.residual
+        e = fit.residual
+        rel = 100 * float(np.linalg.norm(e) / np.linalg.norm(fit.y))
+        a = ax[row, 0]
+        a.plot(sig.position, fit.y, lw=0.6, color="0.3", label="measured")
+        a.plot(sig.position, sim, lw=0.6, color="tab:red", label="simulated from the measured displacement")
+        a.set_xlabel(f"displacement ({pu})")
+        a.set_ylabel(f"force ({tu})")
+        a.set_title(f"{label}: force error {rel:.3g} % (100·|F - F_sim|/|F|)", fontsize=9)
+        a.legend(fontsize=7)
+        a = ax[row, 1]
+        a.plot(sig.time, fit.y, lw=0.6, color="0.3", label="measured")
+        a.plot(sig.time, sim, lw=0.6, color="tab:red", label="simulated")
+        a.plot(sig.time, e, lw=0.6, color="tab:blue", label="error")
+        a.set_xlabel("time (s)")
+        a.set_ylabel(f"force ({tu})")
+        a.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
 def _fmt(v) -> str:
     if v is None:
         return "-"
@@ -120,9 +154,18 @@ def markdown_summary(result: LoopResult, title: str = "Residual loop", notes: li
              f"Starting model: `{', '.join(d['start'])}`. Held-out error from: {d['validation_mode']}.", ""]
     lines += ["## Error before and after", "", "| set | metric | before | after |", "|---|---|---|---|"]
     for part in ("train", "validation"):
-        for key in ("torque_rel_pct", "torque_nrmse", "position_nrmse", "velocity_nrmse"):
+        keys = (("force_rel_pct", "force_nrmse") if d.get("record") == "displacement-driven" else
+                ("torque_rel_pct", "torque_nrmse", "position_nrmse", "velocity_nrmse"))
+        for key in keys:
             lines.append(f"| {part} | {key} | {_fmt(d['error_before'][part].get(key))} | "
                          f"{_fmt(d['error_after'][part].get(key))} |")
+    pm = d.get("published_metric")
+    if pm:
+        lines += ["", f"Published metric: {pm['metric']} ({pm['reference']}).", "",
+                  "| set | published | before | after |", "|---|---|---|---|"]
+        for part in ("train", "validation"):
+            lines.append(f"| {part} | {_fmt(pm['published'][part])} | {_fmt(pm['before'][part])} | "
+                         f"{_fmt(pm['after'][part])} |")
     lines += ["", "## Effects added (in order)", ""]
     if not d["effects_added"]:
         lines.append("None.")
@@ -146,13 +189,18 @@ def markdown_summary(result: LoopResult, title: str = "Residual loop", notes: li
             for c in rd["candidates"]))
     if notes:
         lines += ["", "## Notes", ""] + [f"- {n}" for n in notes]
-    lines += ["", "Figures: `diagnostics_before.png`, `diagnostics_after.png`.", ""]
+    figs = "`diagnostics_before.png`, `diagnostics_after.png`"
+    if d.get("record") == "displacement-driven":
+        figs += (", `force.png` (displacement-driven record: measured force and the force simulated from the "
+                 "measured displacement)")
+    lines += ["", f"Figures: {figs}.", ""]
     return "\n".join(lines)
 
 
 def write_report(result: LoopResult, directory: str | Path, title: str = "Residual loop",
                  notes: list[str] | None = None) -> list[Path]:
-    """Write diagnostics_before.png, diagnostics_after.png and summary.md into ``directory``."""
+    """Write diagnostics_before.png, diagnostics_after.png and summary.md into ``directory`` (and force.png
+    for a displacement-driven record)."""
     from hilbench.analysis.models.friction_model import AXES
 
     out = Path(directory)
@@ -165,4 +213,7 @@ def write_report(result: LoopResult, directory: str | Path, title: str = "Residu
     after = ", ".join(result.names_added) or "nothing added"
     plot_diagnostics(result.signals_after, result.diagnostics_after, f"{title}: after ({after})", paths[1], units)
     paths[2].write_text(markdown_summary(result, title, notes))
+    if result.record == "displacement-driven":
+        paths.append(out / "force.png")
+        plot_force(result, paths[-1], units)
     return paths

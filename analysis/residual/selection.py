@@ -19,7 +19,7 @@ Whatever the final residual's diagnostics still flag is reported as unexplained 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -43,7 +43,7 @@ class LoopOptions:
     alpha: significance level of the diagnostics and of the validation test (before Bonferroni).
     min_effect: smallest fraction of the residual variance a diagnostic must explain to count.
     min_gain: smallest relative reduction of the held-out mean square error to keep a candidate.
-    parsimony: a simpler candidate with at least this fraction of the best gain is preferred.
+    parsimony: a simpler candidate whose held-out MSE is at most 1/parsimony times the best one's is preferred.
     fixed_inertia: known inertia (kg*m^2 or kg); makes a torque-gain error identifiable.
     n_thresholds: Maxwell-slip threshold grid size; folds: blocked cross-validation folds.
     sim_window: window of the simulation error, s (None: skip the simulation error).
@@ -59,6 +59,8 @@ class LoopOptions:
     folds: int = 5
     sim_window: float | None = 1.0
     candidates: tuple[str, ...] | None = None  # None: every registered candidate term
+    moving_only: bool = True  # candidates are judged on the held-out rows not at rest (see docs)
+    record: str = "torque-driven"  # or "displacement-driven": the model maps displacement to force (J fixed, 0)
 
 
 @dataclass
@@ -99,6 +101,9 @@ class LoopResult:
     signals_after: Signals
     validation_mode: str
     fit_after: Fit = field(repr=False, default=None)
+    fit_before: Fit = field(repr=False, default=None)
+    record: str = "torque-driven"
+    published_metric: dict | None = None  # analysis.residual.published, set by the caller that knows the data set
 
     @property
     def names_added(self) -> list[str]:
@@ -112,6 +117,8 @@ class LoopResult:
 
     def to_dict(self) -> dict:
         return {
+            "record": self.record,
+            **({"published_metric": self.published_metric} if self.published_metric else {}),
             "start": list(self.start),
             "effects_added": self.effects_added,
             "error_before": self.error_before,
@@ -128,13 +135,18 @@ class LoopResult:
 
 
 def _held_out(model: list, train: list[RunData], validation: list[RunData] | None, setting: Setting,
-              folds: int, fit: Fit | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(held-out y, held-out residual)."""
+              folds: int, fit: Fit | None = None, moving_only: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(held-out y, held-out residual); ``moving_only``: the rows not at rest only."""
     if validation:
         fit = fit or fit_model(model, train, setting, covariance=False)
-        return predict(fit, validation)
-    d = build_design(model, train, setting)
-    return d.y, blocked_cv_residual(model, train, setting, folds)
+        y, e = predict(fit, validation)
+        rest = build_design(model, validation, fit.setting).rest if moving_only else None
+    else:
+        d = build_design(model, train, setting)
+        y, e, rest = d.y, blocked_cv_residual(model, train, setting, folds), d.rest
+    if moving_only:
+        return y[~rest], e[~rest]
+    return y, e
 
 
 def _dm_test(e0: np.ndarray, e1: np.ndarray) -> float:
@@ -147,6 +159,56 @@ def _dm_test(e0: np.ndarray, e1: np.ndarray) -> float:
         return 0.5
     z = float(np.mean(d)) / (sd / np.sqrt(effective_sample_count(d)))
     return float(stats.norm.sf(z))
+
+
+def _evidence(p_dm: float, score: float) -> float:
+    """p-value of a candidate. Without a pointing diagnostic: the held-out DM test. With one (training-
+    residual p-value 10^-score): the smaller of the DM p-value and Fisher's combination of the two
+    (independent records), doubled (Bonferroni over the two). A slow effect (a load drift) cuts the held-out
+    error by 99 % but leaves the DM test few effective samples; the training diagnostic is the other,
+    independent half of the evidence."""
+    from scipy import stats
+
+    if score <= 0:
+        return p_dm
+    p_diag = 10.0 ** (-score)
+    fisher = float(stats.chi2.sf(-2.0 * (np.log(max(p_dm, 1e-300)) + np.log(max(p_diag, 1e-300))), 4))
+    return float(min(1.0, 2.0 * min(p_dm, fisher)))
+
+
+def _dm_two_sided(e1: np.ndarray, e2: np.ndarray) -> float:
+    """Two-sided Diebold-Mariano p-value that e1 and e2 have different mean squares."""
+    return float(min(1.0, 2.0 * min(_dm_test(e1, e2), _dm_test(e2, e1))))
+
+
+def _pair_search(model: list, fitted: list, train, validation, setting: Setting, opts, e0: np.ndarray,
+                 spend: float):
+    """Single additions failed but a diagnostic stays significant: try every pair of the (up to) four
+    candidates with the largest single held-out gains, each at its single-fit setting, jointly. A pair is
+    kept like a single candidate (gain >= min_gain, one-sided DM p below the round's level / pairs); the best
+    gain wins. Returns (attempts, model, fit) or None."""
+    pool = sorted((a for a in fitted if a.gain is not None and a.gain > 0), key=lambda a: -a.gain)[:4]
+    trials = []
+    for i, a in enumerate(pool):
+        for b in pool[i + 1:]:
+            ta, tb = REGISTRY[a.name], REGISTRY[b.name]
+            if a.name in tb.replaces or b.name in ta.replaces:
+                continue
+            m2 = _with(_with(model, ta, a.nl), tb, b.nl)
+            f2 = fit_model(m2, train, setting)
+            _, e2 = _held_out(m2, train, validation, _setting_for(m2, setting), opts.folds, f2, opts.moving_only)
+            trials.append((1.0 - float(e2 @ e2) / float(e0 @ e0), _dm_test(e0, e2), a, b, m2, f2))
+    if not trials:
+        return None
+    level = spend / len(trials)
+    good = [t for t in trials if t[0] >= opts.min_gain and t[1] < level]
+    if not good:
+        return None
+    gain, p, a, b, m2, f2 = max(good, key=lambda t: t[0])
+    for att in (a, b):
+        att.note = f"kept as a pair ({a.name} + {b.name}): joint held-out MSE change {-100 * gain:+.1f} % (p {p:.2g})"
+        att.gain, att.p_value = gain, p
+    return [a, b], m2, f2
 
 
 def _setting_for(model: list, setting: Setting) -> Setting:
@@ -218,12 +280,25 @@ def _sim_metrics(fit: Fit, runs: list[RunData], window: float | None) -> dict:
     return out
 
 
+FORCE_NOTE = ("displacement-driven record: the model maps the measured displacement to the force, so the "
+              "force simulated from the measured displacement is the prediction itself (force_rel_pct, "
+              "force_nrmse); there is no position to simulate")
+
+
+def _sim_or_force(fit: Fit, runs: list[RunData], opts: LoopOptions, m: dict) -> dict:
+    if opts.record == "displacement-driven":
+        return {"force_rel_pct": m["torque_rel_pct"], "force_nrmse": m["torque_nrmse"], "position_nrmse": None,
+                "velocity_nrmse": None, "simulation_note": FORCE_NOTE}
+    return _sim_metrics(fit, runs, opts.sim_window)
+
+
 def _errors(fit: Fit, model: list, train, validation, setting, opts: LoopOptions) -> dict:
-    tr = {**metrics(fit.y, fit.residual), **_sim_metrics(fit, train, opts.sim_window)}
+    m = metrics(fit.y, fit.residual)
+    tr = {**m, **_sim_or_force(fit, train, opts, m)}
     yv, ev = _held_out(model, train, validation, setting, opts.folds, fit)
     va = metrics(yv, ev)
     if validation:
-        va.update(_sim_metrics(fit, validation, opts.sim_window))
+        va.update(_sim_or_force(fit, validation, opts, va))
     else:
         va.update({"position_nrmse": None, "velocity_nrmse": None,
                    "note": f"blocked {opts.folds}-fold cross-validation of the training run (torque only)"})
@@ -278,6 +353,10 @@ def residual_loop(
         :class:`LoopResult` (``to_dict()`` is the JSON report, docs/residual-report.md).
     """
     opts = options or LoopOptions()
+    if opts.record not in ("torque-driven", "displacement-driven"):
+        raise AnalysisError(f"record must be torque-driven or displacement-driven, got {opts.record!r}")
+    if opts.record == "displacement-driven" and opts.fixed_inertia is None:
+        opts = replace(opts, fixed_inertia=0.0)  # force against an imposed displacement: no inertia term
     train = [train] if isinstance(train, RunData) else list(train)
     validation = [validation] if isinstance(validation, RunData) else list(validation or [])
     if not train:
@@ -306,7 +385,7 @@ def residual_loop(
         in_model = {t.name for t, _ in model}
         replaced = {r for t, _ in model for r in t.replaces}
         cur = _setting_for(model, setting)
-        _, e0 = _held_out(model, train, validation, cur, opts.folds, fit)
+        _, e0 = _held_out(model, train, validation, cur, opts.folds, fit, opts.moving_only)
         attempts = []
         for n in names:
             term = REGISTRY[n]
@@ -323,42 +402,65 @@ def residual_loop(
                 continue
             nl, fit_c = _search(model, term, settings, train, setting)
             new_model = _with(model, term, nl)
-            _, e1 = _held_out(new_model, train, validation, _setting_for(new_model, setting), opts.folds, fit_c)
-            att.nl, att.gain, att.p_value = nl, 1.0 - float(e1 @ e1) / float(e0 @ e0), _dm_test(e0, e1)
-            att._fit, att._model = fit_c, new_model  # type: ignore[attr-defined]
+            _, e1 = _held_out(new_model, train, validation, _setting_for(new_model, setting), opts.folds, fit_c,
+                              opts.moving_only)
+            att.nl, att.gain = nl, 1.0 - float(e1 @ e1) / float(e0 @ e0)
+            att.p_value = _evidence(_dm_test(e0, e1), att.score)
+            att._fit, att._model, att._e1 = fit_c, new_model, e1  # type: ignore[attr-defined]
             attempts.append(att)
         fitted = [a for a in attempts if a.gain is not None]
-        level = opts.alpha / max(len(fitted), 1)
+        # family-wise error control over candidates and rounds: round r (from 1) spends alpha/2^r, split
+        # over its candidates (Bonferroni); the levels of all rounds sum to less than alpha
+        spend = opts.alpha * 0.5 ** (len(rounds) + 1)
+        level = spend / max(len(fitted), 1)
         ok = [a for a in fitted if a.gain >= opts.min_gain and a.p_value < level]
         for a in fitted:
             if a not in ok:
                 a.note = (f"held-out MSE change {-100 * a.gain:+.1f} % (p {a.p_value:.2g}): "
-                          f"not a significant gain of at least {100 * opts.min_gain:.0f} %")
+                          f"not a significant gain of at least {100 * opts.min_gain:.0f} % "
+                          f"(level {level:.2g})")
                 tried[a.name] = a.note
         attempts.sort(key=lambda a: -a.score)
-        if not ok:
+        picks: list[Attempt] = []
+        if ok:
+            top = max(a.gain for a in ok)
+            # parsimony on the error scale: a simpler candidate whose held-out MSE is within 1/parsimony of
+            # the best one's (not within a fraction of its gain: 89 % and 99 % gains leave 15x different errors)
+            near = [a for a in ok if 1.0 - a.gain <= (1.0 - top) / opts.parsimony]
+            pick = min(near, key=lambda a: (_complexity(REGISTRY[a.name], a.nl, model, train, setting), -a.gain))
+            pick.indistinguishable = [a.name for a in near if a is not pick  # type: ignore[attr-defined]
+                                      and _dm_two_sided(pick._e1, a._e1) > opts.alpha]  # type: ignore[attr-defined]
+            picks = [pick]
+            new_model, new_fit = pick._model, pick._fit  # type: ignore[attr-defined]
+        elif any(d.significant and d.points_to for d in diags.values()):  # structure a candidate could explain
+            pair = _pair_search(model, fitted, train, validation, setting, opts, e0, spend)
+            if pair is not None:
+                picks, new_model, new_fit = pair
+        if not picks:
             rounds.append({"diagnostics": {k: d.to_dict() for k, d in diags.items() if d.significant},
                            "candidates": [a.to_dict() for a in attempts]})
             break
-        top = max(a.gain for a in ok)
-        near = [a for a in ok if a.gain >= opts.parsimony * top]
-        pick = min(near, key=lambda a: (_complexity(REGISTRY[a.name], a.nl, model, train, setting), -a.gain))
-        pick.kept = True
-        tried.pop(pick.name, None)
+        for pick in picks:
+            pick.kept = True
+            tried.pop(pick.name, None)
         rounds.append({"diagnostics": {k: d.to_dict() for k, d in diags.items() if d.significant},
                        "candidates": [a.to_dict() for a in attempts]})
-        model, fit = pick._model, pick._fit  # type: ignore[attr-defined]
-        term = REGISTRY[pick.name]
-        params, unc = term.parameters(fit, pick.nl, axis)
+        model, fit = new_model, new_fit
         errors = _errors(fit, model, train, validation, setting, opts)
-        effects.append({"name": pick.name, "physics": term.physics, "parameters": params, "uncertainty": unc,
-                        "main_parameter": term.main, "validation_gain": pick.gain, "p_value": pick.p_value,
-                        "error_after": errors})
+        for pick in picks:
+            term = REGISTRY[pick.name]
+            params, unc = term.parameters(fit, pick.nl, axis)
+            effects.append({"name": pick.name, "physics": term.physics, "parameters": params, "uncertainty": unc,
+                            "main_parameter": term.main, "validation_gain": pick.gain, "p_value": pick.p_value,
+                            "indistinguishable_from": list(getattr(pick, "indistinguishable", [])),
+                            "error_after": errors})
         diags = run_diagnostics(Signals.from_runs(train, fit.residual), opts.alpha, opts.min_effect)
 
     unexplained = _unexplained(diags, tried)
     if effects:
-        verdict = "missing effect(s) found: " + ", ".join(e["name"] for e in effects)
+        verdict = "missing effect(s) found: " + ", ".join(
+            e["name"] + (f" (indistinguishable on these data from {' or '.join(e['indistinguishable_from'])})"
+                         if e["indistinguishable_from"] else "") for e in effects)
         if unexplained:
             verdict += "; structure remains that no candidate explains"
     else:
@@ -369,5 +471,5 @@ def residual_loop(
         model_after=describe_model(fit, axis), diagnostics_before=diags0, diagnostics_after=diags,
         signals_before=Signals.from_runs(train, fit0.residual), signals_after=Signals.from_runs(train, fit.residual),
         validation_mode="validation runs" if validation else f"blocked {opts.folds}-fold cross-validation",
-        fit_after=fit,
+        fit_after=fit, fit_before=fit0, record=opts.record,
     )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 
@@ -44,6 +45,11 @@ def register(subparsers) -> None:
         "[t_k-1, t_k) (a measured current); hold_next = held over [t_k, t_k+1) (a command); instant = value at t_k",
     )
     parser.add_argument("--refine", action="store_true", help="refine the thresholds (variable projection)")
+    parser.add_argument(
+        "--inertia", type=float, metavar="VALUE",
+        help="known inertia (kg*m^2, or kg on a linear axis), not estimated; 0 allowed: force against displacement. "
+        "Default: estimated, or 0 for a displacement-driven record (run-file attribute record)",
+    )
     parser.set_defaults(func=run)
 
 
@@ -78,17 +84,25 @@ def run(args) -> int:
     from hilbench.analysis.identification.maxwell_fit import LipSettings
     from hilbench.analysis.models.friction_model import AXES
     from hilbench.analysis.models.model_file import model_document
+    from hilbench.analysis.run_file import record_kind
     from hilbench.bench import outputs
     from hilbench.bench.analysis_input import MAX_THRESHOLDS, check_count, check_cutoff
+    from hilbench.bench.errors import BenchError
+    from hilbench.bench.runfile import open_run
     from hilbench.bench.verdict import judge
 
     outputs.refuse_inputs({"--json": args.json, "--plots": args.plots}, [args.run, args.validate])
     check_count(args.thresholds, "--thresholds", 0, MAX_THRESHOLDS,
                 "candidate thresholds; a model must fit the plant's element limit")
+    if args.inertia is not None and not (math.isfinite(args.inertia) and args.inertia >= 0):
+        raise BenchError(f"--inertia must be finite and >= 0, got {args.inertia}")
     train, channel, timing, origin = _arrays(args.run, args.torque_channel, args.torque_timing)
     outputs.say(f"torque timing: {timing} ({origin})", args.json)
     val = _arrays(args.validate, args.torque_channel, args.torque_timing)[0] if args.validate else None
     check_cutoff(args.cutoff, train.fs)
+    with open_run(args.run) as r:
+        record = record_kind(r.meta.get("record"), args.run)
+    inertia = 0.0 if args.inertia is None and record == "displacement-driven" else args.inertia
     settings = LipSettings(
         n_thresholds=args.thresholds,
         cutoff=args.cutoff,
@@ -97,8 +111,9 @@ def run(args) -> int:
         spring=args.spring,
         timing=timing,
         refine=args.refine,
+        fixed_inertia=inertia,
     )
-    res = identify(train, method=args.method, validate=val, settings=settings)
+    res = identify(train, method=args.method, validate=val, settings=settings, record=record)
     data = {
         "train": {
             "file": str(Path(args.run).resolve()),
@@ -119,6 +134,19 @@ def run(args) -> int:
     outputs.write_json(args.json, doc, indent=2, allow_nan=False)
     f, u = res.figures, AXES[res.model.axis]
     say = lambda text: outputs.say(text, args.json)  # noqa: E731
+    if "train_force_nrmse" in f:
+        m, trq = res.model, u["torque"]
+        line = (f"{res.method} on {channel} ({record}, J fixed at {m.inertia:.6g} {u['inertia']}): "
+                f"{m.ms_stiffness.size} elements, break-away {m.breakaway:.4g} {trq}, "
+                f"b = {m.viscous:.4g} {trq}*s/{u['position']}; force simulated from the measured displacement: "
+                f"train NRMSE {f['train_force_nrmse']:.4f} ({f['train_force_rel_pct']:.3g} % relative)")
+        if val is not None:
+            line += (f"; validation NRMSE {f['validation_force_nrmse']:.4f} "
+                     f"({f['validation_force_rel_pct']:.3g} % relative)")
+        say(line + f" ({res.wall_time:.2f} s) -> {args.json}")
+        if args.plots:
+            say("plots: not drawn for a displacement-driven record (use hilbench residual --report for its figures)")
+        return 0
     say(summary_line(res, u, channel, timing) + f" ({res.wall_time:.2f} s) -> {args.json}")
     where = "validation" if val is not None else "train"
     say(judge(100 * f[f"{where}_torque_nrmse"], 100 * f[f"{where}_position_nrmse"],

@@ -118,6 +118,11 @@ def table_options(p: argparse.ArgumentParser) -> None:
         "median step (default: refuse, naming the first gap)",
     )
     p.add_argument("--sample-rate", type=float, metavar="HZ", help="sample rate for a file without a time column")
+    p.add_argument(
+        "--record", choices=("torque-driven", "displacement-driven"), default="torque-driven",
+        help="torque-driven (default: the torque drives the motion) or displacement-driven (force measured "
+        "against an imposed displacement, e.g. a tribometer); the analysis picks its mode from it",
+    )
 
 
 def _options(args: argparse.Namespace):
@@ -128,6 +133,7 @@ def _options(args: argparse.Namespace):
         units=_parse_pairs(args.unit, "--unit", "CHANNEL=UNIT"),
         torque_constant=args.torque_constant, counts_per_rev=args.counts_per_rev, linear=args.linear,
         torque_timing=args.torque_timing, resample=args.resample, sample_rate=args.sample_rate,
+        record=args.record,
     )
 
 

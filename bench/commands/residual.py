@@ -5,6 +5,7 @@ and reports the error before and after (docs/residual-report.md)."""
 from __future__ import annotations
 
 import argparse
+import math
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -39,7 +40,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="regression low-pass cutoff in Hz (default fs/20)")
     parser.add_argument("--inertia", type=float, default=None, metavar="J",
                         help="known inertia (kg*m^2, or kg on a linear axis): fixes J and makes a torque-gain "
-                             "error identifiable")
+                             "error identifiable; 0 allowed (force against displacement). Default: estimated, "
+                             "or 0 for a displacement-driven record (run-file attribute record)")
     parser.add_argument("--candidates", default=None, metavar="TERMS",
                         help="comma-separated candidate terms to try (default: all registered)")
     parser.set_defaults(func=run)
@@ -47,7 +49,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _load(path: str, channel: str | None, timing: str | None, cutoff: float | None, json_target=None):
     from hilbench.analysis.residual import prepare_run
-    from hilbench.analysis.run_file import run_torque_timing
+    from hilbench.analysis.run_file import record_kind, run_torque_timing
     from hilbench.bench import outputs
     from hilbench.bench.analysis_input import check_cutoff, numeric, torque_channel
     from hilbench.bench.runfile import open_run
@@ -58,9 +60,12 @@ def _load(path: str, channel: str | None, timing: str | None, cutoff: float | No
         torque = numeric(r.channel(name), name, path)
         fs, axis = r.sample_rate, r.axis
         timing, origin = run_torque_timing(r.meta, timing or "auto", name)
+        record = record_kind(r.meta.get("record"), path)
+        source = str(r.meta.get("source", "device"))
     check_cutoff(cutoff, fs)
     outputs.say(f"{path}: torque timing of {name}: {timing} ({origin})", json_target)
-    return prepare_run(position, torque, fs, axis=axis, name=path, cutoff=cutoff, timing=timing), name, timing
+    run = prepare_run(position, torque, fs, axis=axis, name=path, cutoff=cutoff, timing=timing)
+    return run, name, timing, record, source
 
 
 def _inertia(model: dict, fixed: float | None) -> float:
@@ -94,32 +99,56 @@ def write_hysteresis(result, directory, title: str, fixed_inertia: float | None)
 
 def run(args: argparse.Namespace) -> int:
     from hilbench.analysis.residual import LoopOptions, residual_loop
+    from hilbench.analysis.residual.published import published_metric
     from hilbench.analysis.residual.report import report_dict, write_report
     from hilbench.bench import outputs
+    from hilbench.bench.errors import BenchError
     from hilbench.bench.verdict import judge
 
     outputs.refuse_inputs({"--json": args.json, "--report": args.report}, [args.run, *args.validate])
     start = tuple(t.strip() for t in args.start.split(",") if t.strip())
     cands = None if args.candidates is None else tuple(t.strip() for t in args.candidates.split(",") if t.strip())
-    train, channel, timing = _load(args.run, args.torque_channel, args.timing, args.cutoff, args.json)
-    validation = [_load(p, args.torque_channel, args.timing, args.cutoff, args.json)[0] for p in args.validate]
-    opts = LoopOptions(fixed_inertia=args.inertia, candidates=cands)
+    if args.inertia is not None and not (math.isfinite(args.inertia) and args.inertia >= 0):
+        raise BenchError(f"--inertia must be finite and >= 0, got {args.inertia}")
+    train, channel, timing, record, source = _load(args.run, args.torque_channel, args.timing, args.cutoff,
+                                                   args.json)
+    loaded = [_load(p, args.torque_channel, args.timing, args.cutoff, args.json) for p in args.validate]
+    if any(v[3] != record for v in loaded):
+        raise BenchError(f"{args.run} is {record}; every --validate run must be too")
+    validation = [v[0] for v in loaded]
+    opts = LoopOptions(fixed_inertia=args.inertia, candidates=cands, record=record)
     result = residual_loop(train, validation or None, start=start, options=opts)
+    result.published_metric = published_metric(source, result.fit_before, result.fit_after, [train], validation)
     inputs = {"run": args.run, "validate": list(args.validate), "start": list(start), "torque_channel": channel,
               "timing": timing, "cutoff_hz": train.data.cutoff, "decimation": train.data.decimation,
-              "fixed_inertia": args.inertia}
+              "fixed_inertia": args.inertia if record == "torque-driven" or args.inertia is not None else 0.0,
+              "record": record}
     outputs.write_json(args.json, report_dict(result, inputs), indent=2, allow_nan=False)
     say = lambda text: outputs.say(text, args.json)  # noqa: E731
     if args.report:
         write_report(result, args.report, title=f"Residual loop on {args.run}")
         path = write_hysteresis(result, args.report, f"Residual loop on {args.run}: friction against displacement",
-                                args.inertia)
-        say(f"report: {args.report} (summary.md, diagnostics_before.png, diagnostics_after.png, {path.name})")
+                                inputs["fixed_inertia"])
+        extra = "force.png, " if record == "displacement-driven" else ""
+        say(f"report: {args.report} (summary.md, diagnostics_before.png, diagnostics_after.png, {extra}{path.name})")
     before, after = result.error_before["validation"], result.error_after["validation"]
     pct = lambda v: None if v is None else 100.0 * v  # noqa: E731
-    say(f"{result.verdict}; on {channel} ({timing}): validation torque NRMSE "
-        f"{pct(before['torque_nrmse']):.3g} % -> {pct(after['torque_nrmse']):.3g} % "
-        f"(relative error |e|/|y| {before['torque_rel_pct']:.3g} % -> {after['torque_rel_pct']:.3g} %)")
+    if record == "displacement-driven":
+        say(f"{result.verdict}; validation force simulated from the measured displacement: NRMSE "
+            f"{pct(before['torque_nrmse']):.3g} % -> {pct(after['torque_nrmse']):.3g} % "
+            f"(relative error |e|/|y| {before['torque_rel_pct']:.3g} % -> {after['torque_rel_pct']:.3g} %)")
+    else:
+        say(f"{result.verdict}; on {channel} ({timing}): validation torque NRMSE "
+            f"{pct(before['torque_nrmse']):.3g} % -> {pct(after['torque_nrmse']):.3g} % "
+            f"(relative error |e|/|y| {before['torque_rel_pct']:.3g} % -> {after['torque_rel_pct']:.3g} %)")
+    pm = result.published_metric
+    if pm:
+        line = (f"  {pm['metric']}: train {pm['before']['train']:.3g} % -> {pm['after']['train']:.3g} % "
+                f"(published {pm['published']['train']:.3g} %)")
+        if pm["before"]["validation"] is not None:
+            line += (f", validation {pm['before']['validation']:.3g} % -> {pm['after']['validation']:.3g} % "
+                     f"(published {pm['published']['validation']:.3g} %)")
+        say(line)
     for u in result.unexplained:
         say(f"  unexplained: {u['description']}")
     where = "validation" if args.validate else "cross-validation"

@@ -1,0 +1,105 @@
+"""The residual loop's strict blind matrix on records of the independent truth generator (tests/truth):
+each case is right only if the set of effects the loop adds equals the truth's set (map of library names in
+docs/residual-blind-matrix.md). Reports the fraction exactly right (target >= 0.9), the additions on clean
+data of every friction family (target 0), and the loop's time per case on 30 s at 1 kHz against the time
+of one fit of the starting model on the same record (target < 10 s).
+
+Quick mode (the smoke test): two cases, one seed, 10 s records. The records are memoised on disk
+(``HILBENCH_TRUTH_CACHE``, default the system temp directory); generating the full matrix takes minutes.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+
+
+def confusion(outcomes) -> dict[str, Counter]:
+    """Rows: each truth term (``none`` for runs whose truth needs no addition); columns: ``runs`` with it,
+    ``found`` (the term was added), ``missed``, and every term added that the truth lacks (``+name``)."""
+    table: dict[str, Counter] = {}
+    for o in outcomes:
+        extra = [f"+{a}" for a in o.added if a not in o.expected]
+        for exp in sorted(o.expected) or ["none"]:
+            row = table.setdefault(exp, Counter())
+            row["runs"] += 1
+            if exp != "none":
+                row["found" if exp in o.added else "missed"] += 1
+            for x in extra:
+                row[x] += 1
+    return table
+
+
+def run_matrix(cases, seeds):
+    from tests.truth.matrix import run_case
+
+    return [run_case(c, s) for c in cases for s in seeds]
+
+
+def run(quick: bool = False) -> list[dict]:
+    from hilbench.analysis.identification.regressors import threshold_grid
+    from hilbench.analysis.residual import LoopOptions, residual_loop
+    from hilbench.analysis.residual.candidates import get_term
+    from hilbench.analysis.residual.design import Setting, fit_model
+    from tests.truth.matrix import CASES, SEEDS, START, Truth, prepared, record
+
+    cases = ("clean-dahl", "current-lag") if quick else tuple(CASES)  # quick: records shared with make test
+    seeds = (1,) if quick else SEEDS
+    outcomes = run_matrix(cases, seeds)
+    right = sum(o.right for o in outcomes) / len(outcomes)
+    clean = [o for o in outcomes if o.case.startswith("clean-")]
+    false_adds = sum(len(o.added) for o in clean)
+    rows = [
+        {"name": f"blind matrix exactly right ({len(cases)} cases x {len(seeds)} seeds)", "value": right,
+         "unit": "fraction", "baseline_name": None, "baseline_value": None, "ratio": None, "target": ">= 0.9",
+         "ok": right >= 0.9},
+        {"name": f"additions on clean data ({len(clean)} runs)", "value": float(false_adds), "unit": "effects",
+         "baseline_name": None, "baseline_value": None, "ratio": None, "target": "0", "ok": false_adds == 0},
+    ]
+    # time per case: 30 s at 1 kHz (10 s in quick mode), the loop against one fit of the start model
+    duration = 10.0 if quick else 30.0
+    truth = CASES["current-lag"][0] if quick else Truth(family="maxwell", cogging=(9.0, 0.06, 1.1), current_lag=0.003)
+    seed = 1 if quick else 7
+    train = prepared(record(truth, seed, duration), "train")
+    valid = prepared(record(truth, seed + 1000, duration), "valid")
+    start = [(get_term(n), {}) for n in START]
+    t0 = time.perf_counter()
+    fit_model(start, [train], Setting(None, threshold_grid(train.position, 40)))
+    t_fit = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    residual_loop(train, valid, start=START, options=LoopOptions(sim_window=None))
+    t_loop = time.perf_counter() - t0
+    what = "lag" if quick else "cogging + lag"
+    rows.append({"name": f"loop time per case ({duration:.0f} s at 1 kHz, {what})", "value": t_loop,
+                 "unit": "s", "baseline_name": "one start-model fit", "baseline_value": t_fit,
+                 "ratio": t_loop / t_fit if t_fit > 0 else None, "target": "< 10 s", "ok": t_loop < 10.0})
+    mean_case = sum(o.seconds for o in outcomes) / len(outcomes)
+    rows.append({"name": "mean loop time per matrix case (10 s records)", "value": mean_case, "unit": "s",
+                 "baseline_name": None, "baseline_value": None, "ratio": None, "target": None, "ok": None})
+    return rows
+
+
+def main() -> None:
+    """Print the matrix, the confusion table and the time per case (Markdown, for docs/)."""
+    from tests.truth.matrix import CASES, SEEDS
+
+    outcomes = run_matrix(tuple(CASES), SEEDS)
+    print("| case | expected | " + " | ".join(f"seed {s}" for s in SEEDS) + " | loop time (s) |")
+    print("|---|---|" + "---|" * len(SEEDS) + "---|")
+    for case in CASES:
+        row = [o for o in outcomes if o.case == case]
+        cells = [("right: " if o.right else "**wrong**: ") + (", ".join(o.added) or "nothing") for o in row]
+        exp = ", ".join(sorted(row[0].expected)) or "nothing"
+        print(f"| {case} | {exp} | " + " | ".join(cells) + f" | {max(o.seconds for o in row):.1f} |")
+    n_right = sum(o.right for o in outcomes)
+    print(f"\nexactly right: {n_right}/{len(outcomes)} ({100 * n_right / len(outcomes):.1f} %)\n")
+    table = confusion(outcomes)
+    cols = ["runs", "found", "missed"] + sorted({k for row in table.values() for k in row if k.startswith("+")})
+    print("| truth term | " + " | ".join(cols) + " |")
+    print("|---|" + "---|" * len(cols))
+    for exp, row in sorted(table.items()):
+        print(f"| {exp} | " + " | ".join(str(row.get(c, 0)) for c in cols) + " |")
+
+
+if __name__ == "__main__":
+    main()

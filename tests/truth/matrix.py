@@ -1,0 +1,136 @@
+"""The strict blind matrix of the residual loop on records from the independent truth generator.
+
+A case is a true system (``generator.Truth``) and the set of library terms that describe its effects
+(the map in docs/residual-blind-matrix.md). The loop starts from ``START`` = inertia + Maxwell-slip +
+viscous (every family has presliding, Coulomb-like and viscous friction), trains on one record and
+validates on another (seed + 1000), and is right only if the set it adds equals the expected set.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import pickle
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from tests.truth.generator import Record, Truth, simulate_torque_driven
+
+START = ("inertia", "maxwell_slip", "viscous")
+DURATION = 10.0  # s per record (train and validation each)
+FS = 1000.0
+
+# which library term describes which truth effect (documented in docs/residual-blind-matrix.md)
+EFFECT_MAP = {
+    "stribeck": "stribeck",  # any exponent, any family's own Stribeck curve
+    "asymmetry": "asymmetric_friction",
+    "angle_level": "position_dependent_friction",
+    "cogging": "position_periodic",  # non-sinusoidal profile: a fundamental and its 2nd harmonic
+    "current_lag": "delay",  # a first-order lag, not a pure delay
+    "offset": "offset",
+    "drift": "offset_drift",  # a drifting load includes its constant part
+    "belt": None,  # no library term: the right answer is to add nothing
+    "backlash": None,
+}
+
+_BELT = (26.0, 0.028, 0.0011)  # k_b N*m/rad, c_b N*m*s/rad, J_l kg*m^2: resonance near 30 Hz, 10 % damping
+
+
+def _t(family: str = "maxwell", **kw) -> Truth:
+    return Truth(family=family, **kw)
+
+
+CASES: dict[str, tuple[Truth, frozenset]] = {}
+
+
+def _case(name: str, truth: Truth, *effects: str) -> None:
+    CASES[name] = (truth, frozenset(e for e in (EFFECT_MAP[x] for x in effects) if e))
+
+
+for fam in ("maxwell", "lugre", "dahl", "gms"):
+    _case(f"clean-{fam}", _t(fam))
+_case("stribeck-lugre", _t("lugre", stribeck_excess=0.3, stribeck_velocity=2.0), "stribeck")
+_case("stribeck-exp1", _t("maxwell", stribeck_excess=0.3, stribeck_velocity=3.0, stribeck_exponent=1.0),
+      "stribeck")
+_case("stribeck-exp4-gms", _t("gms", stribeck_excess=0.3, stribeck_velocity=2.0, stribeck_exponent=4.0),
+      "stribeck")
+_case("angle-level", _t("maxwell", angle_level=(5.0, 0.2, 0.7)), "angle_level")
+_case("cogging", _t("maxwell", cogging=(9.0, 0.06, 1.1)), "cogging")
+_case("current-lag", _t("maxwell", current_lag=0.003), "current_lag")
+_case("asymmetry", _t("lugre", asymmetry=0.15), "asymmetry")
+_case("offset", _t("maxwell", offset=0.1), "offset")
+_case("drift", _t("maxwell", offset=0.05, drift=0.015), "drift")
+_case("belt", _t("maxwell", belt=_BELT), "belt")
+_case("backlash", _t("maxwell", belt=_BELT, backlash=0.002), "belt", "backlash")
+_case("stribeck+cogging", _t("lugre", stribeck_excess=0.3, stribeck_velocity=2.0, cogging=(9.0, 0.06, 0.3)),
+      "stribeck", "cogging")
+_case("angle-level+lag", _t("maxwell", angle_level=(7.0, 0.2, 2.0), current_lag=0.003), "angle_level",
+      "current_lag")
+_case("cogging+lag", _t("dahl", cogging=(6.0, 0.06, 0.0), current_lag=0.002), "cogging", "current_lag")
+_case("asymmetry+cogging", _t("maxwell", asymmetry=0.15, cogging=(11.0, 0.06, 2.0)), "asymmetry", "cogging")
+_case("stribeck+lag", _t("gms", stribeck_excess=0.3, stribeck_velocity=2.0, current_lag=0.003), "stribeck",
+      "current_lag")
+_case("angle-level+cogging", _t("lugre", angle_level=(4.0, 0.2, 0.0), cogging=(10.0, 0.06, 1.0)), "angle_level",
+      "cogging")
+
+SEEDS = (1, 2, 3)
+#: the representative subset run by ``make test`` (one seed; the whole matrix is benchmarks/bench_residual.py)
+QUICK = ("clean-dahl", "stribeck-exp1", "angle-level", "current-lag", "stribeck+cogging")
+
+
+def _cache_dir() -> Path:
+    d = Path(os.environ.get("HILBENCH_TRUTH_CACHE", Path(tempfile.gettempdir()) / "hilbench-truth-cache"))
+    d.mkdir(parents=True, exist_ok=True)
+    return d
+
+
+def record(truth: Truth, seed: int, duration: float = DURATION, fs: float = FS) -> Record:
+    """A torque-driven record, memoised on disk (the integration takes seconds; the key is the truth,
+    the seed, the duration, the rate and the generator's source)."""
+    src = Path(__file__).with_name("generator.py").read_bytes()
+    key = hashlib.sha256(repr((truth, seed, duration, fs)).encode() + src).hexdigest()[:24]
+    path = _cache_dir() / f"{key}.pkl"
+    if path.exists():
+        try:
+            return pickle.loads(path.read_bytes())
+        except Exception:  # a damaged cache entry is regenerated
+            pass
+    rec = simulate_torque_driven(truth, seed, duration, fs)
+    tmp = path.with_suffix(f".{os.getpid()}.tmp")
+    tmp.write_bytes(pickle.dumps(rec))
+    tmp.replace(path)
+    return rec
+
+
+def prepared(rec: Record, name: str):
+    from hilbench.analysis.residual import prepare_run
+
+    return prepare_run(rec.position, rec.torque, rec.fs, name=name, timing="instant")
+
+
+@dataclass
+class Outcome:
+    case: str
+    seed: int
+    expected: frozenset
+    added: tuple
+    seconds: float  # the loop's wall time (the records are generated beforehand)
+    verdict: str
+
+    @property
+    def right(self) -> bool:
+        return frozenset(self.added) == self.expected
+
+
+def run_case(case: str, seed: int, options=None) -> Outcome:
+    from hilbench.analysis.residual import LoopOptions, residual_loop
+
+    truth, expected = CASES[case]
+    train = prepared(record(truth, seed), f"{case}-{seed}")
+    valid = prepared(record(truth, seed + 1000), f"{case}-{seed + 1000}")
+    t0 = time.perf_counter()
+    res = residual_loop(train, valid, start=START, options=options or LoopOptions(sim_window=None))
+    dt = time.perf_counter() - t0
+    return Outcome(case, seed, expected, tuple(res.names_added), dt, res.verdict)
