@@ -263,7 +263,8 @@ class RunBrowser(QtWidgets.QWidget):
             for row, (unit, members) in enumerate(groups.items()):
                 item = self.plot.addPlot(row=row, col=0)
                 item.showGrid(x=True, y=True, alpha=0.3)
-                item.addLegend(offset=(5, 5))
+                item.addLegend(offset=(5, 5), labelTextColor="k")
+                item.getAxis("left").enableAutoSIPrefix(False)  # the unit stays the channel's unit
                 item.setClipToView(True)
                 item.setDownsampling(auto=True, mode="peak")
                 item.setLabel("left", f"{', '.join(members)} ({unit})")
