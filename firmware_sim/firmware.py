@@ -82,16 +82,7 @@ class Firmware:
         return self.safety.faults if self.safety else self._pending_faults
 
     def handle(self, msg: p.Message, now: float) -> list[p.Message]:
-        """Apply one host message received at ``now``; return the replies.
-
-        If the host had been silent past the watchdog deadline (a device loop that stalled longer than the
-        timeout), the watchdog trips first: this message arrived too late to keep the stream alive."""
-        timeout = self.config.watchdog_timeout if self.config else 0.0
-        late = timeout > 0 and self.state in (p.State.ARMED, p.State.STREAMING) and now - self.last_rx > timeout
-        first = self.advance(now) if late else []
-        return first + self._handle(msg, now)
-
-    def _handle(self, msg: p.Message, now: float) -> list[p.Message]:
+        """Apply one host message received at ``now``; return the replies."""
         self.last_rx = now
         self.counters["rx_frames"] += 1
         T = p.MsgType

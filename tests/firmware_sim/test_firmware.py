@@ -86,12 +86,12 @@ def test_blocks_of_any_size_equal_one_direct_run():
 
 
 def test_realtime_watchdog_zeroes_current_at_the_computed_sample():
-    fw = fresh("realtime", watchdog_timeout=0.1)  # armed at t = 0 (a first message after 0.1 s would trip)
-    fw.handle(p.SetpointBlock(0, np.full(128, 1.0)), 0.05)
+    fw = fresh("realtime", watchdog_timeout=0.1)
+    fw.handle(p.SetpointBlock(0, np.full(128, 1.0)), 100.0)
     for k in range(1, 8):
-        fw.handle(p.SetpointBlock(k, np.full(128, 1.0)), 0.05)  # last host message at t = 0.05 s
-    got, blocks = samples(fw.advance(0.55))
-    # t0 = 0.05, so sample k is at 0.05 s + k ms; deadline 0.15 s -> sample 101 is the first after it
+        fw.handle(p.SetpointBlock(k, np.full(128, 1.0)), 100.0)  # last host message at t = 100.0 s
+    got, blocks = samples(fw.advance(100.5))
+    # t0 = 100.0, so sample k is at 100.0 + k ms; deadline 100.1 s -> sample 101 is the first after it
     assert len(got["current_cmd"]) == 102
     assert np.all(got["current_cmd"][:101] == 1.0) and got["current_cmd"][101] == 0.0
     assert got["status"][101] == p.SampleStatus.FAULT | p.SampleStatus.END
