@@ -4,6 +4,8 @@
   (``serial://socket://host:7777``, ``serial://loop://``);
 - ``can://INTERFACE/CHANNEL?node=1&fd=1&bitrate=1000000`` -- any python-can interface
   (``can://socketcan/can0``, ``can://virtual/bench0``, ``can://pcan/PCAN_USBBUS1``);
+- ``canopen://INTERFACE/CHANNEL?node=N&eds=FILE`` -- a CiA 402 drive over CANopen
+  (:class:`drivers.canopen_drive.CanopenDrive`; ``udp_multicast`` stays on this host: hop limit 0);
 - ``sim://?pacing=lockstep&config=sim.toml&seed=3&tick=0.004`` -- starts the simulated amplifier as a
   separate process (``python -m hilbench.firmware_sim --serial``) and connects to its pseudo-terminal.
 """
@@ -18,6 +20,7 @@ import time
 from urllib.parse import parse_qsl, urlsplit
 
 from hilbench.drivers.amplifier import Amplifier
+from hilbench.drivers.device import Device
 from hilbench.drivers.errors import DeviceURLError, DriverError
 from hilbench.drivers.links import CanLink, SerialLink
 
@@ -40,7 +43,7 @@ def _int(params: dict[str, str], key: str, default: int, url: str) -> int:
         raise DeviceURLError(f"{url}: {key} must be an integer, got {params[key]!r}") from None
 
 
-def open_device(url: str, timeout: float = 2.0) -> Amplifier:
+def open_device(url: str, timeout: float = 2.0) -> Amplifier | Device:
     """Connect to the device at ``url`` (see the module doc) and return its :class:`Amplifier`."""
     scheme, sep, rest = url.partition("://")
     if not sep:
@@ -70,7 +73,36 @@ def open_device(url: str, timeout: float = 2.0) -> Amplifier:
             stop_simulator(proc)
             raise
         return Amplifier(link, timeout=timeout, on_close=lambda: stop_simulator(proc))
-    raise DeviceURLError(f"{url}: unknown scheme {scheme!r} (serial, can or sim)")
+    if scheme == "canopen":
+        return _open_canopen(url, timeout)
+    raise DeviceURLError(f"{url}: unknown scheme {scheme!r} (serial, can, canopen or sim)")
+
+
+def _bus_location(url: str, allowed: set[str]) -> tuple[str, str, dict[str, str], dict]:
+    """INTERFACE, CHANNEL, query and python-can keyword arguments of a ``scheme://INTERFACE/CHANNEL?...`` URL."""
+    parts = urlsplit(url)
+    params = _query(parts.query, allowed, url)
+    channel = parts.path.lstrip("/")
+    if not parts.netloc or not channel:
+        raise DeviceURLError(f"{url}: expected {parts.scheme}://INTERFACE/CHANNEL")
+    kwargs: dict = {"bitrate": _int(params, "bitrate", 0, url)} if "bitrate" in params else {}
+    if parts.netloc == "udp_multicast":
+        kwargs["hop_limit"] = 0  # loopback only: the simulated drives live on this host
+    return parts.netloc, channel, params, kwargs
+
+
+def _open_canopen(url: str, timeout: float):
+    from hilbench.drivers.canopen_drive import CanopenDrive
+
+    interface, channel, params, kwargs = _bus_location(url, {"node", "eds", "bitrate"})
+    if "eds" not in params:
+        raise DeviceURLError(f"{url}: eds=FILE is required (the drive's EDS or DCF)")
+    if not os.path.isfile(params["eds"]):
+        raise DeviceURLError(f"{url}: EDS file {params['eds']} does not exist")
+    node = _int(params, "node", 1, url)
+    if not 1 <= node <= 127:
+        raise DeviceURLError(f"{url}: node must be 1..127, got {node}")
+    return CanopenDrive(interface, channel, node, params["eds"], timeout=timeout, **kwargs)
 
 
 def start_simulator(options: dict[str, str]) -> tuple[subprocess.Popen, str]:
