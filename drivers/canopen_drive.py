@@ -44,7 +44,7 @@ from hilbench.drivers.errors import (
     DriverError,
     SampleLossError,
 )
-from hilbench.drivers.host_cycle import TimingSummary, run_cycles, timing_summary
+from hilbench.drivers.host_cycle import CanCycle, CanCycleSpec, TimingSummary, timing_summary
 
 HOST_NODE_ID = 127          # the host's node id for its heartbeat (0x700 + 127)
 DRIVE_HEARTBEAT_MS = 100    # producer heartbeat the host asks of the drive
@@ -72,7 +72,9 @@ class CanopenDrive(Device):
         self._timing: TimingSummary | None = None
         self._events: list[tuple[str, str]] = []
         self._closed = False
-        self._estop = threading.Event()
+        self._estop_requested = False
+        self._cycle: CanCycle | None = None
+        self.interface, self.channel, self.bus_kwargs = interface, channel, dict(bus_kwargs)
         self.network = canopen.Network()
         try:
             self.network.connect(interface=interface, channel=channel, **bus_kwargs)
@@ -200,7 +202,8 @@ class CanopenDrive(Device):
             node.rpdo.read()
             node.tpdo.read()
         except Exception as exc:
-            raise DeviceTimeoutError(f"CANopen node {self.node_id}: reading the PDO configuration failed: {exc}") from exc
+            raise DeviceTimeoutError(f"CANopen node {self.node_id}: reading the PDO configuration failed: "
+                                     f"{exc}") from exc
         layout = {1: (node.rpdo, (c.CONTROLWORD, c.TARGET_TORQUE)),
                   2: (node.tpdo, (c.STATUSWORD, c.TORQUE_ACTUAL)),
                   3: (node.tpdo, (c.POSITION_ACTUAL, c.VELOCITY_ACTUAL))}
@@ -252,7 +255,7 @@ class CanopenDrive(Device):
         if self.state() in (c.State.FAULT, c.State.FAULT_REACTION):
             raise DeviceFaultError(f"CANopen node {self.node_id} is in fault ({self.emcy_line() or 'no EMCY seen'}); "
                                    f"call clear_faults() first")
-        self._estop.clear()
+        self._estop_requested = False
         self._walk_to(c.State.OPERATION_ENABLED, (c.Command.SHUTDOWN, c.Command.SWITCH_ON,
                                                   c.Command.ENABLE_OPERATION))
         display = int(self._read(c.MODES_DISPLAY, what="modes of operation display"))
@@ -269,14 +272,20 @@ class CanopenDrive(Device):
 
     def disarm(self) -> None:
         """Shutdown (power stage off, torque zero): ready to switch on. A drive in fault stays there."""
+        if self._cycle is not None:
+            self._cycle.stop()
         if self.state() in (c.State.FAULT, c.State.FAULT_REACTION, c.State.SWITCH_ON_DISABLED):
             return
         self._controlword(int(c.Command.SHUTDOWN))
 
     def estop(self) -> None:
-        """Quick stop: in the next cycle's RPDO when streaming, and by SDO."""
-        self._estop.set()
-        self._controlword(int(c.Command.QUICK_STOP))
+        """Quick stop: in the next cycle's RPDO when streaming, else by SDO. Safe from any thread."""
+        self._estop_requested = True
+        cycle = self._cycle
+        if cycle is not None:
+            cycle.estop()
+        else:
+            self._controlword(int(c.Command.QUICK_STOP))
 
     # ------------------------------------------------------------------ the cycle
     def stream(self, setpoints, allow_loss: bool = False) -> Iterator[CycleSamples]:
@@ -292,6 +301,9 @@ class CanopenDrive(Device):
         values = check_setpoints(setpoints, cfg)
         if self._emcy:
             raise DeviceFaultError(f"cannot stream: {self.emcy_line()}")
+        if self.state() not in (c.State.OPERATION_ENABLED, c.State.SWITCHED_ON):
+            raise CommandRefusedError(f"cannot stream: CANopen node {self.node_id} is not switched on; "
+                                      f"call arm() first")
         torque_cmd = values * cfg.torque_constant
         pm = c.torque_to_permille(torque_cmd, self.rated_torque)
         return self._stream(values, pm, allow_loss)
@@ -300,122 +312,100 @@ class CanopenDrive(Device):
         cfg = self.config
         n = len(values)
         rate = cfg.sample_rate
-        status = np.zeros(n, np.uint16)
-        torque_pm = np.zeros(n, np.int16)
-        pos = np.zeros(n, np.int32)
-        vel = np.zeros(n, np.int32)
-        host_time = np.zeros(n)
-        scheduled = np.zeros(n)
-        got = [0, 0]
-        fmt1 = _pdo_format(self._tpdo1)
-        fmt2 = _pdo_format(self._tpdo2)
-        stop = threading.Event()
-
-        def on_tpdo1(can_id, data, timestamp):
-            k = got[0]
-            if k < n:
-                status[k], torque_pm[k] = fmt1.unpack_from(data)
-                if c.state_of(int(status[k])) is not c.State.OPERATION_ENABLED:
-                    stop.set()
-            got[0] = k + 1
-
-        def on_tpdo2(can_id, data, timestamp):
-            k = got[1]
-            if k < n:
-                pos[k], vel[k] = fmt2.unpack_from(data)
-            got[1] = k + 1
-
-        net = self.network
-        rpdo_id = self._rpdo.cob_id
         rpdo_fmt = _pdo_format(self._rpdo)
-        frames = [rpdo_fmt.pack(int(c.Command.ENABLE_OPERATION), int(v)) for v in pm]
-        quick = rpdo_fmt.pack(int(c.Command.QUICK_STOP), 0)
-        bus = net.bus
-
-        import can
-
-        sync_msg = can.Message(arbitration_id=0x80, data=b"", is_extended_id=False)
-
-        def send(k: int) -> None:
-            data = quick if self._estop.is_set() else frames[k]
-            bus.send(can.Message(arbitration_id=rpdo_id, data=data, is_extended_id=False))
-            bus.send(sync_msg)
-
-        net.subscribe(self._tpdo1.cob_id, on_tpdo1)
-        net.subscribe(self._tpdo2.cob_id, on_tpdo2)
-        sent = [0]
-
-        def cycle() -> None:
-            try:
-                sent[0] = run_cycles(n, rate, send, host_time, scheduled, stop.is_set)
-            except BaseException as exc:  # handed to the consumer
-                sent.append(exc)
-            finally:
-                stop.set()
-
-        thread = threading.Thread(target=cycle, name="canopen-cycle", daemon=True)
+        fmt1, fmt2 = _pdo_format(self._tpdo1), _pdo_format(self._tpdo2)
+        tx = np.zeros((n, 2, 8), np.uint8)
+        frame = np.zeros(n, dtype=np.dtype([("cw", "<u2"), ("torque", "<i2")]))
+        frame["cw"] = int(c.Command.ENABLE_OPERATION)
+        frame["torque"] = pm
+        tx[:, 0, :4] = frame.view(np.uint8).reshape(n, 4)
+        spec = CanCycleSpec(self.interface, self.channel, self.bus_kwargs, float(rate),
+                            (self._rpdo.cob_id, 0x80), (rpdo_fmt.size, 0),
+                            (self._tpdo1.cob_id, self._tpdo2.cob_id),
+                            (rpdo_fmt.pack(int(c.Command.QUICK_STOP), 0), b""),
+                            (rpdo_fmt.pack(int(c.Command.SWITCH_ON), 0), b""))  # zero torque, operation disabled
+        dt1 = np.dtype([("status", "<u2"), ("torque", "<i2")])
+        dt2 = np.dtype([("position", "<i4"), ("velocity", "<i4")])
+        assert fmt1.size == dt1.itemsize and fmt2.size == dt2.itemsize
+        cycle = CanCycle(spec, tx)
+        self._cycle = cycle
         unwrap = CountUnwrapper()
         done = 0
         finished = False
         self._timing = None
+        arrays = cycle.arrays
         try:
-            thread.start()
+            cycle.start()
+            hb_deadline = None
             while True:
-                ended = stop.wait(BLOCK_PERIOD)
+                time.sleep(BLOCK_PERIOD)
+                ended = not cycle.alive() or bool(arrays["ctl"][1])
                 if ended:
-                    thread.join()
-                    deadline = time.monotonic() + max(0.1, 20.0 / rate)
-                    while min(got) < min(sent[0], n) and time.monotonic() < deadline:
-                        time.sleep(0.002)
-                ready = min(got[0], got[1], sent[0] if ended else n, n)
+                    cycle.join()
+                sent = cycle.sent
+                ready = min(cycle.received(0), cycle.received(1))
                 if ready > done:
-                    yield self._block(done, ready, values, pm, status, torque_pm, pos, vel, host_time, unwrap)
+                    t1 = arrays["rx"][0, done:ready, :4].copy().view(dt1).ravel()
+                    t2 = arrays["rx"][1, done:ready, :8].copy().view(dt2).ravel()
+                    enabled = np.array([c.state_of(int(w)) is c.State.OPERATION_ENABLED for w in t1["status"]])
+                    if not enabled.all():  # the drive left operation enabled: keep the sample that says so
+                        ready = done + int(np.argmin(enabled)) + 1
+                        t1, t2 = t1[: ready - done], t2[: ready - done]
+                        cycle.stop()
+                        ended = True
+                        cycle.join()
+                    yield self._block(done, ready, pm, t1, t2, arrays["host_time"], unwrap)
                     done = ready
+                    hb_deadline = None
+                elif not ended and sent > done + rate * 0.25:  # a quarter second of SYNCs unanswered
+                    hb_deadline = hb_deadline or time.monotonic()
+                    if time.monotonic() - hb_deadline > self.timeout:
+                        cycle.stop()
+                        raise DeviceTimeoutError(
+                            f"CANopen node {self.node_id} stopped answering SYNC at cycle {done} "
+                            f"(no TPDO for {self.timeout:g} s)")
                 if ended:
                     break
             finished = True
-            if len(sent) > 1:
-                raise sent[1]
-            self._timing = timing_summary(host_time[:sent[0]], scheduled[:sent[0]], rate)
+            sent = cycle.sent
+            if cycle.error:
+                raise DriverError(f"{self.name}: the cycle process could not open the CAN bus")
+            self._timing = timing_summary(arrays["host_time"][:sent], arrays["scheduled"][:sent], rate)
             if done < n:
-                last = c.state_of(int(status[done - 1])) if done else None
-                if last is not c.State.OPERATION_ENABLED and done:
+                word = int(arrays["rx"][0, done - 1, :2].view("<u2")[0]) if done else 0
+                last = c.state_of(word)
+                if done and last is not c.State.OPERATION_ENABLED:
                     if not self._emcy:
                         self._emcy_event.wait(0.2)
-                    why = self.emcy_line() or f"statusword 0x{int(status[done - 1]):04X} ({last.value if last else '?'})"
+                    why = self.emcy_line() or f"statusword 0x{word:04X} ({last.value if last else '?'})"
+                    if self._estop_requested:
+                        why = f"quick stop (e-stop); {why}"
                     raise DeviceFaultError(f"CANopen node {self.node_id} left operation enabled at cycle "
                                            f"{done - 1}: {why}")
-                lost = min(sent[0], n) - done
-                if self._estop.is_set():
-                    raise DeviceFaultError(f"CANopen node {self.node_id}: quick stop (e-stop) at cycle {done}")
+                lost = sent - done
                 if lost and not allow_loss:
-                    raise SampleLossError(f"CANopen node {self.node_id}: {lost} of {sent[0]} SYNCs got no TPDO back")
+                    raise SampleLossError(f"CANopen node {self.node_id}: {lost} of {sent} SYNCs got no TPDO back")
         finally:
-            stop.set()
-            thread.join(timeout=2.0)
-            net.unsubscribe(self._tpdo1.cob_id, on_tpdo1)
-            net.unsubscribe(self._tpdo2.cob_id, on_tpdo2)
-            if self._timing is None and sent[0]:
-                self._timing = timing_summary(host_time[:sent[0]], scheduled[:sent[0]], rate)
-            try:  # the drive holds the last target torque: zero it in one more cycle
-                bus.send(can.Message(arbitration_id=rpdo_id, data=rpdo_fmt.pack(
-                    int(c.Command.QUICK_STOP if self._estop.is_set() else c.Command.ENABLE_OPERATION), 0),
-                    is_extended_id=False))
-                bus.send(sync_msg)
-            except Exception:
-                pass
+            cycle.stop()
+            cycle.join()
+            sent = cycle.sent
+            if self._timing is None and sent:
+                self._timing = timing_summary(arrays["host_time"][:sent], arrays["scheduled"][:sent], rate)
+            self._cycle = None
+            cycle.close()
             if not finished and not self._closed:
                 try:
                     self.disarm()
                 except DriverError:
                     pass
 
-    def _block(self, a, b, values, pm, status, torque_pm, pos, vel, host_time, unwrap) -> CycleSamples:
+    def _block(self, a: int, b: int, pm: np.ndarray, t1: np.ndarray, t2: np.ndarray, host_time: np.ndarray,
+               unwrap: CountUnwrapper) -> CycleSamples:
         cal = self.calibration
-        counts = unwrap(pos[a:b])
-        torque = c.permille_to_torque(torque_pm[a:b], self.rated_torque) * cal.ratio
+        counts = unwrap(t2["position"])
+        torque = c.permille_to_torque(t1["torque"], self.rated_torque) * cal.ratio
         torque_cmd = c.permille_to_torque(pm[a:b], self.rated_torque) * cal.ratio
-        velocity = vel[a:b] * (2 * math.pi / (self.counts_per_rev * cal.ratio))
+        velocity = t2["velocity"] * (2 * math.pi / (self.counts_per_rev * cal.ratio))
         return CycleSamples(np.arange(a, b, dtype=np.int64), host_time[a:b].copy(), counts,
                             cal.current(torque_cmd), cal.current(torque), torque_cmd, torque,
                             cal.position(counts), velocity, self.config.sample_rate)

@@ -23,6 +23,7 @@ time that really passed since the previous SYNC, so a late SYNC holds the torque
 from __future__ import annotations
 
 import math
+import os
 import threading
 import time
 from pathlib import Path
@@ -145,7 +146,7 @@ class SimCia402Drive:
         if self.state is c.State.QUICK_STOP:
             self.state = c.next_state(self.state, c.Command.DISABLE_VOLTAGE)  # torque zero at once
         if self.state is c.State.OPERATION_ENABLED and before is not c.State.OPERATION_ENABLED:
-            self.last_sync = time.monotonic()
+            self.last_sync = math.inf  # SYNC monitoring starts with the first SYNC in operation enabled
 
     def fault(self, code: int, register: int = 0x01) -> None:
         """Latch a fault: torque off, state fault, 0x603F/0x1001 set, EMCY sent (thread-safe)."""
@@ -180,7 +181,8 @@ class SimCia402Drive:
                     self._lost(EMCY_HEARTBEAT)
                     continue
                 period = self._settings[0] if self._settings else self._raw(c.COMM_CYCLE_PERIOD) * 1e-6
-                if period > 0 and now - self.last_sync > SYNC_TIMEOUT_PERIODS * period:
+                silent = now - self.last_sync
+                if period > 0 and math.isfinite(silent) and silent > SYNC_TIMEOUT_PERIODS * period:
                     self._lost(EMCY_SYNC_LOST)
 
     # ------------------------------------------------------------------ NMT, PDOs, SYNC
@@ -270,6 +272,10 @@ def serve(interface: str, channel: str, node_id: int, sim: SimConfig, clock: str
           supported_modes: int | None = None, stop: threading.Event | None = None) -> int:
     """Run one simulated drive on a python-can bus until ``stop`` is set (or Ctrl-C). Prints the device
     URL to connect to as its first line."""
+    try:  # a drive's control loop is real-time: ask the OS for SCHED_FIFO (runs without it when refused)
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(20))
+    except (AttributeError, OSError):
+        pass
     network = canopen.Network()
     kwargs = {"hop_limit": 0} if interface == "udp_multicast" else {}  # udp_multicast: this host only
     network.connect(interface=interface, channel=channel, **kwargs)
