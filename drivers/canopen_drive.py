@@ -83,7 +83,7 @@ class CanopenDrive(Device):
         try:
             self.node = self.network.add_node(node_id, eds)
             self.node.sdo.RESPONSE_TIMEOUT = timeout
-            self.node.sdo.MAX_RETRIES = 0
+            self.node.sdo.MAX_RETRIES = 1  # tries in all: the timeout is the whole wait
             self.node.emcy.add_callback(self._on_emcy)
             self._identify()
         except BaseException:
@@ -193,6 +193,7 @@ class CanopenDrive(Device):
         self._map_pdos()
         self._start_heartbeat(config.watchdog_timeout)
         node.nmt.state = "OPERATIONAL"
+        self._wait_nmt("OPERATIONAL")
         self.config = config
         self.calibration = Calibration(config.torque_constant, self.counts_per_rev, config.ratio)
 
@@ -224,6 +225,20 @@ class CanopenDrive(Device):
             raise CommandRefusedError(f"CANopen node {self.node_id} refused the PDO mapping: {exc}") from exc
         self._rpdo = node.rpdo.map[1]
         self._tpdo1, self._tpdo2 = node.tpdo.map[1], node.tpdo.map[2]
+
+    def _wait_nmt(self, state: str) -> None:
+        """Wait until the drive's heartbeat reports NMT ``state``."""
+        import canopen
+
+        deadline = time.monotonic() + self.timeout + DRIVE_HEARTBEAT_MS / 1000
+        while time.monotonic() < deadline:
+            try:
+                if self.node.nmt.wait_for_heartbeat(max(0.0, deadline - time.monotonic())) == state:
+                    return
+            except canopen.nmt.NmtError:
+                break
+        raise DeviceTimeoutError(f"CANopen node {self.node_id} did not report NMT {state} in its heartbeat within "
+                                 f"{self.timeout + DRIVE_HEARTBEAT_MS / 1000:g} s")
 
     def _start_heartbeat(self, timeout: float) -> None:
         if self._heartbeat_task is not None:
@@ -408,7 +423,7 @@ class CanopenDrive(Device):
         velocity = t2["velocity"] * (2 * math.pi / (self.counts_per_rev * cal.ratio))
         return CycleSamples(np.arange(a, b, dtype=np.int64), host_time[a:b].copy(), counts,
                             cal.current(torque_cmd), cal.current(torque), torque_cmd, torque,
-                            cal.position(counts), velocity, self.config.sample_rate)
+                            cal.position(counts), velocity, self.config.sample_rate, t1["status"].copy())
 
     def run_events(self) -> list[tuple[str, str]]:
         out = []

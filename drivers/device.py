@@ -64,6 +64,7 @@ class CycleSamples:
         current_meas: measured current, A (measured torque divided by the torque constant).
         torque_cmd, torque: commanded and measured motor torque at the load, N*m.
         position: load angle, rad; velocity: load velocity the drive reports, rad/s.
+        status: the drive's status word per sample (CiA 402 0x6041; ODrive axis state), if it has one.
         sample_rate: nominal cycle rate, Hz.
     """
 
@@ -77,6 +78,7 @@ class CycleSamples:
     position: np.ndarray
     velocity: np.ndarray
     sample_rate: int
+    status: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.cycle)
@@ -92,13 +94,15 @@ class CycleSamples:
 
     def extra(self) -> dict[str, np.ndarray]:
         """Channels beyond the device-clocked set, for the run file."""
-        return {"host_time": self.host_time, "cycle": self.cycle.astype(np.float64), "velocity": self.velocity,
-                "torque_cmd": self.torque_cmd}
+        out = {"host_time": self.host_time, "cycle": self.cycle.astype(np.float64), "velocity": self.velocity,
+               "torque_cmd": self.torque_cmd}
+        out["drive_status"] = (self.status if self.status is not None else np.zeros(len(self))).astype(np.float64)
+        return out
 
 
 #: Run-file channels a host-clocked device adds: catalogue channels and custom ones (name: unit).
 HOST_CLOCKED_CHANNELS = ("velocity", "torque_cmd")
-HOST_CLOCKED_CUSTOM = {"host_time": "s", "cycle": "1"}
+HOST_CLOCKED_CUSTOM = {"host_time": "s", "cycle": "1", "drive_status": "1"}
 
 
 class Device(abc.ABC):

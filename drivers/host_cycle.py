@@ -143,7 +143,10 @@ class CanCycle:
                 for name, offset, _, shape, dtype in cls._layout(n, ntx, m)}
 
     def start(self) -> None:
-        args = (self.spec, self._shm.name, self.n, self._start_delay, self.spec.interface != "virtual")
+        import os
+
+        own = self.spec.interface != "virtual"
+        args = (self.spec, self._shm.name, self.n, self._start_delay, os.getpid() if own else 0)
         if self.spec.interface == "virtual":
             import threading
 
@@ -196,8 +199,10 @@ class CanCycle:
         self._shm.unlink()
 
 
-def _cycle_main(spec: CanCycleSpec, shm_name: str, n: int, start_delay: float, own_process: bool) -> None:
-    """The cycle (in its own process or thread): send, record, receive, until n cycles or a stop."""
+def _cycle_main(spec: CanCycleSpec, shm_name: str, n: int, start_delay: float, parent: int) -> None:
+    """The cycle (in its own process, child of ``parent``, or in a thread when ``parent`` is 0): send,
+    record, receive, until n cycles, a stop, or the parent's death (then the triggers just stop, as
+    they would if the host itself ran them, and the drive's SYNC or heartbeat timeout takes over)."""
     from multiprocessing import shared_memory
 
     import can
@@ -206,7 +211,7 @@ def _cycle_main(spec: CanCycleSpec, shm_name: str, n: int, start_delay: float, o
     try:
         a = CanCycle._view(shm.buf, n, len(spec.tx_ids), len(spec.rx_ids))
         ctl, host_time, scheduled, rx, tx = a["ctl"], a["host_time"], a["scheduled"], a["rx"], a["tx"]
-        if own_process:
+        if parent:
             ctl[_REALTIME] = _realtime_priority()
         try:
             bus = can.Bus(interface=spec.interface, channel=spec.channel, **spec.bus_kwargs)
@@ -215,7 +220,7 @@ def _cycle_main(spec: CanCycleSpec, shm_name: str, n: int, start_delay: float, o
             ctl[_STOP] = 1
             return
         try:
-            _cycle_loop(bus, spec, n, start_delay, ctl, host_time, scheduled, rx, tx)
+            _cycle_loop(bus, spec, n, start_delay, ctl, host_time, scheduled, rx, tx, parent)
         finally:
             bus.shutdown()
         del a, ctl, host_time, scheduled, rx, tx
@@ -223,7 +228,10 @@ def _cycle_main(spec: CanCycleSpec, shm_name: str, n: int, start_delay: float, o
         shm.close()
 
 
-def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_time, scheduled, rx, tx) -> None:
+def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_time, scheduled, rx, tx,
+                parent: int) -> None:
+    import os
+
     import can
 
     slot = {cob: j for j, cob in enumerate(spec.rx_ids)}
@@ -256,8 +264,12 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
                 take(msg)
 
     t0 = clock() + start_delay
+    orphaned = False
     for k in range(n):
         if ctl[_STOP]:
+            break
+        if parent and os.getppid() != parent:
+            orphaned = True
             break
         due = t0 + k * period
         wait_until(due)
@@ -271,6 +283,8 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
         host_time[k] = clock()
         scheduled[k] = due
         ctl[_SENT] = k + 1
+    if orphaned:
+        return
     for msg in stop_msgs if ctl[_ESTOP] else end_msgs:
         bus.send(msg)
     # the answers to the last triggers

@@ -10,8 +10,8 @@ What it implements, as a real drive on the bus would:
 - synchronous RPDOs (applied at the next SYNC) and SYNC-triggered TPDOs, which it sends itself, since
   LocalNode does not transmit TPDOs on SYNC;
 - EMCY with the error register 0x1001 and error code 0x603F; faults latch until a fault reset;
-- loss of the host (no heartbeat within 0x1016, or no SYNC for ``SYNC_TIMEOUT_PERIODS`` communication
-  cycles while operation is enabled) triggers the reaction 0x6007 selects.
+- loss of the host (no heartbeat within 0x1016, or no SYNC for ``sync_timeout`` s once SYNCs have started
+  while operation is enabled, ``sync_timeout``, default 0.1 s) triggers the reaction 0x6007 selects.
 
 The plant: at each SYNC the drive samples the plant (position 0x6064, velocity 0x606C, torque 0x6077) and then
 applies the target torque received before that SYNC, held until the next SYNC. Internally the plant runs at
@@ -36,7 +36,7 @@ from hilbench.firmware_sim.plant import Plant
 from hilbench.firmware_sim.sim_config import SimConfig, substeps_for
 
 EDS_PATH = Path(__file__).with_name("hb_cia402.eds")
-SYNC_TIMEOUT_PERIODS = 50  # communication cycles without SYNC that count as a lost host
+SYNC_TIMEOUT = 0.1  # s without SYNC (while operation is enabled) that count as a lost host
 EMCY_HEARTBEAT = 0x8130
 EMCY_SYNC_LOST = 0x8250  # the synchronous RPDOs stop with the SYNC
 CLOCKS = ("sync", "real")
@@ -51,16 +51,19 @@ class SimCia402Drive:
         sim: plant and injected effects (firmware_sim.sim_config).
         eds: the object dictionary; ``supported_modes`` overrides 0x6502 (e.g. a drive without CST).
         clock: ``"sync"`` or ``"real"`` (see the module doc); ``oversample``: plant steps per cycle.
+        sync_timeout: s without SYNC, once started, before the drive reacts as 0x6007 says.
     """
 
     def __init__(self, network: canopen.Network, node_id: int, sim: SimConfig, eds: str | Path = EDS_PATH,
-                 clock: str = "real", oversample: int = 10, supported_modes: int | None = None) -> None:
+                 clock: str = "real", oversample: int = 10, supported_modes: int | None = None,
+                 sync_timeout: float = SYNC_TIMEOUT) -> None:
         if clock not in CLOCKS:
             raise ValueError(f"clock must be one of {CLOCKS}, got {clock!r}")
         self.network = network
         self.sim = sim
         self.clock = clock
         self.oversample = int(oversample)
+        self.sync_timeout = float(sync_timeout)
         self.node = canopen.LocalNode(node_id, str(eds))
         if supported_modes is not None:
             self.node.data_store.setdefault(c.SUPPORTED_MODES, {})[0] = int(supported_modes).to_bytes(4, "little")
@@ -180,9 +183,7 @@ class SimCia402Drive:
                 if self._host_hb is not None and now - self.last_host_heartbeat > self._host_hb[1]:
                     self._lost(EMCY_HEARTBEAT)
                     continue
-                period = self._settings[0] if self._settings else self._raw(c.COMM_CYCLE_PERIOD) * 1e-6
-                silent = now - self.last_sync
-                if period > 0 and math.isfinite(silent) and silent > SYNC_TIMEOUT_PERIODS * period:
+                if now - self.last_sync > self.sync_timeout:  # -inf before the first SYNC
                     self._lost(EMCY_SYNC_LOST)
 
     # ------------------------------------------------------------------ NMT, PDOs, SYNC
@@ -248,7 +249,9 @@ class SimCia402Drive:
             self.u_held = u_new
             wrap = (int(out.counts[-1]) + 2**31) % 2**32 - 2**31
             velocity = out.omega[-1] * cpr / (2 * math.pi)
-            torque_pm = round(out.torque[-1] / self._rated * 1000.0)
+            # torque actual: the measured current (mean over the cycle that ends now) times the nominal k_t,
+            # as a drive computes it; per mille of the rated torque
+            torque_pm = round(out.current_meas[-1] * kt / self._rated * 1000.0)
             self.meas = (wrap, int(round(velocity)), int(np.clip(torque_pm, -32768, 32767)),
                          int(np.clip(round(out.current_meas[-1] / (self._rated / kt) * 1000.0), -32768, 32767)))
             self.cycle += 1
