@@ -5,7 +5,8 @@
 - ``can://INTERFACE/CHANNEL?node=1&fd=1&bitrate=1000000`` -- any python-can interface
   (``can://socketcan/can0``, ``can://virtual/bench0``, ``can://pcan/PCAN_USBBUS1``);
 - ``canopen://INTERFACE/CHANNEL?node=N&eds=FILE`` -- a CiA 402 drive over CANopen
-  (:class:`drivers.canopen_drive.CanopenDrive`; ``udp_multicast`` stays on this host: hop limit 0);
+  (:class:`drivers.canopen_drive.CanopenDrive`; ``udp_multicast`` stays on this host: hop limit 0, and
+  ``&port=P`` picks its UDP port, default 43113: buses sharing a port hear each other whatever the group);
 - ``sim://?pacing=lockstep&config=sim.toml&seed=3&tick=0.004`` -- starts the simulated amplifier as a
   separate process (``python -m hilbench.firmware_sim --serial``) and connects to its pseudo-terminal.
 """
@@ -88,13 +89,17 @@ def _bus_location(url: str, allowed: set[str]) -> tuple[str, str, dict[str, str]
     kwargs: dict = {"bitrate": _int(params, "bitrate", 0, url)} if "bitrate" in params else {}
     if parts.netloc == "udp_multicast":
         kwargs["hop_limit"] = 0  # loopback only: the simulated drives live on this host
+        if "port" in params:  # groups on one port hear each other (Linux): separate buses need their own port
+            kwargs["port"] = _int(params, "port", 43113, url)
+    elif "port" in params:
+        raise DeviceURLError(f"{url}: port is an option of udp_multicast only")
     return parts.netloc, channel, params, kwargs
 
 
 def _open_canopen(url: str, timeout: float):
     from hilbench.drivers.canopen_drive import CanopenDrive
 
-    interface, channel, params, kwargs = _bus_location(url, {"node", "eds", "bitrate"})
+    interface, channel, params, kwargs = _bus_location(url, {"node", "eds", "bitrate", "port"})
     if "eds" not in params:
         raise DeviceURLError(f"{url}: eds=FILE is required (the drive's EDS or DCF)")
     if not os.path.isfile(params["eds"]):

@@ -23,6 +23,8 @@ def build_parser(prog: str = "python -m hilbench.firmware_sim") -> argparse.Argu
                             "--interface udp_multicast); prints its canopen:// URL")
     parser.add_argument("--clock", choices=("real", "sync"), default="real",
                         help="--canopen: plant time follows real time between SYNCs (default) or the SYNC count")
+    parser.add_argument("--udp-port", type=int, default=None,
+                        help="--canopen on udp_multicast: UDP port (default 43113; buses on one port hear each other)")
     parser.add_argument("--interface", default="socketcan",
                         help="python-can interface for --can (socketcan, udp_multicast, pcan...; "
                              "default socketcan)")
@@ -68,7 +70,7 @@ def _serve_drive(args, sim) -> int:
     stop = threading.Event()
     if args.parent_pid is not None:
         threading.Thread(target=watch_parent, args=(args.parent_pid, stop), daemon=True).start()
-    return cia402_drive.serve(args.interface, args.canopen, args.node, sim, args.clock, stop=stop)
+    return cia402_drive.serve(args.interface, args.canopen, args.node, sim, args.clock, stop=stop, port=args.udp_port)
 
 
 def main(argv: list[str] | None = None, prog: str = "python -m hilbench.firmware_sim") -> int:

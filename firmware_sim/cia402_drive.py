@@ -272,7 +272,7 @@ class SimCia402Drive:
 
 
 def serve(interface: str, channel: str, node_id: int, sim: SimConfig, clock: str = "real",
-          supported_modes: int | None = None, stop: threading.Event | None = None) -> int:
+          supported_modes: int | None = None, stop: threading.Event | None = None, port: int | None = None) -> int:
     """Run one simulated drive on a python-can bus until ``stop`` is set (or Ctrl-C). Prints the device
     URL to connect to as its first line."""
     try:  # a drive's control loop is real-time: ask the OS for SCHED_FIFO (runs without it when refused)
@@ -280,10 +280,13 @@ def serve(interface: str, channel: str, node_id: int, sim: SimConfig, clock: str
     except (AttributeError, OSError):
         pass
     network = canopen.Network()
-    kwargs = {"hop_limit": 0} if interface == "udp_multicast" else {}  # udp_multicast: this host only
+    kwargs: dict = {"hop_limit": 0} if interface == "udp_multicast" else {}  # udp_multicast: this host only
+    if port is not None:
+        kwargs["port"] = port
     network.connect(interface=interface, channel=channel, **kwargs)
     drive = SimCia402Drive(network, node_id, sim, clock=clock, supported_modes=supported_modes)
-    print(f"canopen://{interface}/{channel}?node={node_id}&eds={EDS_PATH}", flush=True)
+    print(f"canopen://{interface}/{channel}?node={node_id}&eds={EDS_PATH}" + (f"&port={port}" if port else ""),
+          flush=True)
     stop = stop or threading.Event()
     try:
         while not stop.wait(0.2):

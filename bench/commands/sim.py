@@ -19,6 +19,7 @@ def register(subparsers) -> None:
                             "udp_multicast: e.g. 239.74.163.2, this host only); prints its canopen:// URL")
     parser.add_argument("--clock", choices=("real", "sync"), default="real",
                         help="--canopen: the plant follows real time between SYNCs (default) or the SYNC count")
+    parser.add_argument("--udp-port", type=int, default=None, help="--canopen on udp_multicast: UDP port")
     parser.add_argument("--interface", default="socketcan", help="python-can interface for --can")
     parser.add_argument("--node", type=int, default=1, help="CAN node id, 1..15")
     parser.add_argument("--fd", action="store_true", help="use CAN FD frames")
@@ -36,7 +37,8 @@ def firmware_argv(args) -> list[str]:
     if getattr(args, "canopen", None):
         return argv + ["--canopen", args.canopen, "--interface", args.interface, "--node", str(args.node),
                        "--clock", args.clock] + [f"--{k}={getattr(args, k)}" for k in ("config", "seed")
-                                                 if getattr(args, k) is not None]
+                                                 if getattr(args, k) is not None] + \
+            ([f"--udp-port={args.udp_port}"] if args.udp_port else [])
     argv += ["--serial"] if args.serial else ["--can", args.can, "--interface", args.interface,
                                               "--node", str(args.node)]
     if args.fd:
