@@ -212,7 +212,10 @@ def _cycle_main(spec: CanCycleSpec, shm_name: str, n: int, start_delay: float, p
         a = CanCycle._view(shm.buf, n, len(spec.tx_ids), len(spec.rx_ids))
         ctl, host_time, scheduled, rx, tx = a["ctl"], a["host_time"], a["scheduled"], a["rx"], a["tx"]
         if parent:
+            import gc
+
             ctl[_REALTIME] = _realtime_priority()
+            gc.disable()  # no collector pauses in the cycle; it allocates nothing that lives on
         try:
             bus = can.Bus(interface=spec.interface, channel=spec.channel, **spec.bus_kwargs)
         except Exception:
