@@ -32,7 +32,7 @@ def _start_drive() -> tuple[subprocess.Popen, str]:
     proc = subprocess.Popen([sys.executable, "-m", "hilbench", "sim", "--canopen", group, "--interface",
                              "udp_multicast", "--node", "2", "--udp-port", str(port)],
                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    ready, _, _ = select.select([proc.stdout], [], [], 30)
+    ready, _, _ = select.select([proc.stdout], [], [], 120)
     if not ready:
         proc.kill()
         raise RuntimeError("the simulated drive did not start")
@@ -67,9 +67,9 @@ def identification_errors(path: Path) -> tuple[float, float]:
 
 
 def measure(seconds: float, loaded: bool, identify: bool) -> dict:
-    hog = subprocess.Popen([sys.executable, "-c", HOG]) if loaded else None
     t_drive = time.monotonic()
     drive, url = _start_drive()
+    hog = subprocess.Popen([sys.executable, "-c", HOG]) if loaded else None
     try:
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / "run.h5"
