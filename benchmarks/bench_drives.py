@@ -124,10 +124,10 @@ def run(quick: bool = False) -> list[dict]:
         if not quick:
             rows += [
                 {"name": f"{name}: J error", "value": 100 * m["j_error"], "unit": "%", "baseline_name": None,
-                 "baseline_value": None, "ratio": None, "target": "|.| < 1 %", "ok": abs(m["j_error"]) < 0.01},
+                 "baseline_value": None, "ratio": None, "target": "|.| < 1 %", "ok": bool(abs(m["j_error"]) < 0.01)},
                 {"name": f"{name}: virgin curve RMS error", "value": 100 * m["virgin_error"], "unit": "%",
                  "baseline_name": None, "baseline_value": None, "ratio": None, "target": "< 2 %",
-                 "ok": m["virgin_error"] < 0.02},
+                 "ok": bool(m["virgin_error"] < 0.02)},
             ]
     return rows
 

@@ -165,6 +165,10 @@ class CanopenDrive(Device):
     def statusword(self) -> int:
         return int(self._read(c.STATUSWORD, what="statusword"))
 
+    def status(self) -> int:
+        """The statusword (a keepalive for callers that poll a device while a run is paused)."""
+        return self.statusword()
+
     def state(self) -> c.State | None:
         return c.state_of(self.statusword())
 
