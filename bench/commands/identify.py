@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 
@@ -76,6 +77,10 @@ def run(args) -> int:
     val = _arrays(args.validate) if args.validate else None
     with open_run(args.run) as r:
         timing = torque_timing_for(str(r.meta.get("source", "device")), args.torque_timing)
+        for event in r.events:  # a host-clocked run says how its cycle went (docs/drives.md)
+            text = str(event["message"])
+            if event["kind"] == "info" and text.startswith("host-clocked timing"):
+                print(f"{args.run}: {text}", file=sys.stderr if "UNFIT" in text else sys.stdout)
     settings = LipSettings(
         n_thresholds=args.thresholds,
         cutoff=args.cutoff,

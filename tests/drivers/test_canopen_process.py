@@ -145,6 +145,11 @@ def test_cli_identify_run_against_the_drive_process_recovers_the_plant(drive_pro
     # measured on 60 s runs by benchmarks/bench_drives.py.
     m = identify(RunArrays(t, tau, x), settings=LipSettings(timing="hold_previous")).model
     assert m.inertia == pytest.approx(p.inertia, rel=0.01), timing[0]
+    # the identify command states the run's timing verdict, in one line with its figures
+    ident = subprocess.run([sys.executable, "-m", "hilbench", "identify", str(out), "--json", str(tmp_path / "m.json")],
+                           capture_output=True, text=True, timeout=300)
+    assert ident.returncode == 0, ident.stderr
+    assert f"{out}: {timing[0]}" in (ident.stderr if "UNFIT" in timing[0] else ident.stdout).splitlines()
 
 
 def test_cli_info_and_one_line_refusal_against_the_drive_process(drive_process, tmp_path):
