@@ -7,6 +7,8 @@
 - ``canopen://INTERFACE/CHANNEL?node=N&eds=FILE`` -- a CiA 402 drive over CANopen
   (:class:`drivers.canopen_drive.CanopenDrive`; ``udp_multicast`` stays on this host: hop limit 0, and
   ``&port=P`` picks its UDP port, default 43113: buses sharing a port hear each other whatever the group);
+- ``odrive://INTERFACE/CHANNEL?node=N&tvl_endpoint=ID`` -- an ODrive axis over CAN Simple
+  (:class:`drivers.odrive_drive.OdriveDrive`);
 - ``sim://?pacing=lockstep&config=sim.toml&seed=3&tick=0.004`` -- starts the simulated amplifier as a
   separate process (``python -m hilbench.firmware_sim --serial``) and connects to its pseudo-terminal.
 """
@@ -76,7 +78,9 @@ def open_device(url: str, timeout: float = 2.0) -> Amplifier | Device:
         return Amplifier(link, timeout=timeout, on_close=lambda: stop_simulator(proc))
     if scheme == "canopen":
         return _open_canopen(url, timeout)
-    raise DeviceURLError(f"{url}: unknown scheme {scheme!r} (serial, can, canopen or sim)")
+    if scheme == "odrive":
+        return _open_odrive(url, timeout)
+    raise DeviceURLError(f"{url}: unknown scheme {scheme!r} (serial, can, canopen, odrive or sim)")
 
 
 def _bus_location(url: str, allowed: set[str]) -> tuple[str, str, dict[str, str], dict]:
@@ -94,6 +98,20 @@ def _bus_location(url: str, allowed: set[str]) -> tuple[str, str, dict[str, str]
     elif "port" in params:
         raise DeviceURLError(f"{url}: port is an option of udp_multicast only")
     return parts.netloc, channel, params, kwargs
+
+
+def _open_odrive(url: str, timeout: float):
+    from hilbench.drivers.odrive_drive import OdriveDrive
+
+    interface, channel, params, kwargs = _bus_location(url, {"node", "tvl_endpoint", "bitrate", "port"})
+    if "tvl_endpoint" not in params:
+        raise DeviceURLError(f"{url}: tvl_endpoint=ID is required (the endpoint id of "
+                             f"axis0.controller.config.enable_torque_mode_vel_limit in your firmware's "
+                             f"flat_endpoints.json), so that the host can switch it off")
+    node = _int(params, "node", 0, url)
+    if not 0 <= node <= 63:
+        raise DeviceURLError(f"{url}: node must be 0..63, got {node}")
+    return OdriveDrive(interface, channel, node, _int(params, "tvl_endpoint", 0, url), timeout=timeout, **kwargs)
 
 
 def _open_canopen(url: str, timeout: float):

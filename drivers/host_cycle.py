@@ -82,8 +82,8 @@ class CanCycleSpec:
     ``tx_ids`` are sent in order each cycle, with payloads ``tx_data[k, j, :tx_len[j]]`` (uint8 array of
     shape (n, len(tx_ids), 8)); ``stop_data`` replaces the payloads once an e-stop is requested;
     ``end_data`` is sent once after the last cycle (e.g. zero torque). Frames with an id in ``rx_ids`` are
-    stored in arrival order, one row per frame (the k-th frame of an id answers cycle k: a drive sends
-    exactly one per trigger).
+    stored in arrival order from the first trigger on, one row per frame, with the host time it arrived
+    (a CiA 402 drive answers each SYNC with one frame per TPDO; an ODrive sends its own cyclic frames).
     """
 
     interface: str
@@ -129,7 +129,7 @@ class CanCycle:
     @staticmethod
     def _layout(n: int, ntx: int, m: int) -> list[tuple[str, int, int, tuple, str]]:
         parts = [("ctl", (_RX + m,), "i8"), ("host_time", (n,), "f8"), ("scheduled", (n,), "f8"),
-                 ("rx", (m, n, 8), "u1"), ("tx", (n, ntx, 8), "u1")]
+                 ("rx", (m, n, 8), "u1"), ("rx_time", (m, n), "f8"), ("tx", (n, ntx, 8), "u1")]
         out, offset = [], 0
         for name, shape, dtype in parts:
             nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
@@ -211,6 +211,7 @@ def _cycle_main(spec: CanCycleSpec, shm_name: str, n: int, start_delay: float, p
     try:
         a = CanCycle._view(shm.buf, n, len(spec.tx_ids), len(spec.rx_ids))
         ctl, host_time, scheduled, rx, tx = a["ctl"], a["host_time"], a["scheduled"], a["rx"], a["tx"]
+        rx_time = a["rx_time"]
         if parent:
             import gc
 
@@ -223,15 +224,15 @@ def _cycle_main(spec: CanCycleSpec, shm_name: str, n: int, start_delay: float, p
             ctl[_STOP] = 1
             return
         try:
-            _cycle_loop(bus, spec, n, start_delay, ctl, host_time, scheduled, rx, tx, parent)
+            _cycle_loop(bus, spec, n, start_delay, ctl, host_time, scheduled, (rx, rx_time), tx, parent)
         finally:
             bus.shutdown()
-        del a, ctl, host_time, scheduled, rx, tx
+        del a, ctl, host_time, scheduled, rx, rx_time, tx
     finally:
         shm.close()
 
 
-def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_time, scheduled, rx, tx,
+def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_time, scheduled, received, tx,
                 parent: int) -> None:
     import os
 
@@ -247,13 +248,16 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
     clock = time.monotonic
     period = 1.0 / spec.rate
 
+    rx, rx_time = received
+
     def take(msg) -> None:
         j = slot.get(msg.arbitration_id)
-        if j is None or msg.is_remote_frame:
+        if j is None or msg.is_remote_frame or not ctl[_SENT]:  # frames before the first trigger: not ours
             return
         k = counts[j]
         if k < n:
             rx[j, k, :len(msg.data)] = msg.data
+            rx_time[j, k] = clock()
         counts[j] = k + 1
         ctl[_RX + j] = k + 1
 

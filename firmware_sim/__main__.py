@@ -21,6 +21,9 @@ def build_parser(prog: str = "python -m hilbench.firmware_sim") -> argparse.Argu
     where.add_argument("--canopen", metavar="CHANNEL",
                        help="be a simulated CiA 402 drive on this python-can channel (e.g. 239.74.163.2 with "
                             "--interface udp_multicast); prints its canopen:// URL")
+    where.add_argument("--odrive", metavar="CHANNEL",
+                       help="be a simulated ODrive axis (CAN Simple) on this python-can channel; prints its "
+                            "odrive:// URL")
     parser.add_argument("--clock", choices=("real", "sync"), default="real",
                         help="--canopen: plant time follows real time between SYNCs (default) or the SYNC count")
     parser.add_argument("--udp-port", type=int, default=None,
@@ -65,11 +68,13 @@ def watch_parent(pid: int, stop, grace: float = 2.0, period: float = 0.25) -> No
 def _serve_drive(args, sim) -> int:
     import threading
 
-    from hilbench.firmware_sim import cia402_drive
+    from hilbench.firmware_sim import cia402_drive, odrive_sim
 
     stop = threading.Event()
     if args.parent_pid is not None:
         threading.Thread(target=watch_parent, args=(args.parent_pid, stop), daemon=True).start()
+    if args.odrive:
+        return odrive_sim.serve(args.interface, args.odrive, args.node, sim, stop, port=args.udp_port)
     return cia402_drive.serve(args.interface, args.canopen, args.node, sim, args.clock, stop=stop, port=args.udp_port)
 
 
@@ -81,7 +86,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m hilbench.firmware
 
     try:
         sim = load_sim_config(args.config, seed=args.seed)
-        if args.canopen:
+        if args.canopen or args.odrive:
             return _serve_drive(args, sim)
         if not 0.0005 <= args.tick <= 0.1:
             raise ValueError(f"--tick must be within 0.0005..0.1 s, got {args.tick}")

@@ -17,6 +17,7 @@ def register(subparsers) -> None:
     where.add_argument("--canopen", metavar="CHANNEL",
                        help="be a simulated CiA 402 drive on this python-can channel (with --interface "
                             "udp_multicast: e.g. 239.74.163.2, this host only); prints its canopen:// URL")
+    where.add_argument("--odrive", metavar="CHANNEL", help="be a simulated ODrive axis on this python-can channel")
     parser.add_argument("--clock", choices=("real", "sync"), default="real",
                         help="--canopen: the plant follows real time between SYNCs (default) or the SYNC count")
     parser.add_argument("--udp-port", type=int, default=None, help="--canopen on udp_multicast: UDP port")
@@ -34,11 +35,11 @@ def register(subparsers) -> None:
 def firmware_argv(args) -> list[str]:
     """The ``python -m hilbench.firmware_sim`` command line equivalent to ``args``."""
     argv = [sys.executable, "-m", "hilbench.firmware_sim"]
-    if getattr(args, "canopen", None):
-        return argv + ["--canopen", args.canopen, "--interface", args.interface, "--node", str(args.node),
-                       "--clock", args.clock] + [f"--{k}={getattr(args, k)}" for k in ("config", "seed")
-                                                 if getattr(args, k) is not None] + \
-            ([f"--udp-port={args.udp_port}"] if args.udp_port else [])
+    if getattr(args, "canopen", None) or getattr(args, "odrive", None):
+        kind = ["--canopen", args.canopen] if args.canopen else ["--odrive", args.odrive]
+        return argv + kind + ["--interface", args.interface, "--node", str(args.node), "--clock", args.clock] \
+            + [f"--{k}={getattr(args, k)}" for k in ("config", "seed") if getattr(args, k) is not None] \
+            + ([f"--udp-port={args.udp_port}"] if args.udp_port else [])
     argv += ["--serial"] if args.serial else ["--can", args.can, "--interface", args.interface,
                                               "--node", str(args.node)]
     if args.fd:
