@@ -1,5 +1,6 @@
-"""Host-clocked drives: ``hilbench run identify`` at 1 kHz against ``hilbench sim --canopen`` (its own process,
-udp_multicast on this host, plant in real time), quiet and with a CPU-heavy process running.
+"""Host-clocked drives: ``hilbench run identify`` at 1 kHz against ``hilbench sim --canopen`` and ``--odrive``
+(their own processes, udp_multicast on this host, plant in real time), quiet and with a CPU-heavy process
+running.
 
 Reported per case: cycle-time p50/p99/max (host send times of SYNC, in the cycle process), missed and late
 cycles (definitions: drivers/host_cycle.py), host CPU (the ``hilbench run`` process and its cycle process,
@@ -26,10 +27,10 @@ from hilbench.drivers.host_cycle import timing_summary
 HOG = "import time\nend = time.monotonic() + 3600\nwhile time.monotonic() < end:\n    pass\n"
 
 
-def _start_drive() -> tuple[subprocess.Popen, str]:
+def _start_drive(kind: str) -> tuple[subprocess.Popen, str]:
     port = random.randint(40000, 60000)
     group = f"239.{random.randint(1, 254)}.{random.randint(1, 254)}.{random.randint(1, 254)}"
-    proc = subprocess.Popen([sys.executable, "-m", "hilbench", "sim", "--canopen", group, "--interface",
+    proc = subprocess.Popen([sys.executable, "-m", "hilbench", "sim", f"--{kind}", group, "--interface",
                              "udp_multicast", "--node", "2", "--udp-port", str(port)],
                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     ready, _, _ = select.select([proc.stdout], [], [], 120)
@@ -66,9 +67,9 @@ def identification_errors(path: Path) -> tuple[float, float]:
     return m.inertia / p.inertia - 1, virgin
 
 
-def measure(seconds: float, loaded: bool, identify: bool) -> dict:
+def measure(kind: str, seconds: float, loaded: bool, identify: bool) -> dict:
     t_drive = time.monotonic()
-    drive, url = _start_drive()
+    drive, url = _start_drive(kind)
     hog = subprocess.Popen([sys.executable, "-c", HOG]) if loaded else None
     try:
         with tempfile.TemporaryDirectory() as tmp:
@@ -98,12 +99,19 @@ def measure(seconds: float, loaded: bool, identify: bool) -> dict:
 
 def run(quick: bool = False) -> list[dict]:
     seconds = 2.0 if quick else 60.0
-    quiet = measure(seconds, loaded=False, identify=not quick)
-    loaded = measure(seconds, loaded=True, identify=not quick)
+    rows = []
+    for kind, label in (("canopen", "CiA 402"), ("odrive", "ODrive")):
+        rows += _rows(kind, label, seconds, quick)
+    return rows
+
+
+def _rows(kind: str, label: str, seconds: float, quick: bool) -> list[dict]:
+    quiet = measure(kind, seconds, loaded=False, identify=not quick)
+    loaded = measure(kind, seconds, loaded=True, identify=not quick)
     rows = []
     for tag, m in (("quiet", quiet), ("loaded", loaded)):
         s = m["summary"]
-        name = f"CiA 402 1 kHz {seconds:g} s {tag}"
+        name = f"{label} 1 kHz {seconds:g} s {tag}"
         base = quiet["summary"]
         for key, label in (("p50", "cycle time p50"), ("p99", "cycle time p99"), ("max", "cycle time max")):
             value, ref = getattr(s, key) * 1e3, getattr(base, key) * 1e3
