@@ -3,8 +3,10 @@
 It runs its own control tick at ``rate`` (1 kHz, as ``encoder_msg_rate_ms = torques_msg_rate_ms = 1``):
 each tick samples the plant and sends Get_Encoder_Estimates (turns, turns/s) and Get_Torques (target,
 estimate in N*m) as cyclic messages, then applies the latest Set_Input_Torque in closed loop control (zero
-otherwise), held until the next tick. The plant runs at ``oversample`` times the tick rate and follows real
-time between ticks. Heartbeat every 100 ms (axis error, axis state). Watchdog: in closed loop control, no
+otherwise), held until the next tick. The plant runs at ``oversample`` times the tick rate and advances one
+tick per tick: an ODrive's control loop and its cyclic messages run on a hardware timer, so the samples are
+uniform in the drive's time whatever this process's scheduling does to when the frames go out.
+Heartbeat every 100 ms (axis error, axis state). Watchdog: in closed loop control, no
 message for the axis within ``watchdog_timeout`` latches WATCHDOG_TIMER_EXPIRED and drops to idle; so does
 Estop (ESTOP_REQUESTED). Errors latch until Clear_Errors. RxSdo serves one endpoint:
 ``enable_torque_mode_vel_limit`` (id ``TVL_ENDPOINT``); with it true the simulated controller does what
@@ -102,7 +104,7 @@ class SimOdrive:
 
     def _run(self) -> None:
         period = 1.0 / self.rate
-        t0 = last = time.monotonic()
+        t0 = time.monotonic()
         next_heartbeat = t0
         u_held = 0.0
         while not self._stop.is_set():
@@ -117,11 +119,10 @@ class SimOdrive:
                     self._trip(o.WATCHDOG_TIMER_EXPIRED)
                 closed = self.state == o.AxisState.CLOSED_LOOP_CONTROL
                 u_new = self._torque(self.plant.omega) / self.kt if closed else 0.0
-                n = int(min(max(round((now - last) / self.plant.dt), 1), 100))
-                u = np.full(n, u_held)
+                u = np.full(round(period / self.plant.dt), u_held)
                 u[-1] = u_new
                 out = self.plant.run(u)  # the last row is measured now, before u_new acts
-                last, u_held = now, u_new
+                u_held = u_new
                 state, error = self.state, self.error
             position, velocity = out.counts[-1] / self.cpr, out.omega[-1] / (2 * math.pi)
             self._send(o.Cmd.GET_ENCODER_ESTIMATES, o.FLOAT2.pack(position, velocity))
