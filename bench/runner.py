@@ -27,8 +27,9 @@ from hilbench.bench.protocols import Protocol
 from hilbench.bench.runfile import DEVICE_CHANNELS, RunFileError, RunWriter
 from hilbench.drivers import protocol as wire
 from hilbench.drivers.amplifier import Amplifier
+from hilbench.drivers.device import HOST_CLOCKED_CHANNELS, HOST_CLOCKED_CUSTOM, Device, refusal
 from hilbench.drivers.device_url import open_device
-from hilbench.drivers.errors import DeviceFaultError, DriverError
+from hilbench.drivers.errors import ConfigError, DeviceFaultError, DriverError
 
 #: Default device settings: the simulated DC motor's catalogue values (firmware_sim default_sim.toml).
 DEFAULT_TORQUE_CONSTANT = 0.2  # N*m/A
@@ -172,7 +173,7 @@ class AbortRun(BenchError):
 class Bench:
     """A connected bench: one device, its settings, and the protocols run on it."""
 
-    def __init__(self, amplifier: Amplifier, url: str, settings: DeviceSettings | None = None):
+    def __init__(self, amplifier: Amplifier | Device, url: str, settings: DeviceSettings | None = None):
         self.amplifier = amplifier
         self.url = url
         self.settings = settings or DeviceSettings()
@@ -192,8 +193,7 @@ class Bench:
         self.amplifier.close()
 
     def identity(self) -> dict:
-        ident = self.amplifier.identity
-        return {k: getattr(ident, k) for k in ident.__slots__}
+        return self.amplifier.info()
 
     def run(self, protocol: Protocol, out: str | Path | None = None, *, operator: str = "", notes: str = "",
             progress: Callable[[Progress], None] | None = None, control: RunControl | None = None,
@@ -205,6 +205,9 @@ class Bench:
         """
         control = control or RunControl()
         protocol.check_memory()
+        why = refusal(self.url, self.amplifier.capabilities, protocol.mode, protocol.sample_rate)  # type: ignore
+        if why:  # before anything moves
+            raise ConfigError(f"cannot run {protocol.name}: {why}")
         limit = self.settings.limit_for(protocol)
         excitation = protocol.excitation(limit)
         segments = protocol.segments(limit)
@@ -218,8 +221,11 @@ class Bench:
         amp = self.amplifier
         # -- startup
         amp.configure(config)
+        host_clocked = amp.clock == "host"
         writer = RunWriter(
-            path, sample_rate=float(protocol.sample_rate), channels=DEVICE_CHANNELS,  # type: ignore
+            path, sample_rate=float(protocol.sample_rate),  # type: ignore
+            channels=DEVICE_CHANNELS + (HOST_CLOCKED_CHANNELS if host_clocked else ()),
+            custom_channels=HOST_CLOCKED_CUSTOM if host_clocked else None,
             device={**self.identity(), "url": self.url},
             config={k: getattr(config, k) if not isinstance(getattr(config, k), float) or
                     math.isfinite(getattr(config, k)) else str(getattr(config, k)) for k in config.__slots__},
@@ -257,6 +263,8 @@ class Bench:
                 amp.disarm()
             except DriverError:
                 pass
+            for kind, text in amp.run_events():  # host-clocked timing, latched EMCY
+                writer.add_event(kind, text)
             writer.finish(status)
         return RunResult(path, status, done, writer.uid, message)
 
@@ -284,7 +292,7 @@ class Bench:
                 t = blk.time
                 writer.append({"sample_index": blk.index, "t": t, "current_cmd": blk.current_cmd,
                                "current": blk.current_meas, "torque": torque, "position": position,
-                               "counts": blk.counts})
+                               "counts": blk.counts, **(blk.extra() if hasattr(blk, "extra") else {})})
                 done += n
                 if progress is not None:
                     prev = position[:1] if last_pos is None else np.array([last_pos])

@@ -26,6 +26,7 @@ import numpy as np
 
 from hilbench.drivers import protocol as p
 from hilbench.drivers.calibration import Calibration, CountUnwrapper
+from hilbench.drivers.device import Capabilities, Device
 from hilbench.drivers.errors import (
     CommandRefusedError,
     ConfigError,
@@ -113,7 +114,7 @@ def check_setpoints(setpoints, config: p.Config) -> np.ndarray:
     return values
 
 
-class Amplifier:
+class Amplifier(Device):
     """Client of one device on a link. Use as a context manager; ``close()`` always disarms.
 
     Args:
@@ -121,6 +122,10 @@ class Amplifier:
         timeout: how long to wait for a reply or a sample block, s.
         on_close: called after the link is closed (e.g. stops a simulator process).
     """
+
+    clock = "device"
+    capabilities = Capabilities({"current": p.SAMPLE_RATES, "velocity": p.SAMPLE_RATES})
+    name = "hilbench amplifier"
 
     def __init__(self, link: Link, timeout: float = 2.0, on_close: Callable[[], None] | None = None) -> None:
         self._link = link
@@ -299,6 +304,9 @@ class Amplifier:
     def clear_faults(self) -> None:
         """Clear every latched fault (the only way to clear them)."""
         self._command(p.ClearFaults())
+
+    def info(self) -> dict:
+        return {k: getattr(self.identity, k) for k in self.identity.__slots__}
 
     def status(self) -> p.Status:
         """A fresh :class:`drivers.protocol.Status` (state, faults, counters) from the device."""

@@ -4,6 +4,11 @@
   (``serial://loop://``), opened exclusively; network ports (``socket://``, ``rfc2217://``) are refused;
 - ``can://INTERFACE/CHANNEL?node=1&fd=1&bitrate=1000000`` -- any python-can interface
   (``can://socketcan/can0``, ``can://virtual/bench0``, ``can://pcan/PCAN_USBBUS1``);
+- ``canopen://INTERFACE/CHANNEL?node=N&eds=FILE`` -- a CiA 402 drive over CANopen
+  (:class:`drivers.canopen_drive.CanopenDrive`; ``udp_multicast`` stays on this host: hop limit 0, and
+  ``&port=P`` picks its UDP port, default 43113: buses sharing a port hear each other whatever the group);
+- ``odrive://INTERFACE/CHANNEL?node=N&tvl_endpoint=ID`` -- an ODrive axis over CAN Simple
+  (:class:`drivers.odrive_drive.OdriveDrive`);
 - ``sim://?pacing=lockstep&config=sim.toml&seed=3&tick=0.004`` -- starts the simulated amplifier as a
   separate process (``python -m hilbench.firmware_sim --serial``) and connects to its pseudo-terminal.
 """
@@ -18,6 +23,7 @@ import time
 from urllib.parse import parse_qsl, urlsplit
 
 from hilbench.drivers.amplifier import Amplifier
+from hilbench.drivers.device import Device
 from hilbench.drivers.errors import DeviceURLError, DriverError
 from hilbench.drivers.links import CanLink, SerialLink
 
@@ -69,12 +75,17 @@ def check_device_url(url: str) -> None:
             raise DeviceURLError(f"{url}: expected can://INTERFACE/CHANNEL")
     elif scheme == "sim":
         _query(urlsplit(url).query, {"pacing", "config", "seed", "tick"}, url)
+    elif scheme == "canopen":
+        _bus_location(url, {"node", "eds", "bitrate", "port"})
+    elif scheme == "odrive":
+        _bus_location(url, {"node", "tvl_endpoint", "bitrate", "port"})
     else:
-        raise DeviceURLError(f"{url}: unknown scheme {scheme!r} (serial, can or sim)")
+        raise DeviceURLError(f"{url}: unknown scheme {scheme!r} (serial, can, canopen, odrive or sim)")
 
 
-def open_device(url: str, timeout: float = 2.0) -> Amplifier:
-    """Connect to the device at ``url`` (see the module doc) and return its :class:`Amplifier`."""
+def open_device(url: str, timeout: float = 2.0) -> Amplifier | Device:
+    """Connect to the device at ``url`` (see the module doc): an :class:`Amplifier` for the hilbench protocol,
+    a host-clocked :class:`Device` for a CANopen or ODrive drive."""
     check_device_url(url)
     scheme, sep, rest = url.partition("://")
     if scheme == "serial":
@@ -100,7 +111,56 @@ def open_device(url: str, timeout: float = 2.0) -> Amplifier:
             stop_simulator(proc)
             raise
         return Amplifier(link, timeout=timeout, on_close=lambda: stop_simulator(proc))
-    raise DeviceURLError(f"{url}: unknown scheme {scheme!r} (serial, can or sim)")
+    if scheme == "canopen":
+        return _open_canopen(url, timeout)
+    if scheme == "odrive":
+        return _open_odrive(url, timeout)
+    raise DeviceURLError(f"{url}: unknown scheme {scheme!r} (serial, can, canopen, odrive or sim)")
+
+
+def _bus_location(url: str, allowed: set[str]) -> tuple[str, str, dict[str, str], dict]:
+    """INTERFACE, CHANNEL, query and python-can keyword arguments of a ``scheme://INTERFACE/CHANNEL?...`` URL."""
+    parts = urlsplit(url)
+    params = _query(parts.query, allowed, url)
+    channel = parts.path.lstrip("/")
+    if not parts.netloc or not channel:
+        raise DeviceURLError(f"{url}: expected {parts.scheme}://INTERFACE/CHANNEL")
+    kwargs: dict = {"bitrate": _int(params, "bitrate", 0, url)} if "bitrate" in params else {}
+    if parts.netloc == "udp_multicast":
+        kwargs["hop_limit"] = 0  # loopback only: the simulated drives live on this host
+        if "port" in params:  # groups on one port hear each other (Linux): separate buses need their own port
+            kwargs["port"] = _int(params, "port", 43113, url)
+    elif "port" in params:
+        raise DeviceURLError(f"{url}: port is an option of udp_multicast only")
+    return parts.netloc, channel, params, kwargs
+
+
+def _open_odrive(url: str, timeout: float):
+    from hilbench.drivers.odrive_drive import OdriveDrive
+
+    interface, channel, params, kwargs = _bus_location(url, {"node", "tvl_endpoint", "bitrate", "port"})
+    if "tvl_endpoint" not in params:
+        raise DeviceURLError(f"{url}: tvl_endpoint=ID is required (the endpoint id of "
+                             f"axis0.controller.config.enable_torque_mode_vel_limit in your firmware's "
+                             f"flat_endpoints.json), so that the host can switch it off")
+    node = _int(params, "node", 0, url)
+    if not 0 <= node <= 63:
+        raise DeviceURLError(f"{url}: node must be 0..63, got {node}")
+    return OdriveDrive(interface, channel, node, _int(params, "tvl_endpoint", 0, url), timeout=timeout, **kwargs)
+
+
+def _open_canopen(url: str, timeout: float):
+    from hilbench.drivers.canopen_drive import CanopenDrive
+
+    interface, channel, params, kwargs = _bus_location(url, {"node", "eds", "bitrate", "port"})
+    if "eds" not in params:
+        raise DeviceURLError(f"{url}: eds=FILE is required (the drive's EDS or DCF)")
+    if not os.path.isfile(params["eds"]):
+        raise DeviceURLError(f"{url}: EDS file {params['eds']} does not exist")
+    node = _int(params, "node", 1, url)
+    if not 1 <= node <= 127:
+        raise DeviceURLError(f"{url}: node must be 1..127, got {node}")
+    return CanopenDrive(interface, channel, node, params["eds"], timeout=timeout, **kwargs)
 
 
 def start_simulator(options: dict[str, str]) -> tuple[subprocess.Popen, str]:

@@ -18,6 +18,16 @@ def build_parser(prog: str = "python -m hilbench.firmware_sim") -> argparse.Argu
     where.add_argument("--serial", action="store_true",
                        help="serve on a new pseudo-terminal; its path is the first line printed")
     where.add_argument("--can", metavar="CHANNEL", help="serve on this python-can channel (e.g. vcan0)")
+    where.add_argument("--canopen", metavar="CHANNEL",
+                       help="be a simulated CiA 402 drive on this python-can channel (e.g. 239.74.163.2 with "
+                            "--interface udp_multicast); prints its canopen:// URL")
+    where.add_argument("--odrive", metavar="CHANNEL",
+                       help="be a simulated ODrive axis (CAN Simple) on this python-can channel; prints its "
+                            "odrive:// URL")
+    parser.add_argument("--clock", choices=("real", "sync"), default="real",
+                        help="--canopen: plant time follows real time between SYNCs (default) or the SYNC count")
+    parser.add_argument("--udp-port", type=int, default=None,
+                        help="--canopen on udp_multicast: UDP port (default 43113; buses on one port hear each other)")
     parser.add_argument("--interface", default="socketcan",
                         help="python-can interface for --can (socketcan, udp_multicast, pcan...; "
                              "default socketcan)")
@@ -55,6 +65,19 @@ def watch_parent(pid: int, stop, grace: float = 2.0, period: float = 0.25) -> No
         time.sleep(period)
 
 
+def _serve_drive(args, sim) -> int:
+    import threading
+
+    from hilbench.firmware_sim import cia402_drive, odrive_sim
+
+    stop = threading.Event()
+    if args.parent_pid is not None:
+        threading.Thread(target=watch_parent, args=(args.parent_pid, stop), daemon=True).start()
+    if args.odrive:
+        return odrive_sim.serve(args.interface, args.odrive, args.node, sim, stop, port=args.udp_port)
+    return cia402_drive.serve(args.interface, args.canopen, args.node, sim, args.clock, stop=stop, port=args.udp_port)
+
+
 def main(argv: list[str] | None = None, prog: str = "python -m hilbench.firmware_sim") -> int:
     args = build_parser(prog).parse_args(argv)
     from hilbench.firmware_sim.device import CanTransport, PtyTransport, serve
@@ -63,6 +86,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m hilbench.firmware
 
     try:
         sim = load_sim_config(args.config, seed=args.seed)
+        if args.canopen or args.odrive:
+            return _serve_drive(args, sim)
         if not 0.0005 <= args.tick <= 0.1:
             raise ValueError(f"--tick must be within 0.0005..0.1 s, got {args.tick}")
         if args.serial:

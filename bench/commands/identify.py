@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 
@@ -102,6 +103,13 @@ def run(args) -> int:
     check_cutoff(args.cutoff, train.fs)
     with open_run(args.run) as r:
         record = record_kind(r.meta.get("record"), args.run)
+        for event in r.events:  # a host-clocked run says how its cycle went (docs/drives.md)
+            text = str(event["message"])
+            if event["kind"] == "info" and text.startswith("host-clocked timing"):
+                if "UNFIT" in text:
+                    print(f"{args.run}: {text}", file=sys.stderr)
+                else:
+                    outputs.say(f"{args.run}: {text}", args.json)
     inertia = 0.0 if args.inertia is None and record == "displacement-driven" else args.inertia
     settings = LipSettings(
         n_thresholds=args.thresholds,

@@ -20,6 +20,10 @@ def describe(amp) -> list[str]:
     """Lines describing an :class:`drivers.amplifier.Amplifier` (units in every line)."""
     from hilbench.drivers import protocol as p
 
+    if amp.clock == "host":  # an off-the-shelf drive: what it reports about itself, and what it can run
+        return [f"{k}: {v}" for k, v in amp.info().items()] + [
+            f"state: {amp.state().value if amp.state() else 'unknown'}",
+            f"clock: host-clocked; runs {amp.capabilities.describe()}"]
     ident = amp.identity
     status = amp.status()
     lines = [

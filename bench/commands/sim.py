@@ -14,6 +14,13 @@ def register(subparsers) -> None:
     where = parser.add_mutually_exclusive_group(required=True)
     where.add_argument("--serial", action="store_true", help="serve on a new pseudo-terminal")
     where.add_argument("--can", metavar="CHANNEL", help="serve on this python-can channel (e.g. vcan0)")
+    where.add_argument("--canopen", metavar="CHANNEL",
+                       help="be a simulated CiA 402 drive on this python-can channel (with --interface "
+                            "udp_multicast: e.g. 239.74.163.2, this host only); prints its canopen:// URL")
+    where.add_argument("--odrive", metavar="CHANNEL", help="be a simulated ODrive axis on this python-can channel")
+    parser.add_argument("--clock", choices=("real", "sync"), default="real",
+                        help="--canopen: the plant follows real time between SYNCs (default) or the SYNC count")
+    parser.add_argument("--udp-port", type=int, default=None, help="--canopen on udp_multicast: UDP port")
     parser.add_argument("--interface", default="socketcan", help="python-can interface for --can")
     parser.add_argument("--node", type=int, default=1, help="CAN node id, 1..15")
     parser.add_argument("--fd", action="store_true", help="use CAN FD frames")
@@ -28,6 +35,11 @@ def register(subparsers) -> None:
 def firmware_argv(args) -> list[str]:
     """The ``python -m hilbench.firmware_sim`` command line equivalent to ``args``."""
     argv = [sys.executable, "-m", "hilbench.firmware_sim"]
+    if getattr(args, "canopen", None) or getattr(args, "odrive", None):
+        kind = ["--canopen", args.canopen] if args.canopen else ["--odrive", args.odrive]
+        return argv + kind + ["--interface", args.interface, "--node", str(args.node), "--clock", args.clock] \
+            + [f"--{k}={getattr(args, k)}" for k in ("config", "seed") if getattr(args, k) is not None] \
+            + ([f"--udp-port={args.udp_port}"] if args.udp_port else [])
     argv += ["--serial"] if args.serial else ["--can", args.can, "--interface", args.interface,
                                               "--node", str(args.node)]
     if args.fd:

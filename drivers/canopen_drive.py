@@ -1,0 +1,469 @@
+"""A CiA 402 servo drive over CANopen, in Cyclic Synchronous Torque mode, with the ``canopen`` package.
+
+    with CanopenDrive("socketcan", "can0", node_id=1, eds="epos4.eds") as drive:
+        drive.configure(Config(sample_rate=1000, current_limit=5.0, torque_constant=0.2))
+        drive.arm()
+        for block in drive.stream(setpoints_in_amperes):
+            use(block.time, block.position, block.torque, block.host_time)
+
+The host owns the clock. Per cycle k it sends the RPDO (controlword, target torque 0x6071 in per mille of
+the rated torque 0x6076) and then SYNC k; at SYNC k the drive samples position 0x6064, velocity 0x606C,
+torque 0x6077 and statusword 0x6041, sends them in two SYNC-triggered TPDOs and applies the target torque
+received before the SYNC. That is the plant's own convention (outputs of sample k measured at t_k, input k
+held over [t_k, t_k+1)), so a host-clocked run reads like a device-clocked one, plus a host timestamp and
+the cycle counter per sample.
+
+Set-up (``configure``): NMT pre-operational; SDO: mode 10 (checked against 0x6502 first), communication
+cycle period 0x1006, max torque 0x6072 from the host's current limit, producer heartbeat 0x1017, the host
+as heartbeat consumer 0x1016 (timeout = the watchdog timeout), lost-communication reaction 0x6007 = fault;
+PDO mapping by SDO; NMT operational; the host starts its own heartbeat. ``arm`` walks the CiA 402 state
+machine to operation enabled (fault reset first if needed). EMCY messages latch a fault host-side with the
+code's text; ``estop`` sends quick stop.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+import threading
+import time
+from collections.abc import Iterator
+
+import numpy as np
+
+from hilbench.drivers import cia402 as c
+from hilbench.drivers import protocol as p
+from hilbench.drivers.amplifier import check_setpoints
+from hilbench.drivers.calibration import Calibration, CountUnwrapper
+from hilbench.drivers.device import Capabilities, CycleSamples, Device, refusal
+from hilbench.drivers.errors import (
+    CommandRefusedError,
+    ConfigError,
+    DeviceFaultError,
+    DeviceTimeoutError,
+    DriverError,
+    SampleLossError,
+)
+from hilbench.drivers.host_cycle import CanCycle, CanCycleSpec, TimingSummary, timing_summary
+
+HOST_NODE_ID = 127          # the host's node id for its heartbeat (0x700 + 127)
+DRIVE_HEARTBEAT_MS = 100    # producer heartbeat the host asks of the drive
+RATES = (1000, 2000)        # Hz; 2 kHz is near a 1 Mbit/s bus's limit for SYNC + 1 RPDO + 2 TPDOs
+BLOCK_PERIOD = 0.02         # s between sample blocks handed to the caller
+
+
+class CanopenDrive(Device):
+    """A CiA 402 drive at ``node_id`` on a python-can bus (``interface``, ``channel``), OD from ``eds``."""
+
+    clock = "host"
+    capabilities = Capabilities({"current": RATES})
+
+    def __init__(self, interface: str, channel: str, node_id: int, eds: str, timeout: float = 2.0,
+                 **bus_kwargs) -> None:
+        import canopen  # imported here: only CANopen users need it loaded
+
+        self.name = f"canopen://{interface}/{channel}?node={node_id}"
+        self.node_id = node_id
+        self.timeout = timeout
+        self.config: p.Config | None = None
+        self._emcy: list[tuple[int, int, float]] = []
+        self._emcy_event = threading.Event()
+        self._heartbeat_task = None
+        self._timing: TimingSummary | None = None
+        self._events: list[tuple[str, str]] = []
+        self._closed = False
+        self._estop_requested = False
+        self._cycle: CanCycle | None = None
+        self.interface, self.channel, self.bus_kwargs = interface, channel, dict(bus_kwargs)
+        self.network = canopen.Network()
+        try:
+            self.network.connect(interface=interface, channel=channel, **bus_kwargs)
+        except Exception as exc:  # python-can raises many types for a missing interface
+            raise DriverError(f"{self.name}: cannot open the CAN bus: {' '.join(str(exc).split())}") from exc
+        try:
+            self.node = self.network.add_node(node_id, eds)
+            self.node.sdo.RESPONSE_TIMEOUT = timeout
+            self.node.sdo.MAX_RETRIES = 1  # tries in all: the timeout is the whole wait
+            self.node.emcy.add_callback(self._on_emcy)
+            self._identify()
+        except BaseException:
+            self.close()
+            raise
+
+    # ------------------------------------------------------------------ SDO helpers
+    def _read(self, index: int, sub: int | None = None, what: str = ""):
+        import canopen
+
+        try:
+            obj = self.node.sdo[index]
+            return (obj[sub] if sub is not None else obj).raw
+        except canopen.SdoCommunicationError as exc:
+            raise DeviceTimeoutError(f"CANopen node {self.node_id} did not answer: SDO upload of 0x{index:04X}"
+                                     f"{'' if sub is None else f':{sub}'} ({what or 'object'}) timed out after "
+                                     f"{self.timeout:g} s") from exc
+        except canopen.SdoAbortedError as exc:
+            raise CommandRefusedError(f"CANopen node {self.node_id} refused reading 0x{index:04X} "
+                                      f"({what or 'object'}): {exc}") from exc
+
+    def _write(self, index: int, value, sub: int | None = None, what: str = "") -> None:
+        import canopen
+
+        try:
+            obj = self.node.sdo[index]
+            (obj[sub] if sub is not None else obj).raw = value
+        except canopen.SdoCommunicationError as exc:
+            raise DeviceTimeoutError(f"CANopen node {self.node_id} did not answer: SDO download of 0x{index:04X}"
+                                     f" ({what or 'object'}) timed out after {self.timeout:g} s") from exc
+        except canopen.SdoAbortedError as exc:
+            raise CommandRefusedError(f"CANopen node {self.node_id} refused 0x{index:04X} ({what or 'object'}) "
+                                      f"= {value}: {exc}") from exc
+
+    def _identify(self) -> None:
+        device_type = int(self._read(c.DEVICE_TYPE, what="device type"))
+        if device_type & 0xFFFF != c.PROFILE_402:
+            raise CommandRefusedError(f"CANopen node {self.node_id} is not a CiA 402 drive (device type "
+                                      f"0x{device_type:08X}, profile {device_type & 0xFFFF})")
+        supported = int(self._read(c.SUPPORTED_MODES, what="supported drive modes"))
+        if not supported & c.CST_BIT:
+            raise CommandRefusedError(f"CANopen node {self.node_id} does not support Cyclic Synchronous Torque "
+                                      f"(mode 10): supported drive modes 0x6502 = 0x{supported:08X}")
+        self.rated_torque = int(self._read(c.RATED_TORQUE, what="motor rated torque")) / 1000.0  # N*m
+        if self.rated_torque <= 0:
+            raise ConfigError(f"CANopen node {self.node_id}: motor rated torque 0x6076 is 0")
+        inc = int(self._read(c.ENCODER_RESOLUTION, 1, "encoder increments"))
+        revs = int(self._read(c.ENCODER_RESOLUTION, 2, "motor revolutions"))
+        self.counts_per_rev = inc // max(revs, 1)
+        self._info = {"protocol": "CiA 402 over CANopen", "url": self.name,
+                      "device_type": f"0x{device_type:08X}", "supported_modes": f"0x{supported:08X}",
+                      "rated_torque_Nm": self.rated_torque, "encoder_counts_per_rev": self.counts_per_rev}
+        try:
+            self._info["model"] = str(self._read(c.DEVICE_NAME, what="device name"))
+        except (CommandRefusedError, KeyError):
+            self._info["model"] = "unknown"
+        for sub, key in ((1, "vendor_id"), (2, "product_code"), (3, "revision"), (4, "serial")):
+            try:
+                self._info[key] = int(self._read(c.IDENTITY, sub, key))
+            except (CommandRefusedError, KeyError):
+                pass
+
+    def info(self) -> dict:
+        return dict(self._info)
+
+    # ------------------------------------------------------------------ EMCY, state
+    def _on_emcy(self, err) -> None:
+        if err.code == 0:
+            return
+        self._emcy.append((err.code, err.register, time.monotonic()))
+        self._emcy_event.set()
+
+    def emcy_line(self) -> str:
+        if not self._emcy:
+            return ""
+        code, register, _ = self._emcy[-1]
+        return f"EMCY 0x{code:04X} {c.emcy_text(code)} (error register 0x{register:02X})"
+
+    def statusword(self) -> int:
+        return int(self._read(c.STATUSWORD, what="statusword"))
+
+    def status(self) -> int:
+        """The statusword (a keepalive for callers that poll a device while a run is paused)."""
+        return self.statusword()
+
+    def state(self) -> c.State | None:
+        return c.state_of(self.statusword())
+
+    # ------------------------------------------------------------------ Device API
+    def configure(self, config: p.Config) -> None:
+        problems = config.problems()
+        if problems:
+            raise ConfigError("; ".join(problems))
+        mode = "current" if config.mode == p.Mode.CURRENT else "velocity"
+        why = refusal(self.name, self.capabilities, mode, config.sample_rate)
+        if why:
+            raise ConfigError(why)
+        if config.counts_per_rev != self.counts_per_rev:
+            raise ConfigError(f"counts_per_rev {config.counts_per_rev} differs from the drive's encoder resolution "
+                              f"0x608F = {self.counts_per_rev} increments/rev")
+        node = self.node
+        node.nmt.state = "PRE-OPERATIONAL"
+        self._write(c.MODES_OF_OPERATION, c.MODE_CST, what="modes of operation")
+        self._write(c.COMM_CYCLE_PERIOD, round(1e6 / config.sample_rate), what="communication cycle period")
+        max_pm = c.max_torque_permille(config.current_limit, config.torque_constant, self.rated_torque)
+        self._write(c.MAX_TORQUE, max_pm, what="max torque")
+        self._write(c.PRODUCER_HEARTBEAT, DRIVE_HEARTBEAT_MS, what="producer heartbeat")
+        hb_ms = min(round(config.watchdog_timeout * 1000), 0xFFFF)
+        self._write(c.CONSUMER_HEARTBEAT, (HOST_NODE_ID << 16) | hb_ms, 1, "consumer heartbeat")
+        self._write(c.ABORT_CONNECTION, 1, what="abort connection option (1 = fault)")
+        self._map_pdos()
+        self._start_heartbeat(config.watchdog_timeout)
+        node.nmt.state = "OPERATIONAL"
+        self._wait_nmt("OPERATIONAL")
+        self.config = config
+        self.calibration = Calibration(config.torque_constant, self.counts_per_rev, config.ratio)
+
+    def _map_pdos(self) -> None:
+        node = self.node
+        try:
+            node.rpdo.read()
+            node.tpdo.read()
+        except Exception as exc:
+            raise DeviceTimeoutError(f"CANopen node {self.node_id}: reading the PDO configuration failed: "
+                                     f"{exc}") from exc
+        layout = {1: (node.rpdo, (c.CONTROLWORD, c.TARGET_TORQUE)),
+                  2: (node.tpdo, (c.STATUSWORD, c.TORQUE_ACTUAL)),
+                  3: (node.tpdo, (c.POSITION_ACTUAL, c.VELOCITY_ACTUAL))}
+        for pdos in (node.rpdo, node.tpdo):
+            for m in pdos.map.values():
+                m.enabled = False
+        for which, (pdos, objects) in layout.items():
+            m = pdos.map[1 if which < 3 else 2]
+            m.clear()
+            for index in objects:
+                m.add_variable(index)
+            m.trans_type = 1  # synchronous, every SYNC
+            m.enabled = True
+        try:
+            node.rpdo.save()
+            node.tpdo.save()
+        except Exception as exc:
+            raise CommandRefusedError(f"CANopen node {self.node_id} refused the PDO mapping: {exc}") from exc
+        self._rpdo = node.rpdo.map[1]
+        self._tpdo1, self._tpdo2 = node.tpdo.map[1], node.tpdo.map[2]
+
+    def _wait_nmt(self, state: str) -> None:
+        """Wait until the drive's heartbeat reports NMT ``state``."""
+        import canopen
+
+        deadline = time.monotonic() + self.timeout + DRIVE_HEARTBEAT_MS / 1000
+        while time.monotonic() < deadline:
+            try:
+                if self.node.nmt.wait_for_heartbeat(max(0.0, deadline - time.monotonic())) == state:
+                    return
+            except canopen.nmt.NmtError:
+                break
+        raise DeviceTimeoutError(f"CANopen node {self.node_id} did not report NMT {state} in its heartbeat within "
+                                 f"{self.timeout + DRIVE_HEARTBEAT_MS / 1000:g} s")
+
+    def _start_heartbeat(self, timeout: float) -> None:
+        if self._heartbeat_task is not None:
+            self._heartbeat_task.stop()
+        period = min(0.1, timeout / 4) if timeout > 0 else 0.1
+        self._heartbeat_task = self.network.send_periodic(0x700 + HOST_NODE_ID, [5], period)
+
+    def _controlword(self, word: int) -> None:
+        self._write(c.CONTROLWORD, word, what="controlword")
+
+    def _walk_to(self, target: c.State, commands: tuple[c.Command, ...]) -> None:
+        for command in commands:
+            self._controlword(int(command))
+        deadline = time.monotonic() + self.timeout
+        while True:
+            word = self.statusword()
+            if c.state_of(word) is target:
+                return
+            if time.monotonic() > deadline:
+                now = c.state_of(word)
+                extra = f"; {self.emcy_line()}" if self._emcy else ""
+                raise CommandRefusedError(f"CANopen node {self.node_id} did not reach '{target.value}' "
+                                          f"(statusword 0x{word:04X}: {now.value if now else 'unknown'}){extra}")
+            time.sleep(0.005)
+
+    def arm(self) -> None:
+        if self.config is None:
+            raise CommandRefusedError("configure() the drive before arming")
+        if self.state() in (c.State.FAULT, c.State.FAULT_REACTION):
+            raise DeviceFaultError(f"CANopen node {self.node_id} is in fault ({self.emcy_line() or 'no EMCY seen'}); "
+                                   f"call clear_faults() first")
+        self._estop_requested = False
+        self._walk_to(c.State.OPERATION_ENABLED, (c.Command.SHUTDOWN, c.Command.SWITCH_ON,
+                                                  c.Command.ENABLE_OPERATION))
+        display = int(self._read(c.MODES_DISPLAY, what="modes of operation display"))
+        if display != c.MODE_CST:
+            self.disarm()
+            raise CommandRefusedError(f"CANopen node {self.node_id} runs mode {display}, not CST (10)")
+
+    def clear_faults(self) -> None:
+        """Fault reset (controlword bit 7), then back to switch on disabled; forgets the latched EMCY."""
+        self._controlword(0)
+        self._walk_to(c.State.SWITCH_ON_DISABLED, (c.Command.FAULT_RESET, c.Command.DISABLE_VOLTAGE))
+        self._emcy.clear()
+        self._emcy_event.clear()
+
+    def disarm(self) -> None:
+        """Shutdown (power stage off, torque zero): ready to switch on. A drive in fault stays there."""
+        if self._cycle is not None:
+            self._cycle.stop()
+        if self.state() in (c.State.FAULT, c.State.FAULT_REACTION, c.State.SWITCH_ON_DISABLED):
+            return
+        self._controlword(int(c.Command.SHUTDOWN))
+
+    def estop(self) -> None:
+        """Quick stop: in the next cycle's RPDO when streaming, else by SDO. Safe from any thread."""
+        self._estop_requested = True
+        cycle = self._cycle
+        if cycle is not None:
+            cycle.estop()
+        else:
+            self._controlword(int(c.Command.QUICK_STOP))
+
+    # ------------------------------------------------------------------ the cycle
+    def stream(self, setpoints, allow_loss: bool = False) -> Iterator[CycleSamples]:
+        """Play ``setpoints`` (A) one per cycle at the configured rate; yield blocks as the TPDOs arrive.
+
+        Raises :class:`DeviceFaultError` (after yielding every sample received) when the drive leaves
+        operation enabled (EMCY text in the message), and :class:`SampleLossError` when some SYNC got no
+        TPDO back, unless ``allow_loss``.
+        """
+        cfg = self.config
+        if cfg is None:
+            raise CommandRefusedError("configure() the drive before streaming")
+        values = check_setpoints(setpoints, cfg)
+        if self._emcy:
+            raise DeviceFaultError(f"cannot stream: {self.emcy_line()}")
+        if self.state() not in (c.State.OPERATION_ENABLED, c.State.SWITCHED_ON):
+            raise CommandRefusedError(f"cannot stream: CANopen node {self.node_id} is not switched on; "
+                                      f"call arm() first")
+        torque_cmd = values * cfg.torque_constant
+        pm = c.torque_to_permille(torque_cmd, self.rated_torque)
+        return self._stream(values, pm, allow_loss)
+
+    def _stream(self, values: np.ndarray, pm: np.ndarray, allow_loss: bool) -> Iterator[CycleSamples]:
+        cfg = self.config
+        n = len(values)
+        rate = cfg.sample_rate
+        rpdo_fmt = _pdo_format(self._rpdo)
+        fmt1, fmt2 = _pdo_format(self._tpdo1), _pdo_format(self._tpdo2)
+        tx = np.zeros((n, 2, 8), np.uint8)
+        frame = np.zeros(n, dtype=np.dtype([("cw", "<u2"), ("torque", "<i2")]))
+        frame["cw"] = int(c.Command.ENABLE_OPERATION)
+        frame["torque"] = pm
+        tx[:, 0, :4] = frame.view(np.uint8).reshape(n, 4)
+        spec = CanCycleSpec(self.interface, self.channel, self.bus_kwargs, float(rate),
+                            (self._rpdo.cob_id, 0x80), (rpdo_fmt.size, 0),
+                            (self._tpdo1.cob_id, self._tpdo2.cob_id),
+                            (rpdo_fmt.pack(int(c.Command.QUICK_STOP), 0), b""),
+                            (rpdo_fmt.pack(int(c.Command.SWITCH_ON), 0), b""))  # zero torque, operation disabled
+        dt1 = np.dtype([("status", "<u2"), ("torque", "<i2")])
+        dt2 = np.dtype([("position", "<i4"), ("velocity", "<i4")])
+        assert fmt1.size == dt1.itemsize and fmt2.size == dt2.itemsize
+        cycle = CanCycle(spec, tx)
+        self._cycle = cycle
+        unwrap = CountUnwrapper()
+        done = 0
+        finished = False
+        self._timing = None
+        arrays = cycle.arrays
+        try:
+            cycle.start()
+            hb_deadline = None
+            while True:
+                time.sleep(BLOCK_PERIOD)
+                ended = not cycle.alive() or bool(arrays["ctl"][1])
+                if ended:
+                    cycle.join()
+                sent = cycle.sent
+                ready = min(cycle.received(0), cycle.received(1))
+                if ready > done:
+                    t1 = arrays["rx"][0, done:ready, :4].copy().view(dt1).ravel()
+                    t2 = arrays["rx"][1, done:ready, :8].copy().view(dt2).ravel()
+                    enabled = np.array([c.state_of(int(w)) is c.State.OPERATION_ENABLED for w in t1["status"]])
+                    if not enabled.all():  # the drive left operation enabled: keep the sample that says so
+                        ready = done + int(np.argmin(enabled)) + 1
+                        t1, t2 = t1[: ready - done], t2[: ready - done]
+                        cycle.stop()
+                        ended = True
+                        cycle.join()
+                    yield self._block(done, ready, pm, t1, t2, arrays["host_time"], unwrap)
+                    done = ready
+                    hb_deadline = None
+                elif not ended and sent > done + rate * 0.25:  # a quarter second of SYNCs unanswered
+                    hb_deadline = hb_deadline or time.monotonic()
+                    if time.monotonic() - hb_deadline > self.timeout:
+                        cycle.stop()
+                        raise DeviceTimeoutError(
+                            f"CANopen node {self.node_id} stopped answering SYNC at cycle {done} "
+                            f"(no TPDO for {self.timeout:g} s)")
+                if ended:
+                    break
+            finished = True
+            sent = cycle.sent
+            if cycle.error:
+                raise DriverError(f"{self.name}: the cycle process could not open the CAN bus")
+            self._timing = timing_summary(arrays["host_time"][:sent], arrays["scheduled"][:sent], rate)
+            if done < n:
+                word = int(arrays["rx"][0, done - 1, :2].view("<u2")[0]) if done else 0
+                last = c.state_of(word)
+                if done and last is not c.State.OPERATION_ENABLED:
+                    if not self._emcy:
+                        self._emcy_event.wait(0.2)
+                    why = self.emcy_line() or f"statusword 0x{word:04X} ({last.value if last else '?'})"
+                    if self._estop_requested:
+                        why = f"quick stop (e-stop); {why}"
+                    raise DeviceFaultError(f"CANopen node {self.node_id} left operation enabled at cycle "
+                                           f"{done - 1}: {why}")
+                lost = sent - done
+                if lost and not allow_loss:
+                    raise SampleLossError(f"CANopen node {self.node_id}: {lost} of {sent} SYNCs got no TPDO back")
+        finally:
+            cycle.stop()
+            cycle.join()
+            sent = cycle.sent
+            if self._timing is None and sent:
+                self._timing = timing_summary(arrays["host_time"][:sent], arrays["scheduled"][:sent], rate)
+            self._cycle = None
+            cycle.close()
+            if not finished and not self._closed:
+                try:
+                    self.disarm()
+                except DriverError:
+                    pass
+
+    def _block(self, a: int, b: int, pm: np.ndarray, t1: np.ndarray, t2: np.ndarray, host_time: np.ndarray,
+               unwrap: CountUnwrapper) -> CycleSamples:
+        cal = self.calibration
+        counts = unwrap(t2["position"])
+        torque = c.permille_to_torque(t1["torque"], self.rated_torque) * cal.ratio
+        torque_cmd = c.permille_to_torque(pm[a:b], self.rated_torque) * cal.ratio
+        velocity = t2["velocity"] * (2 * math.pi / (self.counts_per_rev * cal.ratio))
+        return CycleSamples(np.arange(a, b, dtype=np.int64), host_time[a:b].copy(), counts,
+                            cal.current(torque_cmd), cal.current(torque), torque_cmd, torque,
+                            cal.position(counts), velocity, self.config.sample_rate, t1["status"].copy())
+
+    def run_events(self) -> list[tuple[str, str]]:
+        out = []
+        if self._timing is not None:
+            out.append(("info", self._timing.line()))
+        if self._emcy:
+            out.append(("fault", self.emcy_line()))
+        return out
+
+    @property
+    def timing(self) -> TimingSummary | None:
+        """Timing of the last stream."""
+        return self._timing
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if getattr(self, "node", None) is not None and getattr(self, "config", None) is not None:
+                self.disarm()
+        except DriverError:
+            pass
+        finally:
+            if self._heartbeat_task is not None:
+                self._heartbeat_task.stop()
+            self.network.disconnect()
+
+
+_STRUCT = {8: "b", 16: "h", 32: "i"}
+
+
+def _pdo_format(pdo_map) -> struct.Struct:
+    """A struct for a PDO whose variables are byte-aligned integers (the layouts this driver maps)."""
+    fmt = "<"
+    for var in pdo_map.map:
+        code = _STRUCT[var.length]
+        fmt += code.upper() if var.od.data_type in (5, 6, 7) else code  # UNSIGNED8/16/32
+    return struct.Struct(fmt)

@@ -1,0 +1,201 @@
+"""CiA 402 (drives and motion control) definitions shared by the host driver and the simulated drive.
+
+Pure functions and constants, no I/O: the power state machine (statusword decoding, controlword commands),
+the object indices the bench uses, per-mille torque scaling and the text of EMCY error codes (CiA 301 and
+CiA 402 tables, the codes a torque-mode bench meets).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+
+import numpy as np
+
+# Object indices (CiA 301 communication, CiA 402 profile)
+DEVICE_TYPE = 0x1000
+ERROR_REGISTER = 0x1001
+COMM_CYCLE_PERIOD = 0x1006    # us
+DEVICE_NAME = 0x1008
+CONSUMER_HEARTBEAT = 0x1016   # sub 1: (node << 16) | time_ms
+PRODUCER_HEARTBEAT = 0x1017   # ms
+IDENTITY = 0x1018
+ABORT_CONNECTION = 0x6007     # reaction to lost communication (heartbeat or SYNC)
+ERROR_CODE = 0x603F
+CONTROLWORD = 0x6040
+STATUSWORD = 0x6041
+QUICK_STOP_OPTION = 0x605A
+MODES_OF_OPERATION = 0x6060
+MODES_DISPLAY = 0x6061
+POSITION_ACTUAL = 0x6064      # increments
+VELOCITY_ACTUAL = 0x606C      # increments/s
+TARGET_TORQUE = 0x6071        # per mille of rated torque
+MAX_TORQUE = 0x6072           # per mille of rated torque
+RATED_CURRENT = 0x6075        # mA
+RATED_TORQUE = 0x6076         # mN*m
+TORQUE_ACTUAL = 0x6077        # per mille of rated torque
+ENCODER_RESOLUTION = 0x608F   # sub 1 increments per sub 2 motor revolutions
+SUPPORTED_MODES = 0x6502
+
+PROFILE_402 = 402
+MODE_CST = 10                 # cyclic synchronous torque
+CST_BIT = 1 << 9              # 0x6502 bit for mode 10
+
+#: 0x6007 values: what the drive does when it loses the host (heartbeat or SYNC)
+ABORT_ACTIONS = {0: "no action", 1: "fault", 2: "disable voltage", 3: "quick stop"}
+
+
+class State(enum.Enum):
+    NOT_READY = "not ready to switch on"
+    SWITCH_ON_DISABLED = "switch on disabled"
+    READY = "ready to switch on"
+    SWITCHED_ON = "switched on"
+    OPERATION_ENABLED = "operation enabled"
+    QUICK_STOP = "quick stop active"
+    FAULT_REACTION = "fault reaction active"
+    FAULT = "fault"
+
+
+# (mask, value) of the statusword for each state, CiA 402 table
+_STATUS_PATTERNS = (
+    (0x4F, 0x00, State.NOT_READY),
+    (0x4F, 0x40, State.SWITCH_ON_DISABLED),
+    (0x6F, 0x21, State.READY),
+    (0x6F, 0x23, State.SWITCHED_ON),
+    (0x6F, 0x27, State.OPERATION_ENABLED),
+    (0x6F, 0x07, State.QUICK_STOP),
+    (0x4F, 0x0F, State.FAULT_REACTION),
+    (0x4F, 0x08, State.FAULT),
+)
+STATUS_BITS = {
+    State.NOT_READY: 0x00, State.SWITCH_ON_DISABLED: 0x40, State.READY: 0x21, State.SWITCHED_ON: 0x23,
+    State.OPERATION_ENABLED: 0x27, State.QUICK_STOP: 0x07, State.FAULT_REACTION: 0x0F, State.FAULT: 0x08,
+}
+VOLTAGE_ENABLED = 0x10
+REMOTE = 0x200
+
+
+def state_of(statusword: int) -> State | None:
+    """The power state a statusword reports (None for a pattern the table does not have)."""
+    for mask, value, state in _STATUS_PATTERNS:
+        if statusword & mask == value:
+            return state
+    return None
+
+
+class Command(enum.IntEnum):
+    """Controlword values of the state-machine commands (bit 7 = fault reset, on its rising edge)."""
+
+    SHUTDOWN = 0x0006
+    SWITCH_ON = 0x0007
+    ENABLE_OPERATION = 0x000F
+    DISABLE_VOLTAGE = 0x0000
+    QUICK_STOP = 0x0002
+    FAULT_RESET = 0x0080
+
+
+def command_of(controlword: int) -> Command | None:
+    """Decode a controlword into its command (CiA 402 table; bit 7 first)."""
+    if controlword & 0x80:
+        return Command.FAULT_RESET
+    if controlword & 0x02 == 0:
+        return Command.DISABLE_VOLTAGE
+    if controlword & 0x06 == 0x02:
+        return Command.QUICK_STOP
+    if controlword & 0x07 == 0x06:
+        return Command.SHUTDOWN
+    if controlword & 0x0F == 0x07:
+        return Command.SWITCH_ON
+    if controlword & 0x0F == 0x0F:
+        return Command.ENABLE_OPERATION
+    return None
+
+
+def next_state(state: State, command: Command | None) -> State:
+    """The drive's state after ``command`` (the device side of the CiA 402 power state machine).
+
+    Quick stop in torque mode zeroes the torque at once, so quick stop active ends in switch on disabled
+    as soon as the drive has applied it (the simulated drive calls this twice); a fault reset leaves
+    fault for switch on disabled.
+    """
+    if command is None:
+        return state
+    if state is State.FAULT:
+        return State.SWITCH_ON_DISABLED if command is Command.FAULT_RESET else state
+    if state in (State.FAULT_REACTION, State.NOT_READY):
+        return state
+    if command is Command.DISABLE_VOLTAGE:
+        return State.SWITCH_ON_DISABLED
+    if command is Command.QUICK_STOP:
+        return State.QUICK_STOP if state is State.OPERATION_ENABLED else State.SWITCH_ON_DISABLED
+    if state is State.QUICK_STOP:
+        return state
+    table = {
+        (State.SWITCH_ON_DISABLED, Command.SHUTDOWN): State.READY,
+        (State.READY, Command.SHUTDOWN): State.READY,
+        (State.READY, Command.SWITCH_ON): State.SWITCHED_ON,
+        (State.READY, Command.ENABLE_OPERATION): State.OPERATION_ENABLED,
+        (State.SWITCHED_ON, Command.SHUTDOWN): State.READY,
+        (State.SWITCHED_ON, Command.SWITCH_ON): State.SWITCHED_ON,
+        (State.SWITCHED_ON, Command.ENABLE_OPERATION): State.OPERATION_ENABLED,
+        (State.OPERATION_ENABLED, Command.SHUTDOWN): State.READY,
+        (State.OPERATION_ENABLED, Command.SWITCH_ON): State.SWITCHED_ON,
+        (State.OPERATION_ENABLED, Command.ENABLE_OPERATION): State.OPERATION_ENABLED,
+    }
+    return table.get((state, command), state)
+
+
+def torque_to_permille(torque: np.ndarray, rated_torque: float) -> np.ndarray:
+    """Torque in N*m to the INTEGER16 per-mille of the rated torque (N*m) that 0x6071 carries (rounded)."""
+    pm = np.rint(np.asarray(torque, dtype=np.float64) * (1000.0 / rated_torque))
+    if np.any(np.abs(pm) > 32767):
+        raise ValueError(f"torque beyond 32.767 x the rated torque {rated_torque} N*m cannot be sent in 0x6071")
+    return pm.astype(np.int16)
+
+
+def permille_to_torque(pm: np.ndarray, rated_torque: float) -> np.ndarray:
+    """Per-mille of the rated torque (N*m) to N*m."""
+    return np.asarray(pm, dtype=np.float64) * (rated_torque / 1000.0)
+
+
+def max_torque_permille(current_limit: float, torque_constant: float, rated_torque: float) -> int:
+    """0x6072 (per mille, UNSIGNED16) from the host's current limit (A) and torque constant (N*m/A)."""
+    value = math.floor(current_limit * torque_constant / rated_torque * 1000.0)
+    return int(min(max(value, 0), 65535))
+
+
+#: Error codes (CiA 301 table and CiA 402 annex): code -> text
+EMCY_TEXT = {
+    0x0000: "error reset or no error",
+    0x1000: "generic error",
+    0x2310: "continuous over-current (device output side)",
+    0x2320: "short circuit at outputs",
+    0x3210: "DC link over-voltage",
+    0x3220: "DC link under-voltage",
+    0x4210: "excess temperature device",
+    0x4310: "excess temperature drive",
+    0x5530: "data storage (non-volatile memory)",
+    0x6320: "parameter error",
+    0x7121: "motor blocked",
+    0x7305: "incremental sensor 1 fault",
+    0x8110: "CAN overrun (objects lost)",
+    0x8120: "CAN in error passive mode",
+    0x8130: "life guard error or heartbeat error",
+    0x8140: "recovered from bus off",
+    0x8250: "RPDO timeout",
+    0x8400: "velocity speed controller (over-speed)",
+    0x8611: "following error",
+    0xFF00: "device specific",
+}
+_CLASS_TEXT = {0x1: "generic", 0x2: "current", 0x3: "voltage", 0x4: "temperature", 0x5: "device hardware",
+               0x6: "device software", 0x7: "additional modules", 0x8: "monitoring", 0x9: "external error",
+               0xF: "additional functions"}
+
+
+def emcy_text(code: int) -> str:
+    """The text of an EMCY error code: the exact entry, else its class (first hex digit)."""
+    if code in EMCY_TEXT:
+        return EMCY_TEXT[code]
+    if code >> 8 == 0xFF:
+        return "device specific"
+    return f"{_CLASS_TEXT.get(code >> 12, 'unknown')} error (code not in the CiA 301/402 tables)"

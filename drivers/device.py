@@ -1,0 +1,151 @@
+"""The device interface every bench device implements: who owns the clock, what it can run, in which units.
+
+Two kinds of device exist:
+
+- **device-clocked stream** (``clock = "device"``): the host streams setpoint blocks ahead and the device
+  owns the sample clock (the hilbench protocol, :class:`drivers.amplifier.Amplifier`);
+- **host-clocked cycle** (``clock = "host"``): the device buffers nothing; the host sends one setpoint per
+  cycle and triggers the sample (CiA 402 SYNC, ODrive cyclic messages). Every sample then also carries its
+  host timestamp and cycle counter, and the cycle's timing is summarised for the run file.
+
+The runner only uses :meth:`Device.configure`, :meth:`Device.arm`, :meth:`Device.disarm`,
+:meth:`Device.estop`, :meth:`Device.stream` and :meth:`Device.close`, and asks :func:`refusal` before
+anything moves whether a protocol can run at all.
+"""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+
+CLOCKS = ("device", "host")
+#: Control modes a device may offer. ``current`` is torque/current control (setpoints in A, turned into a
+#: torque command with the host's torque constant where the drive takes torque); ``velocity`` setpoints are
+#: rad/s; ``position`` setpoints are rad (no protocol uses it yet).
+MODE_UNITS = {"current": "A", "velocity": "rad/s", "position": "rad"}
+
+
+@dataclass(frozen=True)
+class Capabilities:
+    """What a device can run: for each control mode, the sample (cycle) rates it supports, Hz."""
+
+    modes: dict[str, tuple[int, ...]] = field(default_factory=dict)
+
+    def rates(self, mode: str) -> tuple[int, ...]:
+        return self.modes.get(mode, ())
+
+    def describe(self) -> str:
+        return "; ".join(f"{m} at {', '.join(map(str, r))} Hz" for m, r in self.modes.items() if r) or "nothing"
+
+
+def refusal(name: str, capabilities: Capabilities, mode: str, sample_rate: int) -> str | None:
+    """One line saying why ``mode`` at ``sample_rate`` cannot run on the device ``name``, or None if it can."""
+    rates = capabilities.rates(mode)
+    if not rates:
+        return f"{name} cannot run {mode} mode (it offers {capabilities.describe()})"
+    if sample_rate not in rates:
+        return (f"{name} cannot run {mode} mode at {sample_rate} Hz (it offers {capabilities.describe()}); "
+                f"choose --sample-rate {rates[0]}")
+    return None
+
+
+@dataclass
+class CycleSamples:
+    """One block of samples of a host-clocked device, in SI units at the load.
+
+    Attributes (1-D arrays of equal length):
+        cycle: cycle counter (SYNC or cyclic-message count since the stream started), int64.
+        host_time: host monotonic time at which the cycle's trigger (SYNC) was sent, s.
+        counts: encoder counts, unwrapped, int64.
+        current_cmd: commanded current, A (the torque command divided by the host's torque constant).
+        current_meas: measured current, A (measured torque divided by the torque constant).
+        torque_cmd, torque: commanded and measured motor torque at the load, N*m.
+        position: load angle, rad; velocity: load velocity the drive reports, rad/s.
+        status: the drive's status word per sample (CiA 402 0x6041; ODrive axis state), if it has one.
+        sample_rate: nominal cycle rate, Hz.
+    """
+
+    cycle: np.ndarray
+    host_time: np.ndarray
+    counts: np.ndarray
+    current_cmd: np.ndarray
+    current_meas: np.ndarray
+    torque_cmd: np.ndarray
+    torque: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    sample_rate: int
+    status: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.cycle)
+
+    @property
+    def index(self) -> np.ndarray:
+        return self.cycle
+
+    @property
+    def time(self) -> np.ndarray:
+        """Drive time of each sample, s: cycle / rate (the drive samples at each SYNC)."""
+        return self.cycle / self.sample_rate
+
+    def extra(self) -> dict[str, np.ndarray]:
+        """Channels beyond the device-clocked set, for the run file."""
+        out = {"host_time": self.host_time, "cycle": self.cycle.astype(np.float64), "velocity": self.velocity,
+               "torque_cmd": self.torque_cmd}
+        out["drive_status"] = (self.status if self.status is not None else np.zeros(len(self))).astype(np.float64)
+        return out
+
+
+#: Run-file channels a host-clocked device adds: catalogue channels and custom ones (name: unit).
+HOST_CLOCKED_CHANNELS = ("velocity", "torque_cmd")
+HOST_CLOCKED_CUSTOM = {"host_time": "s", "cycle": "1", "drive_status": "1"}
+
+
+class Device(abc.ABC):
+    """A bench device. Subclasses set :attr:`clock`, :attr:`capabilities` and :attr:`name`."""
+
+    clock: str = "device"
+    capabilities: Capabilities = Capabilities()
+    name: str = "device"
+
+    @abc.abstractmethod
+    def info(self) -> dict:
+        """Identity of the device (model, serial, firmware...), JSON-able."""
+
+    @abc.abstractmethod
+    def configure(self, config) -> None:
+        """Send a :class:`drivers.protocol.Config` (rate, mode, limits, watchdog, calibration)."""
+
+    @abc.abstractmethod
+    def arm(self) -> None:
+        """Enable the power stage at zero torque."""
+
+    @abc.abstractmethod
+    def disarm(self) -> None:
+        """Zero the torque and disable the power stage."""
+
+    @abc.abstractmethod
+    def estop(self) -> None:
+        """Emergency stop (quick stop on a drive); safe from any thread."""
+
+    @abc.abstractmethod
+    def stream(self, setpoints) -> Iterator:
+        """Play ``setpoints`` (A in current mode, rad/s in velocity mode), one per sample; yield sample blocks."""
+
+    @abc.abstractmethod
+    def close(self) -> None:
+        """Disable and release the device. Idempotent."""
+
+    def run_events(self) -> list[tuple[str, str]]:
+        """(kind, one-line message) events for the run file once a stream has ended (timing, faults)."""
+        return []
+
+    def __enter__(self) -> Device:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -1,0 +1,314 @@
+"""Host-clocked cycles: the timing loop and its honest bookkeeping.
+
+A host-clocked drive buffers nothing; the host sends one trigger (SYNC, or a cyclic message) per period
+``T`` at the scheduled times ``t0 + k*T``. The loop never skips a setpoint: when it falls behind it sends
+the overdue cycles back to back, so every sample exists, but the drive held the previous torque for longer
+than ``T``. :func:`timing_summary` turns the host timestamps into the figures the run file keeps.
+
+Definitions (``d_k = host_time[k+1] - host_time[k]``, the cycle time the drive saw, give or take the bus):
+
+- cycle-time p50, p99, max: percentiles of ``d_k``;
+- **missed** cycles: scheduled trigger slots that stayed empty, ``sum(max(0, round(d_k/T) - 1))``;
+- **late** cycles: triggers sent more than ``LATE_FRACTION*T`` after their scheduled time;
+- **jitter**: p99 of ``|d_k - T|``. A run is unfit for identification when that exceeds ``JITTER_LIMIT*T``
+  or when more than ``MISSED_LIMIT`` of the cycles were missed: the plant then integrated a held torque
+  over a span the analysis (which takes ``t = k*T``) does not know about.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+LATE_FRACTION = 0.25
+JITTER_LIMIT = 0.10
+MISSED_LIMIT = 1e-3
+
+
+@dataclass(frozen=True)
+class TimingSummary:
+    """Timing of one host-clocked stream (times in s)."""
+
+    cycles: int
+    rate: float
+    p50: float
+    p99: float
+    max: float
+    missed: int
+    late: int
+    jitter_p99: float
+
+    @property
+    def fit(self) -> bool:
+        period = 1.0 / self.rate
+        return self.jitter_p99 <= JITTER_LIMIT * period and self.missed <= MISSED_LIMIT * max(self.cycles, 1)
+
+    def line(self) -> str:
+        """One line with the figures and the verdict."""
+        period = 1.0 / self.rate
+        figures = (f"host-clocked timing: {self.cycles} cycles at {self.rate:g} Hz; cycle p50 {self.p50 * 1e3:.3f} "
+                   f"ms, p99 {self.p99 * 1e3:.3f} ms, max {self.max * 1e3:.3f} ms; {self.missed} missed, "
+                   f"{self.late} late; jitter p99 {self.jitter_p99 * 1e6:.0f} us ({self.jitter_p99 / period:.1%} of T)")
+        if self.fit:
+            return figures + "; fit for identification"
+        return figures + (f"; UNFIT for identification (limits {JITTER_LIMIT:.0%} of T, "
+                          f"{MISSED_LIMIT:.1%} missed)")
+
+    def as_dict(self) -> dict:
+        return {"cycles": self.cycles, "rate_hz": self.rate, "cycle_time_p50_s": self.p50,
+                "cycle_time_p99_s": self.p99, "cycle_time_max_s": self.max, "missed": self.missed,
+                "late": self.late, "jitter_p99_s": self.jitter_p99, "fit_for_identification": self.fit}
+
+
+def timing_summary(host_time: np.ndarray, scheduled: np.ndarray, rate: float) -> TimingSummary:
+    """Figures of a stream from the host times its triggers went out and the times they were due (s)."""
+    host_time = np.asarray(host_time, dtype=np.float64)
+    period = 1.0 / rate
+    d = np.diff(host_time)
+    if d.size == 0:
+        return TimingSummary(int(host_time.size), rate, period, period, period, 0, 0, 0.0)
+    missed = int(np.maximum(np.rint(d / period) - 1, 0).sum())
+    late = int(np.count_nonzero(host_time - np.asarray(scheduled) > LATE_FRACTION * period))
+    return TimingSummary(int(host_time.size), rate, float(np.percentile(d, 50)), float(np.percentile(d, 99)),
+                         float(d.max()), missed, late, float(np.percentile(np.abs(d - period), 99)))
+
+
+@dataclass(frozen=True)
+class CanCycleSpec:
+    """What a host-clocked CAN cycle sends and collects.
+
+    ``tx_ids`` are sent in order each cycle, with payloads ``tx_data[k, j, :tx_len[j]]`` (uint8 array of
+    shape (n, len(tx_ids), 8)); ``stop_data`` replaces the payloads once an e-stop is requested;
+    ``end_data`` is sent once after the last cycle (e.g. zero torque). Frames with an id in ``rx_ids`` are
+    stored in arrival order from the first trigger on, one row per frame, with the host time it arrived
+    (a CiA 402 drive answers each SYNC with one frame per TPDO; an ODrive sends its own cyclic frames).
+    """
+
+    interface: str
+    channel: str
+    bus_kwargs: dict
+    rate: float
+    tx_ids: tuple[int, ...]
+    tx_len: tuple[int, ...]
+    rx_ids: tuple[int, ...]
+    stop_data: tuple[bytes, ...]
+    end_data: tuple[bytes, ...]
+
+
+_SENT, _STOP, _ESTOP, _ERROR, _REALTIME = 0, 1, 2, 3, 4  # control slots; rx counters follow from _RX
+_RX = 6
+RT_PRIORITY = 20  # SCHED_FIFO priority of the cycle process, where the OS allows it
+
+
+class CanCycle:
+    """A host-clocked CAN cycle run in a dedicated process (off this process's GIL), or in a thread for
+    python-can's in-process ``virtual`` bus. Shares its arrays with the caller through shared memory.
+
+    The cycle opens its own bus; it sends the frames of cycle k at ``t0 + k/rate``, sleeping in
+    ``bus.recv`` (select) until then, so receiving the drive's answers costs no extra thread.
+    """
+
+    def __init__(self, spec: CanCycleSpec, tx_data: np.ndarray, start_delay: float = 0.05) -> None:
+        from multiprocessing import shared_memory
+
+        self.spec = spec
+        n = len(tx_data)
+        self.n = n
+        m = len(spec.rx_ids)
+        layout = self._layout(n, len(spec.tx_ids), m)
+        size = layout[-1][1] + layout[-1][2]
+        self._shm = shared_memory.SharedMemory(create=True, size=max(size, 8))
+        self.arrays = self._view(self._shm.buf, n, len(spec.tx_ids), m)
+        self.arrays["tx"][:] = tx_data
+        self.arrays["ctl"][:] = 0
+        self._start_delay = start_delay
+        self._worker = None
+
+    @staticmethod
+    def _layout(n: int, ntx: int, m: int) -> list[tuple[str, int, int, tuple, str]]:
+        parts = [("ctl", (_RX + m,), "i8"), ("host_time", (n,), "f8"), ("scheduled", (n,), "f8"),
+                 ("rx", (m, n, 8), "u1"), ("rx_time", (m, n), "f8"), ("tx", (n, ntx, 8), "u1")]
+        out, offset = [], 0
+        for name, shape, dtype in parts:
+            nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
+            out.append((name, offset, nbytes, shape, dtype))
+            offset += (nbytes + 7) // 8 * 8
+        return out
+
+    @classmethod
+    def _view(cls, buf, n: int, ntx: int, m: int) -> dict[str, np.ndarray]:
+        return {name: np.ndarray(shape, dtype, buffer=buf, offset=offset)
+                for name, offset, _, shape, dtype in cls._layout(n, ntx, m)}
+
+    def start(self) -> None:
+        import os
+
+        own = self.spec.interface != "virtual"
+        args = (self.spec, self._shm.name, self.n, self._start_delay, os.getpid() if own else 0)
+        if self.spec.interface == "virtual":
+            import threading
+
+            self._worker = threading.Thread(target=_cycle_main, args=args, name="can-cycle", daemon=True)
+        else:
+            import multiprocessing
+
+            self._worker = multiprocessing.get_context("spawn").Process(target=_cycle_main, args=args,
+                                                                        name="can-cycle", daemon=True)
+        self._worker.start()
+
+    @property
+    def sent(self) -> int:
+        return int(self.arrays["ctl"][_SENT])
+
+    def received(self, j: int) -> int:
+        return int(min(self.arrays["ctl"][_RX + j], self.n))
+
+    @property
+    def realtime(self) -> bool:
+        """Whether the cycle ran with SCHED_FIFO priority."""
+        return bool(self.arrays["ctl"][_REALTIME])
+
+    @property
+    def error(self) -> int:
+        return int(self.arrays["ctl"][_ERROR])
+
+    def alive(self) -> bool:
+        return self._worker is not None and self._worker.is_alive()
+
+    def stop(self) -> None:
+        self.arrays["ctl"][_STOP] = 1
+
+    def estop(self) -> None:
+        self.arrays["ctl"][_ESTOP] = 1
+
+    def join(self, timeout: float = 5.0) -> None:
+        if self._worker is None:
+            return
+        self._worker.join(timeout)
+        if self._worker.is_alive() and hasattr(self._worker, "terminate"):
+            self._worker.terminate()
+            self._worker.join(1.0)
+
+    def close(self) -> None:
+        self.stop()
+        self.join()
+        self.arrays = {}
+        self._shm.close()
+        self._shm.unlink()
+
+
+def _cycle_main(spec: CanCycleSpec, shm_name: str, n: int, start_delay: float, parent: int) -> None:
+    """The cycle (in its own process, child of ``parent``, or in a thread when ``parent`` is 0): send,
+    record, receive, until n cycles, a stop, or the parent's death (then the triggers just stop, as
+    they would if the host itself ran them, and the drive's SYNC or heartbeat timeout takes over)."""
+    from multiprocessing import shared_memory
+
+    import can
+
+    shm = shared_memory.SharedMemory(name=shm_name)
+    try:
+        a = CanCycle._view(shm.buf, n, len(spec.tx_ids), len(spec.rx_ids))
+        ctl, host_time, scheduled, rx, tx = a["ctl"], a["host_time"], a["scheduled"], a["rx"], a["tx"]
+        rx_time = a["rx_time"]
+        if parent:
+            import gc
+
+            ctl[_REALTIME] = _realtime_priority()
+            gc.disable()  # no collector pauses in the cycle; it allocates nothing that lives on
+        try:
+            bus = can.Bus(interface=spec.interface, channel=spec.channel, **spec.bus_kwargs)
+        except Exception:
+            ctl[_ERROR] = 1
+            ctl[_STOP] = 1
+            return
+        try:
+            _cycle_loop(bus, spec, n, start_delay, ctl, host_time, scheduled, (rx, rx_time), tx, parent)
+        finally:
+            bus.shutdown()
+        del a, ctl, host_time, scheduled, rx, rx_time, tx
+    finally:
+        shm.close()
+
+
+def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_time, scheduled, received, tx,
+                parent: int) -> None:
+    import os
+
+    import can
+
+    slot = {cob: j for j, cob in enumerate(spec.rx_ids)}
+    counts = [0] * len(spec.rx_ids)
+    msgs = [can.Message(arbitration_id=cob, data=bytes(8)[:length], is_extended_id=cob > 0x7FF)
+            for cob, length in zip(spec.tx_ids, spec.tx_len, strict=True)]
+    stop_msgs, end_msgs = ([can.Message(arbitration_id=cob, data=d, is_extended_id=cob > 0x7FF)
+                            for cob, d in zip(spec.tx_ids, payloads, strict=True)]
+                           for payloads in (spec.stop_data, spec.end_data))
+    clock = time.monotonic
+    period = 1.0 / spec.rate
+
+    rx, rx_time = received
+
+    def take(msg) -> None:
+        j = slot.get(msg.arbitration_id)
+        if j is None or msg.is_remote_frame or not ctl[_SENT]:  # frames before the first trigger: not ours
+            return
+        k = counts[j]
+        if k < n:
+            rx[j, k, :len(msg.data)] = msg.data
+            rx_time[j, k] = clock()
+        counts[j] = k + 1
+        ctl[_RX + j] = k + 1
+
+    def wait_until(deadline: float) -> None:
+        while True:
+            left = deadline - clock()
+            if left <= 0:
+                return
+            msg = bus.recv(timeout=left)
+            if msg is not None:
+                take(msg)
+
+    t0 = clock() + start_delay
+    orphaned = False
+    for k in range(n):
+        if ctl[_STOP]:
+            break
+        if parent and os.getppid() != parent:
+            orphaned = True
+            break
+        due = t0 + k * period
+        wait_until(due)
+        if ctl[_ESTOP]:
+            for msg in stop_msgs:
+                bus.send(msg)
+        else:
+            for j, msg in enumerate(msgs):
+                msg.data = bytearray(tx[k, j, :spec.tx_len[j]])
+                bus.send(msg)
+        host_time[k] = clock()
+        scheduled[k] = due
+        ctl[_SENT] = k + 1
+    if orphaned:
+        return
+    for msg in stop_msgs if ctl[_ESTOP] else end_msgs:
+        bus.send(msg)
+    # the answers to the last triggers
+    end = clock() + max(1.0, 20 * period)
+    while min(counts or [0]) < ctl[_SENT] and clock() < end:
+        msg = bus.recv(timeout=max(0.0, end - clock()))
+        if msg is not None:
+            take(msg)
+    ctl[_STOP] = 1
+
+
+def _realtime_priority() -> int:
+    """Ask for SCHED_FIFO (1 if granted, 0 if the OS refuses: then the cycle runs at normal priority)."""
+    import os
+
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(RT_PRIORITY))
+        return 1
+    except (AttributeError, OSError):
+        return 0

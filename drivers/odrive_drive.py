@@ -1,0 +1,273 @@
+"""An ODrive axis over its CAN Simple protocol, in torque control.
+
+    with OdriveDrive("socketcan", "can0", node_id=0, tvl_endpoint=394) as drive:
+        drive.configure(Config(sample_rate=1000, current_limit=20.0, torque_constant=0.2))
+        drive.arm()
+        for block in drive.stream(setpoints_in_amperes):
+            use(block.time, block.position, block.torque, block.host_time)
+
+The host sends Set_Input_Torque once per cycle (host-clocked commands). The ODrive sends
+Get_Encoder_Estimates and Get_Torques as cyclic messages on its own timer (``encoder_msg_rate_ms`` and
+``torques_msg_rate_ms`` = 1 ms), so the samples are the drive's: sample k is its k-th cyclic pair after the
+stream's first command, ``t = k / rate``, with the host time it arrived. The torque channels are the drive's
+own torque target and estimate of that tick, not the host's command.
+
+Set-up: torque control with passthrough input (Set_Controller_Mode), limits (Set_Limits), and
+``controller.config.enable_torque_mode_vel_limit`` written to false with CAN Simple's RxSdo (endpoint id
+``tvl_endpoint`` from the firmware's flat_endpoints.json) and read back. With it on, ODrive scales the
+commanded torque down near ``vel_limit``, so the motor would not get the torque the run file records.
+Arming feeds ODrive's watchdog with zero-torque commands until the stream's own commands take over; errors
+come from the heartbeat and latch until Clear_Errors.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Iterator
+
+import numpy as np
+
+from hilbench.drivers import odrive_can as o
+from hilbench.drivers import protocol as p
+from hilbench.drivers.amplifier import check_setpoints
+from hilbench.drivers.device import Capabilities, CycleSamples, Device, refusal
+from hilbench.drivers.errors import CommandRefusedError, ConfigError, DeviceFaultError, DeviceTimeoutError, DriverError
+from hilbench.drivers.host_cycle import CanCycle, CanCycleSpec, TimingSummary, timing_summary
+
+FEED_PERIOD = 0.02  # s between watchdog feeds while armed and not streaming
+
+
+class OdriveDrive(Device):
+    """One ODrive axis at ``node_id`` (0..63) on a python-can bus."""
+
+    clock = "host"
+    capabilities = Capabilities({"current": (1000,)})
+
+    def __init__(self, interface: str, channel: str, node_id: int, tvl_endpoint: int, timeout: float = 2.0,
+                 **bus_kwargs) -> None:
+        import can
+
+        self.name = f"odrive://{interface}/{channel}?node={node_id}"
+        self.node_id, self.tvl_endpoint, self.timeout = node_id, tvl_endpoint, timeout
+        self.interface, self.channel, self.bus_kwargs = interface, channel, dict(bus_kwargs)
+        self.config: p.Config | None = None
+        self.axis_error = 0
+        self.axis_state = 0
+        self._heartbeat = threading.Event()
+        self._sdo: dict[int, int] = {}
+        self._sdo_event = threading.Event()
+        self._feed = None
+        self._cycle: CanCycle | None = None
+        self._timing: TimingSummary | None = None
+        self._closed = False
+        try:
+            self.bus = can.Bus(interface=interface, channel=channel, **bus_kwargs)
+        except Exception as exc:
+            raise DriverError(f"{self.name}: cannot open the CAN bus: {' '.join(str(exc).split())}") from exc
+        self.notifier = can.Notifier(self.bus, [self._on_message])
+        if not self._heartbeat.wait(timeout):
+            self.close()
+            raise DeviceTimeoutError(f"ODrive node {node_id} did not answer: no heartbeat (CAN id "
+                                     f"0x{o.can_id(node_id, o.Cmd.HEARTBEAT):03X}) within {timeout:g} s")
+
+    # ------------------------------------------------------------------ bus
+    def _on_message(self, msg) -> None:
+        node, cmd = o.split_id(msg.arbitration_id)
+        if node != self.node_id or msg.is_remote_frame:
+            return
+        if cmd == o.Cmd.HEARTBEAT and len(msg.data) >= 5:
+            self.axis_error, self.axis_state = o.HEARTBEAT.unpack(bytes(msg.data).ljust(8, b"\0"))[:2]
+            self._heartbeat.set()
+        elif cmd == o.Cmd.TX_SDO and len(msg.data) == 8:
+            _, endpoint, _, value = o.SDO.unpack(msg.data)
+            self._sdo[endpoint] = value
+            self._sdo_event.set()
+
+    def _send(self, cmd: o.Cmd, data: bytes = b"") -> None:
+        import can
+
+        self.bus.send(can.Message(arbitration_id=o.can_id(self.node_id, cmd), data=data, is_extended_id=False))
+
+    def _wait_heartbeat(self, ok, what: str) -> None:
+        deadline = time.monotonic() + self.timeout
+        while time.monotonic() < deadline:
+            self._heartbeat.clear()
+            self._heartbeat.wait(0.2)
+            if ok():
+                return
+        raise DeviceTimeoutError(f"ODrive node {self.node_id}: {what} not reported by its heartbeat within "
+                                 f"{self.timeout:g} s (axis state {self.axis_state}, errors: "
+                                 f"{o.describe_errors(self.axis_error)})")
+
+    def info(self) -> dict:
+        return {"protocol": "ODrive CAN Simple", "url": self.name, "node": self.node_id,
+                "axis_state": self.axis_state, "axis_error": f"0x{self.axis_error:08X}"}
+
+    def state(self) -> str:
+        return f"axis state {self.axis_state} ({o.describe_errors(self.axis_error)})"
+
+    def status(self) -> int:
+        return self.axis_state
+
+    # ------------------------------------------------------------------ Device API
+    def configure(self, config: p.Config) -> None:
+        problems = config.problems()
+        if problems:
+            raise ConfigError("; ".join(problems))
+        mode = "current" if config.mode == p.Mode.CURRENT else "velocity"
+        why = refusal(self.name, self.capabilities, mode, config.sample_rate)
+        if why:
+            raise ConfigError(why)
+        self._send(o.Cmd.SET_CONTROLLER_MODE, o.U32x2.pack(o.CONTROL_MODE_TORQUE, o.INPUT_MODE_PASSTHROUGH))
+        self._send(o.Cmd.SET_LIMITS, o.FLOAT2.pack(config.velocity_limit / (2 * math.pi), config.current_limit))
+        # enable_torque_mode_vel_limit off, then read back (it reshapes the commanded torque near vel_limit)
+        self._sdo.pop(self.tvl_endpoint, None)
+        self._send(o.Cmd.RX_SDO, o.SDO.pack(1, self.tvl_endpoint, 0, 0))
+        self._sdo_event.clear()
+        self._send(o.Cmd.RX_SDO, o.SDO.pack(0, self.tvl_endpoint, 0, 0))
+        if not self._sdo_event.wait(self.timeout) or self._sdo.get(self.tvl_endpoint) != 0:
+            raise CommandRefusedError(f"ODrive node {self.node_id}: enable_torque_mode_vel_limit (endpoint "
+                                      f"{self.tvl_endpoint}) did not read back as false")
+        self.config = config
+
+    def arm(self) -> None:
+        if self.config is None:
+            raise CommandRefusedError("configure() the drive before arming")
+        if self.axis_error:
+            raise DeviceFaultError(f"ODrive node {self.node_id}: {o.describe_errors(self.axis_error)}; "
+                                   f"call clear_faults() first")
+        self._start_feed()
+        self._send(o.Cmd.SET_AXIS_STATE, o.U32.pack(o.AxisState.CLOSED_LOOP_CONTROL))
+        self._wait_heartbeat(lambda: self.axis_state == o.AxisState.CLOSED_LOOP_CONTROL, "closed loop control")
+
+    def _start_feed(self) -> None:
+        import can
+
+        if self._feed is None:
+            msg = can.Message(arbitration_id=o.can_id(self.node_id, o.Cmd.SET_INPUT_TORQUE), data=o.FLOAT.pack(0.0),
+                              is_extended_id=False)
+            self._feed = self.bus.send_periodic(msg, FEED_PERIOD)
+
+    def _stop_feed(self) -> None:
+        if self._feed is not None:
+            self._feed.stop()
+            self._feed = None
+
+    def clear_faults(self) -> None:
+        self._send(o.Cmd.CLEAR_ERRORS)
+        self._wait_heartbeat(lambda: self.axis_error == 0, "no error")
+
+    def disarm(self) -> None:
+        if self._cycle is not None:
+            self._cycle.stop()
+        self._stop_feed()
+        self._send(o.Cmd.SET_INPUT_TORQUE, o.FLOAT.pack(0.0))
+        self._send(o.Cmd.SET_AXIS_STATE, o.U32.pack(o.AxisState.IDLE))
+
+    def estop(self) -> None:
+        cycle = self._cycle
+        if cycle is not None:
+            cycle.estop()
+        self._send(o.Cmd.ESTOP)
+
+    # ------------------------------------------------------------------ the cycle
+    def stream(self, setpoints, allow_loss: bool = False) -> Iterator[CycleSamples]:
+        """Send ``setpoints`` (A, as torque k_t*i) one per cycle; yield the drive's cyclic samples.
+
+        Raises :class:`DeviceFaultError`, after yielding every sample received, when the heartbeat reports
+        an axis error or the axis leaves closed loop control.
+        """
+        cfg = self.config
+        if cfg is None:
+            raise CommandRefusedError("configure() the drive before streaming")
+        values = check_setpoints(setpoints, cfg)
+        if self.axis_error or self.axis_state != o.AxisState.CLOSED_LOOP_CONTROL:
+            raise CommandRefusedError(f"cannot stream: ODrive node {self.node_id} is not in closed loop control "
+                                      f"({o.describe_errors(self.axis_error)}); call arm() first")
+        return self._stream(values)
+
+    def _stream(self, values: np.ndarray) -> Iterator[CycleSamples]:
+        cfg = self.config
+        n, rate = len(values), cfg.sample_rate
+        tx = np.zeros((n, 1, 8), np.uint8)
+        tx[:, 0, :4] = (values * cfg.torque_constant).astype("<f4").view(np.uint8).reshape(n, 4)
+        zero = o.FLOAT.pack(0.0)
+        spec = CanCycleSpec(self.interface, self.channel, self.bus_kwargs, float(rate),
+                            (o.can_id(self.node_id, o.Cmd.SET_INPUT_TORQUE),), (4,),
+                            (o.can_id(self.node_id, o.Cmd.GET_ENCODER_ESTIMATES),
+                             o.can_id(self.node_id, o.Cmd.GET_TORQUES)), (zero,), (zero,))
+        cycle = CanCycle(spec, tx)
+        self._cycle, self._timing = cycle, None
+        a = cycle.arrays
+        done, fault = 0, ""
+        self._stop_feed()  # the cycle's commands feed the watchdog now
+        try:
+            cycle.start()
+            while True:
+                time.sleep(0.02)
+                ended = not cycle.alive() or bool(a["ctl"][1])
+                if self.axis_error or self.axis_state != o.AxisState.CLOSED_LOOP_CONTROL:
+                    fault = f"{o.describe_errors(self.axis_error)} (axis state {self.axis_state})"
+                    cycle.stop()
+                    ended = True
+                if ended:
+                    cycle.join()
+                ready = min(cycle.received(0), cycle.received(1))
+                if ready > done:
+                    yield self._block(done, ready, a)
+                    done = ready
+                if ended:
+                    break
+            if cycle.error:
+                raise DriverError(f"{self.name}: the cycle process could not open the CAN bus")
+            if fault:
+                raise DeviceFaultError(f"ODrive node {self.node_id} stopped at sample {done}: {fault}")
+        finally:
+            cycle.stop()
+            cycle.join()
+            if cycle.sent:
+                self._timing = timing_summary(a["host_time"][:cycle.sent], a["scheduled"][:cycle.sent], rate)
+            self._cycle = None
+            cycle.close()
+            if not self._closed and not fault:
+                self._start_feed()
+
+    def _block(self, i: int, j: int, a: dict) -> CycleSamples:
+        cal_ratio, cfg = self.config.ratio, self.config
+        est = a["rx"][0, i:j].copy().view("<f4").reshape(j - i, 2).astype(np.float64)
+        torques = a["rx"][1, i:j].copy().view("<f4").reshape(j - i, 2).astype(np.float64) * cal_ratio
+        turns = est[:, 0]
+        counts = np.rint(turns * cfg.counts_per_rev).astype(np.int64)
+        return CycleSamples(np.arange(i, j, dtype=np.int64), a["rx_time"][0, i:j].copy(), counts,
+                            torques[:, 0] / (cfg.torque_constant * cal_ratio),
+                            torques[:, 1] / (cfg.torque_constant * cal_ratio), torques[:, 0], torques[:, 1],
+                            2 * math.pi * turns / cal_ratio, 2 * math.pi * est[:, 1] / cal_ratio, cfg.sample_rate,
+                            np.full(j - i, self.axis_state, np.uint16))
+
+    def run_events(self) -> list[tuple[str, str]]:
+        out = [("info", self._timing.line())] if self._timing is not None else []
+        if self.axis_error:
+            out.append(("fault", f"ODrive axis error 0x{self.axis_error:08X}: {o.describe_errors(self.axis_error)}"))
+        return out
+
+    @property
+    def timing(self) -> TimingSummary | None:
+        return self._timing
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if self.config is not None:
+                self.disarm()
+        except Exception:
+            pass
+        finally:
+            self._stop_feed()
+            if getattr(self, "notifier", None) is not None:
+                self.notifier.stop()
+            if getattr(self, "bus", None) is not None:
+                self.bus.shutdown()
