@@ -61,7 +61,7 @@ def test_identify_and_residual_read_the_same_channel_and_report_the_same_metric(
 
 def test_every_summary_number_has_a_unit(runs, capsys):
     assert main(["identify", str(runs / "a.h5"), "--json", str(runs / "m2.json"), "--coulomb"]) == 0
-    line = capsys.readouterr().out.splitlines()[0]
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if " J = " in ln)
     for part in ("J = ", "break-away ", "b = ", "Fc = "):
         number = re.search(re.escape(part) + r"(-?[\d.e+-]+) (\S+)", line)
         assert number, (part, line)
