@@ -4,7 +4,8 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.stamp-install
-C_SRC  := $(wildcard firmware_sim/*.c firmware_sim/*.h) firmware_sim/plant_build.py
+C_SRC  := $(wildcard firmware_sim/*.c firmware_sim/*.h firmware/core/*.[ch] firmware/targets/host/*.[ch]) \
+          firmware_sim/plant_build.py firmware/targets/host/core_build.py
 PKG    := $(wildcard hilbench/*.py)
 export QT_QPA_PLATFORM ?= offscreen
 
@@ -36,4 +37,4 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 
 clean:
-	rm -rf $(VENV) build *.egg-info firmware_sim/_plant*.so firmware_sim/_plant.c demo-out
+	rm -rf $(VENV) build *.egg-info firmware_sim/_plant*.so firmware_sim/_plant.c firmware_sim/_fwcore* demo-out
