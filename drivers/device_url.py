@@ -4,8 +4,9 @@
   (``serial://socket://host:7777``, ``serial://loop://``);
 - ``can://INTERFACE/CHANNEL?node=1&fd=1&bitrate=1000000`` -- any python-can interface
   (``can://socketcan/can0``, ``can://virtual/bench0``, ``can://pcan/PCAN_USBBUS1``);
-- ``sim://?pacing=lockstep&config=sim.toml&seed=3&tick=0.004`` -- starts the simulated amplifier as a
-  separate process (``python -m hilbench.firmware_sim --serial``) and connects to its pseudo-terminal.
+- ``sim://?pacing=lockstep&config=sim.toml&seed=3&tick=0.004&core=c`` -- starts the simulated amplifier as a
+  separate process (``python -m hilbench.firmware_sim --serial``) and connects to its pseudo-terminal;
+  ``core`` picks the device implementation (``c``: the firmware core, default; ``python``).
 """
 
 from __future__ import annotations
@@ -62,7 +63,7 @@ def open_device(url: str, timeout: float = 2.0) -> Amplifier:
         link = CanLink(parts.netloc, channel, _int(params, "node", 1, url), fd, **kwargs)
         return Amplifier(link, timeout=timeout)
     if scheme == "sim":
-        params = _query(urlsplit(url).query, {"pacing", "config", "seed", "tick"}, url)
+        params = _query(urlsplit(url).query, {"pacing", "config", "seed", "tick", "core"}, url)
         proc, path = start_simulator(params)
         try:
             link = SerialLink(path)
@@ -77,7 +78,7 @@ def start_simulator(options: dict[str, str]) -> tuple[subprocess.Popen, str]:
     """Start ``python -m hilbench.firmware_sim --serial`` with ``options`` (pacing, config, seed, tick) as flags;
     return the process and the pty path it printed."""
     cmd = [sys.executable, "-m", "hilbench.firmware_sim", "--serial", "--parent-pid", str(os.getpid())]
-    for key in ("pacing", "config", "seed", "tick"):
+    for key in ("pacing", "config", "seed", "tick", "core"):
         if key in options:
             cmd += [f"--{key}", options[key]]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)

@@ -94,7 +94,7 @@ size_t hb_frame_encode(uint8_t type, const uint8_t *payload, size_t n, uint8_t *
     uint8_t *raw = out + cap - (n + 6);
     raw[0] = HB_PROTOCOL_VERSION;
     raw[1] = type;
-    memmove(raw + 2, payload, n);
+    if (n) memmove(raw + 2, payload, n);
     hb_put_u32(raw + 2 + n, hb_crc32(0, raw, n + 2));
     size_t len = hb_cobs_encode(raw, n + 6, out);
     out[len] = 0;

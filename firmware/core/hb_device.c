@@ -161,7 +161,10 @@ static hb_real velocity_loop(hb_device *d, hb_real setpoint, hb_real position) {
     return i_cmd;
 }
 
+/* Append sample `index` to the block; a full block goes out only when the next sample arrives, so that
+ * the end of a stream can still mark its last sample. */
 static void record(hb_device *d, int64_t counts, hb_real cmd, hb_real meas, uint16_t status) {
+    if (d->block_n == d->setup.max_block) flush_block(d);
     if (!d->block_n) d->block_first = d->index;
     uint32_t i = d->block_n++;
     d->blk_counts[i] = (int32_t)(uint32_t)(uint64_t)counts;  /* counts modulo 2^32 on the wire */
@@ -170,7 +173,6 @@ static void record(hb_device *d, int64_t counts, hb_real cmd, hb_real meas, uint
     d->blk_status[i] = status;
     d->index++;
     d->current_applied = cmd;
-    if (d->block_n == d->setup.max_block) flush_block(d);
 }
 
 static hb_real encoder_position(const hb_device *d, int64_t counts) {
