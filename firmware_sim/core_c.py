@@ -50,15 +50,15 @@ class CoreDevice:
         self._host = ffi.new("hb_host *")
         h = self._host
         self._params = _CParams(sim.plant)  # keeps the arrays the C struct points to alive
-        ffi.memmove(ffi.addressof(h, "base"), plant_ffi.buffer(self._params.struct), ffi.sizeof("hb_params"))
+        ffi.memmove(ffi.addressof(h.sim, "base"), plant_ffi.buffer(self._params.struct), ffi.sizeof("hb_params"))
         for i, rate in enumerate(RATES):
             substeps = sim.substeps_at(rate)
             try:
                 validate(sim.plant, 1.0 / rate, substeps)
             except PlantParameterError:
                 substeps = 0  # CONFIG at this rate is refused (INVALID_CONFIG)
-            h.substeps_by_rate[i] = substeps
-        h.seed = int(sim.plant.seed)
+            h.sim.substeps_by_rate[i] = substeps
+        h.sim.seed = int(sim.plant.seed)
         self._strings = [ffi.new("char[]", s.encode()) for s in (sim.model, sim.serial, FIRMWARE_VERSION)]
         setup = ffi.new("hb_device_setup *")
         setup.model, setup.serial, setup.firmware = self._strings
@@ -83,7 +83,7 @@ class CoreDevice:
     def tick(self, now: float) -> None:
         """Run the sample clock up to ``now`` (s): the samples due, the watchdog."""
         lib.hb_device_tick(self._dev, _us(now))
-        if self._host.plant_failed:
+        if self._host.sim.plant_failed:
             raise FloatingPointError("plant state became non-finite; check the simulator's parameters")
 
     def take_bytes(self) -> bytes:

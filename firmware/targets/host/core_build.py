@@ -62,6 +62,11 @@ typedef struct {
     int substeps_by_rate[5];
     uint64_t seed;
     int plant_failed;
+    ...;
+} hb_plant_hal;
+
+typedef struct {
+    hb_plant_hal sim;
     size_t tx_len;
     uint32_t tx_dropped;
     uint32_t can_n;
@@ -87,7 +92,7 @@ size_t hb_frame_encode(uint8_t type, const uint8_t *payload, size_t n, uint8_t *
 """
 
 SOURCES = [*(f"firmware/core/{name}" for name in ("hb_codec.c", "hb_can.c", "hb_device.c")),
-           "firmware/targets/host/hb_host.c", "firmware_sim/plant.c"]
+           "firmware/targets/host/hb_host.c", "firmware/targets/plant/hb_plant_hal.c", "firmware_sim/plant.c"]
 
 ffibuilder = FFI()
 ffibuilder.cdef(CDEF)
@@ -95,7 +100,8 @@ ffibuilder.set_source(
     "hilbench.firmware_sim._fwcore",
     '#include "hb_host.h"',
     sources=SOURCES,
-    include_dirs=[str(CORE), str(HERE), str(PLANT_DIR)],
+    include_dirs=[str(CORE), str(HERE), str(HERE.parent / "plant"), str(PLANT_DIR)],
+    define_macros=[("HB_BUFFER_CAPACITY", "1048576")],  # the simulator's buffer_capacity may go up to 2**20
     extra_compile_args=["-O2", "-std=c99", "-ffp-contract=off", "-fno-fast-math", "-Wall", "-Wextra"],
     libraries=["m"],
 )

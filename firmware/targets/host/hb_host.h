@@ -8,7 +8,7 @@
 #include <stdint.h>
 
 #include "hb_device.h"
-#include "plant.h"
+#include "hb_plant_hal.h"
 
 #define HB_HOST_TX_BYTES (1 << 20)
 #define HB_HOST_CAN_FRAMES 32768
@@ -20,14 +20,7 @@ typedef struct {
 } hb_host_can_frame;
 
 typedef struct {
-    hb_params base;            /* the simulator's plant; CONFIG supplies current limit, k_t and cpr */
-    hb_params params;
-    hb_state plant;
-    int substeps_by_rate[5];   /* RK4 sub-steps at 1, 2, 5, 10, 20 kHz; 0 = the plant is unstable there */
-    uint64_t seed;
-    double dt;
-    int substeps;
-    int plant_failed;          /* the plant state became non-finite */
+    hb_plant_hal sim;          /* first: the core's hal pointer is also the plant HAL's */
     size_t tx_len;
     uint32_t tx_dropped;       /* frames that did not fit the queue */
     uint32_t can_n;
@@ -36,7 +29,7 @@ typedef struct {
     hb_host_can_frame can[HB_HOST_CAN_FRAMES];
 } hb_host;
 
-/* base, substeps_by_rate and seed are set by the caller first. */
+/* sim.base, sim.substeps_by_rate and sim.seed are set by the caller first. */
 void hb_host_init(hb_host *h, const hb_device_setup *setup);
 
 #endif
