@@ -5,6 +5,7 @@ extern uint32_t _sidata, _sdata, _edata, _sbss, _ebss, _estack;
 int main(void);
 void Reset_Handler(void);
 void SysTick_Handler(void);
+void UART0_RX_Handler(void);
 
 #define SCB_CPACR (*(volatile uint32_t *)0xE000ED88u)
 
@@ -13,11 +14,12 @@ static void Default_Handler(void) {
     }
 }
 
-__attribute__((section(".vectors"), used)) static const void *const vectors[16] = {
+__attribute__((section(".vectors"), used)) static const void *const vectors[17] = {
     &_estack, (void *)Reset_Handler, (void *)Default_Handler, (void *)Default_Handler, /* NMI, HardFault */
     (void *)Default_Handler, (void *)Default_Handler, (void *)Default_Handler,        /* MemManage, Bus, Usage */
     0, 0, 0, 0, (void *)Default_Handler, (void *)Default_Handler, 0,                   /* SVC, DebugMon */
     (void *)Default_Handler, (void *)SysTick_Handler,                                  /* PendSV, SysTick */
+    (void *)UART0_RX_Handler,                                                          /* IRQ 0: UART0 RX */
 };
 
 void Reset_Handler(void) {
