@@ -46,12 +46,13 @@ def missing_tools() -> str | None:
 
 
 def build_image(pacing: str = "lockstep", sim_config: str | None = None, build_dir: Path | None = None) -> Path:
-    """Cross-compile the mps2-an386 image for ``pacing``; returns the ELF path. ``sim_config``: the
-    simulator TOML whose plant the image embeds (default: the packaged one)."""
-    if pacing not in PACINGS:
-        raise ValueError(f"pacing must be one of {PACINGS}, got {pacing!r}")
+    """Cross-compile the mps2-an386 image for ``pacing`` (or ``"nucleo-f446re"``: the board port); returns
+    the ELF path. ``sim_config``: the simulator TOML whose plant the QEMU image embeds (default: the
+    packaged one)."""
+    if pacing not in (*PACINGS, "nucleo-f446re"):
+        raise ValueError(f"pacing must be one of {PACINGS} or nucleo-f446re, got {pacing!r}")
     build = Path(build_dir) if build_dir is not None else FIRMWARE / "build"
-    target = build / f"an386-{pacing}.elf"
+    target = build / (f"{pacing}.elf" if pacing == "nucleo-f446re" else f"an386-{pacing}.elf")
     cmd = ["make", "-s", "-C", str(FIRMWARE), f"BUILD={build}", f"PYTHON={sys.executable}", str(target)]
     if sim_config:
         cmd.append(f"SIM_CONFIG={Path(sim_config).resolve()}")

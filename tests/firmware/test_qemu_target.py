@@ -50,3 +50,12 @@ def test_identification_on_the_emulated_m4_equals_the_host_run(qemu, tmp_path):
     for channel, values in host_run.items():
         assert np.array_equal(qemu_run[channel], values), channel  # tolerance zero
     assert np.ptp(host_run["counts"]) > 50  # the motor turned: not a comparison of a motor at rest
+
+
+def test_board_port_builds_and_fits_the_f446re(lockstep_image):
+    elf = qemu_target.build_image("nucleo-f446re")
+    sizes = qemu_target.size(elf)
+    # STM32F446RE: 512 KiB flash, 128 KiB RAM of which the linker script keeps >= 4 KiB for the stack
+    assert 0 < sizes["flash"] <= 512 * 1024 and 0 < sizes["ram"] <= 124 * 1024, sizes
+    qemu = qemu_target.size(lockstep_image)
+    assert qemu["flash"] > sizes["flash"]  # the QEMU image also carries the plant and its libm
