@@ -104,3 +104,4 @@ def stop_qemu(proc: subprocess.Popen) -> None:
             proc.wait()
     if proc.stdout is not None:
         proc.stdout.close()
+
