@@ -4,9 +4,9 @@
    core through cffi against the Python firmware (``firmware_sim.firmware``), same plant and stream, same
    run. Lockstep pacing, current mode, 10 kHz, 60 000 samples (quick: 6 000). Twice: with the default
    plant (16 Maxwell-slip elements: the plant dominates) and with a bare inertia (the device's own cost).
-2. The highest sample rate the emulated Cortex-M4F (QEMU mps2-an386, realtime image, no -icount: the guest
-   clock follows the host's) sustains: 0 lost samples and the stream done within its nominal duration
-   + 10 % + 0.2 s. 2 s per rate (quick: only 1 kHz, 0.5 s). Measured twice: with the default plant (which
+2. The highest sample rate at which the emulated Cortex-M4F (QEMU mps2-an386, realtime image, no -icount:
+   the guest clock follows the host's) streams with 0 lost samples, and how long that stream took for its
+   nominal duration (1.0 = real time). 2 s per rate (quick: only 1 kHz, 0.5 s). Measured twice: with the default plant (which
    the image simulates in soft double precision, as a board would not) and with a bare inertia (the
    core's own capacity). Every received byte crosses QEMU's one-byte CMSDK UART (one QEMU main-loop pass
    per byte), so this is a property of the emulation on this host. Baseline: the protocol's highest rate,
@@ -78,7 +78,7 @@ def ns_per_sample_python(n: int, sim) -> float:
 
 
 def m4_sustains(elf, rate: int, seconds: float) -> tuple[bool, int, float]:
-    """Stream ``seconds`` at ``rate`` to the realtime image; (sustained, lost samples, wall time s)."""
+    """Stream ``seconds`` at ``rate`` to the realtime image; (0 lost, lost samples, wall time s)."""
     from hilbench.drivers import protocol as p
     from hilbench.drivers.device_url import open_device
     from hilbench.drivers.errors import DriverError
@@ -100,7 +100,7 @@ def m4_sustains(elf, rate: int, seconds: float) -> tuple[bool, int, float]:
         wall = time.perf_counter() - t0
         qemu_target.stop_qemu(proc)
     lost = n - received
-    return lost == 0 and wall <= seconds * 1.1 + 0.2, lost, wall
+    return lost == 0, lost, wall
 
 
 def m4_lockstep_rate(elf, n: int) -> float:
@@ -143,13 +143,14 @@ def run(quick: bool = False) -> list[dict]:
         bare_elf = qemu_target.build_image("realtime", str(toml), Path(tmp) / "build")
         seconds = 0.5 if quick else 2.0
         for label, image in (("default plant", elf), ("bare inertia", bare_elf)):
-            best = 0
+            best, stretch = 0, 0.0
             for rate in (1000,) if quick else (1000, 2000, 5000, 10000, 20000):
                 ok, lost, wall = m4_sustains(image, rate, seconds)
                 print(f"  QEMU M4 {label}, realtime {rate} Hz, {seconds:g} s: lost {lost} samples, wall {wall:.2f} s")
-                best = rate if ok else best
-            rows.append(_row(f"QEMU M4, {label}: highest rate, 0 lost, real time", best, "Hz",
-                             "protocol maximum", 20000))
+                if ok:
+                    best, stretch = rate, wall / seconds
+            rows.append(_row(f"QEMU M4, {label}: highest rate with 0 lost", best, "Hz", "protocol maximum", 20000))
+            rows.append(_row(f"QEMU M4, {label}: wall / nominal duration there", stretch, "x", "real time", 1.0))
     rows.append(_row("QEMU M4: lockstep throughput", m4_lockstep_rate(qemu_target.build_image("lockstep"),
                                                                       500 if quick else 4000),
                      "samples/s", "protocol maximum", 20000))
