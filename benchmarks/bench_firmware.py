@@ -6,11 +6,11 @@
    plant (16 Maxwell-slip elements: the plant dominates) and with a bare inertia (the device's own cost).
 2. The highest sample rate at which the emulated Cortex-M4F (QEMU mps2-an386, realtime image, no -icount:
    the guest clock follows the host's) streams with 0 lost samples, and how long that stream took for its
-   nominal duration (1.0 = real time). 2 s per rate (quick: only 1 kHz, 0.5 s). Measured twice: with the default plant (which
-   the image simulates in soft double precision, as a board would not) and with a bare inertia (the
-   core's own capacity). Every received byte crosses QEMU's one-byte CMSDK UART (one QEMU main-loop pass
-   per byte), so this is a property of the emulation on this host. Baseline: the protocol's highest rate,
-   20 kHz. Also the lockstep throughput (samples/s) of the default image.
+   nominal duration (1.0 = real time). 2 s per rate (quick: only 1 kHz, 0.5 s). Measured twice: with the
+   default plant (which the image simulates in soft double precision, as a board would not) and with a
+   bare inertia (the core's own capacity). Every received byte crosses QEMU's one-byte CMSDK UART (one
+   QEMU main-loop pass per byte), so this is a property of the emulation on this host. Baseline: the
+   protocol's highest rate, 20 kHz. Also the lockstep throughput (samples/s) of the default image.
 3. Flash (text + data) and RAM (data + bss) of the QEMU and Nucleo-F446RE images, from arm-none-eabi-size;
    baseline: the F446RE's 512 KiB flash and 128 KiB RAM.
 Parts 2 and 3 need the cross toolchain and QEMU (``make toolchain``); without them they report nothing.
