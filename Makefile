@@ -19,7 +19,7 @@ $(BIN)/python:
 
 $(STAMP): $(BIN)/python pyproject.toml setup.py $(C_SRC) $(PKG)
 	$(BIN)/python -m pip install --quiet -e ".[test]"
-	$(BIN)/python -c "import hilbench.firmware_sim._plant"   # the C extension is built and importable
+	$(BIN)/python -c "import hilbench.firmware_sim._plant, hilbench.firmware_sim._fwcore"  # C extensions built
 	touch $@
 
 setup: $(STAMP)
