@@ -80,14 +80,13 @@ def ns_per_sample_python(n: int, sim) -> float:
 def m4_sustains(elf, rate: int, seconds: float) -> tuple[bool, int, float]:
     """Stream ``seconds`` at ``rate`` to the realtime image; (0 lost, lost samples, wall time s)."""
     from hilbench.drivers import protocol as p
-    from hilbench.drivers.device_url import open_device
     from hilbench.drivers.errors import DriverError
     from hilbench.firmware_sim import qemu_target
 
     proc, pty = qemu_target.start_qemu(elf)
     n, received, t0 = int(seconds * rate), 0, time.perf_counter()
     try:
-        with open_device(f"serial://{pty}", timeout=5.0) as amp:
+        with qemu_target.open_target(pty) as amp:
             amp.configure(p.Config(sample_rate=rate, current_limit=5.0, torque_constant=0.2, watchdog_timeout=0.5))
             amp.arm()
             u = 1.0 * np.sin(2 * np.pi * 5.0 * np.arange(n) / rate)
@@ -106,12 +105,11 @@ def m4_sustains(elf, rate: int, seconds: float) -> tuple[bool, int, float]:
 def m4_lockstep_rate(elf, n: int) -> float:
     """Samples per second of wall time the lockstep image streams (1 kHz configuration, current mode)."""
     from hilbench.drivers import protocol as p
-    from hilbench.drivers.device_url import open_device
     from hilbench.firmware_sim import qemu_target
 
     proc, pty = qemu_target.start_qemu(elf)
     try:
-        with open_device(f"serial://{pty}", timeout=5.0) as amp:
+        with qemu_target.open_target(pty) as amp:
             amp.configure(p.Config(sample_rate=1000, current_limit=5.0, torque_constant=0.2, watchdog_timeout=0.5))
             amp.arm()
             t0 = time.perf_counter()

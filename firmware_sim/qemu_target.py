@@ -94,6 +94,22 @@ def start_qemu(elf: Path, icount: int | None = None) -> tuple[subprocess.Popen, 
         text += chunk
 
 
+def open_target(pty: str, timeout: float = 5.0, attempts: int = 3):
+    """``open_device("serial://PTY")`` for a QEMU just started. QEMU notices a host opening its pty on a
+    1 s timer and drops what the guest writes until then, so the first identity request may go
+    unanswered on a loaded machine: retried ``attempts`` times."""
+    from hilbench.drivers.device_url import open_device
+    from hilbench.drivers.errors import DeviceTimeoutError
+
+    for attempt in range(attempts):
+        try:
+            return open_device(f"serial://{pty}", timeout=timeout)
+        except DeviceTimeoutError:
+            if attempt == attempts - 1:
+                raise
+    raise AssertionError("not reached")
+
+
 def stop_qemu(proc: subprocess.Popen) -> None:
     if proc.poll() is None:
         proc.terminate()

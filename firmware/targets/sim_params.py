@@ -53,7 +53,7 @@ def header(path: str | None) -> str:
               f"#define SIM_VELOCITY_KI {c_double(sim.plant.velocity_ki)}",
               f"#define SIM_MODEL \"{sim.model}\"",
               f"#define SIM_SERIAL \"{sim.serial}\"",
-              f"#define SIM_CAPACITY {min(sim.buffer_capacity, 8192)}u", ""]
+              f"#define SIM_CAPACITY {sim.buffer_capacity}u", ""]  # the image's HB_BUFFER_CAPACITY caps it
     return "\n".join(lines)
 
 

@@ -8,6 +8,7 @@ import pytest
 
 from hilbench.bench.protocols import Identification
 from hilbench.bench.runner import Bench, DeviceSettings
+from hilbench.drivers.device_url import open_device
 from hilbench.firmware_sim import qemu_target
 
 pytestmark = pytest.mark.target
@@ -39,7 +40,8 @@ def test_identification_on_the_emulated_m4_equals_the_host_run(qemu, tmp_path):
     settings = DeviceSettings(counts_per_rev=4096)
     runs = {}
     for name, url in (("qemu", f"serial://{qemu}"), ("host", "sim://?pacing=lockstep")):
-        with Bench.open(url, settings, timeout=5.0) as bench:
+        amp = qemu_target.open_target(qemu) if name == "qemu" else open_device(url, timeout=5.0)
+        with Bench(amp, url, settings) as bench:
             if name == "qemu":
                 assert bench.identity()["firmware"].endswith("mps2-an386")
             result = bench.run(protocol, tmp_path / f"{name}.h5")
