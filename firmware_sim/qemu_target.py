@@ -107,6 +107,7 @@ def open_target(pty: str, timeout: float = 5.0, attempts: int = 3):
         except DeviceTimeoutError:
             if attempt == attempts - 1:
                 raise
+            time.sleep(1.0)
     raise AssertionError("not reached")
 
 
