@@ -112,13 +112,7 @@ def open_target(pty: str, timeout: float = 5.0, attempts: int = 3):
 
 
 def stop_qemu(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-    if proc.stdout is not None:
-        proc.stdout.close()
+    """Terminate QEMU and reap it (as a simulator process is stopped)."""
+    from hilbench.drivers.device_url import stop_simulator
 
+    stop_simulator(proc)
