@@ -4,11 +4,12 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.stamp-install
-C_SRC  := $(wildcard firmware_sim/*.c firmware_sim/*.h) firmware_sim/plant_build.py
+C_SRC  := $(wildcard firmware_sim/*.c firmware_sim/*.h firmware/core/*.[ch] firmware/targets/host/*.[ch] firmware/targets/plant/*.[ch]) \
+          firmware_sim/plant_build.py firmware/targets/host/core_build.py
 PKG    := $(wildcard hilbench/*.py)
 export QT_QPA_PLATFORM ?= offscreen
 
-.PHONY: all setup demo test bench lint clean
+.PHONY: all setup demo test bench lint clean toolchain firmware
 
 all: test
 
@@ -18,7 +19,7 @@ $(BIN)/python:
 
 $(STAMP): $(BIN)/python pyproject.toml setup.py $(C_SRC) $(PKG)
 	$(BIN)/python -m pip install --quiet -e ".[test]"
-	$(BIN)/python -c "import hilbench.firmware_sim._plant"   # the C extension is built and importable
+	$(BIN)/python -c "import hilbench.firmware_sim._plant, hilbench.firmware_sim._fwcore"  # C extensions built
 	touch $@
 
 setup: $(STAMP)
@@ -26,7 +27,27 @@ setup: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/hilbench demo -o demo-out
 
-test: $(STAMP)
+# The emulated Cortex-M target (tests marked `target`) needs a cross compiler, newlib and QEMU. They are
+# installed from Debian packages when missing and we may (root with apt-get); otherwise those tests skip
+# with one line naming the package.
+ARM_PACKAGES := gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm
+
+toolchain:
+	@missing=""; \
+	command -v arm-none-eabi-gcc >/dev/null 2>&1 || missing="$$missing gcc-arm-none-eabi"; \
+	[ -d /usr/lib/arm-none-eabi/newlib ] || missing="$$missing libnewlib-arm-none-eabi"; \
+	command -v qemu-system-arm >/dev/null 2>&1 || missing="$$missing qemu-system-arm"; \
+	if [ -z "$$missing" ]; then exit 0; fi; \
+	if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	  echo "installing$$missing"; \
+	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$missing) \
+	    >/dev/null || echo "could not install$$missing: the target tests will skip"; \
+	else echo "not root: the target tests will skip (apt-get install$$missing)"; fi
+
+firmware: $(STAMP) toolchain
+	$(MAKE) -C firmware qemu nucleo PYTHON=$(abspath $(BIN)/python)
+
+test: $(STAMP) toolchain
 	$(BIN)/python -m pytest -q -p no:cacheprovider
 
 bench: $(STAMP)
@@ -36,4 +57,4 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 
 clean:
-	rm -rf $(VENV) build *.egg-info firmware_sim/_plant*.so firmware_sim/_plant.c demo-out
+	rm -rf $(VENV) build *.egg-info firmware_sim/_plant*.so firmware_sim/_plant.c firmware_sim/_fwcore* firmware/build demo-out

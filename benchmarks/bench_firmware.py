@@ -1,0 +1,161 @@
+"""The firmware core: cost per sample on the host, the emulated Cortex-M4's highest real-time rate, image sizes.
+
+1. ns per sample of the device (decode setpoint frames, limits, plant step, encode sample frames), the C
+   core through cffi against the Python firmware (``firmware_sim.firmware``), same plant and stream, same
+   run. Lockstep pacing, current mode, 10 kHz, 60 000 samples (quick: 6 000). Twice: with the default
+   plant (16 Maxwell-slip elements: the plant dominates) and with a bare inertia (the device's own cost).
+2. The highest sample rate at which the emulated Cortex-M4F (QEMU mps2-an386, realtime image, no -icount:
+   the guest clock follows the host's) streams with 0 lost samples, and how long that stream took for its
+   nominal duration (1.0 = real time). 2 s per rate (quick: skipped; tests/firmware runs QEMU). Measured twice: with the
+   default plant (which the image simulates in soft double precision, as a board would not) and with a
+   bare inertia (the core's own capacity). Every received byte crosses QEMU's one-byte CMSDK UART (one
+   QEMU main-loop pass per byte), so this is a property of the emulation on this host. Baseline: the
+   protocol's highest rate, 20 kHz. Also the lockstep throughput (samples/s) of the default image.
+3. Flash (text + data) and RAM (data + bss) of the QEMU and Nucleo-F446RE images, from arm-none-eabi-size;
+   baseline: the F446RE's 512 KiB flash and 128 KiB RAM.
+Parts 2 and 3 need the cross toolchain and QEMU (``make toolchain``); without them they report nothing.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def _row(name, value, unit, baseline_name=None, baseline_value=None, target=None, ok=None) -> dict:
+    ratio = value / baseline_value if baseline_value else None
+    return {"name": name, "value": float(value), "unit": unit, "baseline_name": baseline_name,
+            "baseline_value": None if baseline_value is None else float(baseline_value), "ratio": ratio,
+            "target": target, "ok": ok}
+
+
+def _stream_blocks(n: int, max_block: int):
+    from hilbench.drivers import protocol as p
+
+    u = (2.0 * np.sin(2 * np.pi * 3.0 * np.arange(n) / 10000)).astype(np.float32)
+    return p.make_setpoint_blocks(u, max_block)
+
+
+def ns_per_sample_c(n: int, sim) -> float:
+    from hilbench.drivers import protocol as p
+    from hilbench.firmware_sim.core_c import CoreDevice
+
+    dev = CoreDevice(sim, "lockstep", max_block=512)
+    frames = [p.encode_frame(b) for b in _stream_blocks(n, 512)]
+    dev.rx_bytes(p.encode_frame(p.Config(sample_rate=10000, current_limit=5.0, torque_constant=0.2)), 0.0)
+    dev.rx_bytes(p.encode_frame(p.Arm()), 0.0)
+    dev.take_bytes()
+    t0 = time.perf_counter()
+    for i in range(0, len(frames), 8):  # credit: 8 blocks of 512 fit the 8192-sample buffer
+        for frame in frames[i: i + 8]:
+            dev.rx_bytes(frame, 0.0)
+        while dev.busy:
+            dev.tick(0.0)
+        dev.take_bytes()
+    return (time.perf_counter() - t0) / n * 1e9
+
+
+def ns_per_sample_python(n: int, sim) -> float:
+    from hilbench.drivers import protocol as p
+    from hilbench.firmware_sim.firmware import Firmware
+
+    fw = Firmware(sim, "lockstep", max_block=512)
+    frames = [p.encode_frame(b) for b in _stream_blocks(n, 512)]
+    fw.handle(p.Config(sample_rate=10000, current_limit=5.0, torque_constant=0.2), 0.0)
+    fw.handle(p.Arm(), 0.0)
+    decoder = p.FrameDecoder()
+    t0 = time.perf_counter()
+    for i in range(0, len(frames), 8):  # the same bytes in and out as the C core: decode, run, encode
+        for msg in decoder.feed(b"".join(frames[i: i + 8])):
+            fw.handle(msg, 0.0)
+        while fw.busy:
+            for msg in fw.advance(0.0):
+                p.encode_frame(msg)
+    return (time.perf_counter() - t0) / n * 1e9
+
+
+def m4_sustains(elf, rate: int, seconds: float) -> tuple[bool, int, float]:
+    """Stream ``seconds`` at ``rate`` to the realtime image; (0 lost, lost samples, wall time s)."""
+    from hilbench.drivers import protocol as p
+    from hilbench.drivers.errors import DriverError
+    from hilbench.firmware_sim import qemu_target
+
+    proc, pty = qemu_target.start_qemu(elf)
+    n, received, t0 = int(seconds * rate), 0, time.perf_counter()
+    try:
+        with qemu_target.open_target(pty) as amp:
+            amp.configure(p.Config(sample_rate=rate, current_limit=5.0, torque_constant=0.2, watchdog_timeout=0.5))
+            amp.arm()
+            u = 1.0 * np.sin(2 * np.pi * 5.0 * np.arange(n) / rate)
+            t0 = time.perf_counter()
+            for blk in amp.stream(u, allow_loss=True):
+                received += len(blk)
+    except DriverError:  # a fault or a timeout: what did not arrive is lost
+        pass
+    finally:
+        wall = time.perf_counter() - t0
+        qemu_target.stop_qemu(proc)
+    lost = n - received
+    return lost == 0, lost, wall
+
+
+def m4_lockstep_rate(elf, n: int) -> float:
+    """Samples per second of wall time the lockstep image streams (1 kHz configuration, current mode)."""
+    from hilbench.drivers import protocol as p
+    from hilbench.firmware_sim import qemu_target
+
+    proc, pty = qemu_target.start_qemu(elf)
+    try:
+        with qemu_target.open_target(pty) as amp:
+            amp.configure(p.Config(sample_rate=1000, current_limit=5.0, torque_constant=0.2, watchdog_timeout=0.5))
+            amp.arm()
+            t0 = time.perf_counter()
+            received = sum(len(b) for b in amp.stream(np.sin(np.arange(n) / 50.0), allow_loss=True))
+            return received / (time.perf_counter() - t0)
+    finally:
+        qemu_target.stop_qemu(proc)
+
+
+def run(quick: bool = False) -> list[dict]:
+    from hilbench.firmware_sim.sim_config import load_sim_config, sim_config_from_dict
+
+    n = 6000 if quick else 60000
+    rows = []
+    bare = sim_config_from_dict({"plant": {"preset": "none", "inertia": 1e-4, "viscous": 1e-3}})
+    for label, sim in (("default plant", load_sim_config()), ("bare inertia", bare)):
+        c_ns = ns_per_sample_c(n, sim)
+        py_ns = ns_per_sample_python(n, sim)
+        rows.append(_row(f"host, {label}: C core, ns per sample", c_ns, "ns", "Python firmware", py_ns))
+
+    from hilbench.firmware_sim import qemu_target
+
+    if qemu_target.missing_tools():
+        return rows
+    elf = qemu_target.build_image("realtime")
+    board = qemu_target.build_image("nucleo-f446re")
+    for name, image in (("QEMU mps2-an386 image (core + plant)", elf), ("Nucleo-F446RE image (core)", board)):
+        size = qemu_target.size(image)
+        rows.append(_row(f"{name}: flash", size["flash"], "bytes", "F446RE flash", 512 * 1024))
+        rows.append(_row(f"{name}: RAM", size["ram"], "bytes", "F446RE RAM", 128 * 1024))
+    if quick:
+        return rows
+    with tempfile.TemporaryDirectory() as tmp:
+        toml = Path(tmp) / "bare.toml"
+        toml.write_text('[plant]\npreset = "none"\ninertia = 1e-4\nviscous = 1e-3\n')
+        bare_elf = qemu_target.build_image("realtime", str(toml), Path(tmp) / "build")
+        seconds = 2.0
+        for label, image in (("default plant", elf), ("bare inertia", bare_elf)):
+            best, stretch = 0, 0.0
+            for rate in (1000, 2000, 5000, 10000, 20000):
+                ok, lost, wall = m4_sustains(image, rate, seconds)
+                print(f"  QEMU M4 {label}, realtime {rate} Hz, {seconds:g} s: lost {lost} samples, wall {wall:.2f} s")
+                if ok:
+                    best, stretch = rate, wall / seconds
+            rows.append(_row(f"QEMU M4, {label}: highest rate with 0 lost", best, "Hz", "protocol maximum", 20000))
+            rows.append(_row(f"QEMU M4, {label}: wall / nominal duration there", stretch, "x", "real time", 1.0))
+    rows.append(_row("QEMU M4: lockstep throughput", m4_lockstep_rate(qemu_target.build_image("lockstep"), 4000),
+                     "samples/s", "protocol maximum", 20000))
+    return rows

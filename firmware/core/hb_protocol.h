@@ -1,0 +1,133 @@
+/* hilbench protocol v1, device side: constants, wire structs, framing and the message codec.
+ *
+ * Byte layouts: docs/protocol.md. Everything is little-endian on the wire and is assembled byte by byte,
+ * so the code does not depend on the target's endianness or struct packing.
+ */
+#ifndef HB_PROTOCOL_H
+#define HB_PROTOCOL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#define HB_PROTOCOL_VERSION 1
+#define HB_MAX_FRAME 8192            /* decoded frame limit: version + type + payload + crc32, bytes */
+#define HB_MAX_PAYLOAD (HB_MAX_FRAME - 6)
+#define HB_COBS_MAX(n) ((n) + (n) / 254 + 2) /* encoded size of n bytes, delimiter included */
+
+enum hb_msg_type {
+    HB_ESTOP = 0x01, HB_DISARM = 0x02, HB_ARM = 0x03, HB_CLEAR_FAULTS = 0x04, HB_CONFIG = 0x05,
+    HB_GET_CONFIG = 0x06, HB_GET_IDENTITY = 0x07, HB_IDENTITY = 0x08, HB_HEARTBEAT = 0x09,
+    HB_STATUS = 0x0A, HB_REPLY = 0x0B, HB_SETPOINTS = 0x0C, HB_SAMPLES = 0x0D
+};
+enum hb_state { HB_UNCONFIGURED = 0, HB_DISARMED = 1, HB_ARMED = 2, HB_STREAMING = 3 };
+enum hb_fault {
+    HB_F_OVER_CURRENT = 0x01, HB_F_OVER_SPEED = 0x02, HB_F_POSITION_WINDOW = 0x04, HB_F_WATCHDOG = 0x08,
+    HB_F_BUFFER_UNDERRUN = 0x10, HB_F_ESTOP = 0x20
+};
+enum hb_sample_status { HB_S_ENABLED = 0x01, HB_S_FAULT = 0x02, HB_S_END = 0x04 };
+enum hb_result { HB_OK = 0, HB_FAULT_LATCHED = 1, HB_NOT_CONFIGURED = 2, HB_INVALID_CONFIG = 3, HB_BAD_STATE = 4 };
+enum hb_mode { HB_CURRENT = 0, HB_VELOCITY = 1 };
+
+#define HB_CONFIG_BYTES 65
+#define HB_STATUS_BYTES 63
+#define HB_SAMPLES_HEADER_BYTES 27
+#define HB_SAMPLE_BYTES 14
+
+/* CONFIG as on the wire (f64 values are kept as sent, so GET_CONFIG echoes them exactly). */
+typedef struct {
+    uint32_t sample_rate;     /* Hz */
+    uint8_t mode;             /* enum hb_mode */
+    double current_limit;     /* A */
+    double velocity_limit;    /* rad/s */
+    double position_min;      /* rad, may be -inf */
+    double position_max;      /* rad, may be +inf */
+    double watchdog_timeout;  /* s, 0 = off */
+    double torque_constant;   /* N*m/A */
+    uint32_t counts_per_rev;
+    double ratio;
+} hb_config;
+
+typedef struct {
+    uint32_t token;
+    uint8_t state;
+    uint16_t faults;
+    uint64_t index, received, fault_index, fault_silence;
+    uint32_t free;
+    float current_applied;    /* A */
+    uint32_t crc_errors, dropped_frames, rx_frames, tx_frames;
+} hb_status;
+
+typedef struct {
+    uint32_t seq, free;
+    uint64_t first_index, received;
+    uint16_t faults;
+    uint8_t state;
+} hb_samples_header;
+
+/* A decoded host message. For SETPOINTS, `values` points into the payload (n little-endian f32). */
+typedef struct {
+    uint8_t type;
+    uint32_t token;           /* HEARTBEAT */
+    uint32_t seq;             /* SETPOINTS */
+    uint8_t end;              /* SETPOINTS */
+    uint32_t n_values;        /* SETPOINTS */
+    const uint8_t *values;    /* SETPOINTS */
+    hb_config config;         /* CONFIG */
+} hb_msg;
+
+/* ---- little-endian fields ---- */
+void hb_put_u16(uint8_t *p, uint16_t v);
+void hb_put_u32(uint8_t *p, uint32_t v);
+void hb_put_u64(uint8_t *p, uint64_t v);
+void hb_put_f32(uint8_t *p, float v);
+void hb_put_f64(uint8_t *p, double v);
+uint16_t hb_get_u16(const uint8_t *p);
+uint32_t hb_get_u32(const uint8_t *p);
+uint64_t hb_get_u64(const uint8_t *p);
+float hb_get_f32(const uint8_t *p);
+double hb_get_f64(const uint8_t *p);
+
+/* ---- CRC-32 (IEEE 802.3, reflected, init and final xor 0xFFFFFFFF: zlib.crc32) ---- */
+uint32_t hb_crc32(uint32_t crc, const uint8_t *data, size_t n);
+
+/* ---- COBS ---- */
+/* Encode n bytes into out (HB_COBS_MAX(n) - 1 bytes suffice); no delimiter. Returns the encoded length. */
+size_t hb_cobs_encode(const uint8_t *in, size_t n, uint8_t *out);
+/* Decode n bytes (no delimiter) into out (n bytes suffice). Returns the length, or -1 for bad COBS. */
+long hb_cobs_decode(const uint8_t *in, size_t n, uint8_t *out);
+
+/* Serial frame: COBS(version | type | payload | crc32) 0x00 into out. Returns the bytes written, or 0 if
+ * the payload is too long. out needs HB_COBS_MAX(n + 6) bytes. */
+size_t hb_frame_encode(uint8_t type, const uint8_t *payload, size_t n, uint8_t *out);
+
+/* Streaming frame decoder: feed bytes; complete valid frames come back one at a time. */
+typedef struct {
+    uint32_t len;             /* bytes of the current encoded frame */
+    uint8_t discarding;       /* inside an oversize frame: drop until the next 0x00 */
+    uint32_t crc_errors;      /* frames rejected: COBS, CRC, version, payload, oversize */
+    uint32_t frames;          /* valid frames */
+    uint8_t enc[HB_COBS_MAX(HB_MAX_FRAME)];
+    uint8_t raw[HB_COBS_MAX(HB_MAX_FRAME)];
+} hb_frame_decoder;
+
+void hb_frame_decoder_init(hb_frame_decoder *d);
+/* Consume bytes from *data until one frame is complete. Returns 1 with the frame's type and payload
+ * (pointing into d->raw, valid until the next call) or 0 when the bytes ran out. */
+int hb_frame_decoder_next(hb_frame_decoder *d, const uint8_t **data, size_t *n, uint8_t *type,
+                          const uint8_t **payload, size_t *len);
+
+/* ---- messages ---- */
+/* Decode a message addressed to the device; device-to-host types are checked for their layout and
+ * returned as is. Returns 0, or -1 for an unknown type or a payload that does not fit its type. */
+int hb_msg_decode(uint8_t type, const uint8_t *payload, size_t n, hb_msg *msg);
+void hb_config_encode(const hb_config *c, uint8_t *out);            /* HB_CONFIG_BYTES */
+void hb_config_decode(const uint8_t *in, hb_config *c);
+int hb_config_valid(const hb_config *c);                            /* 1 = valid */
+void hb_status_encode(const hb_status *s, uint8_t *out);            /* HB_STATUS_BYTES */
+void hb_reply_encode(uint8_t request, uint8_t result, uint16_t faults, uint8_t *out); /* 4 bytes */
+/* IDENTITY; strings are cut at 255 bytes. Returns the payload length. out needs 3*256 + 8 bytes. */
+size_t hb_identity_encode(const char *model, const char *serial, const char *firmware, uint32_t capacity,
+                          uint16_t max_block, uint8_t *out);
+void hb_samples_header_encode(const hb_samples_header *h, uint8_t *out); /* HB_SAMPLES_HEADER_BYTES */
+
+#endif

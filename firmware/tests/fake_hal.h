@@ -1,0 +1,30 @@
+/* A scripted HAL for the core's unit tests: the encoder reads a script (or holds), the measured current
+ * is the last applied command times `gain`, and every write is captured. */
+#ifndef FAKE_HAL_H
+#define FAKE_HAL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "hb_device.h"
+
+#define FAKE_TX (1 << 20)
+#define FAKE_SCRIPT 8192
+
+typedef struct {
+    int64_t script[FAKE_SCRIPT];  /* counts of sample k (holds the last entry beyond n_script) */
+    size_t n_script;
+    size_t measured;              /* samples measured (the index into the script) */
+    double gain;                  /* measured current = gain * last applied current, A */
+    double applied;               /* last applied current, A */
+    int enabled;
+    int configured;
+    size_t tx_len;
+    uint8_t tx[FAKE_TX];
+    uint32_t can_frames;
+    uint16_t can_id[4096];
+    uint8_t can_len[4096];
+    uint8_t can_data[4096][64];
+} fake_hal;
+
+#endif
