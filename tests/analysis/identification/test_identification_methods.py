@@ -85,6 +85,8 @@ def test_model_file_round_trip_and_plots(tmp_path):
         "train_residuals.png",
         "validation_fit.png",
         "validation_residuals.png",
+        "train_hysteresis.png",
+        "validation_hysteresis.png",
     }
     assert all(f.stat().st_size > 1000 for f in files)
 
