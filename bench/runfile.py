@@ -1081,8 +1081,12 @@ def channel_summary(run: Run, names: Iterable[str] | None = None) -> list[dict[s
     out = []
     for name in names or run.channels:
         data = run.channel(name)
-        finite = data[np.isfinite(data)] if data.dtype.kind == "f" else data
         row: dict[str, Any] = {"name": name, "unit": run.unit(name), "n": int(data.size)}
+        if data.dtype.kind not in "biuf":  # a foreign file may hold text or compound data: shown, not summed
+            row.update(min=None, max=None, mean=None, non_finite=0, not_numeric=str(data.dtype))
+            out.append(row)
+            continue
+        finite = data[np.isfinite(data)] if data.dtype.kind == "f" else data
         if finite.size:
             row.update(min=float(finite.min()), max=float(finite.max()), mean=float(finite.mean()))
         else:

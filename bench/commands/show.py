@@ -83,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
             lines.append(
                 f"  {c['name']:<14}{c['unit']:<9}{c['n']:>10}{_fmt(c['min']):>14}{_fmt(c['max']):>14}"
                 f"{_fmt(c['mean']):>14}" + (f"  ({c['non_finite']} non-finite)" if c["non_finite"] else "")
+                + (f"  (not numeric: {c['not_numeric']})" if "not_numeric" in c else "")
             )
         lines.append(f"events: {len(events)}")
         for e in events[: max(args.events, 0)]:

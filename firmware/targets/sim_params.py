@@ -11,7 +11,8 @@ from hilbench.firmware_sim.sim_config import load_sim_config
 
 ARRAYS = {"ms_stiffness": "n_elements", "ms_delta": "n_elements", "cogging_order": "n_cogging",
           "cogging_amplitude": "n_cogging", "cogging_phase": "n_cogging", "restoring_x": "n_restoring",
-          "restoring_f": "n_restoring", "damping_v": "n_damping", "damping_f": "n_damping"}
+          "restoring_f": "n_restoring", "damping_v": "n_damping", "damping_f": "n_damping",
+          "gms_k": "gms_n", "gms_alpha": "gms_n"}
 
 
 def c_double(value: float) -> str:

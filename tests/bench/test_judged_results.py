@@ -158,3 +158,19 @@ def test_skeleton_never_returns_a_negative_stiffness_silently(tmp_path, capsys):
     assert "warning: k_eq < 0 in" in err and doc["warnings"] and "--spring 4 N*m/rad" in doc["warnings"][0]
     assert main(["skeleton", str(path), "--mass", "1", "--spring", "50"]) == 2  # ... and with no bin positive
     assert "k_eq < 0 in every amplitude bin" in capsys.readouterr().err
+
+
+def test_show_lists_a_string_typed_channel_without_a_traceback(runs, tmp_path, capsys):
+    # #12 item 11: a string-typed channel made `show` end in a numpy traceback
+    text = tmp_path / "text.h5"
+    with h5py.File(runs / "a.h5", "r") as f:
+        n = f["samples"]["torque"].shape[0]
+    _poison(runs / "a.h5", text, "torque", np.array([b"abc"] * n))
+    assert main(["show", str(text)]) == 0
+    out = capsys.readouterr().out
+    row = next(ln for ln in out.splitlines() if ln.strip().startswith("torque"))
+    assert "not numeric: |S3" in row, row
+    assert main(["show", str(text), "--json", "-"]) == 0
+    rows = {c["name"]: c for c in json.loads(capsys.readouterr().out)["channels"]}
+    assert rows["torque"]["not_numeric"] == "|S3" and rows["torque"]["mean"] is None
+    assert rows["position"]["mean"] is not None

@@ -5,17 +5,11 @@ model's structure, so its figure must land near the published one."""
 from __future__ import annotations
 
 import json
-import os
-from pathlib import Path
 
 import pytest
 
 from hilbench.bench.cli import main
-
-ROOT = os.environ.get("HILBENCH_REAL_DATA")
-EMPS = Path(ROOT) / "emps" if ROOT else None
-pytestmark = pytest.mark.skipif(EMPS is None or not (EMPS / "DATA_EMPS.mat").is_file(),
-                                reason="EMPS data not available (set HILBENCH_REAL_DATA to the real-data folder)")
+from tests.real_data import EMPS  # vendored: this test always runs
 
 
 def test_emps_report_gives_the_published_metric(tmp_path, capsys):
