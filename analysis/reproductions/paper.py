@@ -96,10 +96,13 @@ class PaperSettings:
     motor_frequencies: int = 25  # log-spaced in [5, 500] Hz
     motor_chirp_torques: tuple[float, ...] = MOTOR_CHIRP_TORQUES
     motor_afrf_torques: tuple[float, ...] = MOTOR_AFRF_TORQUES
+    continuous_levels: tuple[float, ...] = CONTINUOUS_LEVELS
 
     @classmethod
     def quick(cls) -> PaperSettings:
+        levels = (0.2, 0.5, 1.0, 2.0, 3.0, 5.0, 10.0, 20.0)
         return cls(
+            levels=levels,
             afrf_amplitudes=(0.1, 0.5, 1.0, 2.0, 10.0),
             afrf_frequencies=10,
             motor_frequencies=10,
@@ -334,8 +337,8 @@ def continuous_curve_check(s: PaperSettings, progress: Callable[[str], None] = p
     """The skeleton of the paper's system with ``CONTINUOUS_ELEMENTS`` elements against the continuous closed
     forms k_eq = 2h*sqrt(d)/(d+A)^1.5 and E = 4hA^3/(d+A)^2 (same chirps, composition and bins)."""
     params = paper_system(CONTINUOUS_ELEMENTS)
-    progress(f"  continuous-curve check: {CONTINUOUS_ELEMENTS} elements, {len(CONTINUOUS_LEVELS)} chirps")
-    runs = [chirp_analysis(params, g, s.rate, s.duration, s.fs).result for g in CONTINUOUS_LEVELS]
+    progress(f"  continuous-curve check: {CONTINUOUS_ELEMENTS} elements, {len(s.continuous_levels)} chirps")
+    runs = [chirp_analysis(params, g, s.rate, s.duration, s.fs).result for g in s.continuous_levels]
     curves = compose(runs, n_bins=s.n_bins)
     return skeleton_errors(curves, params, check_from=CONTINUOUS_CHECK_FROM)
 

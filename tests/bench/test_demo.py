@@ -8,7 +8,7 @@ from hilbench.bench.cli import main
 
 def test_demo_runs_everything_and_finds_the_undeclared_cogging(tmp_path, capsys):
     tmp_path = tmp_path / "a+b &c=d"  # characters that mean something in a URL query (issue 12 item 12)
-    assert main(["demo", "-o", str(tmp_path)]) == 0
+    assert main(["demo", "-o", str(tmp_path), "--duration", "10"]) == 0  # 20 s by default; 10 s finds both
     for role in ("identification", "validation", "afrf"):
         assert read_run_file(tmp_path / "runs" / f"{role}.h5").status == "completed"
     model = json.loads((tmp_path / "model.json").read_text())
