@@ -132,3 +132,15 @@ def test_measured_displacement_follows_the_reference(presliding_run):
     hold = round(proto.settle * proto.sample_rate)
     settled = pos[turning["index"][1:] + hold]
     assert np.all(np.abs(settled - turning["position"][1:]) <= COUNT * 1.0001)
+
+
+def test_a_campaign_plays_presliding_with_gains_and_units(tmp_path, capsys):
+    toml = tmp_path / "c.toml"
+    toml.write_text('[defaults]\ndevice = "sim://?pacing=lockstep"\ncounts_per_rev = 65536\n'
+                    'position_kp = "2500 A/rad"\n\n[[run]]\nname = "pre"\nprotocol = "presliding"\n'
+                    'amplitudes = [4, 2, 1]\nrate = 20\nsettle = "0.02 s"\n')
+    assert main(["campaign", str(toml), "--check"]) == 0
+    assert "pre-1: presliding 1.2 s (12200 samples" in capsys.readouterr().out
+    toml.write_text(toml.read_text().replace('"0.02 s"', '"0.02 A"'))
+    assert main(["campaign", str(toml), "--check"]) == 2
+    assert "settle" in capsys.readouterr().err
