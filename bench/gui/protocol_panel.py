@@ -156,7 +156,13 @@ class DeviceSettingsForm(QtWidgets.QWidget):
         from hilbench.bench.runner import DeviceSettings
 
         super().__init__(parent)
-        defaults = DeviceSettings()
+        from hilbench.bench.errors import BenchError
+        from hilbench.bench.user_config import default_settings
+
+        try:  # the config file's [settings] (docs/cli.md); a bad file is reported by the CLI, not here
+            defaults = DeviceSettings(**default_settings())
+        except (BenchError, ValueError):
+            defaults = DeviceSettings()
         self.fields: dict[str, QtWidgets.QLineEdit] = {}
         form = QtWidgets.QFormLayout(self)
         for name, (unit, text) in DEVICE_OPTIONS.items():
