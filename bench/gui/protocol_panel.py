@@ -15,7 +15,8 @@ from hilbench.bench.protocols import PROTOCOLS, ParameterSpec, Protocol, Protoco
 
 #: forms build the setpoints (to run their checks) up to this many samples; longer runs are checked at start
 CHECK_SETPOINTS_UP_TO = 600_000
-TITLES = {"identification": "Identification", "chirp": "Chirp", "stepped_sine": "Stepped sine"}
+TITLES = {"identification": "Identification", "chirp": "Chirp", "stepped_sine": "Stepped sine",
+          "presliding": "Presliding"}
 
 
 def default_values(cls: type[Protocol]) -> dict[str, Any]:
