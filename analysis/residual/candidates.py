@@ -74,6 +74,16 @@ class Term:
         """Nonlinear settings to try (a 1-D grid), or [{}]; an empty list means nothing to fit."""
         return [{}]
 
+    needs_fit: bool = False  # settings depend on the current model's fit (``bind``)
+
+    def bind(self, nl: dict, model: list, fit: Fit) -> dict:
+        """A setting completed from the current model and its fit (for ``needs_fit`` terms)."""
+        return nl
+
+    def raw_force(self, run: RunData, nl: dict, coef: np.ndarray, setting: Setting) -> np.ndarray:
+        """This term's force at full rate, unfiltered, shape (n,), N*m or N (level terms only)."""
+        raise NotImplementedError(f"{self.name} has no raw force")
+
     refine_key: str | None = None  # scalar nonlinear setting refined by a parabola through the grid minimum
     refine_log: bool = False
 
@@ -129,6 +139,9 @@ class MaxwellSlip(Term):
     def static_level(self, coef):
         return float(coef[0])
 
+    def raw_force(self, run, nl, coef, setting):
+        return coef[0] * np.sign(run.velocity_fast) + run.stop_raw(setting.thresholds) @ coef[1:]
+
     def parameters(self, fit, nl, axis):
         u = _units(axis)
         c = fit.term_coef(self.name)
@@ -174,6 +187,9 @@ class Coulomb(_Scalar):
 
     def static_level(self, coef):
         return float(coef[0])
+
+    def raw_force(self, run, nl, coef, setting):
+        return coef[0] * np.sign(run.velocity_fast)
 
     def plant(self, fit, nl):
         return {"coulomb": float(fit.term_coef(self.name)[0])}
@@ -243,6 +259,10 @@ class Stribeck(Term):
     def static_level(self, coef):
         return float(coef[0])
 
+    def raw_force(self, run, nl, coef, setting):
+        v = run.velocity_fast
+        return coef[0] * np.sign(v) * np.exp(-((v / float(nl["v_s"])) ** 2))
+
     def settings(self, runs, diagnostics):
         speed = np.abs(np.concatenate([r.velocity_fast for r in runs]))
         lo, hi = np.percentile(speed, [3, 60])
@@ -263,17 +283,47 @@ class Stribeck(Term):
 
 
 class AsymmetricFriction(Term):
+    """Direction-dependent friction. Two ways a friction level can differ between the directions of motion:
+
+    - additively: Coulomb and viscous levels per direction (columns max(v,0), min(v,0), [v>0], -[v<0]); while
+      moving this is a symmetric level plus a constant, so on its own it cannot be told from ``offset``
+      except at rest;
+    - multiplicatively: the whole friction level scaled by (1 + a*sign(v)), presliding included
+      (column sign(v)*F_level[theta], F_level the start model's Coulomb-like and Maxwell-slip force with its
+      fitted coefficients held, the ``_level`` setting). Right after a reversal the elements still carry the
+      old direction's deflection, so the force there differs from a symmetric level plus a constant by up to
+      2*a*F_c: the presliding rows tell the two apart.
+    """
+
     name, main = "asymmetric_friction", "coulomb_difference"
-    physics = "direction-dependent friction: Coulomb level and viscous slope differ between directions"
+    physics = ("direction-dependent friction: Coulomb level, viscous slope and presliding force differ between "
+               "directions")
     diagnostics = ("direction",)
     replaces = ("viscous", "coulomb", "offset")
+    needs_fit = True
+
+    def bind(self, nl: dict, model: list, fit: Fit) -> dict:
+        level = [(t.name, dict(n), fit.term_coef(t.name).copy()) for t, n in model
+                 if t.name in ("maxwell_slip", "coulomb", "stribeck")]
+        return {**nl, "_level": level}
 
     def columns(self, run, nl, setting):
+        level = nl.get("_level", [])
+        key = tuple((n, c.tobytes()) for n, _, c in level) + (setting.thresholds.tobytes(),)
+
         def make():
             v = run.velocity_fast
-            return run.filt(np.column_stack([np.maximum(v, 0), np.minimum(v, 0), (v > 0) * 1.0,
-                                             -1.0 * (v < 0)]))
-        return run.cached(("asym",), make)
+            s = np.sign(v)
+            cols = [np.maximum(v, 0), np.minimum(v, 0), (v > 0) * 1.0, -1.0 * (v < 0)]
+            if level:
+                f = sum(REGISTRY[n].raw_force(run, n_nl, c, setting) for n, n_nl, c in level)
+                # the Coulomb-like part of F_level is already in the two direction columns
+                cols.append(s * (f - sum(_coulomb_like(n, n_nl, c, s, v) for n, n_nl, c in level)))
+            return run.filt(np.column_stack(cols))
+        return run.cached(("asym", key), make)
+
+    def lower(self, nl, q):
+        return np.array([0, 0, 0, 0, FREE][:q], float)
 
     def static_level(self, coef):
         return float(max(coef[2], coef[3]))
@@ -284,21 +334,33 @@ class AsymmetricFriction(Term):
         se = fit.term_se(self.name)
         d_c, d_b = np.array([0, 0, 1, -1.0]), np.array([1, -1.0, 0, 0])
         names = ("viscous_pos", "viscous_neg", "coulomb_pos", "coulomb_neg")
-        params = dict(zip(names, map(float, c), strict=True))
+        params = dict(zip(names, map(float, c[:4]), strict=True))
         params["coulomb_difference"] = float(c[2] - c[3])
         params["viscous_difference"] = float(c[0] - c[1])
         params["units"] = {"viscous_pos": u["viscous"], "viscous_neg": u["viscous"], "coulomb_pos": u["torque"],
                            "coulomb_neg": u["torque"], "coulomb_difference": u["torque"],
                            "viscous_difference": u["viscous"]}
-        unc = dict(zip(names, map(float, se), strict=True))
-        unc["coulomb_difference"] = float(np.sqrt(max(d_c @ cov @ d_c, 0)))
-        unc["viscous_difference"] = float(np.sqrt(max(d_b @ cov @ d_b, 0)))
+        unc = dict(zip(names, map(float, se[:4]), strict=True))
+        unc["coulomb_difference"] = float(np.sqrt(max(d_c[:4] @ cov[:4, :4] @ d_c[:4], 0)))
+        unc["viscous_difference"] = float(np.sqrt(max(d_b[:4] @ cov[:4, :4] @ d_b[:4], 0)))
+        if c.size > 4:
+            params["presliding_asymmetry"] = float(c[4])
+            params["units"]["presliding_asymmetry"] = "1"
+            unc["presliding_asymmetry"] = float(se[4])
         return params, unc
 
     def plant(self, fit, nl):
+        # the C plant has no direction-scaled presliding force: it is simulated with the additive part only
         c = fit.term_coef(self.name)
         return {"viscous": float(c[0]), "viscous_neg": float(c[1]), "coulomb": float(c[2]),
                 "coulomb_neg": float(c[3])}
+
+
+def _coulomb_like(name: str, nl: dict, coef: np.ndarray, s: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """The part of a level term's raw force that is a function of sign(v) alone (the Delta -> 0 element, F_c)."""
+    if name in ("maxwell_slip", "coulomb"):
+        return coef[0] * s
+    return np.zeros_like(v)
 
 
 def _harmonic_parameters(fit: Fit, name: str, nl: dict, axis: str) -> tuple[dict, dict]:
