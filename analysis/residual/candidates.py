@@ -265,7 +265,7 @@ class Stribeck(Term):
 
     def settings(self, runs, diagnostics):
         speed = np.abs(np.concatenate([r.velocity_fast for r in runs]))
-        lo, hi = np.percentile(speed, [3, 60])
+        lo, hi = np.percentile(speed, [3, 90])
         if not hi > lo > 0:
             return []
         return [{"v_s": float(v)} for v in np.geomspace(lo, hi, 14)]
@@ -303,24 +303,21 @@ class AsymmetricFriction(Term):
     needs_fit = True
 
     def bind(self, nl: dict, model: list, fit: Fit) -> dict:
-        level = [(t.name, dict(n), fit.term_coef(t.name).copy()) for t, n in model
-                 if t.name in ("maxwell_slip", "coulomb", "stribeck")]
-        return {**nl, "_level": level}
+        return _bind_level(nl, model, fit)
 
     def columns(self, run, nl, setting):
         level = nl.get("_level", [])
-        key = tuple((n, c.tobytes()) for n, _, c in level) + (setting.thresholds.tobytes(),)
 
         def make():
             v = run.velocity_fast
             s = np.sign(v)
             cols = [np.maximum(v, 0), np.minimum(v, 0), (v > 0) * 1.0, -1.0 * (v < 0)]
             if level:
-                f = sum(REGISTRY[n].raw_force(run, n_nl, c, setting) for n, n_nl, c in level)
                 # the Coulomb-like part of F_level is already in the two direction columns
-                cols.append(s * (f - sum(_coulomb_like(n, n_nl, c, s, v) for n, n_nl, c in level)))
+                cols.append(s * (_level_force(run, nl, setting)
+                                 - sum(_coulomb_like(n, n_nl, c, s, v) for n, n_nl, c in level)))
             return run.filt(np.column_stack(cols))
-        return run.cached(("asym", key), make)
+        return run.cached(("asym", _level_key(nl, setting)), make)
 
     def lower(self, nl, q):
         return np.array([0, 0, 0, 0, FREE][:q], float)
@@ -328,32 +325,72 @@ class AsymmetricFriction(Term):
     def static_level(self, coef):
         return float(max(coef[2], coef[3]))
 
+    @staticmethod
+    def _element_level(nl: dict, setting: Setting) -> float:
+        """Sliding force of the held level terms without their Coulomb-like part (the part the scaled column
+        multiplies), N*m or N."""
+        return _sliding_level(nl, setting) - sum(float(c[0]) for n, _, c in nl.get("_level", [])
+                                                 if n in LEVEL_TERMS)
+
+    def _gradients(self, fit, nl) -> dict:
+        """Each reported level as a linear function of the term's coefficients: while sliding the scaled column
+        adds a*L to the positive direction's level and takes it from the negative one's (L: _element_level)."""
+        q = fit.term_coef(self.name).size
+        big_l = self._element_level(nl, fit.setting) if q > 4 else 0.0
+        g = {"viscous_pos": [1, 0, 0, 0, 0], "viscous_neg": [0, 1, 0, 0, 0], "coulomb_pos": [0, 0, 1, 0, big_l],
+             "coulomb_neg": [0, 0, 0, 1, -big_l], "coulomb_difference": [0, 0, 1, -1, 2 * big_l],
+             "viscous_difference": [1, -1, 0, 0, 0]}
+        return {k: np.array(v[:q], float) for k, v in g.items()}
+
     def parameters(self, fit, nl, axis):
         u = _units(axis)
         c, cov = fit.term_coef(self.name), np.nan_to_num(fit.term_cov(self.name))
-        se = fit.term_se(self.name)
-        d_c, d_b = np.array([0, 0, 1, -1.0]), np.array([1, -1.0, 0, 0])
-        names = ("viscous_pos", "viscous_neg", "coulomb_pos", "coulomb_neg")
-        params = dict(zip(names, map(float, c[:4]), strict=True))
-        params["coulomb_difference"] = float(c[2] - c[3])
-        params["viscous_difference"] = float(c[0] - c[1])
+        params, unc = {}, {}
+        for key, g in self._gradients(fit, nl).items():
+            params[key] = float(g @ c)
+            unc[key] = float(np.sqrt(max(g @ cov @ g, 0.0)))
         params["units"] = {"viscous_pos": u["viscous"], "viscous_neg": u["viscous"], "coulomb_pos": u["torque"],
                            "coulomb_neg": u["torque"], "coulomb_difference": u["torque"],
                            "viscous_difference": u["viscous"]}
-        unc = dict(zip(names, map(float, se[:4]), strict=True))
-        unc["coulomb_difference"] = float(np.sqrt(max(d_c[:4] @ cov[:4, :4] @ d_c[:4], 0)))
-        unc["viscous_difference"] = float(np.sqrt(max(d_b[:4] @ cov[:4, :4] @ d_b[:4], 0)))
         if c.size > 4:
             params["presliding_asymmetry"] = float(c[4])
             params["units"]["presliding_asymmetry"] = "1"
-            unc["presliding_asymmetry"] = float(se[4])
+            unc["presliding_asymmetry"] = float(fit.term_se(self.name)[4])
         return params, unc
 
     def plant(self, fit, nl):
-        # the C plant has no direction-scaled presliding force: it is simulated with the additive part only
+        # the C plant has no direction-scaled presliding force: the sliding levels go to its Coulomb element
         c = fit.term_coef(self.name)
-        return {"viscous": float(c[0]), "viscous_neg": float(c[1]), "coulomb": float(c[2]),
-                "coulomb_neg": float(c[3])}
+        g = self._gradients(fit, nl)
+        return {"viscous": float(c[0]), "viscous_neg": float(c[1]), "coulomb": float(g["coulomb_pos"] @ c),
+                "coulomb_neg": float(g["coulomb_neg"] @ c)}
+
+
+LEVEL_TERMS = ("maxwell_slip", "coulomb", "stribeck")
+
+
+def _bind_level(nl: dict, model: list, fit: Fit) -> dict:
+    """``nl`` plus ``_level``: the current model's level terms (name, settings, fitted coefficients), held."""
+    return {**nl, "_level": [(t.name, dict(n), fit.term_coef(t.name).copy()) for t, n in model
+                             if t.name in LEVEL_TERMS or t.name.startswith("family_")]}
+
+
+def _level_key(nl: dict, setting: Setting) -> tuple:
+    return tuple((n, c.tobytes()) for n, _, c in nl.get("_level", [])) + (setting.thresholds.tobytes(),)
+
+
+def _level_force(run: RunData, nl: dict, setting: Setting) -> np.ndarray:
+    """The held level terms' force at full rate, unfiltered, shape (n,), N*m or N (zeros without any)."""
+    return sum((REGISTRY[n].raw_force(run, n_nl, c, setting) for n, n_nl, c in nl.get("_level", [])),
+               np.zeros(run.position.size))
+
+
+def _sliding_level(nl: dict, setting: Setting) -> float:
+    """The held level terms' force while sliding (Maxwell-slip: W_0 + sum k_j*Delta_j), N*m or N."""
+    out = 0.0
+    for n, _, c in nl.get("_level", []):
+        out += float(c[0] + c[1:] @ setting.thresholds) if n == "maxwell_slip" else float(c[0])
+    return out
 
 
 def _coulomb_like(name: str, nl: dict, coef: np.ndarray, s: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -431,13 +468,28 @@ class PositionPeriodic(Term):
 
 class PositionDependentFriction(PositionPeriodic):
     name = "position_dependent_friction"
-    physics = "friction level that varies with position (eccentricity, raceway waviness): sign(v)*A*sin(k*theta+phi)"
+    physics = ("friction level that varies with position (eccentricity, raceway waviness): the level force "
+               "F_level*(1 + (A/F_slide)*sin(k*theta+phi)), A*sin(k*theta+phi)*sign(v) while sliding")
     diagnostics = ("angle_spectrum_direction",)
     spectrum = "angle_spectrum_direction"
 
-    def _basis(self, run, k):
-        s = np.sign(run.velocity_fast)[:, None]
-        return s * np.column_stack([np.sin(k * run.position), np.cos(k * run.position)])
+    needs_fit = True
+
+    def bind(self, nl, model, fit):
+        return _bind_level(nl, model, fit)
+
+    def columns(self, run, nl, setting):
+        ks = tuple(nl["wavenumbers"])
+        norm = _sliding_level(nl, setting)
+
+        def make():
+            # the whole friction level scaled by (1 + m*sin(k*theta + phi)), presliding included: the held level
+            # force normalised to 1 while sliding (sign(v) when the model has no level term)
+            g = _level_force(run, nl, setting) / norm if norm > 0 else np.sign(run.velocity_fast)
+            return run.filt(np.column_stack([g[:, None] * np.column_stack([np.sin(k * run.position),
+                                                                           np.cos(k * run.position)])
+                                             for k in ks]))
+        return run.cached((self.name, ks, _level_key(nl, setting)), make)
 
     def plant(self, fit, nl):
         return {}  # the C plant has no position-dependent friction level; simulated without it
