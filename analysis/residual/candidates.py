@@ -16,11 +16,15 @@ reads m, m/s, N, kg):
 | offset | 1 | c0 (constant load; plant torque_offset = -c0) | free |
 | offset_drift | 1, t | c0, c1 (load c0 + c1*t) | free |
 | stribeck | sign(v)*exp(-(v/v_s)^2) | F_s - F_c; v_s searched | >= 0 |
-| asymmetric_friction | max(v,0), min(v,0), [v>0], -[v<0] | b+, b-, F_c+, F_c- | >= 0 |
+| asymmetric_friction | max(v,0), min(v,0), [v>0], -[v<0], sign(v)*F_el[theta] | b+-, F_c+- (>= 0), a | free a |
 | position_periodic | sin(k_n theta), cos(k_n theta) | A_n, phi_n: A_n*sin(k_n theta + phi_n) | free |
-| position_dependent_friction | sign(v)*sin(k_n theta), sign(v)*cos(k_n theta) | A_n, phi_n | free |
+| position_dependent_friction | g*sin(k_n theta), g*cos(k_n theta); g = F_level[theta]/F_slide | A_n, phi_n | free |
 | delay | (shifts the torque: tau(t - d)) | d, searched | >= 0 |
 | torque_gain | tau(t - d) | eps: applied torque (1 + eps)*tau | free |
+
+F_level is the current model's level force (Maxwell-slip elements and Coulomb element, Coulomb, Stribeck, or a
+start family's force) with its fitted coefficients held (``Term.bind``); F_el the same without the Coulomb-like
+part; F_slide its value while sliding. While sliding g = sign(v); in presliding g follows the elements.
 
 k_n is the spatial angular frequency in rad per unit position: on a rotary axis the harmonic order
 (cycles/rev); on a linear axis 2*pi/wavelength.
