@@ -47,12 +47,16 @@ def run(quick: bool = False) -> list[dict]:
     seeds = (1,) if quick else SEEDS
     outcomes = run_matrix(cases, seeds)
     right = sum(o.right for o in outcomes) / len(outcomes)
+    declared = sum(o.declared for o in outcomes)
     clean = [o for o in outcomes if o.case.startswith("clean-")]
     false_adds = sum(len(o.added) for o in clean)
     rows = [
         {"name": f"blind matrix exactly right ({len(cases)} cases x {len(seeds)} seeds)", "value": right,
          "unit": "fraction", "baseline_name": None, "baseline_value": None, "ratio": None, "target": ">= 0.9",
          "ok": right >= 0.9},
+        {"name": "wrong, but declared indistinguishable from the truth (not counted as right)",
+         "value": float(declared), "unit": "runs", "baseline_name": None, "baseline_value": None, "ratio": None,
+         "target": None, "ok": None},
         {"name": f"additions on clean data ({len(clean)} runs)", "value": float(false_adds), "unit": "effects",
          "baseline_name": None, "baseline_value": None, "ratio": None, "target": "0", "ok": false_adds == 0},
     ]
@@ -60,17 +64,20 @@ def run(quick: bool = False) -> list[dict]:
     duration = 10.0 if quick else 30.0
     truth = CASES["current-lag"][0] if quick else Truth(family="maxwell", cogging=(9.0, 0.06, 1.1), current_lag=0.003)
     seed = 1 if quick else 7
-    train = prepared(record(truth, seed, duration), "train")
-    valid = prepared(record(truth, seed + 1000, duration), "valid")
+    records = record(truth, seed, duration), record(truth, seed + 1000, duration)
+    t0 = time.perf_counter()
+    train, valid = prepared(records[0], "train"), prepared(records[1], "valid")
+    t_prep = time.perf_counter() - t0
     start = [(get_term(n), {}) for n in START]
     t0 = time.perf_counter()
     fit_model(start, [train], Setting(None, threshold_grid(train.position, 40)))
     t_fit = time.perf_counter() - t0
     t0 = time.perf_counter()
     residual_loop(train, valid, start=START, options=LoopOptions(sim_window=None))
-    t_loop = time.perf_counter() - t0
+    t_loop = time.perf_counter() - t0 + t_prep  # the case's whole analysis: both runs prepared, then the loop
     what = "lag" if quick else "cogging + lag"
-    rows.append({"name": f"loop time per case ({duration:.0f} s at 1 kHz, {what})", "value": t_loop,
+    rows.append({"name": f"time per case, preparing both runs + loop ({duration:.0f} s at 1 kHz, {what})",
+                 "value": t_loop,
                  "unit": "s", "baseline_name": "one start-model fit", "baseline_value": t_fit,
                  "ratio": t_loop / t_fit if t_fit > 0 else None, "target": "< 10 s", "ok": t_loop < 10.0})
     mean_case = sum(o.seconds for o in outcomes) / len(outcomes)
@@ -88,11 +95,14 @@ def main() -> None:
     print("|---|---|" + "---|" * len(SEEDS) + "---|")
     for case in CASES:
         row = [o for o in outcomes if o.case == case]
-        cells = [("right: " if o.right else "**wrong**: ") + (", ".join(o.added) or "nothing") for o in row]
+        cells = [("right: " if o.right else "**wrong, declared indistinguishable**: " if o.declared else
+                  "**wrong**: ") + (", ".join(o.added) or "nothing") for o in row]
         exp = ", ".join(sorted(row[0].expected)) or "nothing"
         print(f"| {case} | {exp} | " + " | ".join(cells) + f" | {max(o.seconds for o in row):.1f} |")
     n_right = sum(o.right for o in outcomes)
-    print(f"\nexactly right: {n_right}/{len(outcomes)} ({100 * n_right / len(outcomes):.1f} %)\n")
+    n_declared = sum(o.declared for o in outcomes)
+    print(f"\nexactly right: {n_right}/{len(outcomes)} ({100 * n_right / len(outcomes):.1f} %); wrong but declared "
+          f"indistinguishable from the truth (not counted as right): {n_declared}\n")
     table = confusion(outcomes)
     cols = ["runs", "found", "missed"] + sorted({k for row in table.values() for k in row if k.startswith("+")})
     print("| truth term | " + " | ".join(cols) + " |")

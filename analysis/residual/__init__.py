@@ -11,6 +11,7 @@ Modules: ``rundata`` (filtered rows of a run), ``design`` (joint bounded least s
 """
 
 from hilbench.analysis.residual.candidates import REGISTRY, Term, get_term, register
+from hilbench.analysis.residual.family_start import family_start
 from hilbench.analysis.residual.rundata import RunData, prepare_run
 from hilbench.analysis.residual.selection import (
     DEFAULT_START,
@@ -22,4 +23,4 @@ from hilbench.analysis.residual.selection import (
 )
 
 __all__ = ["DEFAULT_START", "EMPS_START", "NO_EFFECT", "REGISTRY", "LoopOptions", "LoopResult", "RunData", "Term",
-           "get_term", "prepare_run", "register", "residual_loop"]
+           "family_start", "get_term", "prepare_run", "register", "residual_loop"]

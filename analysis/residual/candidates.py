@@ -16,11 +16,15 @@ reads m, m/s, N, kg):
 | offset | 1 | c0 (constant load; plant torque_offset = -c0) | free |
 | offset_drift | 1, t | c0, c1 (load c0 + c1*t) | free |
 | stribeck | sign(v)*exp(-(v/v_s)^2) | F_s - F_c; v_s searched | >= 0 |
-| asymmetric_friction | max(v,0), min(v,0), [v>0], -[v<0] | b+, b-, F_c+, F_c- | >= 0 |
+| asymmetric_friction | max(v,0), min(v,0), [v>0], -[v<0], sign(v)*F_el[theta] | b+-, F_c+- (>= 0), a | free a |
 | position_periodic | sin(k_n theta), cos(k_n theta) | A_n, phi_n: A_n*sin(k_n theta + phi_n) | free |
-| position_dependent_friction | sign(v)*sin(k_n theta), sign(v)*cos(k_n theta) | A_n, phi_n | free |
+| position_dependent_friction | g*sin(k_n theta), g*cos(k_n theta); g = F_level[theta]/F_slide | A_n, phi_n | free |
 | delay | (shifts the torque: tau(t - d)) | d, searched | >= 0 |
 | torque_gain | tau(t - d) | eps: applied torque (1 + eps)*tau | free |
+
+F_level is the current model's level force (Maxwell-slip elements and Coulomb element, Coulomb, Stribeck, or a
+start family's force) with its fitted coefficients held (``Term.bind``); F_el the same without the Coulomb-like
+part; F_slide its value while sliding. While sliding g = sign(v); in presliding g follows the elements.
 
 k_n is the spatial angular frequency in rad per unit position: on a rotary axis the harmonic order
 (cycles/rev); on a linear axis 2*pi/wavelength.
@@ -73,6 +77,16 @@ class Term:
     def settings(self, runs: list[RunData], diagnostics: dict) -> list[dict]:
         """Nonlinear settings to try (a 1-D grid), or [{}]; an empty list means nothing to fit."""
         return [{}]
+
+    needs_fit: bool = False  # settings depend on the current model's fit (``bind``)
+
+    def bind(self, nl: dict, model: list, fit: Fit) -> dict:
+        """A setting completed from the current model and its fit (for ``needs_fit`` terms)."""
+        return nl
+
+    def raw_force(self, run: RunData, nl: dict, coef: np.ndarray, setting: Setting) -> np.ndarray:
+        """This term's force at full rate, unfiltered, shape (n,), N*m or N (level terms only)."""
+        raise NotImplementedError(f"{self.name} has no raw force")
 
     refine_key: str | None = None  # scalar nonlinear setting refined by a parabola through the grid minimum
     refine_log: bool = False
@@ -129,6 +143,9 @@ class MaxwellSlip(Term):
     def static_level(self, coef):
         return float(coef[0])
 
+    def raw_force(self, run, nl, coef, setting):
+        return coef[0] * np.sign(run.velocity_fast) + run.stop_raw(setting.thresholds) @ coef[1:]
+
     def parameters(self, fit, nl, axis):
         u = _units(axis)
         c = fit.term_coef(self.name)
@@ -174,6 +191,9 @@ class Coulomb(_Scalar):
 
     def static_level(self, coef):
         return float(coef[0])
+
+    def raw_force(self, run, nl, coef, setting):
+        return coef[0] * np.sign(run.velocity_fast)
 
     def plant(self, fit, nl):
         return {"coulomb": float(fit.term_coef(self.name)[0])}
@@ -243,9 +263,13 @@ class Stribeck(Term):
     def static_level(self, coef):
         return float(coef[0])
 
+    def raw_force(self, run, nl, coef, setting):
+        v = run.velocity_fast
+        return coef[0] * np.sign(v) * np.exp(-((v / float(nl["v_s"])) ** 2))
+
     def settings(self, runs, diagnostics):
         speed = np.abs(np.concatenate([r.velocity_fast for r in runs]))
-        lo, hi = np.percentile(speed, [3, 60])
+        lo, hi = np.percentile(speed, [3, 90])
         if not hi > lo > 0:
             return []
         return [{"v_s": float(v)} for v in np.geomspace(lo, hi, 14)]
@@ -263,42 +287,121 @@ class Stribeck(Term):
 
 
 class AsymmetricFriction(Term):
+    """Direction-dependent friction. Two ways a friction level can differ between the directions of motion:
+
+    - additively: Coulomb and viscous levels per direction (columns max(v,0), min(v,0), [v>0], -[v<0]); while
+      moving this is a symmetric level plus a constant, so on its own it cannot be told from ``offset``
+      except at rest;
+    - multiplicatively: the whole friction level scaled by (1 + a*sign(v)), presliding included
+      (column sign(v)*F_level[theta], F_level the start model's Coulomb-like and Maxwell-slip force with its
+      fitted coefficients held, the ``_level`` setting). Right after a reversal the elements still carry the
+      old direction's deflection, so the force there differs from a symmetric level plus a constant by up to
+      2*a*F_c: the presliding rows tell the two apart.
+    """
+
     name, main = "asymmetric_friction", "coulomb_difference"
-    physics = "direction-dependent friction: Coulomb level and viscous slope differ between directions"
+    physics = ("direction-dependent friction: Coulomb level, viscous slope and presliding force differ between "
+               "directions")
     diagnostics = ("direction",)
     replaces = ("viscous", "coulomb", "offset")
+    needs_fit = True
+
+    def bind(self, nl: dict, model: list, fit: Fit) -> dict:
+        return _bind_level(nl, model, fit)
 
     def columns(self, run, nl, setting):
+        level = nl.get("_level", [])
+
         def make():
             v = run.velocity_fast
-            return run.filt(np.column_stack([np.maximum(v, 0), np.minimum(v, 0), (v > 0) * 1.0,
-                                             -1.0 * (v < 0)]))
-        return run.cached(("asym",), make)
+            s = np.sign(v)
+            cols = [np.maximum(v, 0), np.minimum(v, 0), (v > 0) * 1.0, -1.0 * (v < 0)]
+            if level:
+                # the Coulomb-like part of F_level is already in the two direction columns
+                cols.append(s * (_level_force(run, nl, setting)
+                                 - sum(_coulomb_like(n, n_nl, c, s, v) for n, n_nl, c in level)))
+            return run.filt(np.column_stack(cols))
+        return run.cached(("asym", _level_key(nl, setting)), make)
+
+    def lower(self, nl, q):
+        return np.array([0, 0, 0, 0, FREE][:q], float)
 
     def static_level(self, coef):
         return float(max(coef[2], coef[3]))
 
+    @staticmethod
+    def _element_level(nl: dict, setting: Setting) -> float:
+        """Sliding force of the held level terms without their Coulomb-like part (the part the scaled column
+        multiplies), N*m or N."""
+        return _sliding_level(nl, setting) - sum(float(c[0]) for n, _, c in nl.get("_level", [])
+                                                 if n in LEVEL_TERMS)
+
+    def _gradients(self, fit, nl) -> dict:
+        """Each reported level as a linear function of the term's coefficients: while sliding the scaled column
+        adds a*L to the positive direction's level and takes it from the negative one's (L: _element_level)."""
+        q = fit.term_coef(self.name).size
+        big_l = self._element_level(nl, fit.setting) if q > 4 else 0.0
+        g = {"viscous_pos": [1, 0, 0, 0, 0], "viscous_neg": [0, 1, 0, 0, 0], "coulomb_pos": [0, 0, 1, 0, big_l],
+             "coulomb_neg": [0, 0, 0, 1, -big_l], "coulomb_difference": [0, 0, 1, -1, 2 * big_l],
+             "viscous_difference": [1, -1, 0, 0, 0]}
+        return {k: np.array(v[:q], float) for k, v in g.items()}
+
     def parameters(self, fit, nl, axis):
         u = _units(axis)
         c, cov = fit.term_coef(self.name), np.nan_to_num(fit.term_cov(self.name))
-        se = fit.term_se(self.name)
-        d_c, d_b = np.array([0, 0, 1, -1.0]), np.array([1, -1.0, 0, 0])
-        names = ("viscous_pos", "viscous_neg", "coulomb_pos", "coulomb_neg")
-        params = dict(zip(names, map(float, c), strict=True))
-        params["coulomb_difference"] = float(c[2] - c[3])
-        params["viscous_difference"] = float(c[0] - c[1])
+        params, unc = {}, {}
+        for key, g in self._gradients(fit, nl).items():
+            params[key] = float(g @ c)
+            unc[key] = float(np.sqrt(max(g @ cov @ g, 0.0)))
         params["units"] = {"viscous_pos": u["viscous"], "viscous_neg": u["viscous"], "coulomb_pos": u["torque"],
                            "coulomb_neg": u["torque"], "coulomb_difference": u["torque"],
                            "viscous_difference": u["viscous"]}
-        unc = dict(zip(names, map(float, se), strict=True))
-        unc["coulomb_difference"] = float(np.sqrt(max(d_c @ cov @ d_c, 0)))
-        unc["viscous_difference"] = float(np.sqrt(max(d_b @ cov @ d_b, 0)))
+        if c.size > 4:
+            params["presliding_asymmetry"] = float(c[4])
+            params["units"]["presliding_asymmetry"] = "1"
+            unc["presliding_asymmetry"] = float(fit.term_se(self.name)[4])
         return params, unc
 
     def plant(self, fit, nl):
+        # the C plant has no direction-scaled presliding force: the sliding levels go to its Coulomb element
         c = fit.term_coef(self.name)
-        return {"viscous": float(c[0]), "viscous_neg": float(c[1]), "coulomb": float(c[2]),
-                "coulomb_neg": float(c[3])}
+        g = self._gradients(fit, nl)
+        return {"viscous": float(c[0]), "viscous_neg": float(c[1]), "coulomb": float(g["coulomb_pos"] @ c),
+                "coulomb_neg": float(g["coulomb_neg"] @ c)}
+
+
+LEVEL_TERMS = ("maxwell_slip", "coulomb", "stribeck")
+
+
+def _bind_level(nl: dict, model: list, fit: Fit) -> dict:
+    """``nl`` plus ``_level``: the current model's level terms (name, settings, fitted coefficients), held."""
+    return {**nl, "_level": [(t.name, dict(n), fit.term_coef(t.name).copy()) for t, n in model
+                             if t.name in LEVEL_TERMS or t.name.startswith("family_")]}
+
+
+def _level_key(nl: dict, setting: Setting) -> tuple:
+    return tuple((n, c.tobytes()) for n, _, c in nl.get("_level", [])) + (setting.thresholds.tobytes(),)
+
+
+def _level_force(run: RunData, nl: dict, setting: Setting) -> np.ndarray:
+    """The held level terms' force at full rate, unfiltered, shape (n,), N*m or N (zeros without any)."""
+    return sum((REGISTRY[n].raw_force(run, n_nl, c, setting) for n, n_nl, c in nl.get("_level", [])),
+               np.zeros(run.position.size))
+
+
+def _sliding_level(nl: dict, setting: Setting) -> float:
+    """The held level terms' force while sliding (Maxwell-slip: W_0 + sum k_j*Delta_j), N*m or N."""
+    out = 0.0
+    for n, _, c in nl.get("_level", []):
+        out += float(c[0] + c[1:] @ setting.thresholds) if n == "maxwell_slip" else float(c[0])
+    return out
+
+
+def _coulomb_like(name: str, nl: dict, coef: np.ndarray, s: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """The part of a level term's raw force that is a function of sign(v) alone (the Delta -> 0 element, F_c)."""
+    if name in ("maxwell_slip", "coulomb"):
+        return coef[0] * s
+    return np.zeros_like(v)
 
 
 def _harmonic_parameters(fit: Fit, name: str, nl: dict, axis: str) -> tuple[dict, dict]:
@@ -369,13 +472,28 @@ class PositionPeriodic(Term):
 
 class PositionDependentFriction(PositionPeriodic):
     name = "position_dependent_friction"
-    physics = "friction level that varies with position (eccentricity, raceway waviness): sign(v)*A*sin(k*theta+phi)"
+    physics = ("friction level that varies with position (eccentricity, raceway waviness): the level force "
+               "F_level*(1 + (A/F_slide)*sin(k*theta+phi)), A*sin(k*theta+phi)*sign(v) while sliding")
     diagnostics = ("angle_spectrum_direction",)
     spectrum = "angle_spectrum_direction"
 
-    def _basis(self, run, k):
-        s = np.sign(run.velocity_fast)[:, None]
-        return s * np.column_stack([np.sin(k * run.position), np.cos(k * run.position)])
+    needs_fit = True
+
+    def bind(self, nl, model, fit):
+        return _bind_level(nl, model, fit)
+
+    def columns(self, run, nl, setting):
+        ks = tuple(nl["wavenumbers"])
+        norm = _sliding_level(nl, setting)
+
+        def make():
+            # the whole friction level scaled by (1 + m*sin(k*theta + phi)), presliding included: the held level
+            # force normalised to 1 while sliding (sign(v) when the model has no level term)
+            g = _level_force(run, nl, setting) / norm if norm > 0 else np.sign(run.velocity_fast)
+            return run.filt(np.column_stack([g[:, None] * np.column_stack([np.sin(k * run.position),
+                                                                           np.cos(k * run.position)])
+                                             for k in ks]))
+        return run.cached((self.name, ks, _level_key(nl, setting)), make)
 
     def plant(self, fit, nl):
         return {}  # the C plant has no position-dependent friction level; simulated without it

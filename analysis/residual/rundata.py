@@ -95,6 +95,13 @@ class RunData:
         d = np.asarray(deltas, float)
         return self.cached(("stop", d.tobytes()), lambda: stop_columns(self.position, d, self.data))
 
+    def stop_raw(self, deltas: np.ndarray) -> np.ndarray:
+        """Unfiltered stop-operator deflections at full rate for the thresholds ``deltas``, shape (n, m)."""
+        from hilbench.firmware_sim.plant import stop_operator
+
+        d = np.asarray(deltas, float)
+        return self.cached(("stop_raw", d.tobytes()), lambda: stop_operator(self.position, d))
+
     def torque_rows(self, delay: float = 0.0) -> np.ndarray:
         """L[tau](t_k - delay*T) at the rows (linear interpolation for a fractional delay), shape (r,)."""
         if delay == 0:

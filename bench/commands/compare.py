@@ -6,7 +6,7 @@ from pathlib import Path
 
 #: Published models a comparison can add as a row: J (kg), Fv (N*s/m), Fc (N), offset (N). EMPS: Janot,
 #: Gautier, Brunot 2019, IDIM-LS on DATA_EMPS (docs/compare.md).
-OUTPUTS = ("compare.md", "compare.json", "compare_hysteresis.png", "compare_time.png")
+OUTPUTS = ("compare.md", "compare.json", "compare_hysteresis.png", "compare_time.png", "models")
 PUBLISHED = {"emps": ("EMPS published (IDIM-LS)", 95.1089, 203.5034, 20.3935, -3.1648)}
 
 
@@ -23,7 +23,7 @@ def register(subparsers) -> None:
     parser.add_argument("run", help="training run file (.h5) with 't', 'position' and 'torque' channels")
     parser.add_argument("--validate", required=True, metavar="RUN2.h5", help="validation run (same axis)")
     parser.add_argument("-o", "--output", dest="out", required=True, metavar="DIR",
-                        help="output folder: compare.md, compare.json, compare_*.png")
+                        help="output folder: compare.md, compare.json, compare_*.png, models/FAMILY.json")
     parser.add_argument("--families", default=",".join(FAMILIES),
                         help=f"comma-separated subset (default all: {','.join(FAMILIES)})")
     parser.add_argument("--published", choices=sorted(PUBLISHED), action="append", default=[],
@@ -59,6 +59,7 @@ def run(args) -> int:
     from hilbench.analysis.models.compare import compare, document, markdown_table
     from hilbench.analysis.models.compare_plots import write_plots
     from hilbench.analysis.models.families import FAMILIES, published_plant
+    from hilbench.analysis.models.model_file import family_document
     from hilbench.bench import outputs
     from hilbench.bench.errors import BenchError
 
@@ -95,8 +96,16 @@ def run(args) -> int:
             "validation": {"file": str(Path(args.validate).resolve()), "samples": int(val.x.size),
                            "sample_rate_hz": val.fs}}
     outputs.write_json(out / "compare.json", document(result, data), indent=2, allow_nan=False)
+    (out / "models").mkdir(exist_ok=True)
+    for row in result.rows:  # one model file per fitted family (schema hilbench.friction-model/2)
+        if row.fit is not None:
+            figures = {f"train_{k}": v for k, v in row.train.items()} | {
+                f"validation_{k}": v for k, v in row.validation.items()} | {"fit_time_s": row.fit_time_s}
+            doc = family_document(row.fit, method="compare", data=data, figures=figures,
+                                  settings={"segment_s": args.segment, "max_evaluations": args.max_evaluations})
+            outputs.write_json(out / "models" / f"{row.name}.json", doc, indent=2, allow_nan=False)
     print(table, end="")
     for p in write_plots(result, out):
         print(f"plot: {p}")
-    print(f"-> {out / 'compare.md'}, {out / 'compare.json'}")
+    print(f"-> {out / 'compare.md'}, {out / 'compare.json'}, {out / 'models'}/FAMILY.json")
     return 0

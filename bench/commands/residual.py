@@ -23,9 +23,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("run", metavar="RUN.h5", help="training run file (position and torque channels)")
     parser.add_argument("--validate", metavar="RUN2.h5", action="append", default=[],
                         help="validation run never fitted (repeatable); default: 5-fold blocked cross-validation")
-    parser.add_argument("--start", default="inertia,maxwell_slip", metavar="TERMS",
+    parser.add_argument("--start", default="inertia,maxwell_slip", metavar="TERMS|FAMILY",
                         help="comma-separated starting terms (default inertia,maxwell_slip; "
-                             "EMPS reference: inertia,coulomb,viscous,offset)")
+                             "EMPS reference: inertia,coulomb,viscous,offset), or one friction family to identify "
+                             "first and start from: coulomb_viscous, stribeck, dahl, lugre, maxwell_slip, gms, "
+                             "continuous (docs/residual-report.md)")
     parser.add_argument("--json", required=True, metavar="OUT.json", help="write the JSON report here")
     parser.add_argument("--report", metavar="DIR", help="write diagnostics PNGs and summary.md into DIR")
     parser.add_argument("--torque-channel", default=None, metavar="NAME",
@@ -98,7 +100,8 @@ def write_hysteresis(result, directory, title: str, fixed_inertia: float | None)
 
 
 def run(args: argparse.Namespace) -> int:
-    from hilbench.analysis.residual import LoopOptions, residual_loop
+    from hilbench.analysis.models.families import FAMILIES
+    from hilbench.analysis.residual import LoopOptions, family_start, residual_loop
     from hilbench.analysis.residual.published import published_metric
     from hilbench.analysis.residual.report import report_dict, write_report
     from hilbench.bench import outputs
@@ -117,9 +120,19 @@ def run(args: argparse.Namespace) -> int:
         raise BenchError(f"{args.run} is {record}; every --validate run must be too")
     validation = [v[0] for v in loaded]
     opts = LoopOptions(fixed_inertia=args.inertia, candidates=cands, record=record)
+    if len(start) == 1 and start[0] not in FAMILIES and start[0] != "inertia":
+        raise BenchError(f"--start {start[0]!r} is neither a friction family ({', '.join(FAMILIES)}) nor a "
+                         "comma-separated list of terms with inertia")
+    if len(start) == 1 and start[0] in FAMILIES:
+        if record == "displacement-driven" or args.inertia is not None:
+            raise BenchError("--start FAMILY identifies J with the family; it takes neither --inertia nor a "
+                             "displacement-driven record (start from terms instead)")
+        outputs.say(f"identifying the {start[0]} family on {args.run} (start of the residual loop)", args.json)
+        start = tuple(family_start(start[0], [train]))
     result = residual_loop(train, validation or None, start=start, options=opts)
     result.published_metric = published_metric(source, result.fit_before, result.fit_after, [train], validation)
-    inputs = {"run": args.run, "validate": list(args.validate), "start": list(start), "torque_channel": channel,
+    inputs = {"run": args.run, "validate": list(args.validate), "start": list(result.start),
+              "start_option": args.start, "torque_channel": channel,
               "timing": timing, "cutoff_hz": train.data.cutoff, "decimation": train.data.decimation,
               "fixed_inertia": args.inertia if record == "torque-driven" or args.inertia is not None else 0.0,
               "record": record}

@@ -41,6 +41,15 @@ def test_compare_writes_table_json_and_plots(tmp_path, capsys):
     for name in ("compare_hysteresis.png", "compare_time.png"):
         assert (tmp_path / "out" / name).stat().st_size > 1000
     assert "plot:" in capsys.readouterr().out
+    # one model file per family (schema hilbench.friction-model/2), read back with its uncertainties
+    from hilbench.analysis.models.model_file import read_family
+
+    model, doc = read_family(tmp_path / "out" / "models" / "continuous.json")
+    assert doc["schema"] == "hilbench.friction-model/2" and model.family == "continuous"
+    assert model.parameters["h"] == pytest.approx(fit["parameters"]["h"])
+    assert model.uncertainty("h") == pytest.approx(fit["std_errors"]["h"]) and model.units["h"] == "N*m"
+    assert model.plant.hysteresis.h == pytest.approx(fit["parameters"]["h"])
+    assert read_family(tmp_path / "out" / "models" / "coulomb_viscous.json")[0].uncertainty("coulomb") > 0
 
 
 @pytest.mark.parametrize("extra, message", [

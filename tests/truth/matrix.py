@@ -118,10 +118,24 @@ class Outcome:
     added: tuple
     seconds: float  # the loop's wall time (the records are generated beforehand)
     verdict: str
+    alternatives: dict = None  # added term -> the terms the loop declared it indistinguishable from
 
     @property
     def right(self) -> bool:
         return frozenset(self.added) == self.expected
+
+    @property
+    def declared(self) -> bool:
+        """Wrong, but every wrong term was declared indistinguishable from a missed truth term, one for one (the
+        loop said it could not tell them apart on these data). Counted apart from right, never as right."""
+        if self.right:
+            return False
+        extra = [a for a in self.added if a not in self.expected]
+        missed = set(self.expected) - set(self.added)
+        alts = self.alternatives or {}
+        named = {m for a in extra for m in alts.get(a, ()) if m in missed}
+        return len(extra) == len(missed) and named == missed and all(
+            set(alts.get(a, ())) & missed for a in extra)
 
 
 def run_case(case: str, seed: int, options=None) -> Outcome:
@@ -133,4 +147,5 @@ def run_case(case: str, seed: int, options=None) -> Outcome:
     t0 = time.perf_counter()
     res = residual_loop(train, valid, start=START, options=options or LoopOptions(sim_window=None))
     dt = time.perf_counter() - t0
-    return Outcome(case, seed, expected, tuple(res.names_added), dt, res.verdict)
+    alts = {e["name"]: tuple(e.get("indistinguishable_from", ())) for e in res.effects_added}
+    return Outcome(case, seed, expected, tuple(res.names_added), dt, res.verdict, alts)

@@ -10,7 +10,7 @@ from hilbench.analysis.identification.identify import RunArrays, identify
 from hilbench.analysis.identification.output_error import refine_output_error, simulation_error
 from hilbench.analysis.identification.paper_baseline import fit_paper
 from hilbench.analysis.models.friction_model import FrictionModel
-from hilbench.analysis.models.model_file import model_document, read_model, write_model
+from hilbench.analysis.models.model_file import model_document, read_family, read_model, write_model
 from hilbench.firmware_sim.plant import PlantParams, simulate
 from tests.analysis.identification.test_identification import random_enveloped
 
@@ -63,7 +63,7 @@ def test_model_file_round_trip_and_plots(tmp_path):
     path = tmp_path / "model.json"
     write_model(path, doc)
     raw = json.loads(path.read_text())
-    assert raw["schema"] == "hilbench.friction-model/1"
+    assert raw["schema"] == "hilbench.friction-model/2" and raw["family"] == "maxwell_slip"
     for key in (
         "train_torque_nrmse",
         "train_position_nrmse",
@@ -75,6 +75,13 @@ def test_model_file_round_trip_and_plots(tmp_path):
     np.testing.assert_allclose(model.ms_stiffness, res.model.ms_stiffness)
     assert model.inertia == res.model.inertia
     assert raw["parameters"]["units"]["inertia"] == "kg*m^2"
+    fam, _ = read_family(path)  # the reader of every family reads identify's file too, uncertainties included
+    assert fam.family == "maxwell_slip" and fam.parameters["inertia"] == res.model.inertia
+    assert fam.uncertainty("inertia") == pytest.approx(res.model.std_errors["inertia"])
+    assert fam.plant.inertia == pytest.approx(res.model.inertia)
+    v1 = tmp_path / "v1.json"  # a version-1 file (before the family key) is still read
+    v1.write_text(json.dumps({k: v for k, v in raw.items() if k != "family"} | {"schema": "hilbench.friction-model/1"}))
+    np.testing.assert_allclose(read_model(v1)[0].ms_stiffness, res.model.ms_stiffness)
 
     from hilbench.analysis.identification.plots import write_plots
 
