@@ -101,7 +101,8 @@ class OdriveDrive(HostClockedDevice):
                                  f"{o.describe_errors(self.axis_error)})")
 
     def info(self) -> dict:
-        return {"protocol": "ODrive CAN Simple", "url": self.name, "node": self.node_id,
+        # the ODrive samples on its own timer: host_time is when a sample arrived, t = k/rate is its time
+        return {"protocol": "ODrive CAN Simple", "url": self.name, "node": self.node_id, "sample_times": "drive",
                 "axis_state": self.axis_state, "axis_error": f"0x{self.axis_error:08X}"}
 
     def state(self) -> str:

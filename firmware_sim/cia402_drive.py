@@ -78,6 +78,8 @@ class SimCia402Drive:
         self.target_pm = 0          # latest target torque, per mille
         self.meas = (0, 0, 0, 0)    # position inc, velocity inc/s, torque per mille, current per mille
         self.last_sync = math.inf
+        self._arrival = math.inf    # bus timestamp of the previous SYNC, s
+        self._lag = 0.0             # real time not yet simulated (rounding to plant steps), s
         self.last_host_heartbeat = math.inf
         self._host_hb: tuple[int, float] | None = None  # (node, timeout s)
         self._lock = threading.RLock()
@@ -150,6 +152,7 @@ class SimCia402Drive:
             self.state = c.next_state(self.state, c.Command.DISABLE_VOLTAGE)  # torque zero at once
         if self.state is c.State.OPERATION_ENABLED and before is not c.State.OPERATION_ENABLED:
             self.last_sync = math.inf  # SYNC monitoring starts with the first SYNC in operation enabled
+            self._arrival, self._lag = math.inf, 0.0
 
     def fault(self, code: int, register: int = 0x01) -> None:
         """Latch a fault: torque off, state fault, 0x603F/0x1001 set, EMCY sent (thread-safe)."""
@@ -238,8 +241,16 @@ class SimCia402Drive:
             plant = self._ensure_plant()
             _, _, kt, cpr = self._settings
             n = self.oversample
-            if self.clock == "real" and math.isfinite(self.last_sync):
-                n = int(min(max(round((now - self.last_sync) / plant.dt), 1), 10 * self.oversample))
+            arrival = timestamp if timestamp else now
+            if self.clock == "real" and math.isfinite(self._arrival):
+                # the time between the SYNCs' arrivals on the bus (kernel timestamps where the bus has them),
+                # not this process's: a real drive samples when SYNC arrives, and this process may be late
+                # to read it. Rounding to plant steps is carried over, so the plant keeps real time.
+                elapsed = arrival - self._arrival + self._lag
+                cap = max(10 * self.oversample, math.ceil(self.sync_timeout / plant.dt))
+                n = int(min(max(round(elapsed / plant.dt), 1), cap))
+                self._lag = elapsed - n * plant.dt if n < cap else 0.0
+            self._arrival = arrival
             self.last_sync = now
             enabled = self.state is c.State.OPERATION_ENABLED
             u_new = self.target_pm / 1000.0 * self._rated / kt if enabled else 0.0
