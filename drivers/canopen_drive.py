@@ -354,7 +354,8 @@ class CanopenDrive(HostClockedDevice):
                             (self._rpdo.cob_id, 0x80), (rpdo_fmt.size, 0),
                             (self._tpdo1.cob_id, self._tpdo2.cob_id),
                             (rpdo_fmt.pack(int(c.Command.QUICK_STOP), 0), b""),
-                            (rpdo_fmt.pack(int(c.Command.SWITCH_ON), 0), b""))  # zero torque, operation disabled
+                            (rpdo_fmt.pack(int(c.Command.SWITCH_ON), 0), b""),  # zero torque, operation disabled
+                            echo_id=0x80)  # host_time: when SYNC k was on the bus
         dt1 = np.dtype([("status", "<u2"), ("torque", "<i2")])
         dt2 = np.dtype([("position", "<i4"), ("velocity", "<i4")])
         assert fmt1.size == dt1.itemsize and fmt2.size == dt2.itemsize
@@ -402,7 +403,7 @@ class CanopenDrive(HostClockedDevice):
             sent = cycle.sent
             if cycle.error:
                 raise DriverError(f"{self.name}: the cycle process could not open the CAN bus")
-            self._timing = timing_summary(arrays["host_time"][:sent], arrays["scheduled"][:sent], rate)
+            self._timing = timing_summary(arrays["host_time"][:sent], arrays["scheduled"][:sent], rate, cycle.echoed)
             if done < n:
                 word = int(arrays["rx"][0, done - 1, :2].view("<u2")[0]) if done else 0
                 last = c.state_of(word)
@@ -422,7 +423,8 @@ class CanopenDrive(HostClockedDevice):
             cycle.join()
             sent = cycle.sent
             if self._timing is None and sent:
-                self._timing = timing_summary(arrays["host_time"][:sent], arrays["scheduled"][:sent], rate)
+                self._timing = timing_summary(arrays["host_time"][:sent], arrays["scheduled"][:sent], rate,
+                                              cycle.echoed)
             self._cycle = None
             cycle.close()
             if not finished and not self._closed:
