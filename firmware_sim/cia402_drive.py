@@ -248,12 +248,18 @@ class SimCia402Drive:
                 # to read it. Rounding to plant steps is carried over, so the plant keeps real time.
                 elapsed = arrival - self._arrival + self._lag
                 cap = max(10 * self.oversample, math.ceil(self.sync_timeout / plant.dt))
-                n = int(min(max(round(elapsed / plant.dt), 1), cap))
+                # 0 steps: a SYNC within one plant step of the previous one (overdue SYNCs sent back to back)
+                # samples the same state, and its target replaces the previous one, as in a drive's control tick
+                n = int(min(max(round(elapsed / plant.dt), 0), cap))
                 self._lag = elapsed - n * plant.dt if n < cap else 0.0
             self._arrival = arrival
             self.last_sync = now
             enabled = self.state is c.State.OPERATION_ENABLED
             u_new = self.target_pm / 1000.0 * self._rated / kt if enabled else 0.0
+            if n == 0:
+                self.u_held = u_new
+                self._answer()
+                return
             u = np.full(n, self.u_held)
             u[-1] = u_new
             out = plant.run(u)  # the last row is measured now, before u_new acts
@@ -265,14 +271,18 @@ class SimCia402Drive:
             torque_pm = round(out.current_meas[-1] * kt / self._rated * 1000.0)
             self.meas = (wrap, int(round(velocity)), int(np.clip(torque_pm, -32768, 32767)),
                          int(np.clip(round(out.current_meas[-1] / (self._rated / kt) * 1000.0), -32768, 32767)))
-            self.cycle += 1
-            for m in self._tpdos:
-                if self.cycle % m.trans_type == 0:
-                    for var in m.map:
-                        value = self._on_read(var.index, var.subindex, var.od)
-                        if value is not None:
-                            var.raw = value
-                    m.transmit()
+            self._answer()
+
+    def _answer(self) -> None:
+        """Count the SYNC and send the TPDOs it triggers (with the lock held)."""
+        self.cycle += 1
+        for m in self._tpdos:
+            if self.cycle % m.trans_type == 0:
+                for var in m.map:
+                    value = self._on_read(var.index, var.subindex, var.od)
+                    if value is not None:
+                        var.raw = value
+                m.transmit()
 
     def close(self) -> None:
         self._stop.set()
