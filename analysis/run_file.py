@@ -79,6 +79,74 @@ def run_torque_timing(attrs: Any, timing: str = "auto", channel: str = "torque")
     return resolved, f"default for {source} runs"
 
 
+#: ``/device/identity`` key of a host-clocked drive saying when its samples were taken: ``host_time`` (the
+#: drive samples at each trigger: CiA 402 SYNC) or ``drive`` (the drive's own clock: ODrive cyclic messages)
+SAMPLE_TIMES_KEY = "sample_times"
+#: resampled channels keep the timing of their record; these are the conventions (see ``TIMINGS``)
+SAMPLE_KINDS = ("instant", "hold_next", "hold_previous")
+
+
+def host_sampled(identity: Any, channels: Any) -> bool:
+    """Whether a run's samples were taken at its ``host_time`` (a CiA 402 drive samples at each SYNC), so
+    that the analysis must resample them (``identity``: the run's ``/device/identity``; ``channels``: names)."""
+    return isinstance(identity, dict) and identity.get(SAMPLE_TIMES_KEY) == "host_time" and "host_time" in channels
+
+
+def on_host_time(host_time: np.ndarray, rate: float, position: np.ndarray, torque: np.ndarray, timing: str
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
+    """Position (sampled at ``host_time``) and torque (of sample timing ``timing``) of a host-clocked run on
+    a uniform grid at ``rate``: (t, position, torque, one line saying so). See :func:`resample_host_clocked`."""
+    t, r = resample_host_clocked(host_time, rate, {"position": (position, "instant"), "torque": (torque, timing)})
+    period = np.diff(np.asarray(host_time, dtype=np.float64))
+    line = (f"resampled on host_time: {period.size + 1} samples taken at {1e3 * period.min():.3f} to "
+            f"{1e3 * period.max():.3f} ms intervals -> {t.size} at {rate:g} Hz")
+    return t, r["position"], r["torque"], line
+
+
+def resample_host_clocked(host_time: np.ndarray, rate: float, channels: dict[str, tuple[np.ndarray, str]]
+                          ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Channels of a host-clocked record, sampled at the irregular times ``host_time``, on the uniform grid
+    ``t_j = j/rate`` (s, from the first sample to the last), each in its own sample timing.
+
+    Args:
+        host_time: s, shape (n,), strictly increasing: when the drive sampled (the SYNC went out).
+        rate: nominal rate, Hz.
+        channels: name -> (values of shape (n,), kind). ``instant`` (a value at s_k: position, velocity) is
+            interpolated by a cubic spline through (s_k, x_k) (not-a-knot; the motion is smooth between
+            samples, and a straight line would bend the second difference the identification reads);
+            ``hold_next`` (held over [s_k, s_k+1): a command) and ``hold_previous`` (the mean over
+            [s_k-1, s_k): a current measured at s_k) are averaged over each grid interval, which keeps the
+            integral (the impulse) of the held signal exact: out_j = (F(t_j+1) - F(t_j)) * rate with F the
+            running integral, piecewise linear between the s_k.
+    Returns:
+        (t, resampled): t of shape (m,), m = floor((s_n-1 - s_0) * rate) + 1; each channel of shape (m,).
+    """
+    from scipy.interpolate import CubicSpline
+
+    s = np.asarray(host_time, dtype=np.float64)
+    s = s - s[0]
+    if s.size < 4 or not np.all(np.diff(s) > 0):
+        raise AnalysisError("host_time must hold 4 or more strictly increasing times to resample on it")
+    period = 1.0 / rate
+    m = int(np.floor(s[-1] * rate + 1e-9)) + 1
+    t = np.arange(m) * period
+    out = {}
+    for name, (values, kind) in channels.items():
+        v = np.asarray(values, dtype=np.float64)
+        if kind == "instant":
+            out[name] = CubicSpline(s, v)(t)
+            continue
+        if kind not in SAMPLE_KINDS:
+            raise AnalysisError(f"{name}: unknown sample kind {kind!r} (expected {', '.join(SAMPLE_KINDS)})")
+        # held values h_i over [s_i, s_i+1); the last one has no end: hold it over one nominal period
+        held = v if kind == "hold_next" else np.append(v[1:], v[-1])
+        edges = np.append(s, s[-1] + period)
+        integral = np.concatenate([[0.0], np.cumsum(held * np.diff(edges))])
+        means = np.diff(np.interp(np.append(t, t[-1] + period), edges, integral)) * rate
+        out[name] = means if kind == "hold_next" else np.concatenate([[v[0]], means[:-1]])
+    return t, out
+
+
 @dataclass
 class RunFile:
     """One run file's samples and metadata.

@@ -10,6 +10,7 @@ of the virgin curve on the recorded samples. Baseline: the quiet case of the sam
 
 from __future__ import annotations
 
+import json
 import os
 import random
 import select
@@ -48,16 +49,21 @@ def _cpu_of(proc: subprocess.Popen, t0: float) -> float:
 
 
 def identification_errors(path: Path) -> tuple[float, float]:
-    """Relative error of J and RMS relative error of the virgin curve, identified from a run file."""
+    """Relative error of J and RMS relative error of the virgin curve, identified from a run file (on its
+    host_time when the drive sampled at each SYNC, as ``hilbench identify`` does)."""
     from hilbench.analysis.identification.identify import RunArrays, identify
     from hilbench.analysis.identification.maxwell_fit import LipSettings
     from hilbench.analysis.identification.regressors import reversal_travels
     from hilbench.analysis.models.friction_model import FrictionModel
+    from hilbench.analysis.run_file import host_sampled, on_host_time
     from hilbench.firmware_sim.sim_config import load_sim_config
 
     with h5py.File(path) as f:
         s = f["samples"]
         t, tau, x = s["t"][:], s["torque"][:], s["position"][:]
+        identity = json.loads(f["device/identity"][()])
+        if host_sampled(identity, s):  # CiA 402: the drive sampled at each SYNC; analyse on those times
+            t, x, tau, _ = on_host_time(s["host_time"][:], float(f.attrs["sample_rate"]), x, tau, "hold_previous")
     p = load_sim_config().plant
     m = identify(RunArrays(t, tau, x), settings=LipSettings(timing="hold_previous")).model
     truth = FrictionModel("rotary", p.inertia, np.array(p.ms_stiffness), p.ms_delta, viscous=p.viscous)

@@ -35,7 +35,7 @@ from hilbench.drivers import cia402 as c
 from hilbench.drivers import protocol as p
 from hilbench.drivers.amplifier import check_setpoints
 from hilbench.drivers.calibration import Calibration, CountUnwrapper
-from hilbench.drivers.device import Capabilities, CycleSamples, Device, refusal
+from hilbench.drivers.device import Capabilities, CycleSamples, refusal
 from hilbench.drivers.errors import (
     CommandRefusedError,
     ConfigError,
@@ -44,7 +44,7 @@ from hilbench.drivers.errors import (
     DriverError,
     SampleLossError,
 )
-from hilbench.drivers.host_cycle import CanCycle, CanCycleSpec, TimingSummary, timing_summary
+from hilbench.drivers.host_cycle import CanCycle, CanCycleSpec, HostClockedDevice, timing_summary
 
 HOST_NODE_ID = 127          # the host's node id for its heartbeat (0x700 + 127)
 DRIVE_HEARTBEAT_MS = 100    # producer heartbeat the host asks of the drive
@@ -52,10 +52,9 @@ RATES = (1000, 2000)        # Hz; 2 kHz is near a 1 Mbit/s bus's limit for SYNC 
 BLOCK_PERIOD = 0.02         # s between sample blocks handed to the caller
 
 
-class CanopenDrive(Device):
+class CanopenDrive(HostClockedDevice):
     """A CiA 402 drive at ``node_id`` on a python-can bus (``interface``, ``channel``), OD from ``eds``."""
 
-    clock = "host"
     capabilities = Capabilities({"current": RATES})
 
     def __init__(self, interface: str, channel: str, node_id: int, eds: str, timeout: float = 2.0,
@@ -69,10 +68,11 @@ class CanopenDrive(Device):
         self._emcy: list[tuple[int, int, float]] = []
         self._emcy_event = threading.Event()
         self._heartbeat_task = None
-        self._timing: TimingSummary | None = None
-        self._events: list[tuple[str, str]] = []
-        self._closed = False
         self._estop_requested = False
+        self._last_status = 0       # statusword of the last sample streamed
+        self._last_cmd = 0.0        # A, the last current command sent
+        self._progress = 0          # cycles sent in the current (or last) stream
+        self._sdo_lock = threading.RLock()  # canopen's SDO client serves one transfer at a time
         self._cycle: CanCycle | None = None
         self.interface, self.channel, self.bus_kwargs = interface, channel, dict(bus_kwargs)
         self.network = canopen.Network()
@@ -95,8 +95,9 @@ class CanopenDrive(Device):
         import canopen
 
         try:
-            obj = self.node.sdo[index]
-            return (obj[sub] if sub is not None else obj).raw
+            with self._sdo_lock:
+                obj = self.node.sdo[index]
+                return (obj[sub] if sub is not None else obj).raw
         except canopen.SdoCommunicationError as exc:
             raise DeviceTimeoutError(f"CANopen node {self.node_id} did not answer: SDO upload of 0x{index:04X}"
                                      f"{'' if sub is None else f':{sub}'} ({what or 'object'}) timed out after "
@@ -109,8 +110,9 @@ class CanopenDrive(Device):
         import canopen
 
         try:
-            obj = self.node.sdo[index]
-            (obj[sub] if sub is not None else obj).raw = value
+            with self._sdo_lock:
+                obj = self.node.sdo[index]
+                (obj[sub] if sub is not None else obj).raw = value
         except canopen.SdoCommunicationError as exc:
             raise DeviceTimeoutError(f"CANopen node {self.node_id} did not answer: SDO download of 0x{index:04X}"
                                      f" ({what or 'object'}) timed out after {self.timeout:g} s") from exc
@@ -133,7 +135,8 @@ class CanopenDrive(Device):
         inc = int(self._read(c.ENCODER_RESOLUTION, 1, "encoder increments"))
         revs = int(self._read(c.ENCODER_RESOLUTION, 2, "motor revolutions"))
         self.counts_per_rev = inc // max(revs, 1)
-        self._info = {"protocol": "CiA 402 over CANopen", "url": self.name,
+        # the drive samples at each SYNC: the analysis resamples on host_time (analysis/run_file.py)
+        self._info = {"protocol": "CiA 402 over CANopen", "url": self.name, "sample_times": "host_time",
                       "device_type": f"0x{device_type:08X}", "supported_modes": f"0x{supported:08X}",
                       "rated_torque_Nm": self.rated_torque, "encoder_counts_per_rev": self.counts_per_rev}
         try:
@@ -171,6 +174,15 @@ class CanopenDrive(Device):
 
     def state(self) -> c.State | None:
         return c.state_of(self.statusword())
+
+    def live_state(self) -> dict:
+        streaming = self._cycle is not None
+        word = self._last_status if streaming else self.statusword()  # no SDO while the cycle runs
+        state = c.state_of(word)
+        return {"state": f"{state.value if state else 'unknown'} (statusword 0x{word:04X})",
+                "armed": state in (c.State.OPERATION_ENABLED, c.State.QUICK_STOP), "streaming": streaming,
+                "faults": [self.emcy_line()] if self._emcy else [], "cycle": self._progress,
+                "current_cmd": self._last_cmd if streaming else 0.0, "counters": self.timing_counters()}
 
     # ------------------------------------------------------------------ Device API
     def configure(self, config: p.Config) -> None:
@@ -342,12 +354,13 @@ class CanopenDrive(Device):
                             (self._rpdo.cob_id, 0x80), (rpdo_fmt.size, 0),
                             (self._tpdo1.cob_id, self._tpdo2.cob_id),
                             (rpdo_fmt.pack(int(c.Command.QUICK_STOP), 0), b""),
-                            (rpdo_fmt.pack(int(c.Command.SWITCH_ON), 0), b""))  # zero torque, operation disabled
+                            (rpdo_fmt.pack(int(c.Command.SWITCH_ON), 0), b""),  # zero torque, operation disabled
+                            echo_id=0x80)  # host_time: when SYNC k was on the bus
         dt1 = np.dtype([("status", "<u2"), ("torque", "<i2")])
         dt2 = np.dtype([("position", "<i4"), ("velocity", "<i4")])
         assert fmt1.size == dt1.itemsize and fmt2.size == dt2.itemsize
         cycle = CanCycle(spec, tx)
-        self._cycle = cycle
+        self._cycle, self._progress = cycle, 0
         unwrap = CountUnwrapper()
         done = 0
         finished = False
@@ -362,6 +375,7 @@ class CanopenDrive(Device):
                 if ended:
                     cycle.join()
                 sent = cycle.sent
+                self._progress = sent
                 ready = min(cycle.received(0), cycle.received(1))
                 if ready > done:
                     t1 = arrays["rx"][0, done:ready, :4].copy().view(dt1).ravel()
@@ -389,7 +403,7 @@ class CanopenDrive(Device):
             sent = cycle.sent
             if cycle.error:
                 raise DriverError(f"{self.name}: the cycle process could not open the CAN bus")
-            self._timing = timing_summary(arrays["host_time"][:sent], arrays["scheduled"][:sent], rate)
+            self._timing = timing_summary(arrays["host_time"][:sent], arrays["scheduled"][:sent], rate, cycle.echoed)
             if done < n:
                 word = int(arrays["rx"][0, done - 1, :2].view("<u2")[0]) if done else 0
                 last = c.state_of(word)
@@ -409,7 +423,8 @@ class CanopenDrive(Device):
             cycle.join()
             sent = cycle.sent
             if self._timing is None and sent:
-                self._timing = timing_summary(arrays["host_time"][:sent], arrays["scheduled"][:sent], rate)
+                self._timing = timing_summary(arrays["host_time"][:sent], arrays["scheduled"][:sent], rate,
+                                              cycle.echoed)
             self._cycle = None
             cycle.close()
             if not finished and not self._closed:
@@ -425,36 +440,18 @@ class CanopenDrive(Device):
         torque = c.permille_to_torque(t1["torque"], self.rated_torque) * cal.ratio
         torque_cmd = c.permille_to_torque(pm[a:b], self.rated_torque) * cal.ratio
         velocity = t2["velocity"] * (2 * math.pi / (self.counts_per_rev * cal.ratio))
+        self._last_status, self._last_cmd = int(t1["status"][-1]), float(cal.current(torque_cmd[-1]))
         return CycleSamples(np.arange(a, b, dtype=np.int64), host_time[a:b].copy(), counts,
                             cal.current(torque_cmd), cal.current(torque), torque_cmd, torque,
                             cal.position(counts), velocity, self.config.sample_rate, t1["status"].copy())
 
-    def run_events(self) -> list[tuple[str, str]]:
-        out = []
-        if self._timing is not None:
-            out.append(("info", self._timing.line()))
-        if self._emcy:
-            out.append(("fault", self.emcy_line()))
-        return out
+    def fault_line(self) -> str:
+        return self.emcy_line()
 
-    @property
-    def timing(self) -> TimingSummary | None:
-        """Timing of the last stream."""
-        return self._timing
-
-    def close(self) -> None:
-        if self._closed:
-            return
-        self._closed = True
-        try:
-            if getattr(self, "node", None) is not None and getattr(self, "config", None) is not None:
-                self.disarm()
-        except DriverError:
-            pass
-        finally:
-            if self._heartbeat_task is not None:
-                self._heartbeat_task.stop()
-            self.network.disconnect()
+    def _release(self) -> None:
+        if self._heartbeat_task is not None:
+            self._heartbeat_task.stop()
+        self.network.disconnect()
 
 
 _STRUCT = {8: "b", 16: "h", 32: "i"}

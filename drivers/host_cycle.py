@@ -17,10 +17,13 @@ Definitions (``d_k = host_time[k+1] - host_time[k]``, the cycle time the drive s
 
 from __future__ import annotations
 
+import abc
 import time
 from dataclasses import dataclass
 
 import numpy as np
+
+from hilbench.drivers.device import Device
 
 LATE_FRACTION = 0.25
 JITTER_LIMIT = 0.10
@@ -39,6 +42,7 @@ class TimingSummary:
     missed: int
     late: int
     jitter_p99: float
+    echoed: int | None = None  # cycles whose host time is the trigger's own echo from the bus (None: not asked)
 
     @property
     def fit(self) -> bool:
@@ -51,6 +55,8 @@ class TimingSummary:
         figures = (f"host-clocked timing: {self.cycles} cycles at {self.rate:g} Hz; cycle p50 {self.p50 * 1e3:.3f} "
                    f"ms, p99 {self.p99 * 1e3:.3f} ms, max {self.max * 1e3:.3f} ms; {self.missed} missed, "
                    f"{self.late} late; jitter p99 {self.jitter_p99 * 1e6:.0f} us ({self.jitter_p99 / period:.1%} of T)")
+        if self.echoed is not None:
+            figures += f"; host times from the bus for {self.echoed} of {self.cycles} cycles"
         if self.fit:
             return figures + "; fit for identification"
         return figures + (f"; UNFIT for identification (limits {JITTER_LIMIT:.0%} of T, "
@@ -59,20 +65,84 @@ class TimingSummary:
     def as_dict(self) -> dict:
         return {"cycles": self.cycles, "rate_hz": self.rate, "cycle_time_p50_s": self.p50,
                 "cycle_time_p99_s": self.p99, "cycle_time_max_s": self.max, "missed": self.missed,
-                "late": self.late, "jitter_p99_s": self.jitter_p99, "fit_for_identification": self.fit}
+                "late": self.late, "jitter_p99_s": self.jitter_p99, "fit_for_identification": self.fit,
+                "host_times_from_bus": self.echoed}
 
 
-def timing_summary(host_time: np.ndarray, scheduled: np.ndarray, rate: float) -> TimingSummary:
-    """Figures of a stream from the host times its triggers went out and the times they were due (s)."""
+def timing_summary(host_time: np.ndarray, scheduled: np.ndarray, rate: float, echoed: int | None = None
+                   ) -> TimingSummary:
+    """Figures of a stream from the host times its triggers went out and the times they were due (s);
+    ``echoed``: how many of those times are the triggers' echoes from the bus."""
     host_time = np.asarray(host_time, dtype=np.float64)
     period = 1.0 / rate
     d = np.diff(host_time)
     if d.size == 0:
-        return TimingSummary(int(host_time.size), rate, period, period, period, 0, 0, 0.0)
+        return TimingSummary(int(host_time.size), rate, period, period, period, 0, 0, 0.0, echoed)
     missed = int(np.maximum(np.rint(d / period) - 1, 0).sum())
     late = int(np.count_nonzero(host_time - np.asarray(scheduled) > LATE_FRACTION * period))
     return TimingSummary(int(host_time.size), rate, float(np.percentile(d, 50)), float(np.percentile(d, 99)),
-                         float(d.max()), missed, late, float(np.percentile(np.abs(d - period), 99)))
+                         float(d.max()), missed, late, float(np.percentile(np.abs(d - period), 99)), echoed)
+
+
+class HostClockedDevice(Device):
+    """What every host-clocked drive shares: the timing of its last stream, the run events, an idempotent close.
+
+    Subclasses set ``config`` (None until configured) and ``_timing`` (after each stream), and implement
+    :meth:`fault_line` (the latched fault, "" if none), :meth:`live_state` and :meth:`_release` (free the bus).
+    """
+
+    clock = "host"
+    config = None
+    _timing: TimingSummary | None = None
+    _closed = False
+
+    @property
+    def timing(self) -> TimingSummary | None:
+        """Timing of the last stream."""
+        return self._timing
+
+    def fault_line(self) -> str:
+        """The latched fault in one line with its code and text, "" when there is none."""
+        return ""
+
+    @abc.abstractmethod
+    def live_state(self) -> dict:
+        """For an operator display, without disturbing a stream: ``state`` (text), ``armed`` (power stage on),
+        ``streaming``, ``faults`` (one-line texts), ``cycle`` (cycles sent in the current or last stream),
+        ``current_cmd`` (A, the last command sent) and ``counters`` (name: (value, unit)) of the last stream."""
+
+    def timing_counters(self) -> dict[str, tuple[float, str]]:
+        """The last stream's timing figures as (value, unit) for a display."""
+        t = self._timing
+        if t is None:
+            return {}
+        return {"cycles": (t.cycles, "cycles"), "missed cycles": (t.missed, "cycles"),
+                "late cycles": (t.late, "cycles"), "cycle time p99": (round(t.p99 * 1e3, 3), "ms"),
+                "cycle time max": (round(t.max * 1e3, 3), "ms"),
+                "jitter p99": (round(t.jitter_p99 * 1e6), "us")}
+
+    def run_events(self) -> list[tuple[str, str]]:
+        out = [("info", self._timing.line())] if self._timing is not None else []
+        fault = self.fault_line()
+        if fault:
+            out.append(("fault", fault))
+        return out
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if self.config is not None:
+                self.disarm()
+        except Exception:  # closing must release the bus whatever the drive or the bus says
+            pass
+        finally:
+            self._release()
+
+    @abc.abstractmethod
+    def _release(self) -> None:
+        """Stop background tasks and free the bus (called once, by :meth:`close`)."""
 
 
 @dataclass(frozen=True)
@@ -84,6 +154,12 @@ class CanCycleSpec:
     ``end_data`` is sent once after the last cycle (e.g. zero torque). Frames with an id in ``rx_ids`` are
     stored in arrival order from the first trigger on, one row per frame, with the host time it arrived
     (a CiA 402 drive answers each SYNC with one frame per TPDO; an ODrive sends its own cyclic frames).
+
+    ``echo_id``: the trigger's id (CiA 402 SYNC, 0x80). Where the bus hands a sender its own frames back
+    with a receive timestamp (udp_multicast always; SocketCAN and ``virtual`` with
+    ``receive_own_messages``), ``host_time[k]`` is that timestamp of trigger k: when it was on the bus, as
+    the drive saw it, rather than when ``send`` returned. Under load the two differ by milliseconds
+    (loopback delivery is deferred to a kernel thread; a SocketCAN frame waits in the transmit queue).
     """
 
     interface: str
@@ -95,9 +171,11 @@ class CanCycleSpec:
     rx_ids: tuple[int, ...]
     stop_data: tuple[bytes, ...]
     end_data: tuple[bytes, ...]
+    echo_id: int | None = None
 
 
-_SENT, _STOP, _ESTOP, _ERROR, _REALTIME = 0, 1, 2, 3, 4  # control slots; rx counters follow from _RX
+OWN_FRAMES_OPTION = ("virtual", "socketcan")  # interfaces that return own frames only when asked to
+_SENT, _STOP, _ESTOP, _ERROR, _REALTIME, _ECHOED = 0, 1, 2, 3, 4, 5  # control slots; rx counters from _RX
 _RX = 6
 RT_PRIORITY = 20  # SCHED_FIFO priority of the cycle process, where the OS allows it
 
@@ -171,6 +249,11 @@ class CanCycle:
         return bool(self.arrays["ctl"][_REALTIME])
 
     @property
+    def echoed(self) -> int:
+        """How many triggers have their host time from the bus's own echo (the rest: when sent)."""
+        return int(self.arrays["ctl"][_ECHOED])
+
+    @property
     def error(self) -> int:
         return int(self.arrays["ctl"][_ERROR])
 
@@ -217,8 +300,11 @@ def _cycle_main(spec: CanCycleSpec, shm_name: str, n: int, start_delay: float, p
 
             ctl[_REALTIME] = _realtime_priority()
             gc.disable()  # no collector pauses in the cycle; it allocates nothing that lives on
+        kwargs = dict(spec.bus_kwargs)
+        if spec.echo_id is not None and spec.interface in OWN_FRAMES_OPTION:
+            kwargs["receive_own_messages"] = True
         try:
-            bus = can.Bus(interface=spec.interface, channel=spec.channel, **spec.bus_kwargs)
+            bus = can.Bus(interface=spec.interface, channel=spec.channel, **kwargs)
         except Exception:
             ctl[_ERROR] = 1
             ctl[_STOP] = 1
@@ -247,10 +333,19 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
                            for payloads in (spec.stop_data, spec.end_data))
     clock = time.monotonic
     period = 1.0 / spec.rate
+    epoch = time.time() - clock()  # bus timestamps are wall-clock times: this turns them into clock()'s
+    echoes = 0
 
     rx, rx_time = received
 
     def take(msg) -> None:
+        nonlocal echoes
+        if msg.arbitration_id == spec.echo_id and echoes < ctl[_SENT]:  # trigger k back from the bus
+            if msg.timestamp and abs(msg.timestamp - epoch - host_time[echoes]) < 1.0:
+                host_time[echoes] = msg.timestamp - epoch
+                ctl[_ECHOED] += 1
+            echoes += 1
+            return
         j = slot.get(msg.arbitration_id)
         if j is None or msg.is_remote_frame or not ctl[_SENT]:  # frames before the first trigger: not ours
             return

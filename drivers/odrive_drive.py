@@ -32,17 +32,16 @@ import numpy as np
 from hilbench.drivers import odrive_can as o
 from hilbench.drivers import protocol as p
 from hilbench.drivers.amplifier import check_setpoints
-from hilbench.drivers.device import Capabilities, CycleSamples, Device, refusal
+from hilbench.drivers.device import Capabilities, CycleSamples, refusal
 from hilbench.drivers.errors import CommandRefusedError, ConfigError, DeviceFaultError, DeviceTimeoutError, DriverError
-from hilbench.drivers.host_cycle import CanCycle, CanCycleSpec, TimingSummary, timing_summary
+from hilbench.drivers.host_cycle import CanCycle, CanCycleSpec, HostClockedDevice, timing_summary
 
 FEED_PERIOD = 0.02  # s between watchdog feeds while armed and not streaming
 
 
-class OdriveDrive(Device):
+class OdriveDrive(HostClockedDevice):
     """One ODrive axis at ``node_id`` (0..63) on a python-can bus."""
 
-    clock = "host"
     capabilities = Capabilities({"current": (1000,)})
 
     def __init__(self, interface: str, channel: str, node_id: int, tvl_endpoint: int, timeout: float = 2.0,
@@ -60,8 +59,8 @@ class OdriveDrive(Device):
         self._sdo_event = threading.Event()
         self._feed = None
         self._cycle: CanCycle | None = None
-        self._timing: TimingSummary | None = None
-        self._closed = False
+        self._last_cmd = 0.0  # A, the last current command sent
+        self._progress = 0    # cycles sent in the current (or last) stream
         try:
             self.bus = can.Bus(interface=interface, channel=channel, **bus_kwargs)
         except Exception as exc:
@@ -102,7 +101,8 @@ class OdriveDrive(Device):
                                  f"{o.describe_errors(self.axis_error)})")
 
     def info(self) -> dict:
-        return {"protocol": "ODrive CAN Simple", "url": self.name, "node": self.node_id,
+        # the ODrive samples on its own timer: host_time is when a sample arrived, t = k/rate is its time
+        return {"protocol": "ODrive CAN Simple", "url": self.name, "node": self.node_id, "sample_times": "drive",
                 "axis_state": self.axis_state, "axis_error": f"0x{self.axis_error:08X}"}
 
     def state(self) -> str:
@@ -110,6 +110,14 @@ class OdriveDrive(Device):
 
     def status(self) -> int:
         return self.axis_state
+
+    def live_state(self) -> dict:
+        names = {int(s): s.name.lower().replace("_", " ") for s in o.AxisState}
+        return {"state": f"axis state {self.axis_state} ({names.get(self.axis_state, '?')})",
+                "armed": self.axis_state == o.AxisState.CLOSED_LOOP_CONTROL, "streaming": self._cycle is not None,
+                "faults": [self.fault_line()] if self.axis_error else [], "cycle": self._progress,
+                "current_cmd": self._last_cmd if self._cycle is not None else 0.0,
+                "counters": self.timing_counters()}
 
     # ------------------------------------------------------------------ Device API
     def configure(self, config: p.Config) -> None:
@@ -199,7 +207,7 @@ class OdriveDrive(Device):
                             (o.can_id(self.node_id, o.Cmd.GET_ENCODER_ESTIMATES),
                              o.can_id(self.node_id, o.Cmd.GET_TORQUES)), (zero,), (zero,))
         cycle = CanCycle(spec, tx)
-        self._cycle, self._timing = cycle, None
+        self._cycle, self._timing, self._progress = cycle, None, 0
         a = cycle.arrays
         done, fault = 0, ""
         self._stop_feed()  # the cycle's commands feed the watchdog now
@@ -214,6 +222,7 @@ class OdriveDrive(Device):
                     ended = True
                 if ended:
                     cycle.join()
+                self._progress = cycle.sent
                 ready = min(cycle.received(0), cycle.received(1))
                 if ready > done:
                     yield self._block(done, ready, a)
@@ -239,6 +248,7 @@ class OdriveDrive(Device):
         est = a["rx"][0, i:j].copy().view("<f4").reshape(j - i, 2).astype(np.float64)
         torques = a["rx"][1, i:j].copy().view("<f4").reshape(j - i, 2).astype(np.float64) * cal_ratio
         turns = est[:, 0]
+        self._last_cmd = float(torques[-1, 0] / (cfg.torque_constant * cal_ratio))
         counts = np.rint(turns * cfg.counts_per_rev).astype(np.int64)
         return CycleSamples(np.arange(i, j, dtype=np.int64), a["rx_time"][0, i:j].copy(), counts,
                             torques[:, 0] / (cfg.torque_constant * cal_ratio),
@@ -246,28 +256,14 @@ class OdriveDrive(Device):
                             2 * math.pi * turns / cal_ratio, 2 * math.pi * est[:, 1] / cal_ratio, cfg.sample_rate,
                             np.full(j - i, self.axis_state, np.uint16))
 
-    def run_events(self) -> list[tuple[str, str]]:
-        out = [("info", self._timing.line())] if self._timing is not None else []
-        if self.axis_error:
-            out.append(("fault", f"ODrive axis error 0x{self.axis_error:08X}: {o.describe_errors(self.axis_error)}"))
-        return out
+    def fault_line(self) -> str:
+        if not self.axis_error:
+            return ""
+        return f"ODrive axis error 0x{self.axis_error:08X}: {o.describe_errors(self.axis_error)}"
 
-    @property
-    def timing(self) -> TimingSummary | None:
-        return self._timing
-
-    def close(self) -> None:
-        if self._closed:
-            return
-        self._closed = True
-        try:
-            if self.config is not None:
-                self.disarm()
-        except Exception:
-            pass
-        finally:
-            self._stop_feed()
-            if getattr(self, "notifier", None) is not None:
-                self.notifier.stop()
-            if getattr(self, "bus", None) is not None:
-                self.bus.shutdown()
+    def _release(self) -> None:
+        self._stop_feed()
+        if getattr(self, "notifier", None) is not None:
+            self.notifier.stop()
+        if getattr(self, "bus", None) is not None:
+            self.bus.shutdown()

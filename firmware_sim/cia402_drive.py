@@ -78,6 +78,8 @@ class SimCia402Drive:
         self.target_pm = 0          # latest target torque, per mille
         self.meas = (0, 0, 0, 0)    # position inc, velocity inc/s, torque per mille, current per mille
         self.last_sync = math.inf
+        self._arrival = math.inf    # bus timestamp of the previous SYNC, s
+        self._lag = 0.0             # real time not yet simulated (rounding to plant steps), s
         self.last_host_heartbeat = math.inf
         self._host_hb: tuple[int, float] | None = None  # (node, timeout s)
         self._lock = threading.RLock()
@@ -150,6 +152,7 @@ class SimCia402Drive:
             self.state = c.next_state(self.state, c.Command.DISABLE_VOLTAGE)  # torque zero at once
         if self.state is c.State.OPERATION_ENABLED and before is not c.State.OPERATION_ENABLED:
             self.last_sync = math.inf  # SYNC monitoring starts with the first SYNC in operation enabled
+            self._arrival, self._lag = math.inf, 0.0
 
     def fault(self, code: int, register: int = 0x01) -> None:
         """Latch a fault: torque off, state fault, 0x603F/0x1001 set, EMCY sent (thread-safe)."""
@@ -238,11 +241,25 @@ class SimCia402Drive:
             plant = self._ensure_plant()
             _, _, kt, cpr = self._settings
             n = self.oversample
-            if self.clock == "real" and math.isfinite(self.last_sync):
-                n = int(min(max(round((now - self.last_sync) / plant.dt), 1), 10 * self.oversample))
+            arrival = timestamp if timestamp else now
+            if self.clock == "real" and math.isfinite(self._arrival):
+                # the time between the SYNCs' arrivals on the bus (kernel timestamps where the bus has them),
+                # not this process's: a real drive samples when SYNC arrives, and this process may be late
+                # to read it. Rounding to plant steps is carried over, so the plant keeps real time.
+                elapsed = arrival - self._arrival + self._lag
+                cap = max(10 * self.oversample, math.ceil(self.sync_timeout / plant.dt))
+                # 0 steps: a SYNC within one plant step of the previous one (overdue SYNCs sent back to back)
+                # samples the same state, and its target replaces the previous one, as in a drive's control tick
+                n = int(min(max(round(elapsed / plant.dt), 0), cap))
+                self._lag = elapsed - n * plant.dt if n < cap else 0.0
+            self._arrival = arrival
             self.last_sync = now
             enabled = self.state is c.State.OPERATION_ENABLED
             u_new = self.target_pm / 1000.0 * self._rated / kt if enabled else 0.0
+            if n == 0:
+                self.u_held = u_new
+                self._answer()
+                return
             u = np.full(n, self.u_held)
             u[-1] = u_new
             out = plant.run(u)  # the last row is measured now, before u_new acts
@@ -254,14 +271,18 @@ class SimCia402Drive:
             torque_pm = round(out.current_meas[-1] * kt / self._rated * 1000.0)
             self.meas = (wrap, int(round(velocity)), int(np.clip(torque_pm, -32768, 32767)),
                          int(np.clip(round(out.current_meas[-1] / (self._rated / kt) * 1000.0), -32768, 32767)))
-            self.cycle += 1
-            for m in self._tpdos:
-                if self.cycle % m.trans_type == 0:
-                    for var in m.map:
-                        value = self._on_read(var.index, var.subindex, var.od)
-                        if value is not None:
-                            var.raw = value
-                    m.transmit()
+            self._answer()
+
+    def _answer(self) -> None:
+        """Count the SYNC and send the TPDOs it triggers (with the lock held)."""
+        self.cycle += 1
+        for m in self._tpdos:
+            if self.cycle % m.trans_type == 0:
+                for var in m.map:
+                    value = self._on_read(var.index, var.subindex, var.od)
+                    if value is not None:
+                        var.raw = value
+                m.transmit()
 
     def close(self) -> None:
         self._stop.set()

@@ -56,7 +56,7 @@ def register(subparsers) -> None:
 
 def _arrays(path: str, requested: str | None, timing: str):
     from hilbench.analysis.identification.identify import RunArrays
-    from hilbench.analysis.run_file import run_torque_timing
+    from hilbench.analysis.run_file import host_sampled, on_host_time, run_torque_timing
     from hilbench.bench.analysis_input import numeric, torque_channel
     from hilbench.bench.errors import BenchError
     from hilbench.bench.runfile import open_run
@@ -77,6 +77,11 @@ def _arrays(path: str, requested: str | None, timing: str):
             name=Path(path).name,
         )
         timing, origin = run_torque_timing(run.meta, timing, name)
+        if host_sampled(run.device, run.channels):  # a drive sampled at each SYNC: on its real times
+            t, x, tau, line = on_host_time(run.channel("host_time"), run.sample_rate, arrays.position,
+                                           arrays.torque, timing)
+            arrays = RunArrays(t, tau, x, run.axis, arrays.name)
+            origin = f"{origin}; {line}"
     return arrays, name, timing, origin
 
 

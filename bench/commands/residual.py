@@ -51,7 +51,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _load(path: str, channel: str | None, timing: str | None, cutoff: float | None, json_target=None):
     from hilbench.analysis.residual import prepare_run
-    from hilbench.analysis.run_file import record_kind, run_torque_timing
+    from hilbench.analysis.run_file import host_sampled, on_host_time, record_kind, run_torque_timing
     from hilbench.bench import outputs
     from hilbench.bench.analysis_input import check_cutoff, numeric, torque_channel
     from hilbench.bench.runfile import open_run
@@ -62,6 +62,9 @@ def _load(path: str, channel: str | None, timing: str | None, cutoff: float | No
         torque = numeric(r.channel(name), name, path)
         fs, axis = r.sample_rate, r.axis
         timing, origin = run_torque_timing(r.meta, timing or "auto", name)
+        if host_sampled(r.device, r.channels):  # a drive sampled at each SYNC: on its real times
+            _, position, torque, line = on_host_time(r.channel("host_time"), fs, position, torque, timing)
+            origin = f"{origin}; {line}"
         record = record_kind(r.meta.get("record"), path)
         source = str(r.meta.get("source", "device"))
     check_cutoff(cutoff, fs)

@@ -57,7 +57,10 @@ class ConnectionPanel(QtWidgets.QGroupBox):
         self.url_box = QtWidgets.QComboBox()
         self.url_box.setEditable(True)
         self.url_box.setToolTip("sim:// (simulated bench), serial:///dev/ttyUSB0?baud=2000000, "
-                                "can://socketcan/can0?node=1")
+                                "can://socketcan/can0?node=1; host-clocked drives: "
+                                "canopen://socketcan/can0?node=1&eds=FILE (CiA 402), "
+                                "odrive://socketcan/can0?node=0&tvl_endpoint=ID, or the URL that "
+                                "'hilbench sim --canopen|--odrive' prints")
         self.recent = list(recent or [])
         self.refresh_urls()
         self.url_box.setCurrentText(DEFAULT_URL)
@@ -145,11 +148,7 @@ class ConnectionPanel(QtWidgets.QGroupBox):
         self.connect_button.setEnabled(True)
         self.connect_button.setText("Disconnect")
         self.url_box.setEnabled(False)
-        ident = info["identity"]
-        self.identity_label.setText(f"{ident.get('model', '?')}  serial {ident.get('serial', '?')}  "
-                                    f"firmware {ident.get('firmware', '?')}  protocol v"
-                                    f"{ident.get('protocol_version', '?')}  buffer "
-                                    f"{ident.get('buffer_capacity', '?')}")
+        self.identity_label.setText(identity_text(info["identity"]))
         cfg = info.get("config") or {}
         if cfg:
             mode = wire.Mode(cfg["mode"]).name.lower() if "mode" in cfg else "?"
@@ -159,12 +158,16 @@ class ConnectionPanel(QtWidgets.QGroupBox):
                 f" N*m/A, {cfg.get('counts_per_rev', '?')} counts/rev")
         else:
             self.config_label.setText("not configured (each run configures the device)")
+        if info.get("clock") == "host":
+            self.config_label.setText(f"{self.config_label.text()}; host-clocked drive, runs "
+                                      f"{info.get('capabilities', '?')}")
         self.clear_button.setEnabled(True)
 
     def show_state(self, state: DeviceState) -> None:
         armed = state.state in ("ARMED", "STREAMING")
         colour = "#c00000" if state.faults else ("#d08000" if armed else "#008000")
-        self.state_label.setText(f"<b style='color:{colour}'>{state.state}</b>"
+        detail = f" {state.detail}" if state.detail else ""
+        self.state_label.setText(f"<b style='color:{colour}'>{state.state}</b>{detail}"
                                  f"{'  (power stage ON)' if armed else ''}  sample {state.index}, "
                                  f"current {state.current_applied:.3g} A")
         if state.faults:
@@ -177,7 +180,8 @@ class ConnectionPanel(QtWidgets.QGroupBox):
             item = QtWidgets.QTableWidgetItem(str(value))
             item.setTextAlignment(QtCore.Qt.AlignmentFlag.AlignRight | QtCore.Qt.AlignmentFlag.AlignVCenter)
             self.counters_table.setItem(row, 1, item)
-            self.counters_table.setItem(row, 2, QtWidgets.QTableWidgetItem(counter_unit(name)))
+            self.counters_table.setItem(row, 2, QtWidgets.QTableWidgetItem(state.units.get(name) or
+                                                                           counter_unit(name)))
         self.counters_table.resizeColumnsToContents()
 
     def show_disconnected(self, reason: str = "") -> None:
@@ -192,6 +196,17 @@ class ConnectionPanel(QtWidgets.QGroupBox):
         """A connection attempt failed: allow another one."""
         if not self.connected:
             self.show_disconnected("connection failed (see the message above)")
+
+
+def identity_text(ident: dict) -> str:
+    """One line naming the device: a hilbench device's model, serial, firmware, protocol and buffer, or a
+    drive's protocol, model and serial."""
+    if "protocol" in ident:  # a host-clocked drive (drivers.canopen_drive, drivers.odrive_drive)
+        parts = [str(ident["protocol"])]
+        parts += [f"{key} {ident[key]}" for key in ("model", "serial", "node", "rated_torque_Nm") if key in ident]
+        return "  ".join(parts)
+    return (f"{ident.get('model', '?')}  serial {ident.get('serial', '?')}  firmware {ident.get('firmware', '?')}"
+            f"  protocol v{ident.get('protocol_version', '?')}  buffer {ident.get('buffer_capacity', '?')}")
 
 
 def counter_unit(name: str) -> str:

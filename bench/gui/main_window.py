@@ -14,11 +14,12 @@ from pathlib import Path
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from hilbench.bench.gui.campaign_view import CampaignView
-from hilbench.bench.gui.connection_panel import ConnectionPanel
+from hilbench.bench.gui.connection_panel import ConnectionPanel, identity_text
 from hilbench.bench.gui.live_plot import LivePlot
 from hilbench.bench.gui.protocol_panel import ProtocolPanel
 from hilbench.bench.gui.run_browser import RunBrowser
 from hilbench.bench.gui.worker import DeviceWorker, EStopLine, RunWorker
+from hilbench.drivers.device import refusal
 
 #: signals from worker threads always reach the GUI thread through its event queue
 QUEUED = QtCore.Qt.ConnectionType.QueuedConnection
@@ -158,8 +159,7 @@ class MainWindow(QtWidgets.QMainWindow):
     def _on_connected(self, info: dict) -> None:
         self.device_info = info
         self.connection.show_connected(info)
-        ident = info["identity"]
-        self.show_message(f"connected to {info['url']}: {ident.get('model')} {ident.get('serial')}")
+        self.show_message(f"connected to {info['url']}: {identity_text(info['identity'])}")
 
     def _on_disconnected(self, reason: str) -> None:
         self.device_info = None
@@ -228,6 +228,10 @@ class MainWindow(QtWidgets.QMainWindow):
         bench = self.device.bench
         if bench is None or not self.connected:
             self.show_message("connect to a device before starting a run", error=True)
+            return False
+        why = refusal(self.device.url, bench.amplifier.capabilities, protocol.mode, protocol.sample_rate)
+        if why:  # before anything moves, and before a file exists (a drive runs fewer modes and rates)
+            self.show_message(f"cannot run {protocol.name}: {why}", error=True)
             return False
         if settings is not None:
             bench.settings = settings

@@ -13,7 +13,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from PySide6 import QtCore
@@ -37,6 +37,22 @@ class DeviceState:
     index: int
     current_applied: float  # A
     counters: dict[str, int]
+    detail: str = ""  # the device's own state (a drive's CiA 402 state and statusword, an ODrive axis state)
+    units: dict[str, str] = field(default_factory=dict)  # counter name -> unit, where not frames or samples
+
+
+def describe_drive(live: dict) -> DeviceState:
+    """A host-clocked drive's :meth:`~drivers.host_cycle.HostClockedDevice.live_state` for the panel."""
+    if live["faults"]:
+        state = "FAULT"
+    elif live["streaming"]:
+        state = "STREAMING"
+    else:
+        state = "ARMED" if live["armed"] else "DISARMED"
+    counters = live["counters"]
+    return DeviceState(state, list(live["faults"]), int(bool(live["faults"])), int(live["cycle"]),
+                       float(live["current_cmd"]), {k: v for k, (v, _) in counters.items()}, live["state"],
+                       {k: unit for k, (_, unit) in counters.items()})
 
 
 def describe_status(status: wire.Status, counters: dict[str, int]) -> DeviceState:
@@ -83,7 +99,8 @@ class DeviceWorker(QtCore.QObject):
         self._estop_line.amplifier = bench.amplifier
         amp = bench.amplifier
         config = amp.config
-        info = {"url": url, "identity": bench.identity(),
+        info = {"url": url, "identity": bench.identity(), "clock": amp.clock,
+                "capabilities": amp.capabilities.describe(),
                 "config": {k: getattr(config, k) for k in config.__slots__} if config is not None else {}}
         self.connected.emit(info)
         self.busy.emit(False)
@@ -112,8 +129,11 @@ class DeviceWorker(QtCore.QObject):
         if bench is None:
             return
         try:
-            st = bench.amplifier.status()
-            self.status.emit(describe_status(st, bench.amplifier.counters))
+            amp = bench.amplifier
+            if amp.clock == "host":  # a drive: its state without disturbing a running cycle
+                self.status.emit(describe_drive(amp.live_state()))
+            else:
+                self.status.emit(describe_status(amp.status(), amp.counters))
         except Exception as exc:
             from hilbench.drivers.errors import DeviceTimeoutError
 

@@ -70,11 +70,17 @@ def test_stream_matches_the_plant_sample_for_sample(bus):
         assert host.state() is c.State.OPERATION_ENABLED
         n = 600
         u = 6.0 * np.sin(2 * np.pi * 3 * np.arange(n) / 1000) + 2.0  # A: presliding and sliding
+        t_before = time.monotonic()
         blocks = list(host.stream(u))
+        t_after = time.monotonic()
     finally:
         host.close()
-    got = {k: np.concatenate([getattr(b, k) for b in blocks]) for k in ("cycle", "counts", "torque", "torque_cmd")}
+    got = {k: np.concatenate([getattr(b, k) for b in blocks]) for k in ("cycle", "counts", "torque", "torque_cmd",
+                                                                         "host_time")}
     np.testing.assert_array_equal(got["cycle"], np.arange(n))
+    # every host time is SYNC k's own echo from the bus (its timestamp on the host's monotonic clock)
+    assert host.timing.echoed == n and f"host times from the bus for {n} of {n} cycles" in host.timing.line()
+    assert t_before < got["host_time"][0] and got["host_time"][-1] < t_after and np.all(np.diff(got["host_time"]) > 0)
     # oracle: the plant at 10 kHz (the drive's oversampling), the per-mille command held for 10 sub-steps;
     # the drive samples at each SYNC, just before the command received with that SYNC acts
     pm = np.rint(u * KT / RATED * 1000)
