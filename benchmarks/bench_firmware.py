@@ -80,24 +80,24 @@ def ns_per_sample_python(n: int, sim) -> float:
 def m4_sustains(elf, rate: int, seconds: float) -> tuple[bool, int, float]:
     """Stream ``seconds`` at ``rate`` to the realtime image; (0 lost, lost samples, wall time s)."""
     from hilbench.drivers import protocol as p
+    from hilbench.drivers.device_url import open_device
     from hilbench.drivers.errors import DriverError
     from hilbench.firmware_sim import qemu_target
 
-    proc, pty = qemu_target.start_qemu(elf)
     n, received, t0 = int(seconds * rate), 0, time.perf_counter()
-    try:
-        with qemu_target.open_target(pty) as amp:
-            amp.configure(p.Config(sample_rate=rate, current_limit=5.0, torque_constant=0.2, watchdog_timeout=0.5))
-            amp.arm()
-            u = 1.0 * np.sin(2 * np.pi * 5.0 * np.arange(n) / rate)
-            t0 = time.perf_counter()
-            for blk in amp.stream(u, allow_loss=True):
-                received += len(blk)
-    except DriverError:  # a fault or a timeout: what did not arrive is lost
-        pass
-    finally:
+    with qemu_target.running_qemu(elf) as (_, pty):
+        try:
+            with open_device(f"serial://{pty}", timeout=5.0) as amp:
+                amp.configure(p.Config(sample_rate=rate, current_limit=5.0, torque_constant=0.2,
+                                       watchdog_timeout=0.5))
+                amp.arm()
+                u = 1.0 * np.sin(2 * np.pi * 5.0 * np.arange(n) / rate)
+                t0 = time.perf_counter()
+                for blk in amp.stream(u, allow_loss=True):
+                    received += len(blk)
+        except DriverError:  # a fault or a timeout: what did not arrive is lost
+            pass
         wall = time.perf_counter() - t0
-        qemu_target.stop_qemu(proc)
     lost = n - received
     return lost == 0, lost, wall
 
@@ -105,18 +105,15 @@ def m4_sustains(elf, rate: int, seconds: float) -> tuple[bool, int, float]:
 def m4_lockstep_rate(elf, n: int) -> float:
     """Samples per second of wall time the lockstep image streams (1 kHz configuration, current mode)."""
     from hilbench.drivers import protocol as p
+    from hilbench.drivers.device_url import open_device
     from hilbench.firmware_sim import qemu_target
 
-    proc, pty = qemu_target.start_qemu(elf)
-    try:
-        with qemu_target.open_target(pty) as amp:
-            amp.configure(p.Config(sample_rate=1000, current_limit=5.0, torque_constant=0.2, watchdog_timeout=0.5))
-            amp.arm()
-            t0 = time.perf_counter()
-            received = sum(len(b) for b in amp.stream(np.sin(np.arange(n) / 50.0), allow_loss=True))
-            return received / (time.perf_counter() - t0)
-    finally:
-        qemu_target.stop_qemu(proc)
+    with qemu_target.running_qemu(elf) as (_, pty), open_device(f"serial://{pty}", timeout=5.0) as amp:
+        amp.configure(p.Config(sample_rate=1000, current_limit=5.0, torque_constant=0.2, watchdog_timeout=0.5))
+        amp.arm()
+        t0 = time.perf_counter()
+        received = sum(len(b) for b in amp.stream(np.sin(np.arange(n) / 50.0), allow_loss=True))
+        return received / (time.perf_counter() - t0)
 
 
 def run(quick: bool = False) -> list[dict]:
