@@ -5,13 +5,15 @@
    the baseline; it stands for the Python firmware, which was removed), same plant and stream, same run.
    Lockstep pacing, current mode, 10 kHz, 60 000 samples (quick: 6 000). Twice: with the default plant
    (16 Maxwell-slip elements: the plant dominates) and with a bare inertia (the device's own cost).
-2. The highest sample rate at which the emulated Cortex-M4F (QEMU mps2-an386, realtime image, no -icount:
-   the guest clock follows the host's) streams with 0 lost samples, and how long that stream took for its
-   nominal duration (1.0 = real time). 2 s per rate (quick: skipped; tests/firmware runs QEMU). Measured twice: with the
-   default plant (which the image simulates in soft double precision, as a board would not) and with a
-   bare inertia (the core's own capacity). Every received byte crosses QEMU's one-byte CMSDK UART (one
-   QEMU main-loop pass per byte), so this is a property of the emulation on this host. Baseline: the
-   protocol's highest rate, 20 kHz. Also the lockstep throughput (samples/s) of the default image.
+2. The highest sample rate the emulated Cortex-M4F (QEMU mps2-an386, realtime image, no -icount: the guest
+   clock follows the host's) holds in real time: every repeat (3) of a 2 s stream has 0 lost samples and a
+   wall time within REALTIME_STRETCH (1.05x) of nominal; rates are tried upwards and the first that fails
+   ends the search. The row's ratio is against the nominal time (1.0 = real time). Quick: skipped
+   (tests/firmware runs QEMU). Measured twice: with the default plant (which the image simulates in soft
+   double precision, as a board would not) and with a bare inertia (the core's own capacity). Every
+   received byte crosses QEMU's one-byte CMSDK UART (one QEMU main-loop pass per byte), so this is a
+   property of the emulation on this host. Also the lockstep throughput (samples/s) of the default image:
+   the most the emulated link carries when nothing waits for a clock.
 3. Flash (text + data) and RAM (data + bss) of the QEMU and Nucleo-F446RE images, from arm-none-eabi-size;
    baseline: the F446RE's 512 KiB flash and 128 KiB RAM.
 Parts 2 and 3 need the cross toolchain and QEMU (``make toolchain``); without them they report nothing.
@@ -136,6 +138,22 @@ def m4_lockstep_rate(elf, n: int) -> float:
         return received / (time.perf_counter() - t0)
 
 
+REALTIME_STRETCH = 1.05  # a stream holds real time when its wall time is within 5 % of its nominal time
+
+
+def m4_highest_realtime_rate(image, label: str, seconds: float = 2.0, repeats: int = 3) -> tuple[int, float]:
+    """(highest protocol rate held in real time, worst wall / nominal there); (0, 0.0) if 1 kHz fails."""
+    best, stretch = 0, 0.0
+    for rate in (1000, 2000, 5000, 10000, 20000):
+        runs = [m4_sustains(image, rate, seconds) for _ in range(repeats)]
+        for _, lost, wall in runs:
+            print(f"  QEMU M4 {label}, realtime {rate} Hz, {seconds:g} s: lost {lost} samples, wall {wall:.2f} s")
+        if not all(ok and wall / seconds <= REALTIME_STRETCH for ok, _, wall in runs):
+            break
+        best, stretch = rate, max(wall for _, _, wall in runs) / seconds
+    return best, stretch
+
+
 def run(quick: bool = False) -> list[dict]:
     from hilbench.firmware_sim.sim_config import load_sim_config, sim_config_from_dict
 
@@ -163,16 +181,11 @@ def run(quick: bool = False) -> list[dict]:
         toml = Path(tmp) / "bare.toml"
         toml.write_text('[plant]\npreset = "none"\ninertia = 1e-4\nviscous = 1e-3\n')
         bare_elf = qemu_target.build_image("realtime", str(toml), Path(tmp) / "build")
-        seconds = 2.0
         for label, image in (("default plant", elf), ("bare inertia", bare_elf)):
-            best, stretch = 0, 0.0
-            for rate in (1000, 2000, 5000, 10000, 20000):
-                ok, lost, wall = m4_sustains(image, rate, seconds)
-                print(f"  QEMU M4 {label}, realtime {rate} Hz, {seconds:g} s: lost {lost} samples, wall {wall:.2f} s")
-                if ok:
-                    best, stretch = rate, wall / seconds
-            rows.append(_row(f"QEMU M4, {label}: highest rate with 0 lost", best, "Hz", "protocol maximum", 20000))
-            rows.append(_row(f"QEMU M4, {label}: wall / nominal duration there", stretch, "x", "real time", 1.0))
+            best, stretch = m4_highest_realtime_rate(image, label)
+            rows.append(_row(f"QEMU M4, {label}: highest real-time rate", best, "Hz", "protocol maximum", 20000))
+            rows.append(_row(f"QEMU M4, {label}: wall / nominal there", stretch, "x", "real time", 1.0,
+                             target=f"<= {REALTIME_STRETCH}", ok=best > 0))
     rows.append(_row("QEMU M4: lockstep throughput", m4_lockstep_rate(qemu_target.build_image("lockstep"), 4000),
                      "samples/s", "protocol maximum", 20000))
     return rows
