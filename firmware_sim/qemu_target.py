@@ -87,8 +87,8 @@ def start_qemu(elf: Path, icount: int | None = None) -> tuple[subprocess.Popen, 
     """Start QEMU on ``elf`` with UART0 on a new pseudo-terminal; returns the process and the pty path.
 
     QEMU runs in its own process group (stopped as a group by :func:`stop_qemu`) and is killed by the
-    kernel if the process that started it dies first. Prefer :func:`running_qemu`, which stops it on
-    every exit path.
+    kernel if the process that started it dies first (strictly, the starting thread: start QEMU from a
+    thread that outlives it). Prefer :func:`running_qemu`, which stops it on every exit path.
 
     ``icount``: ``-icount shift=N``, every guest instruction advances guest time by 2**N ns, so the
     guest clock follows the instruction count, not the host clock (deterministic, not real time).
