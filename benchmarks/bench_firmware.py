@@ -1,16 +1,19 @@
 """The firmware core: cost per sample on the host, the emulated Cortex-M4's highest real-time rate, image sizes.
 
-1. ns per sample of the device (decode setpoint frames, limits, plant step, encode sample frames), the C
-   core through cffi against the Python firmware (``firmware_sim.firmware``), same plant and stream, same
-   run. Lockstep pacing, current mode, 10 kHz, 60 000 samples (quick: 6 000). Twice: with the default
-   plant (16 Maxwell-slip elements: the plant dominates) and with a bare inertia (the device's own cost).
-2. The highest sample rate at which the emulated Cortex-M4F (QEMU mps2-an386, realtime image, no -icount:
-   the guest clock follows the host's) streams with 0 lost samples, and how long that stream took for its
-   nominal duration (1.0 = real time). 2 s per rate (quick: skipped; tests/firmware runs QEMU). Measured twice: with the
-   default plant (which the image simulates in soft double precision, as a board would not) and with a
-   bare inertia (the core's own capacity). Every received byte crosses QEMU's one-byte CMSDK UART (one
-   QEMU main-loop pass per byte), so this is a property of the emulation on this host. Baseline: the
-   protocol's highest rate, 20 kHz. Also the lockstep throughput (samples/s) of the default image.
+1. ns per sample of the device (decode setpoint frames, limits, plant step, encode sample frames): the C
+   core through cffi against a plain Python/numpy loop of the same work (:func:`ns_per_sample_reference`,
+   the baseline; it stands for the Python firmware, which was removed), same plant and stream, same run.
+   Lockstep pacing, current mode, 10 kHz, 60 000 samples (quick: 6 000). Twice: with the default plant
+   (16 Maxwell-slip elements: the plant dominates) and with a bare inertia (the device's own cost).
+2. The highest sample rate the emulated Cortex-M4F (QEMU mps2-an386, realtime image, no -icount: the guest
+   clock follows the host's) holds in real time: every repeat (3) of a 2 s stream has 0 lost samples and a
+   wall time within REALTIME_STRETCH (1.05x) of nominal; rates are tried upwards and the first that fails
+   ends the search. The row's ratio is against the nominal time (1.0 = real time). Quick: skipped
+   (tests/firmware runs QEMU). Measured twice: with the default plant (which the image simulates in soft
+   double precision, as a board would not) and with a bare inertia (the core's own capacity). Every
+   received byte crosses QEMU's one-byte CMSDK UART (one QEMU main-loop pass per byte), so this is a
+   property of the emulation on this host. Also the lockstep throughput (samples/s) of the default image:
+   the most the emulated link carries when nothing waits for a clock.
 3. Flash (text + data) and RAM (data + bss) of the QEMU and Nucleo-F446RE images, from arm-none-eabi-size;
    baseline: the F446RE's 512 KiB flash and 128 KiB RAM.
 Parts 2 and 3 need the cross toolchain and QEMU (``make toolchain``); without them they report nothing.
@@ -58,46 +61,65 @@ def ns_per_sample_c(n: int, sim) -> float:
     return (time.perf_counter() - t0) / n * 1e9
 
 
-def ns_per_sample_python(n: int, sim) -> float:
-    from hilbench.drivers import protocol as p
-    from hilbench.firmware_sim.firmware import Firmware
+def ns_per_sample_reference(n: int, sim) -> float:
+    """The baseline: the same device work as a plain Python/numpy loop (no state machine), ns per sample.
 
-    fw = Firmware(sim, "lockstep", max_block=512)
+    Setpoint frames are decoded by the Python codec (COBS, CRC-32), the C plant runs each block through
+    ``firmware_sim.plant.Plant`` (the same plant the core drives), the limits are checked with numpy
+    (over-current, over-speed over a 1 ms window, position window) and the sample blocks are encoded by the
+    Python codec. This is what the removed Python firmware did per block, without its bookkeeping, so the
+    ratio is a lower bound of the C core's gain over it.
+    """
+    from hilbench.drivers import protocol as p
+    from hilbench.firmware_sim.plant import Plant
+
+    rate, cpr, limit, v_max = 10000, 4096, 5.0, 1e4
+    plant = Plant(sim.plant_for(limit, 0.2, cpr), 1.0 / rate, sim.substeps_at(rate), "current")
     frames = [p.encode_frame(b) for b in _stream_blocks(n, 512)]
-    fw.handle(p.Config(sample_rate=10000, current_limit=5.0, torque_constant=0.2), 0.0)
-    fw.handle(p.Arm(), 0.0)
-    decoder = p.FrameDecoder()
+    decoder, window, scale = p.FrameDecoder(), rate // 1000, 2.0 * np.pi / cpr
+    history = None
+    index = seq = 0
     t0 = time.perf_counter()
-    for i in range(0, len(frames), 8):  # the same bytes in and out as the C core: decode, run, encode
-        for msg in decoder.feed(b"".join(frames[i: i + 8])):
-            fw.handle(msg, 0.0)
-        while fw.busy:
-            for msg in fw.advance(0.0):
-                p.encode_frame(msg)
+    for i in range(0, len(frames), 8):
+        for blk in decoder.feed(b"".join(frames[i: i + 8])):
+            u = blk.values.astype(np.float64)
+            res = plant.run(u)
+            counts = res.counts.astype(np.int64)
+            history = np.full(window, counts[0]) if history is None else history
+            hist = np.concatenate((history, counts))
+            speed = np.abs(hist[window:] - hist[:-window]) * (scale * rate / window)
+            bad = (np.abs(res.current_meas) > limit) | (np.abs(u) > limit) | (speed > v_max) \
+                | (np.abs(counts * scale) > 1e9)
+            assert not bad.any()  # the stream stays inside the limits: every sample is checked, none trips
+            history = hist[-window:]
+            status = np.full(len(u), p.SampleStatus.ENABLED, dtype=np.uint16)
+            p.encode_frame(p.SampleBlock(seq, index, 8192, index + len(u), 0, p.State.STREAMING,
+                                         counts.astype(np.int32), res.current_cmd, res.current_meas, status))
+            index, seq = index + len(u), seq + 1
     return (time.perf_counter() - t0) / n * 1e9
 
 
 def m4_sustains(elf, rate: int, seconds: float) -> tuple[bool, int, float]:
     """Stream ``seconds`` at ``rate`` to the realtime image; (0 lost, lost samples, wall time s)."""
     from hilbench.drivers import protocol as p
+    from hilbench.drivers.device_url import open_device
     from hilbench.drivers.errors import DriverError
     from hilbench.firmware_sim import qemu_target
 
-    proc, pty = qemu_target.start_qemu(elf)
     n, received, t0 = int(seconds * rate), 0, time.perf_counter()
-    try:
-        with qemu_target.open_target(pty) as amp:
-            amp.configure(p.Config(sample_rate=rate, current_limit=5.0, torque_constant=0.2, watchdog_timeout=0.5))
-            amp.arm()
-            u = 1.0 * np.sin(2 * np.pi * 5.0 * np.arange(n) / rate)
-            t0 = time.perf_counter()
-            for blk in amp.stream(u, allow_loss=True):
-                received += len(blk)
-    except DriverError:  # a fault or a timeout: what did not arrive is lost
-        pass
-    finally:
+    with qemu_target.running_qemu(elf) as (_, pty):
+        try:
+            with open_device(f"serial://{pty}", timeout=5.0) as amp:
+                amp.configure(p.Config(sample_rate=rate, current_limit=5.0, torque_constant=0.2,
+                                       watchdog_timeout=0.5))
+                amp.arm()
+                u = 1.0 * np.sin(2 * np.pi * 5.0 * np.arange(n) / rate)
+                t0 = time.perf_counter()
+                for blk in amp.stream(u, allow_loss=True):
+                    received += len(blk)
+        except DriverError:  # a fault or a timeout: what did not arrive is lost
+            pass
         wall = time.perf_counter() - t0
-        qemu_target.stop_qemu(proc)
     lost = n - received
     return lost == 0, lost, wall
 
@@ -105,18 +127,33 @@ def m4_sustains(elf, rate: int, seconds: float) -> tuple[bool, int, float]:
 def m4_lockstep_rate(elf, n: int) -> float:
     """Samples per second of wall time the lockstep image streams (1 kHz configuration, current mode)."""
     from hilbench.drivers import protocol as p
+    from hilbench.drivers.device_url import open_device
     from hilbench.firmware_sim import qemu_target
 
-    proc, pty = qemu_target.start_qemu(elf)
-    try:
-        with qemu_target.open_target(pty) as amp:
-            amp.configure(p.Config(sample_rate=1000, current_limit=5.0, torque_constant=0.2, watchdog_timeout=0.5))
-            amp.arm()
-            t0 = time.perf_counter()
-            received = sum(len(b) for b in amp.stream(np.sin(np.arange(n) / 50.0), allow_loss=True))
-            return received / (time.perf_counter() - t0)
-    finally:
-        qemu_target.stop_qemu(proc)
+    with qemu_target.running_qemu(elf) as (_, pty), open_device(f"serial://{pty}", timeout=5.0) as amp:
+        # a heartbeat can wait behind blocks in the emulated link for longer than 0.5 s on a loaded host;
+        # the watchdog is not what this measures
+        amp.configure(p.Config(sample_rate=1000, current_limit=5.0, torque_constant=0.2, watchdog_timeout=5.0))
+        amp.arm()
+        t0 = time.perf_counter()
+        received = sum(len(b) for b in amp.stream(np.sin(np.arange(n) / 50.0), allow_loss=True))
+        return received / (time.perf_counter() - t0)
+
+
+REALTIME_STRETCH = 1.05  # a stream holds real time when its wall time is within 5 % of its nominal time
+
+
+def m4_highest_realtime_rate(image, label: str, seconds: float = 2.0, repeats: int = 3) -> tuple[int, float]:
+    """(highest protocol rate held in real time, worst wall / nominal there); (0, 0.0) if 1 kHz fails."""
+    best, stretch = 0, 0.0
+    for rate in (1000, 2000, 5000, 10000, 20000):
+        runs = [m4_sustains(image, rate, seconds) for _ in range(repeats)]
+        for _, lost, wall in runs:
+            print(f"  QEMU M4 {label}, realtime {rate} Hz, {seconds:g} s: lost {lost} samples, wall {wall:.2f} s")
+        if not all(ok and wall / seconds <= REALTIME_STRETCH for ok, _, wall in runs):
+            break
+        best, stretch = rate, max(wall for _, _, wall in runs) / seconds
+    return best, stretch
 
 
 def run(quick: bool = False) -> list[dict]:
@@ -127,8 +164,8 @@ def run(quick: bool = False) -> list[dict]:
     bare = sim_config_from_dict({"plant": {"preset": "none", "inertia": 1e-4, "viscous": 1e-3}})
     for label, sim in (("default plant", load_sim_config()), ("bare inertia", bare)):
         c_ns = ns_per_sample_c(n, sim)
-        py_ns = ns_per_sample_python(n, sim)
-        rows.append(_row(f"host, {label}: C core, ns per sample", c_ns, "ns", "Python firmware", py_ns))
+        py_ns = ns_per_sample_reference(n, sim)
+        rows.append(_row(f"host, {label}: C core, ns per sample", c_ns, "ns", "Python/numpy reference loop", py_ns))
 
     from hilbench.firmware_sim import qemu_target
 
@@ -146,16 +183,11 @@ def run(quick: bool = False) -> list[dict]:
         toml = Path(tmp) / "bare.toml"
         toml.write_text('[plant]\npreset = "none"\ninertia = 1e-4\nviscous = 1e-3\n')
         bare_elf = qemu_target.build_image("realtime", str(toml), Path(tmp) / "build")
-        seconds = 2.0
         for label, image in (("default plant", elf), ("bare inertia", bare_elf)):
-            best, stretch = 0, 0.0
-            for rate in (1000, 2000, 5000, 10000, 20000):
-                ok, lost, wall = m4_sustains(image, rate, seconds)
-                print(f"  QEMU M4 {label}, realtime {rate} Hz, {seconds:g} s: lost {lost} samples, wall {wall:.2f} s")
-                if ok:
-                    best, stretch = rate, wall / seconds
-            rows.append(_row(f"QEMU M4, {label}: highest rate with 0 lost", best, "Hz", "protocol maximum", 20000))
-            rows.append(_row(f"QEMU M4, {label}: wall / nominal duration there", stretch, "x", "real time", 1.0))
+            best, stretch = m4_highest_realtime_rate(image, label)
+            rows.append(_row(f"QEMU M4, {label}: highest real-time rate", best, "Hz", "protocol maximum", 20000))
+            rows.append(_row(f"QEMU M4, {label}: wall / nominal there", stretch, "x", "real time", 1.0,
+                             target=f"<= {REALTIME_STRETCH}", ok=best > 0))
     rows.append(_row("QEMU M4: lockstep throughput", m4_lockstep_rate(qemu_target.build_image("lockstep"), 4000),
                      "samples/s", "protocol maximum", 20000))
     return rows

@@ -9,9 +9,9 @@
   ``&port=P`` picks its UDP port, default 43113: buses sharing a port hear each other whatever the group);
 - ``odrive://INTERFACE/CHANNEL?node=N&tvl_endpoint=ID`` -- an ODrive axis over CAN Simple
   (:class:`drivers.odrive_drive.OdriveDrive`);
-- ``sim://?pacing=lockstep&config=sim.toml&seed=3&tick=0.004&core=c`` -- starts the simulated amplifier as a
-  separate process (``python -m hilbench.firmware_sim --serial``) and connects to its pseudo-terminal;
-  ``core`` picks the device implementation (``c``: the firmware core, default; ``python``).
+- ``sim://?pacing=lockstep&config=sim.toml&seed=3&tick=0.004`` -- starts the simulated amplifier (the C
+  firmware core) as a separate process (``python -m hilbench.firmware_sim --serial``) and connects to its
+  pseudo-terminal.
 """
 
 from __future__ import annotations
@@ -75,7 +75,7 @@ def check_device_url(url: str) -> None:
         if not parts.netloc or not parts.path.lstrip("/"):
             raise DeviceURLError(f"{url}: expected can://INTERFACE/CHANNEL")
     elif scheme == "sim":
-        _query(urlsplit(url).query, {"pacing", "config", "seed", "tick", "core"}, url)
+        _query(urlsplit(url).query, {"pacing", "config", "seed", "tick"}, url)
     elif scheme == "canopen":
         _bus_location(url, {"node", "eds", "bitrate", "port"})
     elif scheme == "odrive":
@@ -104,7 +104,7 @@ def open_device(url: str, timeout: float = 2.0) -> Amplifier | Device:
         link = CanLink(parts.netloc, channel, _int(params, "node", 1, url), fd, **kwargs)
         return Amplifier(link, timeout=timeout)
     if scheme == "sim":
-        params = _query(urlsplit(url).query, {"pacing", "config", "seed", "tick", "core"}, url)
+        params = _query(urlsplit(url).query, {"pacing", "config", "seed", "tick"}, url)
         proc, path = start_simulator(params)
         try:
             link = SerialLink(path)
@@ -168,7 +168,7 @@ def start_simulator(options: dict[str, str]) -> tuple[subprocess.Popen, str]:
     """Start ``python -m hilbench.firmware_sim --serial`` with ``options`` (pacing, config, seed, tick) as flags;
     return the process and the pty path it printed."""
     cmd = [sys.executable, "-m", "hilbench.firmware_sim", "--serial", "--parent-pid", str(os.getpid())]
-    for key in ("pacing", "config", "seed", "tick", "core"):
+    for key in ("pacing", "config", "seed", "tick"):
         if key in options:
             cmd += [f"--{key}", options[key]]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)

@@ -8,17 +8,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from hilbench.firmware_sim.firmware import PACINGS
-
-CORES = ("c", "python")
-
-
-def default_core() -> str:
-    """The device implementation a simulator runs unless told: HILBENCH_SIM_CORE, else the C core."""
-    import os
-
-    core = os.environ.get("HILBENCH_SIM_CORE", "c")
-    return core if core in CORES else "c"
+PACINGS = ("realtime", "lockstep")
 
 
 def build_parser(prog: str = "python -m hilbench.firmware_sim") -> argparse.ArgumentParser:
@@ -48,9 +38,6 @@ def build_parser(prog: str = "python -m hilbench.firmware_sim") -> argparse.Argu
     parser.add_argument("--seed", type=int, help="override the plant's random seed")
     parser.add_argument("--pacing", choices=PACINGS, default="realtime",
                         help="realtime (default) or lockstep (as fast as flow control allows, for tests)")
-    parser.add_argument("--core", choices=CORES, default=default_core(),
-                        help="device implementation: c (the firmware core in firmware/, default) or python; "
-                             "the default comes from HILBENCH_SIM_CORE when set")
     parser.add_argument("--tick", type=float, default=0.004, help="realtime loop period, s (default 0.004)")
     parser.add_argument("--parent-pid", type=int, default=None,
                         help="exit once this process is gone (sim:// passes the host's pid); the watchdog has "
@@ -93,8 +80,8 @@ def _serve_drive(args, sim) -> int:
 
 def main(argv: list[str] | None = None, prog: str = "python -m hilbench.firmware_sim") -> int:
     args = build_parser(prog).parse_args(argv)
+    from hilbench.firmware_sim.core_c import CoreDevice
     from hilbench.firmware_sim.device import CanTransport, PtyTransport, serve
-    from hilbench.firmware_sim.firmware import Firmware
     from hilbench.firmware_sim.sim_config import load_sim_config
 
     try:
@@ -103,9 +90,6 @@ def main(argv: list[str] | None = None, prog: str = "python -m hilbench.firmware
             return _serve_drive(args, sim)
         if not 0.0005 <= args.tick <= 0.1:
             raise ValueError(f"--tick must be within 0.0005..0.1 s, got {args.tick}")
-        if args.core == "c":
-            from hilbench.firmware_sim.core_c import CoreCanTransport as CanTransport
-            from hilbench.firmware_sim.core_c import CorePtyTransport as PtyTransport
         if args.serial:
             transport = PtyTransport()
         else:
@@ -122,14 +106,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m hilbench.firmware
     except (ValueError, OSError, ImportError, RuntimeError) as exc:  # RuntimeError: python-can's CanError
         print(f"{prog}: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2
-    if args.core == "c":
-        from hilbench.firmware_sim.core_c import CoreDevice, serve_core
-
-        link = "serial" if args.serial else "can-fd" if args.fd else "can"
-        firmware = CoreDevice(sim, args.pacing, link, args.node, transport.max_block)
-        serve = serve_core
-    else:
-        firmware = Firmware(sim, args.pacing, transport.max_block)
+    link = "serial" if args.serial else "can-fd" if args.fd else "can"
+    device = CoreDevice(sim, args.pacing, link, args.node, transport.max_block)
     if args.serial:
         print(transport.path, flush=True)
     else:
@@ -140,7 +118,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m hilbench.firmware
     if args.parent_pid is not None:
         threading.Thread(target=watch_parent, args=(args.parent_pid, stop), daemon=True).start()
     try:
-        serve(transport, firmware, args.tick, stop)
+        serve(transport, device, args.tick, stop)
     except KeyboardInterrupt:
         pass
     finally:

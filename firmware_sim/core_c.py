@@ -2,18 +2,13 @@
 code a microcontroller runs, with the C plant behind its HAL (``firmware/targets/host/``).
 
 :class:`CoreDevice` is one device: bytes (serial) or CAN frames in, bytes or CAN frames out, time in
-seconds of the monotonic clock. :func:`serve_core` is its serve loop on a pseudo-terminal
-(:class:`CorePtyTransport`) or a python-can bus (:class:`CoreCanTransport`). Design, HAL and float
-policy: ``docs/firmware.md``.
+seconds of the monotonic clock. Its serve loop and transports are in :mod:`firmware_sim.device`. Design,
+HAL and float policy: ``docs/firmware.md``.
 """
 
 from __future__ import annotations
 
-import threading
-import time
-
 from hilbench.firmware_sim._fwcore import ffi, lib
-from hilbench.firmware_sim.device import TX_BUFFER_LIMIT, CanTransport, PtyTransport
 from hilbench.firmware_sim.plant import PlantParameterError, _CParams, validate
 from hilbench.firmware_sim.plant import ffi as plant_ffi
 from hilbench.firmware_sim.sim_config import SimConfig
@@ -120,104 +115,3 @@ class CoreDevice:
         names = ("state", "faults", "index", "free", "received", "fault_index", "fault_silence",
                  "current_applied", "crc_errors", "dropped_frames", "rx_frames", "tx_frames")
         return {name: getattr(s, name) for name in names}
-
-
-class _Inbox:
-    """Stands in for PtyTransport's frame decoder: the C core parses the bytes itself."""
-
-    crc_errors = 0
-
-    def __init__(self) -> None:
-        self.data = bytearray()
-
-    def feed(self, chunk: bytes) -> list:
-        self.data += chunk
-        return []
-
-    def take(self) -> bytes:
-        out = bytes(self.data)
-        self.data.clear()
-        return out
-
-
-class CorePtyTransport(PtyTransport):
-    """PtyTransport's pseudo-terminal and output queue, carrying the C core's bytes unparsed."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self._decoder = _Inbox()
-
-    def exchange(self, device: CoreDevice, timeout: float) -> None:
-        """Wait up to ``timeout`` s for host bytes and hand them to the device."""
-        self.poll(timeout)
-        data = self._decoder.take()
-        if data:
-            before = device.identity_requests
-            device.rx_bytes(data, time.monotonic())
-            if device.identity_requests != before:  # a new host: drop what the previous one left unread
-                self._discard_backlog()
-
-    def deliver(self, device: CoreDevice) -> None:
-        """Queue the device's output frames (0x00-delimited) and write what the pty takes."""
-        out = device.take_bytes()
-        start = 0
-        while start < len(out):
-            end = out.index(0, start) + 1
-            if len(self._tx) > TX_BUFFER_LIMIT:
-                self.dropped_frames += 1
-            else:
-                self._tx_starts.append(len(self._tx))
-                self._tx += out[start:end]
-                self.frames_tx += 1
-            start = end
-        self._flush()
-
-
-class CoreCanTransport(CanTransport):
-    """CanTransport's bus, carrying the C core's CAN frames (the core segments and reassembles)."""
-
-    def exchange(self, device: CoreDevice, timeout: float) -> None:
-        frame = self.bus.recv(max(0.0, timeout))
-        while frame is not None:
-            if not (frame.is_error_frame or frame.is_remote_frame):
-                device.rx_can(frame.arbitration_id, bytes(frame.data), time.monotonic())
-            frame = self.bus.recv(0.0)
-
-    def deliver(self, device: CoreDevice) -> None:
-        for arb, data in device.take_can():
-            try:
-                self.bus.send(self._can.Message(arbitration_id=arb, data=data, is_extended_id=False,
-                                                is_fd=self.fd, bitrate_switch=self.fd), timeout=0.1)
-                self.frames_tx += 1
-            except self._can.CanError:
-                self.dropped_frames_tx += 1
-
-    @property
-    def dropped_frames(self) -> int:
-        return self.dropped_frames_tx
-
-
-def serve_core(transport: CorePtyTransport | CoreCanTransport, device: CoreDevice, tick: float = 0.004,
-               stop: threading.Event | None = None) -> None:
-    """Run the device until ``stop`` is set (forever when None).
-
-    ``tick`` (s) is the realtime loop period; in lockstep the loop waits only when nothing is buffered.
-    The core checks its watchdog on every pass, whatever the pacing and the buffer hold.
-    """
-    next_tick = time.monotonic()
-    reported = 0
-    while stop is None or not stop.is_set():
-        now = time.monotonic()
-        if device.pacing == "realtime":
-            timeout = next_tick - now
-        else:
-            timeout = 0.0 if device.busy else 0.01
-        transport.exchange(device, timeout)
-        now = time.monotonic()
-        if device.pacing == "lockstep" or now >= next_tick:
-            device.tick(now)
-            next_tick = max(next_tick + tick, now)
-        transport.deliver(device)
-        dropped = transport.dropped_frames
-        device.count_dropped(dropped - reported)
-        reported = dropped

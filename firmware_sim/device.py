@@ -1,8 +1,10 @@
-"""The simulated amplifier as a process: transports (pseudo-terminal, python-can bus) and the serve loop.
+"""The simulated amplifier as a process: transports (pseudo-terminal, python-can bus) and the serve loop of
+the firmware core (:class:`firmware_sim.core_c.CoreDevice`).
 
-The serve loop waits for host frames until the next tick, hands them to :class:`Firmware`, then lets the
-firmware compute the samples due and sends everything it returns. Nothing of the simulator configuration
-is written anywhere but the wire protocol's own messages.
+The transports carry the core's bytes and CAN frames unparsed: COBS, CRC, codec and CAN segmentation are the
+C core's, as on a board. The serve loop waits for host bytes until the next tick, hands them to the core, lets
+it compute the samples due and writes what it produced. Nothing of the simulator configuration is written
+anywhere but the wire protocol's own messages.
 """
 
 from __future__ import annotations
@@ -14,8 +16,7 @@ import threading
 import time
 import tty
 
-from hilbench.drivers import protocol as p
-from hilbench.firmware_sim.firmware import Firmware
+from hilbench.firmware_sim.core_c import CoreDevice
 
 TX_BUFFER_LIMIT = 1 << 18  # bytes queued towards a host that does not read; beyond it frames are dropped
 
@@ -35,19 +36,19 @@ class PtyTransport:
         tty.setraw(self._slave)
         os.set_blocking(self.master, False)
         self.path = os.ttyname(self._slave)
-        self._decoder = p.FrameDecoder()
         self._tx = bytearray()
         self._tx_starts: list[int] = []  # offsets of the frames queued in _tx
         self.dropped_frames = 0
         self.frames_tx = 0
 
-    def poll(self, timeout: float) -> list[p.Message]:
+    def exchange(self, device: CoreDevice, timeout: float) -> None:
+        """Wait up to ``timeout`` s for host bytes and hand them to the device."""
         wlist = [self.master] if self._tx else []
         readable, writable, _ = select.select([self.master], wlist, [], max(0.0, timeout))
         if writable:
             self._flush()
         if not readable:
-            return []
+            return
         chunks = []
         while True:
             try:
@@ -62,10 +63,11 @@ class PtyTransport:
             if not chunk:
                 break
             chunks.append(chunk)
-        msgs = self._decoder.feed(b"".join(chunks)) if chunks else []
-        if any(m.TYPE == p.MsgType.GET_IDENTITY for m in msgs):
-            self._discard_backlog()
-        return msgs
+        if chunks:
+            before = device.identity_requests
+            device.rx_bytes(b"".join(chunks), time.monotonic())
+            if device.identity_requests != before:  # a new host: drop what the previous one left unread
+                self._discard_backlog()
 
     def _discard_backlog(self) -> None:
         """Drop the queued frames that have not started to go out (a partly written one is finished)."""
@@ -74,14 +76,19 @@ class PtyTransport:
             del self._tx[self._tx_starts[1]:]
             del self._tx_starts[1:]
 
-    def send(self, msgs: list[p.Message]) -> None:
-        for msg in msgs:
+    def deliver(self, device: CoreDevice) -> None:
+        """Queue the device's output frames (0x00-delimited) and write what the pty takes."""
+        out = device.take_bytes()
+        start = 0
+        while start < len(out):
+            end = out.index(0, start) + 1
             if len(self._tx) > TX_BUFFER_LIMIT:
                 self.dropped_frames += 1
-                continue
-            self._tx_starts.append(len(self._tx))
-            self._tx += p.encode_frame(msg)
-            self.frames_tx += 1
+            else:
+                self._tx_starts.append(len(self._tx))
+                self._tx += out[start:end]
+                self.frames_tx += 1
+            start = end
         self._flush()
 
     def _flush(self) -> None:
@@ -95,10 +102,6 @@ class PtyTransport:
             if self._tx and self._tx_starts[0] != 0:
                 self._tx_starts.insert(0, 0)  # the partly written frame
 
-    @property
-    def crc_errors(self) -> int:
-        return self._decoder.crc_errors
-
     def close(self) -> None:
         for fd in (self.master, self._slave):
             try:
@@ -108,7 +111,8 @@ class PtyTransport:
 
 
 class CanTransport:
-    """Serves the protocol as CAN node ``node`` on a python-can bus (classic frames, or CAN FD)."""
+    """Serves the protocol as CAN node ``node`` on a python-can bus (classic frames, or CAN FD); the core
+    segments and reassembles."""
 
     def __init__(self, bus, node: int = 1, fd: bool = False) -> None:
         import can
@@ -118,66 +122,50 @@ class CanTransport:
         self.node = node
         self.fd = fd
         self.max_block = 512 if fd else 60
-        self._reassembler = p.CanReassembler(p.HOST_TO_DEVICE, node)
         self.frames_tx = 0
-        self.dropped_frames_tx = 0
+        self.dropped_frames = 0
 
-    def poll(self, timeout: float) -> list[p.Message]:
-        out = []
+    def exchange(self, device: CoreDevice, timeout: float) -> None:
         frame = self.bus.recv(max(0.0, timeout))
         while frame is not None:
             if not (frame.is_error_frame or frame.is_remote_frame):
-                msg = self._reassembler.feed(frame.arbitration_id, bytes(frame.data))
-                if msg is not None:
-                    out.append(msg)
+                device.rx_can(frame.arbitration_id, bytes(frame.data), time.monotonic())
             frame = self.bus.recv(0.0)
-        return out
 
-    def send(self, msgs: list[p.Message]) -> None:
-        for msg in msgs:
+    def deliver(self, device: CoreDevice) -> None:
+        for arb, data in device.take_can():
             try:
-                for arb, data in p.encode_can(msg, p.DEVICE_TO_HOST, self.node, self.fd):
-                    self.bus.send(self._can.Message(arbitration_id=arb, data=data, is_extended_id=False,
-                                                    is_fd=self.fd, bitrate_switch=self.fd), timeout=0.1)
+                self.bus.send(self._can.Message(arbitration_id=arb, data=data, is_extended_id=False,
+                                                is_fd=self.fd, bitrate_switch=self.fd), timeout=0.1)
                 self.frames_tx += 1
             except self._can.CanError:
-                self.dropped_frames_tx += 1
-
-    @property
-    def crc_errors(self) -> int:
-        return self._reassembler.errors
-
-    @property
-    def dropped_frames(self) -> int:
-        return self._reassembler.dropped_frames + self.dropped_frames_tx
+                self.dropped_frames += 1
 
     def close(self) -> None:
         self.bus.shutdown()
 
 
-def serve(transport, firmware: Firmware, tick: float = 0.004, stop: threading.Event | None = None) -> None:
+def serve(transport: PtyTransport | CanTransport, device: CoreDevice, tick: float = 0.004,
+          stop: threading.Event | None = None) -> None:
     """Run the device until ``stop`` is set (forever when None).
 
-    ``tick`` (s) is the realtime loop period: the samples due are computed in blocks every tick. In
-    lockstep the loop only waits when there is nothing buffered to compute.
+    ``tick`` (s) is the realtime loop period; in lockstep the loop waits only when nothing is buffered.
+    The core checks its watchdog on every pass, whatever the pacing and the buffer hold.
     """
     next_tick = time.monotonic()
-    base_dropped = 0
+    reported = 0
     while stop is None or not stop.is_set():
         now = time.monotonic()
-        if firmware.pacing == "realtime":
+        if device.pacing == "realtime":
             timeout = next_tick - now
         else:
-            timeout = 0.0 if firmware.busy else 0.01
-        for msg in transport.poll(timeout):
-            transport.send(firmware.handle(msg, time.monotonic()))
+            timeout = 0.0 if device.busy else 0.01
+        transport.exchange(device, timeout)
         now = time.monotonic()
-        if firmware.pacing == "lockstep" or now >= next_tick:
-            transport.send(firmware.advance(now))
+        if device.pacing == "lockstep" or now >= next_tick:
+            device.tick(now)
             next_tick = max(next_tick + tick, now)
-        c = firmware.counters
-        c["crc_errors"] = transport.crc_errors
-        c["tx_frames"] = transport.frames_tx
+        transport.deliver(device)
         dropped = transport.dropped_frames
-        c["dropped_frames"] += dropped - base_dropped
-        base_dropped = dropped
+        device.count_dropped(dropped - reported)
+        reported = dropped

@@ -7,6 +7,7 @@ Used by the ``target`` tests and the firmware benchmark. The firmware sources li
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import select
@@ -14,6 +15,7 @@ import shutil
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -69,8 +71,24 @@ def size(elf: Path) -> dict[str, int]:
     return {"text": text, "data": data, "bss": bss, "flash": text + data, "ram": data + bss}
 
 
+def _die_with_parent() -> None:
+    """In the child, before exec: SIGKILL when the parent dies (Linux prctl PR_SET_PDEATHSIG), so a host
+    that is itself killed (SIGKILL, a crashed test run) never leaves an emulator spinning."""
+    import ctypes
+    import signal
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
+    except (OSError, AttributeError):  # not Linux: stop_qemu and the process group remain
+        pass
+
+
 def start_qemu(elf: Path, icount: int | None = None) -> tuple[subprocess.Popen, str]:
     """Start QEMU on ``elf`` with UART0 on a new pseudo-terminal; returns the process and the pty path.
+
+    QEMU runs in its own process group (stopped as a group by :func:`stop_qemu`) and is killed by the
+    kernel if the process that started it dies first (strictly, the starting thread: start QEMU from a
+    thread that outlives it). Prefer :func:`running_qemu`, which stops it on every exit path.
 
     ``icount``: ``-icount shift=N``, every guest instruction advances guest time by 2**N ns, so the
     guest clock follows the instruction count, not the host clock (deterministic, not real time).
@@ -79,58 +97,49 @@ def start_qemu(elf: Path, icount: int | None = None) -> tuple[subprocess.Popen, 
            "-kernel", str(elf)]
     if icount is not None:
         cmd += ["-icount", f"shift={icount}"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
-    deadline = time.monotonic() + QEMU_START_TIMEOUT
-    text = b""
-    while True:
-        match = re.search(rb"(/dev/pts/\d+)", text)
-        if match:
-            return proc, match.group(1).decode()
-        ready, _, _ = select.select([proc.stdout], [], [], max(0.0, deadline - time.monotonic()))
-        chunk = os.read(proc.stdout.fileno(), 4096) if ready else b""
-        if not chunk:
-            stop_qemu(proc)
-            raise RuntimeError(f"QEMU did not offer its UART: {text.decode(errors='replace').strip()[-200:]}")
-        text += chunk
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, process_group=0,
+                            preexec_fn=_die_with_parent)
+    try:
+        deadline = time.monotonic() + QEMU_START_TIMEOUT
+        text = b""
+        while True:
+            match = re.search(rb"(/dev/pts/\d+)", text)
+            if match:
+                return proc, match.group(1).decode()
+            ready, _, _ = select.select([proc.stdout], [], [], max(0.0, deadline - time.monotonic()))
+            chunk = os.read(proc.stdout.fileno(), 4096) if ready else b""
+            if not chunk:
+                raise RuntimeError(f"QEMU did not offer its UART: {text.decode(errors='replace').strip()[-200:]}")
+            text += chunk
+    except BaseException:
+        stop_qemu(proc)
+        raise
 
 
-def start_connected(elf: Path, starts: int = 3, timeout: float = 5.0, attempts: int = 3):
-    """Start QEMU on ``elf`` and connect to it: (process, pty path, Amplifier). Now and then a freshly
-    started QEMU never passes its guest's first answer to the pty (seen in 4 of 10 starts on this machine,
-    the guest answering fine over the same pty when the host writes raw frames afterwards: not explained);
-    such a QEMU is stopped and started again, ``starts`` times at most."""
-    from hilbench.drivers.errors import DeviceTimeoutError
+@contextlib.contextmanager
+def running_qemu(elf: Path, icount: int | None = None) -> Iterator[tuple[subprocess.Popen, str]]:
+    """``with running_qemu(elf) as (proc, pty):`` QEMU on ``elf``, stopped however the block ends."""
+    proc, pty = start_qemu(elf, icount)
+    try:
+        yield proc, pty
+    finally:
+        stop_qemu(proc)
 
-    for start in range(starts):
-        proc, pty = start_qemu(elf)
+
+def stop_qemu(proc: subprocess.Popen, grace: float = 5.0) -> None:
+    """Stop QEMU's whole process group (SIGTERM, then SIGKILL after ``grace`` s) and reap it."""
+    import signal
+
+    for sig, wait in ((signal.SIGTERM, grace), (signal.SIGKILL, None)):
         try:
-            return proc, pty, open_target(pty, timeout=timeout, attempts=attempts)
-        except DeviceTimeoutError:
-            stop_qemu(proc)
-            if start == starts - 1:
-                raise
-    raise AssertionError("not reached")
-
-
-def open_target(pty: str, timeout: float = 5.0, attempts: int = 3):
-    """``open_device("serial://PTY")`` for a QEMU just started. QEMU notices a host opening its pty on a
-    1 s timer and drops what the guest writes until then, so the first identity request may go
-    unanswered on a loaded machine: retried ``attempts`` times."""
-    from hilbench.drivers.device_url import open_device
-    from hilbench.drivers.errors import DeviceTimeoutError
-
-    for attempt in range(attempts):
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            break
         try:
-            return open_device(f"serial://{pty}", timeout=timeout)
-        except DeviceTimeoutError:
-            if attempt == attempts - 1:
-                raise
-            time.sleep(1.0)
-    raise AssertionError("not reached")
-
-
-def stop_qemu(proc: subprocess.Popen) -> None:
-    """Terminate QEMU and reap it (as a simulator process is stopped)."""
-    from hilbench.drivers.device_url import stop_simulator
-
-    stop_simulator(proc)
+            proc.wait(timeout=wait)
+            break
+        except subprocess.TimeoutExpired:
+            continue
+    proc.wait()
+    if proc.stdout is not None:
+        proc.stdout.close()

@@ -29,8 +29,6 @@ def register(subparsers) -> None:
     parser.add_argument("--pacing", choices=("realtime", "lockstep"), default="realtime",
                         help="realtime (default) or lockstep (as fast as flow control allows)")
     parser.add_argument("--tick", type=float, default=0.004, help="realtime loop period, s")
-    parser.add_argument("--core", choices=("c", "python"), default=None,
-                        help="device implementation: c (the firmware core, default) or python")
     parser.set_defaults(func=run)
 
 
@@ -46,7 +44,7 @@ def firmware_argv(args) -> list[str]:
                                               "--node", str(args.node)]
     if args.fd:
         argv.append("--fd")
-    for name in ("config", "seed", "core"):
+    for name in ("config", "seed"):
         if getattr(args, name) is not None:
             argv += [f"--{name}", str(getattr(args, name))]
     return argv + ["--pacing", args.pacing, "--tick", str(args.tick)]

@@ -22,7 +22,7 @@ double hb_get_f64(const uint8_t *p) { uint64_t u = hb_get_u64(p); double v; memc
 
 /* Table-driven CRC-32 (reflected polynomial 0xEDB88320); the 1 KiB table lives in flash. */
 static const uint32_t crc_table[256] = {
-#define C1(c) (((c) & 1u) ? 0xEDB88320u ^ ((c) >> 1) : (c) >> 1)
+#define C1(c) (((c) >> 1) ^ (0xEDB88320u & (0u - ((c) & 1u))))  /* c twice, not 3 times: 2^8 expansions, not 3^8 */
 #define C8(c) C1(C1(C1(C1(C1(C1(C1(C1((uint32_t)(c)))))))))
 #define R4(i) C8(i), C8(i + 1), C8(i + 2), C8(i + 3)
 #define R16(i) R4(i), R4(i + 4), R4(i + 8), R4(i + 12)

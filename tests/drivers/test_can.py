@@ -10,7 +10,8 @@ import pytest
 from hilbench.drivers import protocol as p
 from hilbench.drivers.device_url import open_device
 from hilbench.drivers.errors import DeviceFaultError, SetpointError
-from hilbench.firmware_sim.core_c import CoreCanTransport, CoreDevice, serve_core
+from hilbench.firmware_sim.core_c import CoreDevice
+from hilbench.firmware_sim.device import CanTransport, serve
 from hilbench.firmware_sim.plant import simulate
 from hilbench.firmware_sim.sim_config import load_sim_config
 
@@ -27,10 +28,10 @@ def virtual_device(sim_toml):
         channel = f"hil-{uuid.uuid4().hex[:8]}"
         path = sim_toml(seed=5)
         bus = can.Bus(interface="virtual", channel=channel, fd=fd)
-        transport = CoreCanTransport(bus, node, fd)
+        transport = CanTransport(bus, node, fd)
         stop = threading.Event()
         device = CoreDevice(load_sim_config(path), pacing, "can-fd" if fd else "can", node, transport.max_block)
-        thread = threading.Thread(target=serve_core, args=(transport, device),
+        thread = threading.Thread(target=serve, args=(transport, device),
                                   kwargs={"stop": stop, "tick": 0.002}, daemon=True)
         thread.start()
         started.append((stop, thread, transport))

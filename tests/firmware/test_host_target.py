@@ -13,35 +13,11 @@ from hilbench.firmware_sim._fwcore import ffi, lib
 from hilbench.firmware_sim.core_c import CoreDevice
 from hilbench.firmware_sim.plant import simulate
 from hilbench.firmware_sim.sim_config import sim_config_from_dict
+from tests.firmware.host import Host, samples
 
 SIM = sim_config_from_dict({"device": {"buffer_capacity": 4096},
                             "plant": {"elements": 4, "seed": 3, "noise_current": 0.01, "noise_position": 1e-4,
                                       "current_lag": 2e-4, "delay_samples": 2}})
-
-
-class Host:
-    """A host talking to a CoreDevice through Python's frame codec; time is given explicitly (s)."""
-
-    def __init__(self, device: CoreDevice) -> None:
-        self.device = device
-        self.decoder = p.FrameDecoder()
-
-    def send(self, msg: p.Message, now: float = 0.0) -> list[p.Message]:
-        self.device.rx_bytes(p.encode_frame(msg), now)
-        return self.receive()
-
-    def receive(self) -> list[p.Message]:
-        return self.decoder.feed(self.device.take_bytes())
-
-    def tick(self, now: float = 0.0) -> list[p.Message]:
-        self.device.tick(now)
-        return self.receive()
-
-
-def samples(msgs):
-    blocks = [m for m in msgs if isinstance(m, p.SampleBlock)]
-    return {k: np.concatenate([getattr(b, k) for b in blocks]) for k in ("counts", "current_cmd", "current_meas",
-                                                                         "status")}
 
 
 @settings(max_examples=300, deadline=None)

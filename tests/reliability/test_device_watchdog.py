@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from hilbench.drivers import protocol as p
-from hilbench.firmware_sim.firmware import Firmware
+from hilbench.firmware_sim.core_c import CoreDevice
 from hilbench.firmware_sim.sim_config import sim_config_from_dict
+from tests.firmware.host import Host
 from tests.reliability.wire import Wire
 
 
@@ -66,57 +67,65 @@ def test_lockstep_watchdog_trips_with_an_empty_buffer(simulator):
 SIM = sim_config_from_dict({"plant": {"elements": 4}})
 
 
-def _armed(pacing: str, watchdog: float) -> Firmware:
-    fw = Firmware(SIM, pacing, max_block=128)
+def _armed(pacing: str, watchdog: float) -> Host:
+    host = Host(CoreDevice(SIM, pacing, max_block=128))
     cfg = p.Config(sample_rate=1000, current_limit=5.0, watchdog_timeout=watchdog, torque_constant=0.2,
                    counts_per_rev=4096)
-    assert fw.handle(cfg, 0.0)[0].result == p.Result.OK
-    assert fw.handle(p.Arm(), 0.0)[0].result == p.Result.OK
-    return fw
+    assert host.send(cfg)[0].result == p.Result.OK
+    assert host.send(p.Arm())[0].result == p.Result.OK
+    return host
 
 
 def test_tick_ending_exactly_on_the_trip_sample():
     """Item 1, watchdog path: the tick computes up to the sample before the trip sample; the next tick has
     nothing left but the trip itself."""
-    fw = _armed("realtime", 0.1)
-    fw.handle(p.SetpointBlock(0, np.full(128, 0.1, dtype=np.float32)), 0.0)
-    # trip sample = first k with k/1000 > 0 + 0.1 -> 101; advance to t = 0.101 computes samples 0..100
-    fw.advance(0.101)
-    assert fw.index == 101 and fw.state == p.State.STREAMING
-    out = fw.advance(0.1015)  # nothing more due on the clock, but the deadline has passed: trips now
+    host = _armed("realtime", 0.1)
+    host.send(p.SetpointBlock(0, np.full(128, 0.1, dtype=np.float32)), 0.0)
+    # trip sample = first k with k/1000 > 0 + 0.1 -> 101; a tick at t = 0.101 computes samples 0..100
+    host.tick(0.101)
+    s = host.device.status()
+    assert s["index"] == 101 and s["state"] == p.State.STREAMING
+    # the deadline has passed, but sample 101 (t = 0.101 s, computed once due at 0.102 s like every sample)
+    # is not due yet: nothing happens; at 0.1025 s the trip sample is all there is to compute
+    assert host.tick(0.1015) == [] and host.device.status()["faults"] == 0
+    out = host.tick(0.1025)
     blocks = [m for m in out if isinstance(m, p.SampleBlock)]
-    assert fw.faults == p.Fault.WATCHDOG and fw.state == p.State.DISARMED
+    s = host.device.status()
+    assert s["faults"] == p.Fault.WATCHDOG and s["state"] == p.State.DISARMED and s["fault_index"] == 101
     assert blocks[-1].first_index == 101 and blocks[-1].current_cmd[-1] == 0.0
-    assert fw.safety.fault_index == 101
 
 
 def test_underrun_on_an_exactly_empty_buffer_unit():
-    fw = _armed("realtime", 0.0)
-    fw.handle(p.SetpointBlock(0, np.full(100, 0.1, dtype=np.float32)), 0.0)
-    fw.advance(0.1)  # all 100 due and buffered
-    assert fw.index == 100
-    fw.advance(0.2)
-    assert fw.faults == p.Fault.BUFFER_UNDERRUN and fw.safety.fault_index == 100
+    host = _armed("realtime", 0.0)
+    host.send(p.SetpointBlock(0, np.full(100, 0.1, dtype=np.float32)), 0.0)
+    host.tick(0.1)  # all 100 due and buffered
+    assert host.device.status()["index"] == 100
+    host.tick(0.2)
+    s = host.device.status()
+    assert s["faults"] == p.Fault.BUFFER_UNDERRUN and s["fault_index"] == 100
 
 
 def test_lockstep_watchdog_unit_runs_on_every_tick():
-    fw = _armed("lockstep", 0.2)
-    fw.handle(p.SetpointBlock(0, np.full(50, 0.12, dtype=np.float32)), 0.0)
-    fw.advance(0.0)
-    assert fw.index == 50 and fw.state == p.State.STREAMING and fw.current_applied == pytest.approx(0.12)
-    assert fw.advance(0.19) == []  # buffer empty, deadline not reached
-    fw.advance(0.21)
-    assert fw.faults == p.Fault.WATCHDOG and fw.current_applied == 0.0 and fw.state == p.State.DISARMED
+    host = _armed("lockstep", 0.2)
+    host.send(p.SetpointBlock(0, np.full(50, 0.12, dtype=np.float32)), 0.0)
+    host.tick(0.0)
+    s = host.device.status()
+    assert s["index"] == 50 and s["state"] == p.State.STREAMING and s["current_applied"] == pytest.approx(0.12)
+    assert host.tick(0.19) == []  # buffer empty, deadline not reached
+    host.tick(0.21)
+    s = host.device.status()
+    assert s["faults"] == p.Fault.WATCHDOG and s["current_applied"] == 0.0 and s["state"] == p.State.DISARMED
 
 
 def test_watchdog_deadline_after_the_buffer_runs_dry_in_one_tick_unit():
     """A long tick (a stalled device loop) that holds both the end of the setpoints and the watchdog
     deadline: the underrun comes first in sample order and latches; nothing is taken that is not there."""
-    fw = _armed("realtime", 0.1)
-    fw.handle(p.SetpointBlock(0, np.full(50, 0.1, dtype=np.float32)), 0.0)
-    fw.advance(0.3)  # 300 samples due, the watchdog trip sample is 101, only 50 setpoints buffered
-    assert fw.faults == p.Fault.BUFFER_UNDERRUN and fw.safety.fault_index == 50
-    assert fw.index == 51 and fw.current_applied == 0.0
+    host = _armed("realtime", 0.1)
+    host.send(p.SetpointBlock(0, np.full(50, 0.1, dtype=np.float32)), 0.0)
+    host.tick(0.3)  # 300 samples due, the watchdog trip sample is 101, only 50 setpoints buffered
+    s = host.device.status()
+    assert s["faults"] == p.Fault.BUFFER_UNDERRUN and s["fault_index"] == 50
+    assert s["index"] == 51 and s["current_applied"] == 0.0
 
 
 def test_host_gone_during_a_long_device_tick(simulator):

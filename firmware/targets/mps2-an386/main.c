@@ -1,5 +1,5 @@
 /* Processor-in-the-loop target: the firmware core and the C plant on QEMU's mps2-an386 (Cortex-M4F,
- * 25 MHz), protocol v1 on the CMSDK APB UART0. Time comes from SysTick (1 ms interrupt + the counter).
+ * 25 MHz), protocol v1 on the CMSDK APB UART0. Time comes from TIMER0, free-running at 25 MHz.
  * The UART holds one received byte, so its RX interrupt moves bytes into a ring that the main loop hands
  * to the core between ticks (a tick may compute hundreds of samples).
  * Pacing is chosen at build time (HB_TARGET_PACING): lockstep for bit-exact tests, realtime for the rate
@@ -29,9 +29,9 @@
 #define RX_RING 16384u                /* bytes, a power of two */
 #define UART_TX_FULL 0x1u
 #define UART_RX_FULL 0x2u
-#define SYST_CSR (*(volatile uint32_t *)0xE000E010u)
-#define SYST_RVR (*(volatile uint32_t *)0xE000E014u)
-#define SYST_CVR (*(volatile uint32_t *)0xE000E018u)
+#define TIMER0_CTRL (*(volatile uint32_t *)0x40000000u)
+#define TIMER0_VALUE (*(volatile uint32_t *)0x40000004u)
+#define TIMER0_RELOAD (*(volatile uint32_t *)0x40000008u)
 
 typedef struct {
     hb_plant_hal sim;  /* first: the core's hal pointer is the plant HAL's */
@@ -39,15 +39,17 @@ typedef struct {
 
 static an386_hal hal;
 static hb_device device;
-static volatile uint32_t milliseconds;
 
 static volatile uint8_t rx_ring[RX_RING];
 static volatile uint32_t rx_head, rx_tail;  /* written by the ISR / by the main loop */
 static uint32_t rx_overruns;
 
-void SysTick_Handler(void) { milliseconds++; }
-
+/* The RX interrupt is cleared first, then the data register drained. Cleared last, it would also clear
+ * the interrupt of a byte that arrived after the drain loop's final check: that byte then sits in the
+ * one-byte RX register with no interrupt pending, QEMU takes no further byte, and the link is dead (the
+ * cause of the unanswered GET_IDENTITY and HEARTBEAT seen in a fifth of fresh starts). */
 void UART0_RX_Handler(void) {
+    UART0_INTSTATUS = 0x2u;
     while (UART0_STATE & UART_RX_FULL) {
         uint8_t b = (uint8_t)UART0_DATA;
         if (rx_head - rx_tail < RX_RING) {
@@ -57,16 +59,20 @@ void UART0_RX_Handler(void) {
             rx_overruns++;  /* the frame is lost; its CRC fails and the core counts it */
         }
     }
-    UART0_INTSTATUS = 0x2u;  /* clear the RX interrupt */
 }
 
+/* Time is read from CMSDK APB TIMER0, a free-running 32-bit down-counter at SYSCLK (wraps every 171 s),
+ * extended to 64 bits here. Counting SysTick interrupts instead loses time whenever QEMU delivers two
+ * expiries before the guest ran: the guest clock then ran slow and a realtime stream took up to twice its
+ * nominal time. Only the main loop reads the clock. */
+static uint64_t clock_ticks;
+static uint32_t clock_last = 0xFFFFFFFFu;
+
 static uint64_t now_us(void) {
-    uint32_t ms, count;
-    do {
-        ms = milliseconds;
-        count = SYST_CVR;
-    } while (ms != milliseconds);
-    return (uint64_t)ms * 1000u + (SYSCLK_HZ / 1000u - 1u - count) / (SYSCLK_HZ / 1000000u);
+    uint32_t value = TIMER0_VALUE;
+    clock_ticks += (uint32_t)(clock_last - value);
+    clock_last = value;
+    return clock_ticks / (SYSCLK_HZ / 1000000u);
 }
 
 void hb_hal_serial_write(void *h, const uint8_t *data, size_t n) {
@@ -97,9 +103,9 @@ int main(void) {
     UART0_BAUDDIV = 16;
     UART0_CTRL = 0xBu;  /* TX and RX enabled, RX interrupt */
     NVIC_ISER0 = 1u;
-    SYST_RVR = SYSCLK_HZ / 1000u - 1u;
-    SYST_CVR = 0;
-    SYST_CSR = 0x7u;    /* processor clock, interrupt, enabled */
+    TIMER0_RELOAD = 0xFFFFFFFFu;
+    TIMER0_VALUE = 0xFFFFFFFFu;
+    TIMER0_CTRL = 0x1u;  /* enabled, no interrupt */
     uint64_t next_tick = now_us();
     uint8_t rx[256];
     for (;;) {
