@@ -15,8 +15,10 @@ add an offset or a drift as it would to any start.
 | ``maxwell_slip`` | inertia, maxwell_slip, viscous |
 | ``dahl``, ``lugre``, ``gms``, ``continuous`` | inertia, ``family_<name>`` (the column above), viscous |
 
-A family that contains a Stribeck curve (stribeck, LuGre, GMS) is not offered the ``stribeck`` candidate (it
-is part of the family); every other candidate is.
+A family that contains a Stribeck curve (stribeck, LuGre, GMS) is not offered the ``stribeck`` candidate, and a
+stateful family is not offered ``maxwell_slip`` (each is part of the family); every other candidate is. The
+friction parameters of a stateful family are refined once more on the loop's own criterion
+(:func:`refine_on_equation_error`) before the column is built.
 """
 
 from __future__ import annotations

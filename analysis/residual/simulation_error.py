@@ -30,14 +30,22 @@ def plant_params(fit: Fit):
     from hilbench.firmware_sim.plant import PlantParams
 
     fields: dict = {}
+    coulomb_others = 0.0  # Coulomb levels of the terms that set no direction-dependent level (both directions)
     for term, nl in fit.model:
         nl = {**nl}
         changes = term.plant(fit, nl)
+        if "coulomb_neg" not in changes:
+            coulomb_others += changes.get("coulomb", 0.0)
         for key, value in changes.items():
             if key in ("torque_offset", "torque_drift", "coulomb") and key in fields:
                 fields[key] += value
             else:
                 fields[key] = value
+    if "coulomb_neg" in fields:
+        # a direction-dependent level adds to the other terms' Coulomb level in both directions; the sliding
+        # levels of asymmetric_friction are increments that may be negative, the plant's levels are not
+        fields["coulomb_neg"] = max(fields["coulomb_neg"] + coulomb_others, 0.0)
+        fields["coulomb"] = max(fields["coulomb"], 0.0)
     excess = fields.pop("stribeck_excess", None)
     if excess is not None and excess > 0:
         fields["static"] = fields.get("coulomb", 0.0) + excess
