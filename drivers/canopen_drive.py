@@ -216,8 +216,9 @@ class CanopenDrive(HostClockedDevice):
     def _map_pdos(self) -> None:
         node = self.node
         try:
-            node.rpdo.read()
-            node.tpdo.read()
+            with self._sdo_lock:  # PDO reads and saves are SDO transfers too
+                node.rpdo.read()
+                node.tpdo.read()
         except Exception as exc:
             raise DeviceTimeoutError(f"CANopen node {self.node_id}: reading the PDO configuration failed: "
                                      f"{exc}") from exc
@@ -235,8 +236,9 @@ class CanopenDrive(HostClockedDevice):
             m.trans_type = 1  # synchronous, every SYNC
             m.enabled = True
         try:
-            node.rpdo.save()
-            node.tpdo.save()
+            with self._sdo_lock:
+                node.rpdo.save()
+                node.tpdo.save()
         except Exception as exc:
             raise CommandRefusedError(f"CANopen node {self.node_id} refused the PDO mapping: {exc}") from exc
         self._rpdo = node.rpdo.map[1]

@@ -226,3 +226,27 @@ def test_configuration_reaches_the_object_dictionary(bus):
 def test_bad_canopen_urls(url, words):
     with pytest.raises(ValueError, match=words):
         open_device(url)
+
+
+def test_polling_the_drive_state_while_it_is_configured_never_mixes_sdo_transfers(bus):
+    # the GUI polls live_state() from its device thread while the run thread configures the drive
+    host = bus.host()
+    stop, errors = threading.Event(), []
+
+    def poll() -> None:
+        while not stop.is_set():
+            try:
+                host.live_state()
+            except Exception as exc:  # noqa: BLE001 - every failure counts
+                errors.append(exc)
+
+    poller = threading.Thread(target=poll)
+    poller.start()
+    try:
+        for _ in range(3):
+            host.configure(config())
+    finally:
+        stop.set()
+        poller.join()
+        host.close()
+    assert not errors, errors[0]

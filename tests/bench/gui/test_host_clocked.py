@@ -44,7 +44,7 @@ def drives():
 
 @pytest.fixture(scope="module")
 def window(qapp, drives, tmp_path_factory):
-    w = MainWindow(device=drives[0], runs_dir=tmp_path_factory.mktemp("runs"), timeout=1.0)
+    w = MainWindow(device=drives[0], runs_dir=tmp_path_factory.mktemp("runs"), timeout=2.0)
     w.show()
     yield w
     w.shutdown()
@@ -74,6 +74,14 @@ def _start(window, qtbot, out, **values) -> bool:
     assert window.protocol.validate() is not None, window.protocol.summary.text()
     qtbot.mouseClick(window.protocol.start_button, QtCore.Qt.MouseButton.LeftButton)
     return window.running
+
+
+def _wait(window, qtbot, condition, timeout: int) -> None:
+    """qtbot.waitUntil, failing with the window's messages (what went wrong, if anything did)."""
+    try:
+        qtbot.waitUntil(condition, timeout=timeout)
+    except Exception:
+        pytest.fail(f"timed out after {timeout} ms; messages: {[m for _, m, _ in window.messages[-5:]]}")
 
 
 def _stream_threads(window) -> list[threading.Thread]:
@@ -119,8 +127,8 @@ def test_a_run_on_the_drive_updates_the_live_view_off_the_gui_thread_and_writes_
     t0 = time.monotonic()
     assert _start(window, qtbot, out, sample_rate="1000", duration="1.5", amplitude="8", period="0.5",
                   cutoff="40")
-    qtbot.waitUntil(lambda: window.live.buffer.total > 300, timeout=10000)
-    qtbot.waitUntil(lambda: not window.running and window.run_worker is None, timeout=20000)
+    _wait(window, qtbot, lambda: window.live.buffer.total > 300, 20000)
+    _wait(window, qtbot, lambda: not window.running and window.run_worker is None, 30000)
     assert not _errors(window, t0), _errors(window, t0)
     assert window.last_result.status == "completed" and window.last_result.samples == 1500
     assert window.live.buffer.total == 1500
@@ -142,9 +150,9 @@ def test_estop_quick_stops_the_canopen_drive_mid_run(window, qtbot, drives, tmp_
     out = tmp_path / "estop.h5"
     t0 = time.monotonic()
     assert _start(window, qtbot, out, sample_rate="1000", duration="5", amplitude="4")
-    qtbot.waitUntil(lambda: window.live.buffer.total > 200, timeout=10000)
+    _wait(window, qtbot, lambda: window.live.buffer.total > 200, 20000)
     window.estop()
-    qtbot.waitUntil(lambda: not window.running and window.run_worker is None, timeout=10000)
+    _wait(window, qtbot, lambda: not window.running and window.run_worker is None, 20000)
     assert any("quick stop" in e for e in _errors(window, t0)), _errors(window, t0)
     with open_run(out) as r:
         assert r.status == "aborted" and r.n_samples < 5000
