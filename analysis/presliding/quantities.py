@@ -28,6 +28,9 @@ from hilbench.analysis.presliding.identify import PreslidingFit, fit_presliding
 DEFAULT_FRACTION = 0.9
 #: a displacement is resolved when it spans at least this many position steps
 MIN_COUNTS = 5.0
+#: F_b is resolved when the elements at the top of the threshold grid (still sticking at the largest travel) hold at
+#: most this fraction of it
+TOP_SHARE = 0.02
 
 
 def presliding_distance(model: FrictionModel, fraction: float = DEFAULT_FRACTION) -> float:
@@ -96,7 +99,8 @@ def resolution(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, loop_travel
             is measured from the data (smallest nonzero increment, or the noise level if larger).
     Rules: x_p needs >= MIN_COUNTS steps; K_0 needs the fitted curve's first breakpoint above the grid's lowest
     candidate (else the curve still bends at the resolution limit and K_0 is only a lower bound) and a force step
-    K_0*step above 3x the force noise; F_b needs a travel of 2*x_p + MIN_COUNTS steps and F_b above 10x the noise;
+    K_0*step above 3x the force noise; F_b needs a travel of 2*x_p + MIN_COUNTS steps, F_b above 10x the noise
+    and at most TOP_SHARE of it in elements at the grid's top;
     a loop's reversal force and memory checks need its travel >= MIN_COUNTS steps.
     """
     if counts_per_rev and fit.model.axis == "rotary":
@@ -125,10 +129,15 @@ def resolution(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, loop_travel
     travel = float(np.max(loop_travels)) if loop_travels.size else 0.0
     fb = q["breakaway"]
     need = 2 * xp + MIN_COUNTS * step  # a branch rises over 2*x_p (Masing), then slides over MIN_COUNTS steps
-    ok["breakaway"] = travel >= need and fb >= 10 * noise
+    # elements on the grid's top still stick at the end of the largest travel: the curve is still rising there
+    top_share = float(np.sum(fit.model.ms_slip[fit.model.ms_delta >= fit.grid[-3] * (1 - 1e-9)])) / fb
+    ok["breakaway"] = travel >= need and fb >= 10 * noise and top_share <= TOP_SHARE
     lines.append(f"break-away force F_b = {fb:.4g} {funit}: " + ("resolved" if ok["breakaway"] else "NOT resolved")
                  + f" (largest travel {travel:.3g} {unit}, needs 2*x_p + {MIN_COUNTS:g} steps = {need:.3g} {unit}; "
-                   f"noise {noise:.3g} {funit})")
+                   f"{100 * top_share:.2g} % of F_b still rising at half the largest travel, allowed "
+                   f"{100 * TOP_SHARE:g} %; noise {noise:.3g} {funit})")
+    if not ok["breakaway"]:
+        lines[0] += "; measured against the level the record reaches, not a resolved F_b"
     small = int(np.sum(loop_travels < MIN_COUNTS * step))
     ok["reversal_forces"] = small == 0
     lines.append(f"reversal forces and memory checks: {loop_travels.size - small} of {loop_travels.size} branches "
