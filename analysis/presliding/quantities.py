@@ -143,5 +143,5 @@ def resolution(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, loop_travel
     lines.append(f"reversal forces and memory checks: {loop_travels.size - small} of {loop_travels.size} branches "
                  f"resolved" + (f"; {small} travel less than {MIN_COUNTS:g} steps ({MIN_COUNTS * step:.3g} {unit})"
                                 if small else ""))
-    return Resolution(step, source, noise, lines, ok)
+    return Resolution(step, source, noise, lines, {k: bool(v) for k, v in ok.items()})
 
