@@ -1,4 +1,4 @@
-"""``hilbench run {identify,chirp,afrf}``: run one measurement protocol on a device and log it."""
+"""``hilbench run {identify,chirp,afrf,presliding}``: run one measurement protocol on a device and log it."""
 
 from __future__ import annotations
 
@@ -6,9 +6,9 @@ import argparse
 import math
 from pathlib import Path
 
-from hilbench.bench.protocols import Chirp, Identification, Protocol, SteppedSine
+from hilbench.bench.protocols import Chirp, Identification, Presliding, Protocol, SteppedSine
 
-RUNNABLE: dict[str, type[Protocol]] = {cls.name: cls for cls in (Identification, Chirp, SteppedSine)}
+RUNNABLE: dict[str, type[Protocol]] = {cls.name: cls for cls in (Identification, Chirp, SteppedSine, Presliding)}
 # Old spellings of `run`'s protocol names, kept as argparse aliases (they map onto the one name; docs/cli.md).
 ALIASES = {"identification": ["identify"], "stepped_sine": ["afrf"]}
 DEVICE_OPTIONS = {
@@ -20,6 +20,11 @@ DEVICE_OPTIONS = {
     "torque_constant": ("N*m/A", "calibration: torque constant"),
     "counts_per_rev": ("counts", "calibration: encoder counts per motor revolution"),
     "ratio": ("1", "calibration: motor revolutions per load revolution"),
+    "position_kp": ("A/rad", "position loop: proportional gain (position mode)"),
+    "position_ki": ("A/(rad*s)", "position loop: integral gain (0 = off)"),
+    "position_kd": ("A*s/rad", "position loop: derivative gain (0 = off)"),
+    "position_i_limit": ("A", "position loop: bound of the integral term"),
+    "position_d_cutoff": ("Hz", "position loop: low-pass of the derivative (0 = unfiltered)"),
 }
 
 
