@@ -18,6 +18,8 @@ from hilbench.analysis.presliding.reversals import MemoryCheck, find_reversals, 
 
 #: the reversal hysteresis, in position steps, when none is given
 HYSTERESIS_STEPS = 1.5
+#: records longer than this are averaged in blocks first (samples)
+MAX_SAMPLES = 10_000
 TABLE_COLUMNS = ("n", "sample", "t_s", "x", "kind", "depth", "travel", "force_measured", "force_rules",
                  "force_model")
 
@@ -38,6 +40,7 @@ class PreslidingResult:
     uncertainties: dict[str, float]
     resolution: Resolution
     fraction: float
+    block: int = 1  # samples averaged into one (block_means)
 
     @property
     def units(self) -> dict[str, str]:
@@ -73,28 +76,44 @@ class PreslidingResult:
 def analyse(t: np.ndarray, x: np.ndarray, force: np.ndarray, fs: float, axis: str = "rotary",
             settings: PreslidingSettings | None = None, counts_per_rev: float | None = None,
             hysteresis: float | None = None, fraction: float = DEFAULT_FRACTION, replicates: int = 20,
-            seed: int = 0) -> PreslidingResult:
+            seed: int = 0, max_samples: int = MAX_SAMPLES) -> PreslidingResult:
     """Run the whole presliding analysis on arrays t (s), x (m or rad), force (N or N*m), each shape (n,).
 
     ``hysteresis`` (m or rad): the smallest travel counted as a reversal, default HYSTERESIS_STEPS position
-    steps. ``replicates``: bootstrap replicates for the uncertainties. AnalysisError for unusable input
-    (e.g. no reversal)."""
-    x = np.asarray(x, float)
-    force = np.asarray(force, float)
+    steps. ``replicates``: bootstrap replicates for the uncertainties. A record longer than ``max_samples`` is
+    first averaged in blocks (:func:`block_means`). AnalysisError for unusable input (e.g. no reversal)."""
+    step = position_resolution(np.asarray(x, float))  # of the samples as recorded, before any averaging
+    t, x, force, block = block_means(t, x, force, max_samples)
+    fs = fs / block
     if hysteresis is None:
-        hysteresis = HYSTERESIS_STEPS * position_resolution(x)
+        hysteresis = HYSTERESIS_STEPS * step
     rev = find_reversals(x, hysteresis)
     if rev.size == 0:
         raise AnalysisError(f"no reversal in the displacement (hysteresis {hysteresis:.3g}): a presliding record "
                             "needs a virgin ramp and at least one reversal")
-    fit = fit_presliding(x, force, fs, axis, settings)
+    fit = fit_presliding(x, force, fs, axis, settings, step=step)
     check = memory_check(x, force, rev)
     ends = np.concatenate([[0], rev, [x.size - 1]])
     travels = np.abs(np.diff(x[ends]))
     unc = bootstrap(fit, x, force, fs, rev, replicates=replicates, fraction=fraction, seed=seed)
-    res = resolution(fit, x, force, travels, counts_per_rev, fraction)
-    return PreslidingResult(np.asarray(t, float), x, force, axis, fit, rev, travels[:-1], check,
-                            quantities(fit.model, fraction), unc, res, fraction)
+    res = resolution(fit, x, force, travels, counts_per_rev, fraction, step=step)
+    return PreslidingResult(t, x, force, axis, fit, rev, travels[:-1], check,
+                            quantities(fit.model, fraction), unc, res, fraction, block)
+
+
+def block_means(t: np.ndarray, x: np.ndarray, force: np.ndarray, max_samples: int = MAX_SAMPLES):
+    """(t, x, force, m): each array averaged over consecutive blocks of m = ceil(n/max_samples) samples (the tail
+    that does not fill a block is dropped); m = 1 returns the arrays as they are. A quasi-static record loses
+    nothing by it, and the mean of an encoder position that the position loop dithers between counts resolves
+    below one count (the force noise falls by sqrt(m) too)."""
+    t, x, force = (np.asarray(a, float) for a in (t, x, force))
+    if max_samples < 100:
+        raise AnalysisError(f"max_samples must be >= 100, got {max_samples}")
+    m = -(-x.size // max_samples)
+    if m <= 1:
+        return t, x, force, 1
+    n = (x.size // m) * m
+    return (*(a[:n].reshape(-1, m).mean(axis=1) for a in (t, x, force)), m)
 
 
 def table_csv(result: PreslidingResult) -> str:

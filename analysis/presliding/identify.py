@@ -95,7 +95,8 @@ def model_force(model: FrictionModel, x: np.ndarray, fs: float) -> np.ndarray:
 
 
 def fit_presliding(x: np.ndarray, force: np.ndarray, fs: float, axis: str = "rotary",
-                   settings: PreslidingSettings | None = None, grid: np.ndarray | None = None) -> PreslidingFit:
+                   settings: PreslidingSettings | None = None, grid: np.ndarray | None = None,
+                   step: float | None = None) -> PreslidingFit:
     """Identify the presliding force model from a displacement-driven record.
 
     Args:
@@ -103,7 +104,9 @@ def fit_presliding(x: np.ndarray, force: np.ndarray, fs: float, axis: str = "rot
         force: measured torque or force, shape (n,), N*m or N.
         fs: sample rate, Hz.
         axis: "rotary" or "linear".
-        grid: candidate thresholds Delta_i (m or rad); default ``threshold_grid`` of the data.
+        grid: candidate thresholds Delta_i (m or rad); default from half the position step to half the largest
+            travel between reversals of more than 1.5 steps.
+        step: the position step (m or rad); default measured from x (position_resolution).
     Returns:
         :class:`PreslidingFit`; AnalysisError for unusable input.
     """
@@ -122,7 +125,7 @@ def fit_presliding(x: np.ndarray, force: np.ndarray, fs: float, axis: str = "rot
         # below one position step an element still shows as a force step at each reversal: start the grid at half
         # a step (threshold_grid starts at two; on a quantised presliding record that halves the virgin-curve error)
         # and end it at half the largest travel between reversals of more than 1.5 steps
-        step = position_resolution(x)
+        step = position_resolution(x) if step is None else step
         ends = np.concatenate([[0], find_reversals(x, 1.5 * step), [x.size - 1]])
         top = 0.5 * float(np.max(np.abs(np.diff(x[ends]))))
         if not top > 0:

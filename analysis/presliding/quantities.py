@@ -89,24 +89,26 @@ class Resolution:
 
 
 def resolution(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, loop_travels: np.ndarray,
-               counts_per_rev: float | None = None, fraction: float = DEFAULT_FRACTION) -> Resolution:
+               counts_per_rev: float | None = None, fraction: float = DEFAULT_FRACTION,
+               step: float | None = None) -> Resolution:
     """Which quantities the position step and the force noise still resolve (docs/presliding.md, "Resolution").
 
     Args:
         fit: the identified model of ``force`` (N or N*m) against ``x`` (m or rad).
         loop_travels: travel between successive reversals (m or rad), one per branch.
         counts_per_rev: encoder counts per revolution (rotary; from the run file's calibration); None: the step
-            is measured from the data (smallest nonzero increment, or the noise level if larger).
-    Rules: x_p needs >= MIN_COUNTS steps; K_0 needs the fitted curve's first breakpoint above the grid's lowest
-    candidate (else the curve still bends at the resolution limit and K_0 is only a lower bound) and a force step
-    K_0*step above 3x the force noise; F_b needs a travel of 2*x_p + MIN_COUNTS steps, F_b above 10x the noise
+            is ``step`` (m or rad), else measured from x (smallest nonzero increment, or the noise level if larger).
+    Rules: x_p needs >= MIN_COUNTS steps; K_0 needs the fitted curve straight (its first breakpoint) over at
+    least MIN_COUNTS steps (else the slope at 0 is not seen and K_0 is a lower bound) and a force step K_0*step
+    above 3x the force noise; F_b needs a travel of 2*x_p + MIN_COUNTS steps, F_b above 10x the noise
     and at most TOP_SHARE of it in elements at the grid's top;
     a loop's reversal force and memory checks need its travel >= MIN_COUNTS steps.
     """
     if counts_per_rev and fit.model.axis == "rotary":
         step, source = 2 * math.pi / float(counts_per_rev), f"{counts_per_rev:.0f} counts/rev"
     else:
-        step, source = position_resolution(x), "measured from the displacement"
+        step = position_resolution(x) if step is None else step
+        source = "measured from the displacement"
     noise = position_resolution(force)  # the larger of the force quantum and its white-noise level
     q = quantities(fit.model, fraction)
     unit = "rad" if fit.model.axis == "rotary" else "m"
@@ -118,12 +120,14 @@ def resolution(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, loop_travel
                  + ("resolved" if ok["presliding_distance"] else "NOT resolved")
                  + f" ({xp / step:.3g} position steps of {step:.3g} {unit}; needs >= {MIN_COUNTS:g})")
     first = float(fit.model.ms_delta[0])
-    at_edge = first <= fit.grid[min(2, fit.grid.size - 1)] * (1 + 1e-9)
     k0 = q["initial_stiffness"]
-    ok["initial_stiffness"] = (not at_edge) and k0 * step >= 3 * noise
-    why = ("the fitted virgin curve bends at the smallest threshold the data resolves "
-           f"({first:.3g} {unit}): K_0 is a lower bound" if at_edge else
-           f"one step moves the force by {k0 * step:.3g} {funit} against noise {noise:.3g} {funit}")
+    short = first < MIN_COUNTS * step
+    ok["initial_stiffness"] = not short and k0 * step >= 3 * noise
+    why = (f"the fitted virgin curve is straight only up to its first breakpoint {first:.3g} {unit} = "
+           f"{first / step:.2g} position steps, fewer than {MIN_COUNTS:g}: the slope at 0 is not seen, K_0 is a "
+           "lower bound" if short else
+           f"straight over {first / step:.3g} steps; one step moves the force by {k0 * step:.3g} {funit} against "
+           f"noise {noise:.3g} {funit}")
     lines.append(f"initial stiffness sum(k) = {k0:.4g} {kunit}: "
                  + ("resolved" if ok["initial_stiffness"] else "NOT resolved") + f" ({why})")
     travel = float(np.max(loop_travels)) if loop_travels.size else 0.0

@@ -105,7 +105,7 @@ def report(res, path: str, channel: str) -> dict:
     m = res.fit.model
     return {
         "schema": "hilbench-presliding", "schema_version": 1, "run": str(Path(path).resolve()),
-        "force_channel": channel, "axis": res.axis, "fraction": res.fraction,
+        "force_channel": channel, "axis": res.axis, "fraction": res.fraction, "samples_averaged": res.block,
         "quantities": {k: {"value": q[k], "std_uncertainty": e[k], "unit": units[k]} for k in q},
         "uncertainty_method": "moving-block residual bootstrap, refit on the same threshold grid",
         "model": {"ms_stiffness": m.ms_stiffness.tolist(), "ms_delta": m.ms_delta.tolist(),
