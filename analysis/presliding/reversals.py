@@ -18,8 +18,8 @@ from hilbench.analysis.errors import AnalysisError
 
 
 def find_reversals(x: np.ndarray, hysteresis: float) -> np.ndarray:
-    """Indices of the turning points of a path: the extreme sample of each monotone run, a run ending only when
-    the path retreats by more than ``hysteresis`` (same unit as x, m or rad) from its extreme.
+    """Indices of the turning points of a path: the extreme sample of each monotone run (the last one of a plateau
+    there), a run ending only when the path retreats by more than ``hysteresis`` (same unit as x, m or rad).
 
     Args:
         x: path, shape (n,), m or rad.
@@ -38,7 +38,7 @@ def find_reversals(x: np.ndarray, hysteresis: float) -> np.ndarray:
         if direction == 0:
             if abs(v - start) > hysteresis:
                 direction, extreme = (1 if v > start else -1), i
-        elif (v - x[extreme]) * direction > 0:
+        elif (v - x[extreme]) * direction >= 0:  # the last sample of a plateau: where the motion turns back
             extreme = i
         elif (x[extreme] - v) * direction > hysteresis:
             turning.append(extreme)
