@@ -93,8 +93,8 @@ def _check_positive(**values: float) -> None:
 
 
 def _check_mode(mode: str) -> None:
-    if mode not in MODES:
-        raise ValueError(f"mode must be one of {sorted(MODES)}, got {mode!r}")
+    if mode not in DEFAULT_LIMITS:  # the generators play currents or velocities (positions: reversal_path)
+        raise ValueError(f"mode must be one of {sorted(DEFAULT_LIMITS)}, got {mode!r}")
 
 
 def _n_samples(duration: float, fs: float) -> int:

@@ -64,13 +64,15 @@ def protocol_from_args(cls: type[Protocol], args: argparse.Namespace) -> Protoco
 
 
 def settings_from_args(args: argparse.Namespace):
+    """Device settings: the options given, over the config file's ``[settings]``, over the defaults."""
     from hilbench.bench.runner import DeviceSettings
+    from hilbench.bench.user_config import default_settings
 
     values = {name: getattr(args, name) for name in DEVICE_OPTIONS if getattr(args, name, None) is not None}
     for name, value in values.items():
         if isinstance(value, float) and math.isnan(value):
             raise ValueError(f"--{name.replace('_', '-')} is NaN")
-    return DeviceSettings(**values)
+    return DeviceSettings(**{**default_settings(), **values})
 
 
 def register(sub: argparse._SubParsersAction) -> None:

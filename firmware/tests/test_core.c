@@ -684,6 +684,14 @@ static void test_can_mapping(void) {
     CHECK(hal.can_frames > 1 && hal.can_id[1] == (HB_STATUS << 5 | 1 << 4 | 3));
     hb_device_rx_can(&dev, (uint16_t)(HB_HEARTBEAT << 5 | 4), hb, 7, 0);  /* another node: ignored */
     CHECK(dev.rx_frames == 2);
+    /* a v2 CONFIG (106 bytes, 16 classic segments) is reassembled too */
+    hb_config cp = {1000, HB_POSITION, 5.0, 100.0, -INFINITY, INFINITY, 0.5, 0.2, 4096, 1.0,
+                    3000.0, 3e5, 5.0, 5.0, 300.0, HB_CFG_FEEDFORWARD};
+    hb_config_encode(&cp, p);
+    hal.can_frames = 0;
+    CHECK(hb_can_send(HB_CONFIG, p, HB_CONFIG_BYTES, 3, 0, can_sink, &dev) == 16);
+    CHECK(hal.can_frames == 1 && hal.can_data[0][3] == HB_CONFIG && hal.can_data[0][4] == HB_OK &&
+          dev.cfg.mode == HB_POSITION && dev.cfg.position_ki == 3e5 && dev.vps == 2);
 }
 
 int main(int argc, char **argv) {

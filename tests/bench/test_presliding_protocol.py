@@ -4,6 +4,7 @@ one-line refusals of bad parameters."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import h5py
@@ -132,3 +133,33 @@ def test_measured_displacement_follows_the_reference(presliding_run):
     hold = round(proto.settle * proto.sample_rate)
     settled = pos[turning["index"][1:] + hold]
     assert np.all(np.abs(settled - turning["position"][1:]) <= COUNT * 1.0001)
+
+
+def test_a_campaign_plays_presliding_with_gains_and_units(tmp_path, capsys):
+    toml = tmp_path / "c.toml"
+    toml.write_text('[defaults]\ndevice = "sim://?pacing=lockstep"\ncounts_per_rev = 65536\n'
+                    'position_kp = "2500 A/rad"\n\n[[run]]\nname = "pre"\nprotocol = "presliding"\n'
+                    'amplitudes = [4, 2, 1]\nrate = 20\nsettle = "0.02 s"\n')
+    assert main(["campaign", str(toml), "--check"]) == 0
+    assert "pre-1: presliding 1.2 s (12200 samples" in capsys.readouterr().out
+    toml.write_text(toml.read_text().replace('"0.02 s"', '"0.02 A"'))
+    assert main(["campaign", str(toml), "--check"]) == 2
+    assert "settle" in capsys.readouterr().err
+
+
+def test_settings_come_from_the_config_file_under_the_options(tmp_path, monkeypatch, capsys):
+    cfg = tmp_path / "config.toml"
+    cfg.write_text('device = "sim://?pacing=lockstep"\n[settings]\ncounts_per_rev = 65536\nposition_kp = 2500.0\n'
+                   'position_kd = 6\n')
+    monkeypatch.setenv("HILBENCH_CONFIG", str(cfg))
+    monkeypatch.delenv("HILBENCH_DEVICE", raising=False)
+    out = tmp_path / "p.h5"
+    assert main(["run", "presliding", "--amplitudes", "2", "1", "--rate", "50", "--settle", "0", "--quiet",
+                 "--position-kd", "4", "-o", str(out)]) == 0
+    with h5py.File(out, "r") as f:
+        config = json.loads(f["device/config"][()])
+    assert (config["counts_per_rev"], config["position_kp"], config["position_kd"]) == (65536, 2500.0, 4.0)
+    cfg.write_text('[settings]\nposition_gain = 1.0\n')
+    assert main(["run", "presliding", "-o", str(tmp_path / "q.h5")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "position_gain is not a device setting" in err
