@@ -27,8 +27,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--fraction", type=float, default=0.9,
                         help="presliding distance: where the virgin curve reaches this fraction of its sliding "
                              "level (default 0.9)")
-    parser.add_argument("--inertia", type=float, default=0.0, metavar="J",
-                        help="known inertia (kg*m^2, or kg on a linear axis) whose J*x'' is subtracted (default 0)")
+    parser.add_argument("--inertia", type=float, default=None, metavar="J",
+                        help="known inertia (kg*m^2, or kg on a linear axis) whose J*x'' is subtracted (default: the "
+                             "presliding protocol's inertia parameter in the run file, else 0)")
     parser.add_argument("--coulomb", action="store_true", help="add a Coulomb term Fc*sign(x')")
     parser.add_argument("--no-viscous", action="store_true", help="no viscous term b*x'")
     parser.add_argument("--thresholds", type=whole_number, default=48,
@@ -50,7 +51,7 @@ def _check(args) -> None:
 
     if not (math.isfinite(args.fraction) and 0 < args.fraction < 1):
         raise BenchError(f"--fraction must be in (0, 1), got {args.fraction}")
-    if not (math.isfinite(args.inertia) and args.inertia >= 0):
+    if args.inertia is not None and not (math.isfinite(args.inertia) and args.inertia >= 0):
         raise BenchError(f"--inertia must be finite and >= 0, got {args.inertia}")
     if args.hysteresis is not None and not (math.isfinite(args.hysteresis) and args.hysteresis >= 0):
         raise BenchError(f"--hysteresis must be finite and >= 0, got {args.hysteresis}")
@@ -80,7 +81,10 @@ def run(args: argparse.Namespace) -> int:
     x = numeric(rf.channel("position"), "position", args.run)
     force = numeric(rf.channels[name], name, args.run)
     cpr = args.counts_per_rev if args.counts_per_rev is not None else rf.calibration.get("counts_per_rev")
-    settings = PreslidingSettings(inertia=args.inertia, viscous=not args.no_viscous, coulomb=args.coulomb,
+    inertia = args.inertia if args.inertia is not None else float(rf.protocol_params.get("inertia", 0.0) or 0.0)
+    if not (math.isfinite(inertia) and inertia >= 0):
+        raise BenchError(f"{args.run}: the run file's protocol inertia must be finite and >= 0, got {inertia}")
+    settings = PreslidingSettings(inertia=inertia, viscous=not args.no_viscous, coulomb=args.coulomb,
                                   n_thresholds=args.thresholds)
     res = analyse(rf.t, x, force, rf.sample_rate, rf.axis, settings, counts_per_rev=cpr,
                   hysteresis=args.hysteresis, fraction=args.fraction, replicates=args.replicates)
