@@ -1,0 +1,181 @@
+"""One presliding analysis of a displacement-driven record: reversal points and their table, the memory-rule checks,
+the force model, derived quantities with uncertainties, the resolution verdicts and the figures.
+The caller writes the outputs (plain data and matplotlib figures here; analysis writes no files)."""
+
+from __future__ import annotations
+
+import io
+from dataclasses import dataclass
+
+import numpy as np
+
+from hilbench.analysis.errors import AnalysisError
+from hilbench.analysis.identification.regressors import position_resolution
+from hilbench.analysis.models.friction_model import AXES
+from hilbench.analysis.presliding.identify import PreslidingFit, PreslidingSettings, fit_presliding
+from hilbench.analysis.presliding.quantities import DEFAULT_FRACTION, Resolution, bootstrap, quantities, resolution
+from hilbench.analysis.presliding.reversals import MemoryCheck, find_reversals, memory_check
+
+#: the reversal hysteresis, in position steps, when none is given
+HYSTERESIS_STEPS = 1.5
+#: records longer than this are averaged in blocks first (samples)
+MAX_SAMPLES = 10_000
+TABLE_COLUMNS = ("n", "sample", "t_s", "x", "kind", "depth", "travel", "force_measured", "force_rules",
+                 "force_model")
+
+
+@dataclass
+class PreslidingResult:
+    """Everything :func:`analyse` finds (units: the axis's, see ``units``)."""
+
+    t: np.ndarray
+    x: np.ndarray
+    force: np.ndarray
+    axis: str
+    fit: PreslidingFit
+    reversals: np.ndarray
+    travels: np.ndarray  # travel into each reversal (m or rad)
+    check: MemoryCheck
+    quantities: dict[str, float]
+    uncertainties: dict[str, float]
+    resolution: Resolution
+    fraction: float
+    block: int = 1  # samples averaged into one (block_means)
+
+    @property
+    def units(self) -> dict[str, str]:
+        return AXES[self.axis]
+
+    def table(self) -> list[dict]:
+        """The reversal-point table: one row per turning point (columns :data:`TABLE_COLUMNS`)."""
+        rows = []
+        for n, (i, travel) in enumerate(zip(self.reversals, self.travels, strict=True)):
+            rows.append({"n": n + 1, "sample": int(i), "t_s": float(self.t[i]), "x": float(self.x[i]),
+                         "kind": "max" if self.x[i] > self.x[self.reversals[n - 1] if n else 0] else "min",
+                         "depth": int(self.check.depth[n]), "travel": float(travel),
+                         "force_measured": float(self.force[i]), "force_rules": float(self.check.reversal_rules[n]),
+                         "force_model": float(self.fit.simulated[i])})
+        return rows
+
+    def checks(self) -> dict[str, float | int]:
+        """Departures (fractions of the largest virgin force) of the memory rules and of the model."""
+        m_max, m_rms, m_n = self.check.departure(self.force, 1)
+        w_max, w_rms, w_n = self.check.departure(self.force, 2)
+        rows = self.table()[1:]
+        scale = self.check.scale
+        rules = [abs(r["force_rules"] - r["force_measured"]) / scale for r in rows if np.isfinite(r["force_rules"])]
+        model = [abs(r["force_model"] - r["force_measured"]) / scale for r in rows]
+        return {"masing_max": m_max, "masing_rms": m_rms, "masing_samples": m_n,
+                "wiping_out_max": w_max, "wiping_out_rms": w_rms, "wiping_out_samples": w_n,
+                "closure_max": self.check.closure_departure, "closed_loops": len(self.check.closures),
+                "reversal_rules_max": max(rules, default=float("nan")),
+                "reversal_model_max": max(model, default=float("nan")),
+                "force_noise_relative": self.resolution.force_noise / scale, "scale": scale}
+
+
+def analyse(t: np.ndarray, x: np.ndarray, force: np.ndarray, fs: float, axis: str = "rotary",
+            settings: PreslidingSettings | None = None, counts_per_rev: float | None = None,
+            hysteresis: float | None = None, fraction: float = DEFAULT_FRACTION, replicates: int = 20,
+            seed: int = 0, max_samples: int = MAX_SAMPLES) -> PreslidingResult:
+    """Run the whole presliding analysis on arrays t (s), x (m or rad), force (N or N*m), each shape (n,).
+
+    ``hysteresis`` (m or rad): the smallest travel counted as a reversal, default HYSTERESIS_STEPS position
+    steps. ``replicates``: bootstrap replicates for the uncertainties. A record longer than ``max_samples`` is
+    first averaged in blocks (:func:`block_means`). AnalysisError for unusable input (e.g. no reversal)."""
+    step = position_resolution(np.asarray(x, float))  # of the samples as recorded, before any averaging
+    t, x, force, block = block_means(t, x, force, max_samples)
+    fs = fs / block
+    if hysteresis is None:
+        hysteresis = HYSTERESIS_STEPS * step
+    rev = find_reversals(x, hysteresis)
+    if rev.size == 0:
+        raise AnalysisError(f"no reversal in the displacement (hysteresis {hysteresis:.3g}): a presliding record "
+                            "needs a virgin ramp and at least one reversal")
+    fit = fit_presliding(x, force, fs, axis, settings, step=step)
+    check = memory_check(x, force, rev)
+    ends = np.concatenate([[0], rev, [x.size - 1]])
+    travels = np.abs(np.diff(x[ends]))
+    unc = bootstrap(fit, x, force, fs, rev, replicates=replicates, fraction=fraction, seed=seed)
+    res = resolution(fit, x, force, travels, counts_per_rev, fraction, step=step)
+    return PreslidingResult(t, x, force, axis, fit, rev, travels[:-1], check,
+                            quantities(fit.model, fraction), unc, res, fraction, block)
+
+
+def block_means(t: np.ndarray, x: np.ndarray, force: np.ndarray, max_samples: int = MAX_SAMPLES):
+    """(t, x, force, m): each array averaged over consecutive blocks of m = ceil(n/max_samples) samples (the tail
+    that does not fill a block is dropped); m = 1 returns the arrays as they are. A quasi-static record loses
+    nothing by it, and the mean of an encoder position that the position loop dithers between counts resolves
+    below one count (the force noise falls by sqrt(m) too)."""
+    t, x, force = (np.asarray(a, float) for a in (t, x, force))
+    if max_samples < 100:
+        raise AnalysisError(f"max_samples must be >= 100, got {max_samples}")
+    m = -(-x.size // max_samples)
+    if m <= 1:
+        return t, x, force, 1
+    n = (x.size // m) * m
+    return (*(a[:n].reshape(-1, m).mean(axis=1) for a in (t, x, force)), m)
+
+
+def table_csv(result: PreslidingResult) -> str:
+    """The reversal-point table as CSV, units in the header."""
+    buf = io.StringIO()
+    buf.write(",".join(_headers(result)) + "\n")
+    for r in result.table():
+        buf.write(",".join(_fmt(r[c]) for c in TABLE_COLUMNS) + "\n")
+    return buf.getvalue()
+
+
+def table_markdown(result: PreslidingResult) -> str:
+    """The reversal-point table as a markdown table, units in the header."""
+    head = _headers(result)
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines += ["| " + " | ".join(_fmt(r[c]) for c in TABLE_COLUMNS) + " |" for r in result.table()]
+    return "\n".join(lines) + "\n"
+
+
+def _headers(result: PreslidingResult) -> list[str]:
+    u = result.units
+    unit = {"t_s": "s", "x": u["position"], "travel": u["position"], "force_measured": u["torque"],
+            "force_rules": u["torque"], "force_model": u["torque"]}
+    return [f"{c} ({unit[c]})" if c in unit and c != "t_s" else c for c in TABLE_COLUMNS]
+
+
+def _fmt(v) -> str:
+    return f"{v:.6g}" if isinstance(v, float) else str(v)
+
+
+def figures(result: PreslidingResult) -> dict:
+    """matplotlib figures: ``loops`` (force against displacement: virgin curve, nested loops, model) and
+    ``virgin`` (measured virgin ramp against the model's virgin curve, with x_p)."""
+    from matplotlib.figure import Figure
+
+    u = result.units
+    xl, fl = f"displacement x ({u['position']})", f"force F ({u['torque']})"
+    r0 = int(result.reversals[0])
+    fig = Figure(figsize=(7.5, 5.5))
+    ax = fig.add_subplot()
+    ax.plot(result.x[r0:], result.force[r0:], lw=0.6, color="0.55", label="measured: nested loops")
+    ax.plot(result.x[: r0 + 1], result.force[: r0 + 1], lw=1.6, color="tab:blue", label="measured: virgin ramp")
+    ax.plot(result.x, result.fit.simulated, lw=0.7, ls="--", color="tab:red",
+            label="model: force simulated from the measured displacement")
+    ax.plot(result.x[result.reversals], result.force[result.reversals], "k.", ms=5, label="reversal points")
+    ax.set(xlabel=xl, ylabel=fl, title="presliding force against displacement")
+    ax.legend(fontsize=7, loc="lower right")
+    ax.grid(alpha=0.3)
+    loops = fig
+    fig = Figure(figsize=(6.5, 4.5))
+    ax = fig.add_subplot()
+    sgn = 1.0 if result.x[r0] > result.x[0] else -1.0
+    s = sgn * (result.x[: r0 + 1] - result.x[0])
+    ax.plot(s, sgn * (result.force[: r0 + 1] - result.force[0]), ".", ms=2, color="tab:blue",
+            label="measured virgin ramp")
+    grid = np.linspace(0, float(s.max()), 400)
+    ax.plot(grid, result.fit.model.virgin_curve(grid) + result.fit.model.coulomb * (grid > 0), color="tab:red",
+            label="identified virgin curve")
+    xp = result.quantities["presliding_distance"]
+    ax.axvline(xp, color="k", ls=":", label=f"x_p({result.fraction:g}) = {xp:.3g} {u['position']}")
+    ax.set(xlabel=f"travel from the relaxed state ({u['position']})", ylabel=f"force change ({u['torque']})",
+           title="virgin curve")
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    return {"loops": loops, "virgin": fig}

@@ -1,0 +1,151 @@
+"""The friction engineer's derived quantities of an identified presliding model, their uncertainties, and what the
+position resolution and the force noise no longer resolve.
+
+- break-away force F_b = sum W_i + Fc (N or N*m): the force once every element slips;
+- initial stiffness K_0 = sum k_i (N/m or N*m/rad): the slope of the virgin curve at x = 0;
+- presliding distance x_p(f): the smallest x where the virgin curve sum_i k_i*min(x, Delta_i) reaches the fraction f
+  of its sliding level sum W_i (m or rad). The curve is piecewise linear with breakpoints Delta_i, so x_p is exact.
+
+Uncertainty: a moving-block residual bootstrap. The residual F - F_model(x) is cut into blocks of consecutive
+samples (``blocks_per_branch`` per branch between reversals, so each block keeps the residual's correlation), blocks
+are drawn with replacement onto the model's force, the model is refitted on the same threshold grid, and the standard
+deviation of each quantity over the replicates is its standard uncertainty.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from hilbench.analysis.errors import AnalysisError
+from hilbench.analysis.identification.regressors import position_resolution
+from hilbench.analysis.models.friction_model import FrictionModel
+from hilbench.analysis.presliding.identify import PreslidingFit, fit_presliding
+
+#: default fraction of the sliding level that defines the presliding distance (see docs/presliding.md)
+DEFAULT_FRACTION = 0.9
+#: a displacement is resolved when it spans at least this many position steps
+MIN_COUNTS = 5.0
+#: F_b is resolved when the elements at the top of the threshold grid (still sticking at the largest travel) hold at
+#: most this fraction of it
+TOP_SHARE = 0.02
+
+
+def presliding_distance(model: FrictionModel, fraction: float = DEFAULT_FRACTION) -> float:
+    """x_p: the smallest x >= 0 with sum_i k_i*min(x, Delta_i) = fraction*sum_i W_i (m or rad)."""
+    if not 0 < fraction < 1:
+        raise AnalysisError(f"the presliding fraction must be in (0, 1), got {fraction}")
+    nodes = np.concatenate([[0.0], model.ms_delta])
+    curve = model.virgin_curve(nodes)
+    return float(np.interp(fraction * curve[-1], curve, nodes))
+
+
+def quantities(model: FrictionModel, fraction: float = DEFAULT_FRACTION) -> dict[str, float]:
+    """{"breakaway": F_b, "initial_stiffness": K_0, "presliding_distance": x_p(fraction)} in SI units."""
+    return {"breakaway": model.breakaway, "initial_stiffness": float(np.sum(model.ms_stiffness)),
+            "presliding_distance": presliding_distance(model, fraction)}
+
+
+def bootstrap(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, fs: float, reversals: np.ndarray,
+              replicates: int = 20, blocks_per_branch: int = 4, fraction: float = DEFAULT_FRACTION,
+              seed: int = 0) -> dict[str, float]:
+    """Standard uncertainties of :func:`quantities` by the moving-block residual bootstrap (module docstring).
+
+    Args:
+        fit: the fit of ``force`` against ``x``; x (m or rad), force (N or N*m), shape (n,); fs in Hz.
+        reversals: turning-point indices (sets the block length: n/((len+1)*blocks_per_branch) samples).
+    Returns:
+        name -> standard deviation over the replicates, same units as :func:`quantities`.
+    """
+    if replicates < 2:
+        raise AnalysisError(f"the bootstrap needs at least 2 replicates, got {replicates}")
+    x = np.asarray(x, float)
+    resid = np.asarray(force, float) - fit.simulated
+    n = x.size
+    block = max(1, n // ((reversals.size + 1) * blocks_per_branch))
+    rng = np.random.default_rng(seed)
+    draws: dict[str, list[float]] = {}
+    for _ in range(replicates):
+        starts = rng.integers(0, n, size=math.ceil(n / block))
+        idx = (starts[:, None] + np.arange(block)[None, :]).ravel()[:n] % n
+        rep = fit_presliding(x, fit.simulated + resid[idx], fs, fit.model.axis, fit.settings, grid=fit.grid)
+        for name, value in quantities(rep.model, fraction).items():
+            draws.setdefault(name, []).append(value)
+    return {name: float(np.std(v, ddof=1)) for name, v in draws.items()}
+
+
+@dataclass
+class Resolution:
+    """What the record resolves. ``step``: position step (m or rad), ``step_source``: where it comes from;
+    ``force_noise``: rms force noise (N or N*m); ``lines``: one sentence per quantity; ``resolved``: name -> bool."""
+
+    step: float
+    step_source: str
+    force_noise: float
+    lines: list[str]
+    resolved: dict[str, bool]
+
+
+def resolution(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, loop_travels: np.ndarray,
+               counts_per_rev: float | None = None, fraction: float = DEFAULT_FRACTION,
+               step: float | None = None) -> Resolution:
+    """Which quantities the position step and the force noise still resolve (docs/presliding.md, "Resolution").
+
+    Args:
+        fit: the identified model of ``force`` (N or N*m) against ``x`` (m or rad).
+        loop_travels: travel between successive reversals (m or rad), one per branch.
+        counts_per_rev: encoder counts per revolution (rotary; from the run file's calibration); None: the step
+            is ``step`` (m or rad), else measured from x (smallest nonzero increment, or the noise level if larger).
+    Rules: x_p needs >= MIN_COUNTS steps; K_0 needs the fitted curve straight (its first breakpoint) over at
+    least MIN_COUNTS steps (else the slope at 0 is not seen and K_0 is a lower bound) and a force step K_0*step
+    above 3x the force noise; F_b needs a travel of 2*x_p + MIN_COUNTS steps, F_b above 10x the noise
+    and at most TOP_SHARE of it in elements at the grid's top;
+    a loop's reversal force and memory checks need its travel >= MIN_COUNTS steps.
+    """
+    if counts_per_rev and fit.model.axis == "rotary":
+        step, source = 2 * math.pi / float(counts_per_rev), f"{counts_per_rev:.0f} counts/rev"
+    else:
+        step = position_resolution(x) if step is None else step
+        source = "measured from the displacement"
+    noise = position_resolution(force)  # the larger of the force quantum and its white-noise level
+    q = quantities(fit.model, fraction)
+    unit = "rad" if fit.model.axis == "rotary" else "m"
+    funit, kunit = ("N*m", "N*m/rad") if fit.model.axis == "rotary" else ("N", "N/m")
+    lines, ok = [], {}
+    xp = q["presliding_distance"]
+    ok["presliding_distance"] = xp >= MIN_COUNTS * step
+    lines.append(f"presliding distance x_p({fraction:g}) = {xp:.4g} {unit}: "
+                 + ("resolved" if ok["presliding_distance"] else "NOT resolved")
+                 + f" ({xp / step:.3g} position steps of {step:.3g} {unit}; needs >= {MIN_COUNTS:g})")
+    first = float(fit.model.ms_delta[0])
+    k0 = q["initial_stiffness"]
+    short = first < MIN_COUNTS * step
+    ok["initial_stiffness"] = not short and k0 * step >= 3 * noise
+    why = (f"the fitted virgin curve is straight only up to its first breakpoint {first:.3g} {unit} = "
+           f"{first / step:.2g} position steps, fewer than {MIN_COUNTS:g}: the slope at 0 is not seen, K_0 is a "
+           "lower bound" if short else
+           f"straight over {first / step:.3g} steps; one step moves the force by {k0 * step:.3g} {funit} against "
+           f"noise {noise:.3g} {funit}")
+    lines.append(f"initial stiffness sum(k) = {k0:.4g} {kunit}: "
+                 + ("resolved" if ok["initial_stiffness"] else "NOT resolved") + f" ({why})")
+    travel = float(np.max(loop_travels)) if loop_travels.size else 0.0
+    fb = q["breakaway"]
+    need = 2 * xp + MIN_COUNTS * step  # a branch rises over 2*x_p (Masing), then slides over MIN_COUNTS steps
+    # elements on the grid's top still stick at the end of the largest travel: the curve is still rising there
+    top_share = float(np.sum(fit.model.ms_slip[fit.model.ms_delta >= fit.grid[-3] * (1 - 1e-9)])) / fb
+    ok["breakaway"] = travel >= need and fb >= 10 * noise and top_share <= TOP_SHARE
+    lines.append(f"break-away force F_b = {fb:.4g} {funit}: " + ("resolved" if ok["breakaway"] else "NOT resolved")
+                 + f" (largest travel {travel:.3g} {unit}, needs 2*x_p + {MIN_COUNTS:g} steps = {need:.3g} {unit}; "
+                   f"{100 * top_share:.2g} % of F_b still rising at half the largest travel, allowed "
+                   f"{100 * TOP_SHARE:g} %; noise {noise:.3g} {funit})")
+    if not ok["breakaway"]:
+        lines[0] += "; measured against the level the record reaches, not a resolved F_b"
+    small = int(np.sum(loop_travels < MIN_COUNTS * step))
+    ok["reversal_forces"] = small == 0
+    lines.append(f"reversal forces and memory checks: {loop_travels.size - small} of {loop_travels.size} branches "
+                 f"resolved" + (f"; {small} travel less than {MIN_COUNTS:g} steps ({MIN_COUNTS * step:.3g} {unit})"
+                                if small else ""))
+    return Resolution(step, source, noise, lines, {k: bool(v) for k, v in ok.items()})
+

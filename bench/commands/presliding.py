@@ -1,0 +1,152 @@
+"""``hilbench presliding RUN.h5 -o DIR``: presliding analysis of a displacement-driven record (docs/presliding.md):
+reversal-point table, Masing and wiping-out checks, the Maxwell-slip force model, x_p, sum(k), F_b with
+uncertainties, what the resolution no longer resolves, and the figures."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+OUTPUT_FILES = ("presliding.json", "summary.md", "reversals.csv", "loops.png", "virgin.png")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    from hilbench.bench.analysis_input import whole_number
+
+    parser = subparsers.add_parser(
+        "presliding",
+        help="presliding analysis of a displacement-driven record (force against imposed displacement)",
+        description="Reversal points, the Masing and wiping-out checks on the measured data, force-from-"
+        "displacement identification (Maxwell-slip by NNLS), presliding distance, initial stiffness and "
+        "break-away force with bootstrap uncertainties, and which of them the encoder resolution no longer "
+        "resolves. Writes " + ", ".join(OUTPUT_FILES) + " into DIR (docs/presliding.md).",
+    )
+    parser.add_argument("run", metavar="RUN.h5", help="a displacement-driven run file (root attribute record)")
+    parser.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the outputs")
+    parser.add_argument("--fraction", type=float, default=0.9,
+                        help="presliding distance: where the virgin curve reaches this fraction of its sliding "
+                             "level (default 0.9)")
+    parser.add_argument("--inertia", type=float, default=None, metavar="J",
+                        help="known inertia (kg*m^2, or kg on a linear axis) whose J*x'' is subtracted (default: the "
+                             "presliding protocol's inertia parameter in the run file, else 0)")
+    parser.add_argument("--coulomb", action="store_true", help="add a Coulomb term Fc*sign(x')")
+    parser.add_argument("--no-viscous", action="store_true", help="no viscous term b*x'")
+    parser.add_argument("--thresholds", type=whole_number, default=48,
+                        help="candidate Maxwell-slip thresholds (default 48, 1 to 400)")
+    parser.add_argument("--hysteresis", type=float, default=None, metavar="X",
+                        help="smallest travel counted as a reversal, m or rad (default 1.5 position steps)")
+    parser.add_argument("--replicates", type=whole_number, default=20,
+                        help="bootstrap replicates for the uncertainties (default 20, 2 to 1000)")
+    parser.add_argument("--counts-per-rev", type=float, default=None, metavar="N",
+                        help="encoder counts per revolution (default: the run file's calibration, else the "
+                             "step measured from the data)")
+    parser.add_argument("--torque-channel", default=None, metavar="NAME", help="force channel (default torque)")
+    parser.set_defaults(func=run)
+
+
+def _check(args) -> None:
+    from hilbench.bench.analysis_input import check_count
+    from hilbench.bench.errors import BenchError
+
+    if not (math.isfinite(args.fraction) and 0 < args.fraction < 1):
+        raise BenchError(f"--fraction must be in (0, 1), got {args.fraction}")
+    if args.inertia is not None and not (math.isfinite(args.inertia) and args.inertia >= 0):
+        raise BenchError(f"--inertia must be finite and >= 0, got {args.inertia}")
+    if args.hysteresis is not None and not (math.isfinite(args.hysteresis) and args.hysteresis >= 0):
+        raise BenchError(f"--hysteresis must be finite and >= 0, got {args.hysteresis}")
+    if args.counts_per_rev is not None and not (math.isfinite(args.counts_per_rev) and args.counts_per_rev > 0):
+        raise BenchError(f"--counts-per-rev must be finite and > 0, got {args.counts_per_rev}")
+    check_count(args.thresholds, "--thresholds", 1, 400, "each threshold is one stop-operator column")
+    check_count(args.replicates, "--replicates", 2, 1000, "each replicate is one refit")
+
+
+def run(args: argparse.Namespace) -> int:
+    from hilbench.analysis.presliding.analyse import analyse, figures, table_csv, table_markdown
+    from hilbench.analysis.presliding.identify import PreslidingSettings
+    from hilbench.analysis.run_file import read_run_file
+    from hilbench.bench import outputs
+    from hilbench.bench.analysis_input import numeric, torque_channel
+    from hilbench.bench.errors import BenchError
+
+    _check(args)
+    out = Path(args.output)
+    targets = {name: out / name for name in OUTPUT_FILES}
+    outputs.refuse_inputs({f"-o {p}": p for p in targets.values()}, [args.run])
+    rf = read_run_file(args.run)
+    if rf.record != "displacement-driven":
+        raise BenchError(f"{args.run}: a {rf.record} record; presliding needs a displacement-driven one "
+                         "(hilbench import ... --record displacement-driven, or a presliding protocol run)")
+    name = torque_channel(rf.channels, args.torque_channel, args.run, rf.axis)
+    x = numeric(rf.channel("position"), "position", args.run)
+    force = numeric(rf.channels[name], name, args.run)
+    cpr = args.counts_per_rev if args.counts_per_rev is not None else rf.calibration.get("counts_per_rev")
+    inertia = args.inertia if args.inertia is not None else float(rf.protocol_params.get("inertia", 0.0) or 0.0)
+    if not (math.isfinite(inertia) and inertia >= 0):
+        raise BenchError(f"{args.run}: the run file's protocol inertia must be finite and >= 0, got {inertia}")
+    settings = PreslidingSettings(inertia=inertia, viscous=not args.no_viscous, coulomb=args.coulomb,
+                                  n_thresholds=args.thresholds)
+    res = analyse(rf.t, x, force, rf.sample_rate, rf.axis, settings, counts_per_rev=cpr,
+                  hysteresis=args.hysteresis, fraction=args.fraction, replicates=args.replicates)
+    doc = report(res, args.run, name)
+    out.mkdir(parents=True, exist_ok=True)
+    outputs.write_json(targets["presliding.json"], doc, indent=2, allow_nan=True)
+    outputs.write_text(targets["reversals.csv"], table_csv(res))
+    outputs.write_text(targets["summary.md"], summary_markdown(doc, table_markdown(res)))
+    for key, fig in figures(res).items():
+        outputs.save_figure(fig, targets[f"{key}.png"], dpi=110)
+    for line in summary_lines(doc):
+        outputs.say(line)
+    outputs.say(f"-> {out}/ ({', '.join(OUTPUT_FILES)})")
+    return 0
+
+
+def report(res, path: str, channel: str) -> dict:
+    """The JSON document (schema hilbench-presliding 1, docs/presliding.md)."""
+    u = res.units
+    q, e = res.quantities, res.uncertainties
+    units = {"breakaway": u["torque"], "initial_stiffness": u["stiffness"], "presliding_distance": u["position"]}
+    m = res.fit.model
+    return {
+        "schema": "hilbench-presliding", "schema_version": 1, "run": str(Path(path).resolve()),
+        "force_channel": channel, "axis": res.axis, "fraction": res.fraction, "samples_averaged": res.block,
+        "quantities": {k: {"value": q[k], "std_uncertainty": e[k], "unit": units[k]} for k in q},
+        "uncertainty_method": "moving-block residual bootstrap, refit on the same threshold grid",
+        "model": {"ms_stiffness": m.ms_stiffness.tolist(), "ms_delta": m.ms_delta.tolist(),
+                  "viscous": m.viscous, "coulomb": m.coulomb, "offset": m.offset, "inertia": m.inertia,
+                  "units": {"ms_stiffness": u["stiffness"], "ms_delta": u["position"], "viscous": u["viscous"],
+                            "coulomb": u["torque"], "offset": u["torque"], "inertia": u["inertia"]}},
+        "validation": {"force_rms_error": res.fit.rms_error, "force_rms_error_relative": res.fit.relative_rms,
+                       "unit": u["torque"],
+                       "what": "force simulated from the measured displacement against the measured force; "
+                               "relative to the model's sliding level"},
+        "checks": res.checks(),
+        "resolution": {"step": res.resolution.step, "step_unit": u["position"], "step_source":
+                       res.resolution.step_source, "force_noise": res.resolution.force_noise,
+                       "resolved": res.resolution.resolved, "lines": res.resolution.lines},
+        "reversals": res.table(),
+    }
+
+
+def summary_lines(doc: dict) -> list[str]:
+    """The human summary: quantities with uncertainties, the checks, the resolution verdicts."""
+    lines = []
+    for name, q in doc["quantities"].items():
+        lines.append(f"{name.replace('_', ' ')}: {q['value']:.5g} +- {q['std_uncertainty']:.2g} {q['unit']}")
+    c, v = doc["checks"], doc["validation"]
+    lines.append(f"model: force simulated from the measured displacement, rms error {v['force_rms_error']:.3g} "
+                 f"{v['unit']} ({100 * v['force_rms_error_relative']:.3g} % of the sliding level)")
+    lines.append(f"Masing rule: departure max {c['masing_max']:.3g}, rms {c['masing_rms']:.3g}; wiping-out: "
+                 f"max {c['wiping_out_max']:.3g}, rms {c['wiping_out_rms']:.3g}, loop closure {c['closure_max']:.3g} "
+                 f"over {c['closed_loops']} closed loops (fractions of the largest virgin force "
+                 f"{c['scale']:.4g} {v['unit']}; force noise {c['force_noise_relative']:.2g})")
+    lines.append(f"reversal forces: by the memory rules within {c['reversal_rules_max']:.3g}, by the model within "
+                 f"{c['reversal_model_max']:.3g} (fractions of the largest virgin force)")
+    lines += [f"resolution: {line}" for line in doc["resolution"]["lines"]]
+    return lines
+
+
+def summary_markdown(doc: dict, table: str) -> str:
+    items = "\n".join(f"- {line}" for line in summary_lines(doc))
+    return (f"# Presliding analysis of {Path(doc['run']).name}\n\n{items}\n\n## Reversal points\n\n{table}\n"
+            "![nested loops](loops.png)\n\n![virgin curve](virgin.png)\n")
