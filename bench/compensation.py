@@ -28,6 +28,41 @@ BYTES_PER_SAMPLE = 96
 
 
 @dataclass(frozen=True)
+class Case:
+    """One compensated tracking case, independent of any device: the reference (``kind`` and its parameters),
+    the feed-forward (``compensation`` of ``model``), the sample rate (Hz) and the calibration (N*m/A, 1)."""
+
+    reference: str
+    parameters: tuple[tuple[str, Any], ...]
+    model: str
+    compensation: str
+    sample_rate: int
+    torque_constant: float
+    ratio: float
+
+    @cached_property
+    def reference_path(self) -> Reference:
+        return make_reference(self.reference, float(self.sample_rate), **dict(self.parameters))
+
+    @cached_property
+    def compensator(self) -> Compensator:
+        if self.compensation == "none":
+            return Compensator("none", None)
+        if not self.model:
+            raise AnalysisError(f"compensation {self.compensation!r} needs a model file")
+        comps, _ = load_compensators(self.model)
+        found = {c.name: c for c in comps}
+        if self.compensation not in found:
+            raise AnalysisError(f"{self.model} offers feed-forward {', '.join(found)}; not {self.compensation!r}")
+        return found[self.compensation]
+
+    def feedforward_result(self, limit: float) -> FeedForward:
+        """Feed-forward current (A, clipped to +-``limit``) and torque (N*m) along the reference."""
+        return feedforward(self.compensator, self.reference_path, self.torque_constant, self.ratio,
+                           limit if math.isfinite(limit) else np.inf)
+
+
+@dataclass(frozen=True)
 class TextSpec(ParameterSpec):
     """A free-text parameter (a file path or a name)."""
 
@@ -84,12 +119,9 @@ class CompensatedReference(Protocol):
     def _check(self) -> None:
         if self.mode != "position":
             raise ProtocolError(f"compensated runs in position mode, got mode {self.mode!r}")
-        if self.compensation != "none" and not self.model:
-            raise ProtocolError(f"compensation {self.compensation!r} needs a model file")
         try:
-            self.reference_path  # noqa: B018 (built once: every reference parameter is checked here)
-            if self.compensation != "none":
-                self.compensator  # noqa: B018
+            self.case.reference_path  # noqa: B018 (built once: every reference parameter is checked here)
+            self.case.compensator  # noqa: B018
         except AnalysisError as exc:
             raise ProtocolError(str(exc)) from None
 
@@ -103,16 +135,20 @@ class CompensatedReference(Protocol):
         return {"targets": self.targets, "move_time": self.move_time, "rest": self.rest}
 
     @cached_property
-    def reference_path(self) -> Reference:
-        return make_reference(self.reference, float(self.sample_rate), **self.reference_parameters())
+    def case(self) -> Case:
+        return Case(self.reference, tuple(self.reference_parameters().items()), self.model, self.compensation,
+                    self.sample_rate, self.torque_constant, self.ratio)
 
-    @cached_property
-    def compensator(self) -> Compensator:
-        comps, _ = load_compensators(self.model)
-        found = {c.name: c for c in comps}
-        if self.compensation not in found:
-            raise AnalysisError(f"{self.model} offers feed-forward {', '.join(found)}; not {self.compensation!r}")
-        return found[self.compensation]
+    @classmethod
+    def of(cls, case: Case) -> CompensatedReference:
+        """The protocol that plays ``case``."""
+        return cls(reference=case.reference, model=case.model, compensation=case.compensation,
+                   sample_rate=case.sample_rate, torque_constant=case.torque_constant, ratio=case.ratio,
+                   **dict(case.parameters))
+
+    @property
+    def reference_path(self) -> Reference:
+        return self.case.reference_path
 
     @property
     def n_samples(self) -> int:
@@ -127,13 +163,8 @@ class CompensatedReference(Protocol):
         return excitations.Excitation("compensated_" + ref.kind, self.mode, float(self.sample_rate), ref.position,
                                       {"reference": ref.kind, **ref.params, "compensation": self.compensation})
 
-    def feedforward_result(self, limit: float) -> FeedForward:
-        comp = self.compensator if self.compensation != "none" else Compensator("none", None)
-        return feedforward(comp, self.reference_path, self.torque_constant, self.ratio,
-                           limit if math.isfinite(limit) else np.inf)
-
     def feedforward(self, limit: float) -> np.ndarray | None:
         """Feed-forward current, A, shape (n,), clipped to +-``limit`` A; None without a model."""
         if self.compensation == "none":
             return None
-        return self.feedforward_result(limit).current
+        return self.case.feedforward_result(limit).current
