@@ -1,0 +1,104 @@
+"""hilbench compensate: refusals before anything moves, clipping counts, the predicted matrix report."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from hilbench.bench import cli
+from hilbench.bench.runfile import RunWriter
+from hilbench.firmware_sim.friction_models import dc_motor
+
+SHORT = ["--sample-rate", "1000", "--amplitudes", "1e-3", "1e-2", "--cycles", "1", "--rest", "0.1",
+         "--amplitude", "0.01", "--frequency", "1", "--targets", "0.01", "0", "--move-time", "0.2"]
+
+
+def _model(tmp_path, axis="rotary", train_file=None, **units):
+    p = dc_motor(8)
+    k = np.asarray(p.ms_stiffness)
+    doc = {"schema": "hilbench.friction-model/1", "data": {"train": {"file": str(train_file or "")}},
+           "parameters": {"axis": axis, "units": {"inertia": "kg*m^2", "ms_stiffness": "N*m/rad", **units},
+                          "inertia": p.inertia, "ms_stiffness": k.tolist(),
+                          "ms_delta": (np.asarray(p.ms_slip) / k).tolist(), "viscous": p.viscous, "coulomb": 0.0,
+                          "offset": 0.0, "spring": 0.0, "std_errors": {}}}
+    path = tmp_path / f"model-{axis}.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+@pytest.fixture
+def no_device(monkeypatch):
+    """Fails the test if anything opens a device (so nothing can have been streamed)."""
+    opened = []
+
+    def refuse(*args, **kwargs):
+        opened.append(args)
+        raise AssertionError("a device was opened")
+
+    monkeypatch.setattr("hilbench.bench.runner.Bench.open", refuse)
+    return opened
+
+
+def _refused(capsys, argv) -> str:
+    code = cli.main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, (code, err)
+    return err[0]
+
+
+def test_a_linear_model_is_refused_before_anything_moves(tmp_path, capsys, no_device):
+    line = _refused(capsys, ["compensate", str(_model(tmp_path, axis="linear")), "-o", str(tmp_path / "r.h5")])
+    assert "linear axis" in line and "rotary" in line
+    assert not no_device and not (tmp_path / "r.h5").exists()
+
+
+def test_a_model_in_other_units_is_refused(tmp_path, capsys, no_device):
+    line = _refused(capsys, ["compensate", str(_model(tmp_path, ms_delta="m")), "--matrix", "-o",
+                             str(tmp_path / "out")])
+    assert "ms_delta is in m, not rad" in line and not no_device
+
+
+def test_a_model_identified_under_another_calibration_is_refused(tmp_path, capsys, no_device):
+    run = tmp_path / "train.h5"
+    with RunWriter(run, sample_rate=1000.0, calibration={"torque_constant": 0.2, "counts_per_rev": 1 << 20,
+                                                          "ratio": 1.0}) as w:
+        w.finish("completed")
+    model = _model(tmp_path, train_file=run)
+    line = _refused(capsys, ["compensate", str(model), "--torque-constant", "0.1", "-o", str(tmp_path / "r.h5")])
+    assert "torque_constant 0.2 N*m/A" in line and "0.1 N*m/A" in line and not no_device
+    line = _refused(capsys, ["compensate", str(model), "--ratio", "3", "-o", str(tmp_path / "r.h5")])
+    assert "ratio" in line and not no_device
+
+
+@pytest.mark.parametrize("extra, match", [
+    (["--feedforward", "lugre"], "offers feed-forward none, coulomb, maxwell_slip; not lugre"),
+    (["--reference", "triangle", "--corner", "5"], "corner"),
+    (["--window", "0"], "--window"),
+    (["--matrix"], "needs -o/--output"),
+])
+def test_bad_options_are_one_line(tmp_path, capsys, no_device, extra, match):
+    assert match in _refused(capsys, ["compensate", str(_model(tmp_path)), *extra])
+    assert not no_device
+
+
+def test_predicted_matrix_counts_clipped_feedforward(tmp_path, capsys, no_device):
+    out = tmp_path / "matrix"
+    model = _model(tmp_path)
+    # 0.5 A limit: the feed-forward of the 0.76 N*m break-away at 0.2 N*m/A (3.8 A) is clipped
+    code = cli.main(["compensate", str(model), "--matrix", "--predict", "-o", str(out), "--current-limit", "0.5",
+                     *SHORT])
+    assert code == 0
+    doc = json.loads((out / "compensation.json").read_text())
+    runs = {(r["reference"], r["feedforward"]): r for r in doc["runs"]}
+    assert set(runs) == {(ref, ff) for ref in ("sine", "triangle", "point_to_point")
+                         for ff in ("none", "coulomb", "maxwell_slip")}
+    assert all(r["feedforward_clipped"] == 0 for (_, ff), r in runs.items() if ff == "none")
+    clipped = runs[("sine", "maxwell_slip")]["feedforward_clipped"]
+    assert clipped > 0
+    table = (out / "compensation.md").read_text()
+    assert "| sine | maxwell_slip |" in table and f"| {clipped} |" in table
+    assert {p.name for p in out.glob("*.png")} == {"compensation_sine.png", "compensation_triangle.png",
+                                                    "compensation_point_to_point.png"}
+    assert not no_device
