@@ -19,6 +19,7 @@ from hilbench.analysis.compensation.closed_loop import PositionGains, simulate_t
 from hilbench.analysis.compensation.feedforward import load_compensators
 from hilbench.analysis.compensation.metrics import tracking_metrics
 from hilbench.analysis.compensation.report import CaseResult, document, markdown_table, write_plots
+from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.models.model_file import _clean as json_safe
 from hilbench.bench import outputs
 from hilbench.bench.compensation import Case
@@ -137,3 +138,107 @@ def run_cases(protocols: list[Case], play: Callable[[Case, int], CaseResult],
         results.append(r)
     return results
 
+
+
+# ---- campaigns: a [[compensate]] step is the matrix, one planned run per case ----
+
+STEP_KEYS = {"name", "model", "references", "feedforwards", "sample_rate"}
+
+
+def campaign_step(table: dict, defaults: dict, index: int, path: Path, text: str) -> list:
+    """The planned runs of the ``index``-th ``[[compensate]]`` table of campaign ``path`` (docs/campaign.md):
+    every feed-forward of ``model`` against every reference, named ``<name>.<reference>.<feed-forward>``.
+    Raises :class:`CampaignError` naming file, line and reason."""
+    from hilbench.bench.campaign import GENERAL_KEYS, SETTING_UNITS, CampaignError, PlannedRun, _line_of, _value
+    from hilbench.bench.runner import DeviceSettings, SettingsError
+
+    merged = {**{k: v for k, v in defaults.items() if k in SETTING_UNITS or k in GENERAL_KEYS}, **table}
+
+    def fail(key: str, reason: str) -> CampaignError:
+        line = _line_of(text, key, None) if key not in table else _step_line(text, key, index)
+        return CampaignError(f"{path}:{line}: compensate {index + 1}: {reason}")
+
+    name = str(merged.get("name", f"compensate{index + 1}"))
+    if "model" not in merged or not isinstance(merged["model"], str):
+        raise fail("model", "needs model = \"MODEL.json\" (hilbench identify or hilbench compare)")
+    model = Path(merged["model"])
+    model = model if model.is_absolute() else path.parent / model
+    references, settings_values = {}, {}
+    kinds = merged.get("references", list(DEFAULT_REFERENCES))
+    if not isinstance(kinds, list) or not kinds or any(k not in DEFAULT_REFERENCES for k in kinds):
+        raise fail("references", f"references must be a list of {', '.join(DEFAULT_REFERENCES)}, got {kinds!r}")
+    units = {"amplitudes": "rad", "amplitude": "rad", "frequency": "Hz", "cycles": "periods", "corner": "s",
+             "targets": "rad", "move_time": "s", "rest": "s"}
+    values = {}
+    for key, raw in merged.items():
+        try:
+            if key in units:
+                values[key] = _value(raw, units[key], key)
+            elif key in SETTING_UNITS:
+                settings_values[key] = _value(raw, SETTING_UNITS[key], key)
+            elif key not in STEP_KEYS and key not in GENERAL_KEYS:
+                raise ValueError(f"unknown key {key!r} (known: {', '.join(sorted(STEP_KEYS | set(units)))} and "
+                                 f"the device settings)")
+        except ValueError as exc:
+            raise fail(key, str(exc)) from None
+    for kind in kinds:
+        params = dict(DEFAULT_REFERENCES[kind])
+        params.update({k: tuple(v) if isinstance(v, list) else v for k, v in values.items() if k in params})
+        references[kind] = params
+    try:
+        settings = DeviceSettings(**settings_values)
+    except SettingsError as exc:
+        raise fail(str(exc).split()[0], str(exc)) from None
+    matrix = MatrixSettings(current_limit=settings.current_limit, torque_constant=settings.torque_constant,
+                            ratio=settings.ratio)
+    names = merged.get("feedforwards")
+    try:
+        from hilbench.bench.compensation import CompensatedReference
+
+        _, doc = load_compensators(model)
+        check_calibration(doc, settings.torque_constant, settings.ratio)
+        found = cases(str(model), references, names, matrix, int(merged.get("sample_rate", 10000)))
+        protocols = [CompensatedReference.of(c) for c in found]
+    except (BenchError, AnalysisError) as exc:
+        raise fail("model", str(exc)) from None
+    device = merged.get("device", "sim://")
+    return [PlannedRun(f"{name}.{p.reference}.{p.compensation}", 1, p, settings, device,
+                       str(merged.get("operator", "")), str(merged.get("notes", ""))) for p in protocols]
+
+
+def _step_line(text: str, key: str, index: int) -> int:
+    """Line (1-based) of ``key =`` in the index-th ``[[compensate]]`` table."""
+    count, inside = -1, False
+    for n, line in enumerate(text.splitlines(), 1):
+        stripped = line.strip()
+        if stripped.startswith("["):
+            count += stripped == "[[compensate]]"
+            inside = stripped == "[[compensate]]" and count == index
+        elif inside and stripped.split("=")[0].strip() == key:
+            return n
+    return 1
+
+
+def campaign_report(campaign, out_dir: Path, entries: dict[str, dict]) -> list[Path]:
+    """After a campaign: the matrix report of every ``[[compensate]]`` step whose runs all completed, in
+    ``out_dir/<name>/`` (nothing when the campaign has none)."""
+    from hilbench.bench.compensation import CompensatedReference
+
+    steps: dict[str, list] = {}
+    for planned in campaign.runs:
+        if isinstance(planned.protocol, CompensatedReference):
+            steps.setdefault(planned.name.split(".")[0], []).append(planned)
+    written = []
+    for step, runs in steps.items():
+        if not all(entries.get(r.key, {}).get("status") == "completed" for r in runs):
+            continue
+        settings = runs[0].settings
+        matrix = MatrixSettings(current_limit=settings.current_limit, torque_constant=settings.torque_constant,
+                                ratio=settings.ratio)
+        results = [measured_case(r.protocol.case, out_dir / entries[r.key]["file"], matrix) for r in runs]
+        meta = {"source": f"campaign {campaign.path}, device {runs[0].device}", "model": runs[0].protocol.model,
+                "window_s": matrix.window, "tolerance_rad": matrix.tolerance,
+                "current_limit_a": settings.current_limit, "torque_constant_nm_per_a": settings.torque_constant,
+                "ratio": settings.ratio, "sample_rate_hz": runs[0].protocol.sample_rate}
+        written += write_report(results, out_dir / step, meta)
+    return written
