@@ -18,7 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
-from hilbench.firmware_sim.plant import Plant, PlantParams, stiffest_eigenvalue
+from hilbench.analysis.models.families import substeps_for
+from hilbench.firmware_sim.plant import Plant, PlantParams
 
 
 @dataclass(frozen=True)
@@ -50,8 +51,7 @@ def simulate_tracking(params: PlantParams, reference: np.ndarray, feedforward: n
     ff = np.asarray(feedforward, float)
     if ref.shape != ff.shape or ref.ndim != 1:
         raise AnalysisError(f"reference and feed-forward must be 1-D of equal length, got {ref.shape}, {ff.shape}")
-    sub = max(1, math.ceil(stiffest_eigenvalue(params) / fs / 2.0))
-    plant = Plant(params, 1.0 / fs, sub)
+    plant = Plant(params, 1.0 / fs, substeps_for(params, fs))
     q = np.empty(ref.size)
     u = np.empty(ref.size)
     integ, e_prev = 0.0, 0.0

@@ -27,14 +27,13 @@ import numpy as np
 
 from hilbench.analysis.compensation.references import Reference
 from hilbench.analysis.errors import AnalysisError
+from hilbench.analysis.models.families import substeps_for
 from hilbench.analysis.models.friction_model import AXES
 from hilbench.analysis.models.model_file import SCHEMA as MODEL_SCHEMA
 from hilbench.analysis.models.model_file import read_model
-from hilbench.firmware_sim.plant import Plant, PlantParameterError, PlantParams, stiffest_eigenvalue
+from hilbench.firmware_sim.plant import Plant, PlantParameterError, PlantParams
 
 COMPARE_SCHEMA = "hilbench.compare/1"
-#: RK4 sub-steps of the friction path keep |lambda|*h below this (the engine's radius is 2.78).
-_STEP_RADIUS = 2.0
 
 
 @dataclass
@@ -59,10 +58,9 @@ class FeedForward:
 
 def feedforward_torque(params: PlantParams, ref: Reference) -> np.ndarray:
     """tau_ff = J*a_ref + F(q_ref) + K*q_ref - torque_offset (N*m), shape (n,); F from rest along q_ref."""
-    lam = stiffest_eigenvalue(params)
-    sub = max(1, math.ceil(lam / ref.fs / _STEP_RADIUS))
     try:
-        friction = Plant(params, 1.0 / ref.fs, sub).friction_path(ref.position, ref.velocity)
+        friction = Plant(params, 1.0 / ref.fs, substeps_for(params, ref.fs)).friction_path(ref.position,
+                                                                                           ref.velocity)
     except PlantParameterError as exc:
         raise AnalysisError(f"model cannot be simulated: {exc}") from None
     return params.inertia * ref.acceleration + friction + params.spring * ref.position - params.torque_offset

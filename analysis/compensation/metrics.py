@@ -58,7 +58,8 @@ class Metrics:
         return {"rms_error_rad": self.rms_error, "max_error_rad": self.max_error, "effort_rms_a": self.effort_rms,
                 "reversals": int(self.glitch.size), "glitch_mean_rad": self.glitch_mean,
                 "glitch_median_rad": self.glitch_median, "glitch_max_rad": self.glitch_max,
-                "glitch_rad": self.glitch.tolist(), "reversal_sample": self.reversal_index.tolist(), "moves": int(self.settling.size),
+                "glitch_rad": self.glitch.tolist(), "reversal_sample": self.reversal_index.tolist(),
+                "moves": int(self.settling.size),
                 "settling_s": [None if not math.isfinite(s) else float(s) for s in self.settling],
                 "settling_max_s": self.settling_max, "glitch_window_s": self.window_s,
                 "settling_tolerance_rad": self.tolerance, **self.extra}
