@@ -172,7 +172,7 @@ def read_run_file(path: str | Path) -> RunFile:
             attrs = {k: f.attrs[k] for k in f.attrs}
             if _text(attrs.get("schema", "")) != SCHEMA:
                 raise AnalysisError(f"{path}: not a hilbench run file (no schema={SCHEMA!r} attribute)")
-            if int(attrs.get("schema_version", 0)) != 1:
+            if int(attrs.get("schema_version", 0)) not in (1, 2):  # 2: position-mode channels added
                 raise AnalysisError(f"{path}: unsupported run-file schema version {attrs.get('schema_version')}")
             samples = f["samples"]
             for name in samples:

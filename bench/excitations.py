@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-MODES = {"current": "A", "velocity": "rad/s"}
+MODES = {"current": "A", "velocity": "rad/s", "position": "rad"}  # position: angle at the encoder shaft
 # Sanity bounds on |u| used when the caller gives no ``limit``; the device configuration should pass its own.
 DEFAULT_LIMITS = {"current": 50.0, "velocity": 2000.0}
 

@@ -18,14 +18,16 @@ from hilbench.bench import excitations
 from hilbench.bench.errors import BenchError
 
 SAMPLE_RATES = (1000, 2000, 5000, 10000, 20000)
-MODES = ("current", "velocity")
+MODES = ("current", "velocity", "position")
 #: The longest protocol, samples: 1 h at 20 kHz (every protocol's longest duration). Checked from the
 #: parameters alone, before any array is allocated.
 MAX_PROTOCOL_SAMPLES = 72_000_000
 #: Peak memory of building a protocol's excitation plus the runner's copies, bytes per sample (measured
 #: with tracemalloc on 500 000 samples: identification's zero-phase filter 128, a chirp 24, a stepped sine
 #: 32; plus 12 for the runner's float64 setpoints and float32 wire copy).
-PEAK_BYTES_PER_SAMPLE = {"identification": 140, "chirp": 36, "stepped_sine": 44}
+PEAK_BYTES_PER_SAMPLE = {"identification": 140, "chirp": 36, "stepped_sine": 44, "presliding": 64}
+#: A protocol not listed above: float64 angle and feed-forward, their (n, 2) stack, float32 wire copy.
+DEFAULT_PEAK_BYTES_PER_SAMPLE = 64
 
 
 class ProtocolError(BenchError):
@@ -85,7 +87,7 @@ class ParameterSpec:
 
 COMMON_SPECS: dict[str, ParameterSpec] = {
     "mode": ParameterSpec("", None, None, "current (setpoints in A) or velocity (rad/s, device PI loop)",
-                          kind="choice", choices=MODES),
+                          kind="choice", choices=("current", "velocity")),
     "sample_rate": ParameterSpec("Hz", 1000, 20000, "device sample rate: 1000, 2000, 5000, 10000 or 20000",
                                  kind="int"),
 }
@@ -93,15 +95,21 @@ COMMON_SPECS: dict[str, ParameterSpec] = {
 
 @dataclass(frozen=True)
 class Protocol:
-    """Base class: validation from ``SPECS`` and the common interface."""
+    """Base class: validation from ``SPECS`` and the common interface.
+
+    A protocol plays in one of its ``MODES``. In ``position`` mode its setpoints are angles at the encoder
+    (motor) shaft, rad, and it may define ``feedforward(limit) -> np.ndarray | None``: a current (A) per
+    setpoint, streamed with it (``limit`` is the current limit, A).
+    """
 
     name: ClassVar[str] = ""
     SPECS: ClassVar[dict[str, ParameterSpec]] = {}
+    MODES: ClassVar[tuple[str, ...]] = ("current", "velocity")
 
     def __post_init__(self) -> None:
         mode = self.mode  # type: ignore[attr-defined]
-        if mode not in MODES:
-            raise ProtocolError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+        if mode not in self.MODES:
+            raise ProtocolError(f"{self.name} runs in {' or '.join(self.MODES)} mode, got {mode!r}")
         for f in fields(self):
             spec = self.specs()[f.name]
             object.__setattr__(self, f.name, spec.check(f.name, getattr(self, f.name), mode))
@@ -127,7 +135,7 @@ class Protocol:
     @property
     def memory_bytes(self) -> int:
         """Peak memory a run of this protocol needs for its setpoints, bytes (see PEAK_BYTES_PER_SAMPLE)."""
-        return self.n_samples * PEAK_BYTES_PER_SAMPLE[self.name]
+        return self.n_samples * PEAK_BYTES_PER_SAMPLE.get(self.name, DEFAULT_PEAK_BYTES_PER_SAMPLE)
 
     def check_memory(self, available: int | None = None) -> None:
         """Raise :class:`ProtocolError` if :attr:`memory_bytes` exceeds the memory available now (bytes,
@@ -142,7 +150,11 @@ class Protocol:
 
     @classmethod
     def specs(cls) -> dict[str, ParameterSpec]:
-        return {**cls.SPECS, **COMMON_SPECS}
+        common = dict(COMMON_SPECS)
+        if cls.MODES != COMMON_SPECS["mode"].choices:
+            common["mode"] = ParameterSpec("", None, None, f"control mode: {', '.join(cls.MODES)}", kind="choice",
+                                           choices=cls.MODES)
+        return {**cls.SPECS, **common}
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> Protocol:

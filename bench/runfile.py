@@ -45,7 +45,9 @@ from hilbench.bench.errors import BenchError
 SCHEMA = "hilbench-run"
 #: root attribute ``record``: what drives the run (absent in older files: torque-driven)
 RECORDS = ("torque-driven", "displacement-driven")
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+#: Versions this reader opens (2 added the position-mode channels position_cmd and current_ff).
+SCHEMA_VERSIONS = (1, 2)
 AXES = ("rotary", "linear")
 FINAL_STATUSES = ("completed", "aborted")
 #: ``failed``: the writer itself could not go on (disk full, I/O error); the file keeps every flushed sample.
@@ -86,6 +88,7 @@ CHANNELS: dict[str, ChannelSpec] = {
     "counts": ChannelSpec("counts", "counts", "i8", "raw encoder counts"),
     "velocity": ChannelSpec("rad/s", "m/s", "f8", "measured velocity"),
     "velocity_cmd": ChannelSpec("rad/s", "m/s", "f8", "commanded velocity (velocity mode)"),
+    "current_ff": ChannelSpec("A", "A", "f8", "feed-forward current streamed with the position reference"),
 }
 DEVICE_CHANNELS = ("sample_index", "t", "current_cmd", "current", "torque", "position", "counts")
 REQUIRED_CHANNELS = ("sample_index", "t")
@@ -731,8 +734,9 @@ class Run:
         if self.meta.get("schema") != SCHEMA:
             raise RunFileError(f"{self.path}: not a hilbench run file (no schema={SCHEMA!r} attribute)")
         version = self.meta.get("schema_version")
-        if version != SCHEMA_VERSION:
-            raise RunFileError(f"{self.path}: unsupported run-file schema version {version} (bench reads 1)")
+        if version not in SCHEMA_VERSIONS:
+            raise RunFileError(f"{self.path}: unsupported run-file schema version {version} (bench reads "
+                               f"{', '.join(map(str, SCHEMA_VERSIONS))})")
         self.uid = self.meta["uid"]
         self.axis = self.meta["axis"]
         self.sample_rate = float(self.meta["sample_rate"])

@@ -47,7 +47,15 @@ SETTING_RANGES: dict[str, tuple[float, float, str]] = {
     "torque_constant": (0.0, 100.0, "N*m/A"),
     "counts_per_rev": (1, 2**32 - 1, "counts"),
     "ratio": (0.0, 1e6, "1"),
+    # position loop (position mode, protocol v2); 0 is allowed for ki, kd, i_limit and d_cutoff (term off)
+    "position_kp": (0.0, 1e7, "A/rad"),
+    "position_ki": (0.0, 1e10, "A/(rad*s)"),
+    "position_kd": (0.0, 1e5, "A*s/rad"),
+    "position_i_limit": (0.0, 1000.0, "A"),
+    "position_d_cutoff": (0.0, 10000.0, "Hz"),
 }
+#: Settings that may be 0 (the rest must be > their low end).
+_ZERO_ALLOWED = ("watchdog_timeout", "position_ki", "position_kd", "position_i_limit", "position_d_cutoff")
 
 
 class SettingsError(BenchError, ValueError):
@@ -70,6 +78,12 @@ class DeviceSettings:
     torque_constant: float = DEFAULT_TORQUE_CONSTANT  # N*m/A
     counts_per_rev: int = DEFAULT_COUNTS_PER_REV
     ratio: float = 1.0                   # motor revolutions per load revolution
+    # position loop gains (docs/protocol.md "Position mode"; defaults hold the simulated DC motor)
+    position_kp: float = wire.POSITION_GAINS["position_kp"]              # A/rad
+    position_ki: float = wire.POSITION_GAINS["position_ki"]              # A/(rad*s)
+    position_kd: float = wire.POSITION_GAINS["position_kd"]              # A*s/rad
+    position_i_limit: float = wire.POSITION_GAINS["position_i_limit"]    # A
+    position_d_cutoff: float = wire.POSITION_GAINS["position_d_cutoff"]  # Hz
 
     def __post_init__(self) -> None:
         for name, (low, high, unit) in SETTING_RANGES.items():
@@ -84,7 +98,7 @@ class DeviceSettings:
                 object.__setattr__(self, name, float(value))
             value = getattr(self, name)
             infinite_ok = name.startswith("position")
-            strict = name not in ("watchdog_timeout",) and not infinite_ok
+            strict = name not in _ZERO_ALLOWED and not infinite_ok
             bad = math.isnan(value) or (not infinite_ok and not math.isfinite(value)) or value > high \
                 or value < low or (strict and value <= low)
             if bad:
@@ -95,16 +109,20 @@ class DeviceSettings:
             raise SettingsError(f"position_min ({self.position_min} rad) must be below position_max "
                                 f"({self.position_max} rad)")
 
-    def config(self, protocol: Protocol) -> wire.Config:
-        mode = wire.Mode.CURRENT if protocol.mode == "current" else wire.Mode.VELOCITY  # type: ignore
+    def config(self, protocol: Protocol, feedforward: bool = False) -> wire.Config:
+        """The CONFIG of a run of ``protocol``; ``feedforward``: position setpoints carry a current (A)."""
+        mode = wire.Mode[protocol.mode.upper()]  # type: ignore[attr-defined]
         return wire.Config(sample_rate=protocol.sample_rate, mode=mode,  # type: ignore[attr-defined]
                            current_limit=self.current_limit, velocity_limit=self.velocity_limit,
                            position_min=self.position_min, position_max=self.position_max,
                            watchdog_timeout=self.watchdog_timeout, torque_constant=self.torque_constant,
-                           counts_per_rev=self.counts_per_rev, ratio=self.ratio)
+                           counts_per_rev=self.counts_per_rev, ratio=self.ratio,
+                           **{g: getattr(self, g) for g in wire.Config.GAINS}, feedforward=feedforward)
 
     def limit_for(self, protocol: Protocol) -> float:
-        return self.current_limit if protocol.mode == "current" else self.velocity_limit  # type: ignore
+        """The bound of the streamed current or velocity: A in current and position mode (there, of the
+        feed-forward current), rad/s in velocity mode."""
+        return self.velocity_limit if protocol.mode == "velocity" else self.current_limit  # type: ignore
 
 
 @dataclass
@@ -211,20 +229,32 @@ class Bench:
         limit = self.settings.limit_for(protocol)
         excitation = protocol.excitation(limit)
         segments = protocol.segments(limit)
-        config = self.settings.config(protocol)
+        position = protocol.mode == "position"  # type: ignore[attr-defined]
+        ff = protocol.feedforward(limit) if position and hasattr(protocol, "feedforward") else None
+        if ff is not None:
+            ff = np.asarray(ff, dtype=np.float64)
+            if ff.shape != excitation.u.shape:
+                raise ConfigError(f"{protocol.name}: feed-forward of shape {ff.shape} for setpoints of shape "
+                                  f"{excitation.u.shape}")
+        config = self.settings.config(protocol, feedforward=ff is not None)
+        stream = excitation.u if ff is None else np.column_stack([excitation.u, ff])
         stamp = uuid.uuid4().hex[:8]
         path = Path(out) if out is not None else Path("runs") / f"{protocol.name}-{stamp}.h5"
         path.parent.mkdir(parents=True, exist_ok=True)
         arrays = {"setpoints": excitation.u}
+        if ff is not None:
+            arrays["feedforward"] = ff
         if excitation.windows is not None:
             arrays["step_windows"] = excitation.windows
         amp = self.amplifier
         # -- startup
         amp.configure(config)
         host_clocked = amp.clock == "host"
+        reference = (("position_cmd",) + (("current_ff",) if ff is not None else ())) if position else ()
         writer = RunWriter(
             path, sample_rate=float(protocol.sample_rate),  # type: ignore
-            channels=DEVICE_CHANNELS + (HOST_CLOCKED_CHANNELS if host_clocked else ()),
+            channels=DEVICE_CHANNELS + reference + (HOST_CLOCKED_CHANNELS if host_clocked else ()),
+            record=getattr(protocol, "record", "torque-driven"),
             custom_channels=HOST_CLOCKED_CUSTOM if host_clocked else None,
             device={**self.identity(), "url": self.url},
             config={k: getattr(config, k) if not isinstance(getattr(config, k), float) or
@@ -237,7 +267,7 @@ class Bench:
         status, message, done = "aborted", "", 0
         try:
             amp.arm()
-            done = self._execute(protocol, excitation.u, segments, writer, progress, control)
+            done = self._execute(protocol, stream, segments, writer, progress, control)
             status = "completed"
         except AbortRun as exc:
             message = str(exc)
@@ -270,8 +300,11 @@ class Bench:
 
     def _execute(self, protocol: Protocol, u: np.ndarray, segments: list[tuple[int, int]], writer: RunWriter,
                  progress: Callable[[Progress], None] | None, control: RunControl) -> int:
+        """Stream ``u`` segment by segment: (n,) setpoints, or (n, 2) angle (rad) and feed-forward (A)."""
         amp = self.amplifier
-        total = int(u.size)
+        total = len(u)
+        position = protocol.mode == "position"  # type: ignore[attr-defined]
+        ratio = self.settings.ratio
         done = 0
         t_start = time.monotonic()
         last_pos = None
@@ -285,24 +318,32 @@ class Bench:
                     amp.arm()
             if control.aborted:
                 raise AbortRun(f"aborted by operator after {done} of {total} samples")
+            k = a  # setpoint of the block's first sample
             for blk in amp.stream(u[a:b]):
                 n = len(blk)
-                position = blk.position
+                measured = blk.position
                 torque = blk.torque
                 t = blk.time
+                reference = {}
+                if position:  # the reference at the load, like `position` (setpoints are at the motor)
+                    ref = u[k: k + n].reshape(n, -1)
+                    reference["position_cmd"] = ref[:, 0] / ratio
+                    if ref.shape[1] > 1:
+                        reference["current_ff"] = ref[:, 1]
+                k += n
                 writer.append({"sample_index": blk.index, "t": t, "current_cmd": blk.current_cmd,
-                               "current": blk.current_meas, "torque": torque, "position": position,
-                               "counts": blk.counts, **(blk.extra() if hasattr(blk, "extra") else {})})
+                               "current": blk.current_meas, "torque": torque, "position": measured,
+                               "counts": blk.counts, **reference, **(blk.extra() if hasattr(blk, "extra") else {})})
                 done += n
                 if progress is not None:
-                    prev = position[:1] if last_pos is None else np.array([last_pos])
-                    velocity = np.diff(np.concatenate([prev, position])) * blk.sample_rate
+                    prev = measured[:1] if last_pos is None else np.array([last_pos])
+                    velocity = np.diff(np.concatenate([prev, measured])) * blk.sample_rate
                     elapsed = time.monotonic() - t_start
                     eta = elapsed / done * (total - done) if done else math.inf
                     progress(Progress(done, total, eta, seg, len(segments), t, blk.current_cmd,
-                                      blk.current_meas, torque, position, velocity))
+                                      blk.current_meas, torque, measured, velocity))
                 if n:
-                    last_pos = float(position[-1])
+                    last_pos = float(measured[-1])
                 if control.aborted:
                     raise AbortRun(f"aborted by operator after {done} of {total} samples")
         return done

@@ -89,28 +89,45 @@ class Samples:
 def check_setpoints(setpoints, config: p.Config) -> np.ndarray:
     """Host-side check of a setpoint array against a configuration; returns it as float64.
 
-    Raises :class:`SetpointError` for a non-1-D or empty array, NaN/inf, or a value beyond the configured
-    current limit (current mode, A) or velocity limit (velocity mode, rad/s).
+    Shape (n,), or (n, 2) in position mode with feed-forward (column 0 angle, rad; column 1 current, A).
+    Raises :class:`SetpointError` for a wrong shape or an empty array, NaN/inf, or a value beyond the
+    configured current limit (current mode and the feed-forward column, A), velocity limit (velocity mode,
+    rad/s) or position window (position mode, rad).
     """
     try:
         values = np.asarray(setpoints, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise SetpointError(f"setpoints are not numbers: {exc}") from exc
-    if values.ndim != 1 or values.size == 0:
-        raise SetpointError(f"setpoints must be a non-empty 1-D array, got shape {values.shape}")
+    m = config.values_per_sample
+    shape = "1-D (n,)" if m == 1 else f"(n, {m}) (angle rad, feed-forward current A)"
+    if (values.ndim != (1 if m == 1 else 2)) or (m > 1 and values.shape[1] != m) or values.size == 0:
+        raise SetpointError(f"setpoints must be a non-empty {shape} array in {config.mode.name.lower()} mode, "
+                            f"got shape {values.shape}")
     finite = np.isfinite(values)
     if not finite.all():
-        i = int(np.argmax(~finite))
+        i = int(np.argmax(~finite.reshape(len(values), -1).all(axis=1)))
         raise SetpointError(f"setpoint {i} is {values[i]}; setpoints must be finite")
-    if config.mode == p.Mode.CURRENT:
-        limit, unit, name = config.current_limit, "A", "current limit"
+    if config.mode == p.Mode.POSITION:
+        angle = values if m == 1 else values[:, 0]
+        outside = (angle < config.position_min) | (angle > config.position_max)
+        if outside.any():
+            i = int(np.argmax(outside))
+            raise SetpointError(f"position setpoint {i} = {angle[i]:.6g} rad is outside the configured window "
+                                f"[{config.position_min:.6g}, {config.position_max:.6g}] rad "
+                                f"({int(outside.sum())} setpoints outside it)")
+        if m == 1:
+            return values
+        checks = [(values[:, 1], config.current_limit, "A", "current limit (feed-forward column)")]
+    elif config.mode == p.Mode.CURRENT:
+        checks = [(values, config.current_limit, "A", "current limit")]
     else:
-        limit, unit, name = config.velocity_limit, "rad/s", "velocity limit"
-    over = np.abs(values) > limit
-    if over.any():
-        i = int(np.argmax(over))
-        raise SetpointError(f"setpoint {i} = {values[i]:.6g} {unit} exceeds the configured {name} "
-                            f"of {limit:.6g} {unit} ({int(over.sum())} setpoints beyond it)")
+        checks = [(values, config.velocity_limit, "rad/s", "velocity limit")]
+    for column, limit, unit, name in checks:
+        over = np.abs(column) > limit
+        if over.any():
+            i = int(np.argmax(over))
+            raise SetpointError(f"setpoint {i} = {column[i]:.6g} {unit} exceeds the configured {name} "
+                                f"of {limit:.6g} {unit} ({int(over.sum())} setpoints beyond it)")
     return values
 
 
@@ -124,7 +141,8 @@ class Amplifier(Device):
     """
 
     clock = "device"
-    capabilities = Capabilities({"current": p.SAMPLE_RATES, "velocity": p.SAMPLE_RATES})
+    capabilities = Capabilities({"current": p.SAMPLE_RATES, "velocity": p.SAMPLE_RATES,
+                                 "position": p.SAMPLE_RATES})
     name = "hilbench amplifier"
 
     def __init__(self, link: Link, timeout: float = 2.0, on_close: Callable[[], None] | None = None) -> None:
@@ -148,11 +166,8 @@ class Amplifier(Device):
         self._thread = threading.Thread(target=self._receive, name="amplifier-rx", daemon=True)
         self._thread.start()
         try:
-            self.identity: p.Identity = self._request(p.GetIdentity(), p.MsgType.IDENTITY)
+            self.identity: p.Identity = self._identify()
             self._drain_stale()
-            if self.identity.protocol_version != p.PROTOCOL_VERSION:
-                raise DriverError(f"device speaks protocol {self.identity.protocol_version}, "
-                                  f"this host {p.PROTOCOL_VERSION}")
             ident = self.identity
             if ident.max_block < 1 or ident.buffer_capacity < ident.max_block:
                 # a block of 0 setpoints would make stream() send empty blocks forever
@@ -164,6 +179,24 @@ class Amplifier(Device):
         except BaseException:
             self.close()
             raise
+
+    def _identify(self) -> p.Identity:
+        """GET_IDENTITY with this host's protocol version. A v1 device does not read it (v1 has an empty
+        GET_IDENTITY); asked again the v1 way, it answers, and is refused in one line."""
+        try:
+            ident = self._request(p.GetIdentity(), p.MsgType.IDENTITY, timeout=self.timeout * 2 / 3, attempts=2)
+        except DeviceTimeoutError:
+            try:
+                old = self._request(p.GetIdentity(1), p.MsgType.IDENTITY, timeout=self.timeout / 3, attempts=1)
+            except DeviceTimeoutError:
+                raise DeviceTimeoutError(f"no answer to GET_IDENTITY from the device within "
+                                         f"{self.timeout:.3g} s") from None
+            raise DriverError(f"device {old.model} (firmware {old.firmware}) speaks protocol "
+                              f"{old.protocol_version}; this host needs protocol {p.PROTOCOL_VERSION}: "
+                              f"update the device firmware") from None
+        if ident.protocol_version != p.PROTOCOL_VERSION:
+            raise DriverError(f"device speaks protocol {ident.protocol_version}, this host {p.PROTOCOL_VERSION}")
+        return ident
 
     # ------------------------------------------------------------------ plumbing
     def _receive(self) -> None:
@@ -327,8 +360,9 @@ class Amplifier(Device):
         return out
 
     def stream(self, setpoints, block: int | None = None, allow_loss: bool = False) -> Iterator[Samples]:
-        """Stream ``setpoints`` (A in current mode, rad/s in velocity mode; sent as float32) to an armed
-        device and yield its sample blocks in device time, one device sample per setpoint.
+        """Stream ``setpoints`` (A in current mode, rad/s in velocity mode, rad in position mode; sent as
+        float32) to an armed device and yield its sample blocks in device time, one device sample per
+        setpoint. In position mode with feed-forward, ``setpoints`` is (n, 2): angle (rad), current (A).
 
         Flow control: never more setpoints in flight than the device reports free. Sample blocks lost on
         the link are counted in ``lost_samples``; unless ``allow_loss``, :class:`SampleLossError` is raised
@@ -370,7 +404,7 @@ class Amplifier(Device):
                     n = min(block, n_total - sent)
                     if free - (sent - dev_received) < n:
                         break
-                    self._send(p.SetpointBlock(seq, values[sent: sent + n], end=sent + n == n_total))
+                    self._send(p.SetpointBlock(seq, values[sent: sent + n].reshape(-1), end=sent + n == n_total))
                     sent += n
                     seq += 1
                 try:

@@ -18,7 +18,7 @@ from hilbench.firmware_sim.plant import PlantParameterError, _CParams, validate
 from hilbench.firmware_sim.plant import ffi as plant_ffi
 from hilbench.firmware_sim.sim_config import SimConfig
 
-FIRMWARE_VERSION = "hilbench-sim c-core 1.0.0"
+FIRMWARE_VERSION = "hilbench-sim c-core 2.0.0"
 PACINGS = {"realtime": 0, "lockstep": 1}
 RATES = (1000, 2000, 5000, 10000, 20000)  # Hz, the order of hb_host.substeps_by_rate
 LINKS = {"serial": 0, "can": 1, "can-fd": 2}

@@ -115,7 +115,7 @@ class Firmware:
     def _configure(self, cfg: p.Config) -> p.Reply:
         if self.state in (p.State.ARMED, p.State.STREAMING):
             return p.Reply(p.MsgType.CONFIG, p.Result.BAD_STATE, self.faults)
-        if cfg.problems():
+        if cfg.problems() or cfg.mode == p.Mode.POSITION:  # position mode: the C core only
             return p.Reply(p.MsgType.CONFIG, p.Result.INVALID_CONFIG, self.faults)
         faults = self.faults
         params = self.sim.plant_for(cfg.current_limit, cfg.torque_constant, cfg.counts_per_rev)

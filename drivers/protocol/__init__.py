@@ -16,7 +16,9 @@ from hilbench.drivers.protocol.can_framing import (
     split_can_id,
 )
 from hilbench.drivers.protocol.messages import (
+    FRAME_VERSIONS,
     MESSAGE_CLASSES,
+    POSITION_GAINS,
     PROTOCOL_VERSION,
     SAMPLE_RATES,
     Arm,
@@ -47,7 +49,8 @@ from hilbench.drivers.protocol.messages import (
 from hilbench.drivers.protocol.serial_framing import MAX_FRAME_BYTES, FrameDecoder, decode_frame, encode_frame
 
 __all__ = [
-    "PROTOCOL_VERSION", "SAMPLE_RATES", "MAX_FRAME_BYTES", "MESSAGE_CLASSES", "ProtocolError",
+    "PROTOCOL_VERSION", "FRAME_VERSIONS", "POSITION_GAINS", "SAMPLE_RATES", "MAX_FRAME_BYTES", "MESSAGE_CLASSES",
+    "ProtocolError",
     "Message", "MsgType", "Mode", "State", "Fault", "SampleStatus", "Result",
     "Arm", "ClearFaults", "Config", "Disarm", "EStop", "GetConfig", "GetIdentity", "Heartbeat", "Identity",
     "Reply", "SampleBlock", "SetpointBlock", "Status",

@@ -16,7 +16,10 @@ import numpy as np
 
 from hilbench.drivers.errors import ProtocolError
 
-PROTOCOL_VERSION = 1
+#: Protocol this host speaks (v2: position mode, the CONFIG gains, GET_IDENTITY carries the host's version).
+PROTOCOL_VERSION = 2
+#: Frame versions a decoder accepts: a v2 host still reads a v1 device's answers (to refuse it clearly).
+FRAME_VERSIONS = (1, 2)
 SAMPLE_RATES = (1000, 2000, 5000, 10000, 20000)  # Hz, the only rates a device accepts
 
 
@@ -41,6 +44,7 @@ class MsgType(enum.IntEnum):
 class Mode(enum.IntEnum):
     CURRENT = 0  # setpoints are motor current, A
     VELOCITY = 1  # setpoints are encoder-shaft velocity, rad/s (device runs its velocity PI loop)
+    POSITION = 2  # setpoints are encoder-shaft angle, rad (+ feed-forward current, A); device PID loop (v2)
 
 
 class State(enum.IntEnum):
@@ -153,8 +157,22 @@ class GetConfig(Message):
 
 
 class GetIdentity(Message):
-    __slots__ = ()
+    """Who are you? A v2 host sends its protocol version (u16); a v1 host sends nothing (``host_version``
+    1), and a v2 device then answers as a v1 device."""
+
+    __slots__ = ("host_version",)
     TYPE = MsgType.GET_IDENTITY
+    _ST = struct.Struct("<H")
+
+    def __init__(self, host_version: int = PROTOCOL_VERSION) -> None:
+        self.host_version = int(host_version)
+
+    def encode(self) -> bytes:
+        return self._ST.pack(self.host_version) if self.host_version >= 2 else b""
+
+    @classmethod
+    def decode(cls, payload: bytes) -> GetIdentity:
+        return cls(1) if not payload else cls(*_unpack(cls._ST, payload, "GET_IDENTITY"))
 
 
 class Identity(Message):
@@ -200,6 +218,12 @@ class Identity(Message):
         return cls(*texts, *_unpack(cls._TAIL, payload[pos:], "IDENTITY"))
 
 
+#: Position-loop defaults (protocol v2), tuned on the simulated DC motor (J 0.0022 kg*m^2, Kt 0.2 N*m/A,
+#: presliding stiffness about 3000 N*m/rad) at 2**16 counts/rev: see docs/protocol.md, "Position mode".
+POSITION_GAINS = {"position_kp": 3000.0, "position_ki": 300000.0, "position_kd": 5.0, "position_i_limit": 5.0,
+                  "position_d_cutoff": 300.0}
+
+
 class Config(Message):
     """Device configuration. Units at the encoder (motor) shaft: A, rad/s, rad, s.
 
@@ -207,19 +231,32 @@ class Config(Message):
     watchdog off (it is on by default). Calibration (``torque_constant`` N*m/A, ``counts_per_rev``,
     ``ratio`` motor revolutions per load revolution) is stored by the device, used for its velocity and
     position checks, and used by the host to convert samples to load-side N*m and rad.
+
+    Position mode (protocol v2): ``position_kp`` A/rad, ``position_ki`` A/(rad*s), ``position_kd`` A*s/rad,
+    ``position_i_limit`` A (bound of the integral term), ``position_d_cutoff`` Hz (low-pass of the
+    derivative, 0 = unfiltered), ``feedforward``: each sample's setpoint is (angle rad, current A).
     """
 
     __slots__ = ("sample_rate", "mode", "current_limit", "velocity_limit", "position_min", "position_max",
-                 "watchdog_timeout", "torque_constant", "counts_per_rev", "ratio")
+                 "watchdog_timeout", "torque_constant", "counts_per_rev", "ratio", "position_kp", "position_ki",
+                 "position_kd", "position_i_limit", "position_d_cutoff", "feedforward")
     TYPE = MsgType.CONFIG
-    _ST = struct.Struct("<IBdddddd I d")
+    _ST_V1 = struct.Struct("<IBdddddd I d")
+    _ST = struct.Struct("<IBdddddd I d ddddd B")
+    GAINS = ("position_kp", "position_ki", "position_kd", "position_i_limit", "position_d_cutoff")
 
     def __init__(self, sample_rate: int = 10000, mode: Mode | int = Mode.CURRENT, current_limit: float = 5.0,
                  velocity_limit: float = 200.0, position_min: float = -math.inf,
                  position_max: float = math.inf, watchdog_timeout: float = 0.5, torque_constant: float = 0.1,
-                 counts_per_rev: int = 16384, ratio: float = 1.0) -> None:
+                 counts_per_rev: int = 16384, ratio: float = 1.0,
+                 position_kp: float = POSITION_GAINS["position_kp"],
+                 position_ki: float = POSITION_GAINS["position_ki"],
+                 position_kd: float = POSITION_GAINS["position_kd"],
+                 position_i_limit: float = POSITION_GAINS["position_i_limit"],
+                 position_d_cutoff: float = POSITION_GAINS["position_d_cutoff"],
+                 feedforward: bool = False) -> None:
         self.sample_rate = int(sample_rate)
-        self.mode = Mode(mode) if mode in (0, 1) else mode
+        self.mode = Mode(mode) if mode in (0, 1, 2) else mode
         self.current_limit = float(current_limit)
         self.velocity_limit = float(velocity_limit)
         self.position_min = float(position_min)
@@ -228,6 +265,18 @@ class Config(Message):
         self.torque_constant = float(torque_constant)
         self.counts_per_rev = int(counts_per_rev)
         self.ratio = float(ratio)
+        self.position_kp = float(position_kp)
+        self.position_ki = float(position_ki)
+        self.position_kd = float(position_kd)
+        self.position_i_limit = float(position_i_limit)
+        self.position_d_cutoff = float(position_d_cutoff)
+        self.feedforward = bool(feedforward)
+
+    @property
+    def values_per_sample(self) -> int:
+        """Setpoint values per device sample: 2 (angle, feed-forward current) in position mode with
+        feed-forward, else 1."""
+        return 2 if self.mode == Mode.POSITION and self.feedforward else 1
 
     def problems(self) -> list[str]:
         """Everything wrong with this configuration, as one-line messages (empty list = valid)."""
@@ -235,8 +284,21 @@ class Config(Message):
         if self.sample_rate not in SAMPLE_RATES:
             rates = ", ".join(map(str, SAMPLE_RATES))
             out.append(f"sample rate {self.sample_rate} Hz is not one of {rates} Hz")
-        if self.mode not in (Mode.CURRENT, Mode.VELOCITY):
-            out.append(f"mode {self.mode!r} is not 0 (current) or 1 (velocity)")
+        if self.mode not in (Mode.CURRENT, Mode.VELOCITY, Mode.POSITION):
+            out.append(f"mode {self.mode!r} is not 0 (current), 1 (velocity) or 2 (position)")
+        units = {"position_kp": "A/rad", "position_ki": "A/(rad*s)", "position_kd": "A*s/rad",
+                 "position_i_limit": "A", "position_d_cutoff": "Hz"}
+        for name, unit in units.items():
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                out.append(f"{name} must be finite and >= 0 {unit}, got {value}")
+        if self.position_d_cutoff >= self.sample_rate / 2:
+            out.append(f"position_d_cutoff {self.position_d_cutoff} Hz must be below Nyquist "
+                       f"({self.sample_rate / 2} Hz)")
+        if self.mode == Mode.POSITION and not self.position_kp > 0:
+            out.append(f"position mode needs position_kp > 0 A/rad, got {self.position_kp}")
+        if self.feedforward and self.mode != Mode.POSITION:
+            out.append("feedforward is a position-mode option (mode 2)")
         for name in ("current_limit", "velocity_limit", "torque_constant", "ratio"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -250,17 +312,28 @@ class Config(Message):
             out.append(f"counts_per_rev must be in 1..2**32-1, got {self.counts_per_rev}")
         return out
 
-    def encode(self) -> bytes:
+    def encode(self, version: int = PROTOCOL_VERSION) -> bytes:
+        """The v2 layout (106 bytes), or with ``version=1`` the v1 layout (65 bytes; no position mode)."""
+        head = (self.sample_rate, int(self.mode), self.current_limit, self.velocity_limit, self.position_min,
+                self.position_max, self.watchdog_timeout, self.torque_constant, self.counts_per_rev, self.ratio)
         try:
-            return self._ST.pack(self.sample_rate, int(self.mode), self.current_limit, self.velocity_limit,
-                                 self.position_min, self.position_max, self.watchdog_timeout,
-                                 self.torque_constant, self.counts_per_rev, self.ratio)
+            if version == 1:
+                if self.mode == Mode.POSITION or self.feedforward:
+                    raise ProtocolError("CONFIG: protocol v1 has no position mode")
+                return self._ST_V1.pack(*head)
+            return self._ST.pack(*head, *(getattr(self, g) for g in self.GAINS), int(self.feedforward))
         except struct.error as exc:
             raise ProtocolError(f"CONFIG: cannot encode: {exc}") from exc
 
     @classmethod
     def decode(cls, payload: bytes) -> Config:
-        return cls(*_unpack(cls._ST, payload, "CONFIG"))
+        """Either layout: a v1 CONFIG (65 bytes) has no position loop (gains 0, no feed-forward)."""
+        if len(payload) == cls._ST_V1.size:
+            return cls(*_unpack(cls._ST_V1, payload, "CONFIG"), **dict.fromkeys(cls.GAINS, 0.0))
+        *head, flags = _unpack(cls._ST, payload, "CONFIG")
+        if flags & ~1:
+            raise ProtocolError(f"CONFIG: unknown flags 0x{flags:02x}")
+        return cls(*head, feedforward=bool(flags & 1))
 
 
 class Heartbeat(Message):
@@ -343,7 +416,8 @@ class Reply(Message):
 
 class SetpointBlock(Message):
     """Setpoints for consecutive device samples: ``seq`` counts blocks from 0 after ARM (u32, wraps);
-    ``end`` marks the last block of a stream. ``values`` are float32 on the wire (A or rad/s)."""
+    ``end`` marks the last block of a stream. ``values`` are float32 on the wire (A, rad/s or rad); in
+    position mode with feed-forward two per sample, interleaved (angle rad, current A)."""
 
     __slots__ = ("seq", "end", "values")
     TYPE = MsgType.SETPOINTS
@@ -440,8 +514,9 @@ def decode_message(msg_type: int, payload: bytes) -> Message:
 
 
 def make_setpoint_blocks(values: np.ndarray, block: int) -> list[SetpointBlock]:
-    """Split a 1-D setpoint array into blocks of at most ``block`` samples, seq 0.., the last one ``end``."""
+    """Split setpoints into blocks of at most ``block`` samples, seq 0.., the last one ``end``. ``values``
+    is (n,) or, with several values per sample, (n, m): each block carries its rows flattened (interleaved)."""
     values = np.asarray(values, dtype="<f4")
     n = len(values)
     starts = range(0, max(n, 1), block)
-    return [SetpointBlock(i, values[s: s + block], end=(s + block >= n)) for i, s in enumerate(starts)]
+    return [SetpointBlock(i, values[s: s + block].reshape(-1), end=(s + block >= n)) for i, s in enumerate(starts)]

@@ -12,15 +12,28 @@ import zlib
 from cobs import cobs
 
 from hilbench.drivers.errors import ProtocolError
-from hilbench.drivers.protocol.messages import PROTOCOL_VERSION, Message, decode_message
+from hilbench.drivers.protocol.messages import (
+    FRAME_VERSIONS,
+    PROTOCOL_VERSION,
+    Config,
+    GetIdentity,
+    Message,
+    decode_message,
+)
 
 MAX_FRAME_BYTES = 8192  # decoded frame size limit (header + payload + CRC)
 _CRC = struct.Struct("<I")
 
 
-def encode_frame(msg: Message) -> bytes:
-    """The bytes to write for ``msg``: COBS-encoded frame followed by the 0x00 delimiter."""
-    raw = bytes((PROTOCOL_VERSION, int(msg.TYPE))) + msg.encode()
+def encode_frame(msg: Message, version: int | None = None) -> bytes:
+    """The bytes to write for ``msg``: COBS-encoded frame followed by the 0x00 delimiter. ``version`` is
+    the frame's version byte (1 for a v1 peer, with the v1 CONFIG layout); by default PROTOCOL_VERSION,
+    except a v1 GET_IDENTITY (no host version), which goes out as a v1 frame so that a v1 device reads it."""
+    if version is None:
+        v1_probe = isinstance(msg, GetIdentity) and msg.host_version < 2
+        version = 1 if v1_probe else PROTOCOL_VERSION
+    payload = msg.encode(version) if isinstance(msg, Config) else msg.encode()
+    raw = bytes((version, int(msg.TYPE))) + payload
     if len(raw) + 4 > MAX_FRAME_BYTES:
         raise ProtocolError(f"{msg.TYPE.name}: frame of {len(raw) + 4} bytes exceeds {MAX_FRAME_BYTES}")
     return cobs.encode(raw + _CRC.pack(zlib.crc32(raw))) + b"\x00"
@@ -37,8 +50,8 @@ def decode_frame(data: bytes) -> Message:
     body, (crc,) = raw[:-4], _CRC.unpack(raw[-4:])
     if zlib.crc32(body) != crc:
         raise ProtocolError("CRC mismatch")
-    if body[0] != PROTOCOL_VERSION:
-        raise ProtocolError(f"protocol version {body[0]} (this host speaks {PROTOCOL_VERSION})")
+    if body[0] not in FRAME_VERSIONS:
+        raise ProtocolError(f"protocol version {body[0]} (this host reads {FRAME_VERSIONS})")
     return decode_message(body[1], body[2:])
 
 

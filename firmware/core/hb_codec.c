@@ -1,4 +1,4 @@
-/* Protocol v1 device side: little-endian fields, CRC-32, COBS, serial frames and the message codec. */
+/* Protocol v2 (and v1) device side: little-endian fields, CRC-32, COBS, serial frames and the message codec. */
 #include "hb_protocol.h"
 
 #include <math.h>
@@ -87,12 +87,16 @@ long hb_cobs_decode(const uint8_t *in, size_t n, uint8_t *out) {
 }
 
 size_t hb_frame_encode(uint8_t type, const uint8_t *payload, size_t n, uint8_t *out) {
+    return hb_frame_encode_version(HB_PROTOCOL_VERSION, type, payload, n, out);
+}
+
+size_t hb_frame_encode_version(uint8_t version, uint8_t type, const uint8_t *payload, size_t n, uint8_t *out) {
     if (n + 6 > HB_MAX_FRAME) return 0;
     /* the raw frame is assembled at the end of `out` and encoded towards its start: COBS never moves a
      * byte forward by more than its overhead, which the gap covers */
     size_t cap = HB_COBS_MAX(n + 6);
     uint8_t *raw = out + cap - (n + 6);
-    raw[0] = HB_PROTOCOL_VERSION;
+    raw[0] = version;
     raw[1] = type;
     if (n) memmove(raw + 2, payload, n);
     hb_put_u32(raw + 2 + n, hb_crc32(0, raw, n + 2));
@@ -106,6 +110,7 @@ void hb_frame_decoder_init(hb_frame_decoder *d) {
     d->discarding = 0;
     d->crc_errors = 0;
     d->frames = 0;
+    d->version = HB_PROTOCOL_VERSION;
 }
 
 int hb_frame_decoder_next(hb_frame_decoder *d, const uint8_t **data, size_t *n, uint8_t *type,
@@ -134,11 +139,12 @@ int hb_frame_decoder_next(hb_frame_decoder *d, const uint8_t **data, size_t *n, 
         if (flen == 0) continue;  /* empty frame: idle line or a sender's resync */
         long rlen = hb_cobs_decode(d->enc, flen, d->raw);
         if (rlen < 6 || hb_crc32(0, d->raw, (size_t)rlen - 4) != hb_get_u32(d->raw + rlen - 4) ||
-            d->raw[0] != HB_PROTOCOL_VERSION) {
+            d->raw[0] < HB_PROTOCOL_VERSION_MIN || d->raw[0] > HB_PROTOCOL_VERSION) {
             d->crc_errors++;
             continue;
         }
         d->frames++;
+        d->version = d->raw[0];
         *type = d->raw[1];
         *payload = d->raw + 2;
         *len = (size_t)rlen - 6;
@@ -147,7 +153,7 @@ int hb_frame_decoder_next(hb_frame_decoder *d, const uint8_t **data, size_t *n, 
     return 0;
 }
 
-void hb_config_decode(const uint8_t *in, hb_config *c) {
+void hb_config_decode(const uint8_t *in, size_t n, hb_config *c) {
     c->sample_rate = hb_get_u32(in);
     c->mode = in[4];
     c->current_limit = hb_get_f64(in + 5);
@@ -158,9 +164,26 @@ void hb_config_decode(const uint8_t *in, hb_config *c) {
     c->torque_constant = hb_get_f64(in + 45);
     c->counts_per_rev = hb_get_u32(in + 53);
     c->ratio = hb_get_f64(in + 57);
+    int v2 = n >= HB_CONFIG_BYTES;
+    c->position_kp = v2 ? hb_get_f64(in + 65) : 0.0;
+    c->position_ki = v2 ? hb_get_f64(in + 73) : 0.0;
+    c->position_kd = v2 ? hb_get_f64(in + 81) : 0.0;
+    c->position_i_limit = v2 ? hb_get_f64(in + 89) : 0.0;
+    c->position_d_cutoff = v2 ? hb_get_f64(in + 97) : 0.0;
+    c->flags = v2 ? in[105] : 0;
 }
 
 void hb_config_encode(const hb_config *c, uint8_t *out) {
+    hb_config_encode_v1(c, out);
+    hb_put_f64(out + 65, c->position_kp);
+    hb_put_f64(out + 73, c->position_ki);
+    hb_put_f64(out + 81, c->position_kd);
+    hb_put_f64(out + 89, c->position_i_limit);
+    hb_put_f64(out + 97, c->position_d_cutoff);
+    out[105] = c->flags;
+}
+
+void hb_config_encode_v1(const hb_config *c, uint8_t *out) {
     hb_put_u32(out, c->sample_rate);
     out[4] = c->mode;
     hb_put_f64(out + 5, c->current_limit);
@@ -174,11 +197,19 @@ void hb_config_encode(const hb_config *c, uint8_t *out) {
 }
 
 static int positive_finite(double v) { return isfinite(v) && v > 0.0; }
+static int nonnegative_finite(double v) { return isfinite(v) && v >= 0.0; }
 
 int hb_config_valid(const hb_config *c) {
     uint32_t r = c->sample_rate;
     if (r != 1000 && r != 2000 && r != 5000 && r != 10000 && r != 20000) return 0;
-    if (c->mode != HB_CURRENT && c->mode != HB_VELOCITY) return 0;
+    if (c->mode != HB_CURRENT && c->mode != HB_VELOCITY && c->mode != HB_POSITION) return 0;
+    if (!nonnegative_finite(c->position_kp) || !nonnegative_finite(c->position_ki) ||
+        !nonnegative_finite(c->position_kd) || !nonnegative_finite(c->position_i_limit)) return 0;
+    /* the derivative filter's cut-off stays below Nyquist (0 = unfiltered) */
+    if (!nonnegative_finite(c->position_d_cutoff) || c->position_d_cutoff >= 0.5 * (double)r) return 0;
+    if (c->flags & ~(unsigned)HB_CFG_FEEDFORWARD) return 0;
+    if (c->flags && c->mode != HB_POSITION) return 0;  /* feed-forward is a position-mode option */
+    if (c->mode == HB_POSITION && !(c->position_kp > 0.0)) return 0;  /* no loop, no position mode */
     if (!positive_finite(c->current_limit) || !positive_finite(c->velocity_limit) ||
         !positive_finite(c->torque_constant) || !positive_finite(c->ratio)) return 0;
     if (isnan(c->position_min) || isnan(c->position_max) || !(c->position_min < c->position_max)) return 0;
@@ -199,11 +230,16 @@ static int identity_layout_ok(const uint8_t *p, size_t n) {
 int hb_msg_decode(uint8_t type, const uint8_t *p, size_t n, hb_msg *msg) {
     msg->type = type;
     switch (type) {
-    case HB_ESTOP: case HB_DISARM: case HB_ARM: case HB_CLEAR_FAULTS: case HB_GET_CONFIG: case HB_GET_IDENTITY:
+    case HB_ESTOP: case HB_DISARM: case HB_ARM: case HB_CLEAR_FAULTS: case HB_GET_CONFIG:
         return n == 0 ? 0 : -1;
+    case HB_GET_IDENTITY:  /* v1: empty; v2: the host's protocol version, u16 */
+        if (n != 0 && n != 2) return -1;
+        msg->host_version = n ? hb_get_u16(p) : 1;
+        return 0;
     case HB_CONFIG:
-        if (n != HB_CONFIG_BYTES) return -1;
-        hb_config_decode(p, &msg->config);
+        if (n != HB_CONFIG_BYTES && n != HB_CONFIG_BYTES_V1) return -1;
+        hb_config_decode(p, n, &msg->config);
+        msg->config_version = n == HB_CONFIG_BYTES ? 2 : 1;
         return 0;
     case HB_HEARTBEAT:
         if (n != 4) return -1;
@@ -253,6 +289,11 @@ void hb_reply_encode(uint8_t request, uint8_t result, uint16_t faults, uint8_t *
 
 size_t hb_identity_encode(const char *model, const char *serial, const char *firmware, uint32_t capacity,
                           uint16_t max_block, uint8_t *out) {
+    return hb_identity_encode_version(model, serial, firmware, capacity, max_block, HB_PROTOCOL_VERSION, out);
+}
+
+size_t hb_identity_encode_version(const char *model, const char *serial, const char *firmware, uint32_t capacity,
+                                  uint16_t max_block, uint16_t version, uint8_t *out) {
     const char *texts[3] = {model, serial, firmware};
     size_t pos = 0;
     for (int i = 0; i < 3; i++) {
@@ -262,7 +303,7 @@ size_t hb_identity_encode(const char *model, const char *serial, const char *fir
         memcpy(out + pos, texts[i], len);
         pos += len;
     }
-    hb_put_u16(out + pos, HB_PROTOCOL_VERSION);
+    hb_put_u16(out + pos, version);
     hb_put_u32(out + pos + 2, capacity);
     hb_put_u16(out + pos + 6, max_block);
     return pos + 8;

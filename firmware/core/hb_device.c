@@ -1,4 +1,4 @@
-/* Device state machine of protocol v1 (docs/protocol.md; design: docs/firmware.md). */
+/* Device state machine of protocol v2, serving v1 hosts too (docs/protocol.md; design: docs/firmware.md). */
 #include "hb_device.h"
 
 #include <math.h>
@@ -18,7 +18,7 @@ static void send_can_frame(void *ctx, uint16_t id, const uint8_t *data, uint8_t 
 
 static void send(hb_device *d, uint8_t type, const uint8_t *payload, size_t n) {
     if (d->setup.link == HB_LINK_SERIAL) {
-        size_t len = hb_frame_encode(type, payload, n, d->tx);
+        size_t len = hb_frame_encode_version(d->version, type, payload, n, d->tx);
         if (!len) {
             d->dropped_frames++;
             return;
@@ -32,7 +32,7 @@ static void send(hb_device *d, uint8_t type, const uint8_t *payload, size_t n) {
     d->tx_frames++;
 }
 
-static uint32_t free_slots(const hb_device *d) { return d->setup.capacity - d->count; }
+static uint32_t free_slots(const hb_device *d) { return d->slots - d->count; }
 
 void hb_device_status(const hb_device *d, uint32_t token, hb_status *s) {
     s->token = token;
@@ -88,6 +88,9 @@ void hb_device_init(hb_device *d, const hb_device_setup *setup, void *hal) {
     if (d->setup.max_block == 0 || d->setup.max_block > HB_MAX_BLOCK) d->setup.max_block = HB_MAX_BLOCK;
     d->hal = hal;
     d->state = HB_UNCONFIGURED;
+    d->version = HB_PROTOCOL_VERSION;
+    d->vps = 1;
+    d->slots = d->setup.capacity;
     hb_frame_decoder_init(&d->decoder);
     hb_can_reassembler_init(&d->can, setup->can_node);
 }
@@ -107,6 +110,9 @@ static void reset_stream(hb_device *d) {
     d->received = 0;
     d->history_valid = 0;
     d->pi_integral = 0;  /* each stream starts its velocity loop without a stale integral */
+    d->pos_integral = 0;  /* and its position loop without a stale integral or derivative */
+    d->pos_derivative = 0;
+    d->has_prev_error = 0;
 }
 
 int hb_device_busy(const hb_device *d) { return d->state == HB_STREAMING && d->count > 0; }
@@ -131,10 +137,10 @@ static void remember(hb_device *d, int64_t counts) {
     d->history_pos = (d->history_pos + 1) % d->window;
 }
 
-static uint16_t limit_trips(hb_device *d, int64_t counts, hb_real meas, hb_real setpoint) {
+/* `current_setpoint` is the streamed current (current mode) or feed-forward current (position mode), A. */
+static uint16_t limit_trips(hb_device *d, int64_t counts, hb_real meas, hb_real current_setpoint) {
     uint16_t bits = 0;
-    if (fabs(meas) > d->current_limit || (d->cfg.mode == HB_CURRENT && fabs(setpoint) > d->current_limit))
-        bits |= HB_F_OVER_CURRENT;
+    if (fabs(meas) > d->current_limit || fabs(current_setpoint) > d->current_limit) bits |= HB_F_OVER_CURRENT;
     if (fabs(speed(d, counts)) > d->velocity_limit) bits |= HB_F_OVER_SPEED;
     hb_real position = (hb_real)counts * d->pos_scale;
     if (position < d->position_min || position > d->position_max) bits |= HB_F_POSITION_WINDOW;
@@ -159,6 +165,29 @@ static hb_real velocity_loop(hb_device *d, hb_real setpoint, hb_real position) {
         d->pi_integral = integral;
     }
     return i_cmd;
+}
+
+static hb_real clip(hb_real v, hb_real lim) { return v > lim ? lim : v < -lim ? -lim : v; }
+
+/* Position PID loop on the encoder: e = r - pos; D = a*D + (1 - a)*(e[k] - e[k-1])/dt (0 on a stream's
+ * first sample); I = clip(I + ki*e*dt, i_limit); i = clip(kp*e + kd*D + I + ff, current_limit). The
+ * integral is not advanced while the output is saturated and the error drives it further (anti-windup). */
+static hb_real position_loop(hb_device *d, hb_real setpoint, hb_real ff, hb_real position) {
+    const hb_config *c = &d->cfg;
+    hb_real err = setpoint - position;
+    hb_real raw = d->has_prev_error ? (err - d->prev_error) / d->dt : (hb_real)0;
+    d->pos_derivative = d->d_alpha * d->pos_derivative + ((hb_real)1 - d->d_alpha) * raw;
+    d->prev_error = err;
+    d->has_prev_error = 1;
+    hb_real integral = clip(d->pos_integral + (hb_real)c->position_ki * err * d->dt, (hb_real)c->position_i_limit);
+    hb_real i_cmd = (hb_real)c->position_kp * err + (hb_real)c->position_kd * d->pos_derivative + integral + ff;
+    hb_real lim = d->current_limit;
+    if ((i_cmd > lim && err > 0) || (i_cmd < -lim && err < 0)) {
+        i_cmd = (hb_real)c->position_kp * err + (hb_real)c->position_kd * d->pos_derivative + d->pos_integral + ff;
+    } else {
+        d->pos_integral = integral;
+    }
+    return clip(i_cmd, lim);
 }
 
 /* Append sample `index` to the block; a full block goes out only when the next sample arrives, so that
@@ -212,13 +241,15 @@ static uint64_t silence_at(const hb_device *d, uint64_t k, uint64_t now_us) {
 /* Execute one buffered setpoint as sample k: measure, check limits, command, apply. Returns 0, or the
  * fault bits that ended the stream at this sample. */
 static uint16_t run_sample(hb_device *d, uint64_t now_us) {
-    hb_real u = (hb_real)d->ring[d->head];
-    d->head = (d->head + 1) % d->setup.capacity;
+    const float *slot = d->ring + (size_t)d->head * d->vps;
+    hb_real u = (hb_real)slot[0];
+    hb_real ff = d->vps > 1 ? (hb_real)slot[1] : (hb_real)0;
+    d->head = (d->head + 1) % d->slots;
     d->count--;
     int64_t counts;
     hb_real meas;
     hb_hal_measure(d->hal, &counts, &meas);
-    uint16_t trip = limit_trips(d, counts, meas, u);
+    uint16_t trip = limit_trips(d, counts, meas, d->cfg.mode == HB_CURRENT ? u : ff);
     if (trip) {
         end_sample(d, counts, meas, trip, silence_at(d, d->index, now_us));
         return trip;
@@ -227,8 +258,10 @@ static uint16_t run_sample(hb_device *d, uint64_t now_us) {
     hb_real cmd;
     if (d->cfg.mode == HB_VELOCITY) {
         cmd = velocity_loop(d, u, position);
+    } else if (d->cfg.mode == HB_POSITION) {
+        cmd = position_loop(d, u, ff, position);
     } else {
-        cmd = u > d->current_limit ? d->current_limit : u < -d->current_limit ? -d->current_limit : u;
+        cmd = clip(u, d->current_limit);
     }
     remember(d, counts);
     hb_hal_apply(d->hal, cmd, 1);
@@ -328,6 +361,11 @@ static uint8_t configure(hb_device *d, const hb_config *c) {
     d->velocity_limit = (hb_real)c->velocity_limit;
     d->position_min = (hb_real)c->position_min;
     d->position_max = (hb_real)c->position_max;
+    d->vps = (c->mode == HB_POSITION && (c->flags & HB_CFG_FEEDFORWARD)) ? 2u : 1u;
+    d->slots = d->setup.capacity / d->vps;
+    d->d_alpha = c->position_d_cutoff > 0.0 ? (hb_real)exp(-2.0 * 3.141592653589793 * c->position_d_cutoff /
+                                                               (double)c->sample_rate) : (hb_real)0;
+    d->head = d->count = 0;
     d->index = 0;
     d->current_applied = 0;
     d->has_prev = 0;
@@ -351,8 +389,9 @@ static void on_setpoints(hb_device *d, const hb_msg *m, uint64_t now_us) {
         d->dropped_frames++;  /* late blocks after a fault or disarm */
         return;
     }
-    int bad = m->seq != d->expected_seq || m->n_values > d->setup.max_block ||
-              d->count + m->n_values > d->setup.capacity;
+    uint32_t n = m->n_values / d->vps;  /* samples in the block */
+    int bad = m->seq != d->expected_seq || m->n_values % d->vps || n > d->setup.max_block ||
+              d->count + n > d->slots;
     for (uint32_t i = 0; !bad && i < m->n_values; i++) bad = !isfinite(hb_get_f32(m->values + 4 * i));
     if (bad) {  /* a lost block, an overflow or garbage: the stream cannot be kept in time */
         d->dropped_frames++;
@@ -366,10 +405,12 @@ static void on_setpoints(hb_device *d, const hb_msg *m, uint64_t now_us) {
         return;
     }
     d->expected_seq++;
-    d->received += m->n_values;
-    for (uint32_t i = 0; i < m->n_values; i++)
-        d->ring[(d->head + d->count + i) % d->setup.capacity] = hb_get_f32(m->values + 4 * i);
-    d->count += m->n_values;
+    d->received += n;
+    for (uint32_t i = 0; i < n; i++) {
+        float *slot = d->ring + (size_t)((d->head + d->count + i) % d->slots) * d->vps;
+        for (uint32_t j = 0; j < d->vps; j++) slot[j] = hb_get_f32(m->values + 4 * (i * d->vps + j));
+    }
+    d->count += n;
     d->end_seen = m->end;
     if (d->state == HB_ARMED) {
         d->state = HB_STREAMING;
@@ -394,15 +435,22 @@ void hb_device_handle(hb_device *d, uint8_t type, const uint8_t *payload, size_t
         on_setpoints(d, &m, now_us);
         return;
     case HB_GET_IDENTITY: {
+        /* a new host says which protocol it speaks (v1: nothing); the device answers in that version from
+         * now on, up to its own */
         d->identity_requests++;
-        size_t len = hb_identity_encode(d->setup.model, d->setup.serial, d->setup.firmware, d->setup.capacity,
-                                        d->setup.max_block, d->payload);
+        d->version = (uint8_t)(m.host_version < HB_PROTOCOL_VERSION_MIN ? HB_PROTOCOL_VERSION_MIN :
+                               m.host_version > HB_PROTOCOL_VERSION ? HB_PROTOCOL_VERSION : m.host_version);
+        size_t len = hb_identity_encode_version(d->setup.model, d->setup.serial, d->setup.firmware,
+                                                d->setup.capacity, d->setup.max_block, d->version, d->payload);
         send(d, HB_IDENTITY, d->payload, len);
         return;
     }
     case HB_GET_CONFIG:
-        if (d->state == HB_UNCONFIGURED) {
-            send_reply(d, type, HB_NOT_CONFIGURED, d->faults);
+        if (d->state == HB_UNCONFIGURED || (d->version < 2 && d->cfg.mode == HB_POSITION)) {
+            send_reply(d, type, HB_NOT_CONFIGURED, d->faults);  /* v1 cannot express position mode */
+        } else if (d->version < 2) {
+            hb_config_encode_v1(&d->cfg, d->payload);
+            send(d, HB_CONFIG, d->payload, HB_CONFIG_BYTES_V1);
         } else {
             hb_config_encode(&d->cfg, d->payload);
             send(d, HB_CONFIG, d->payload, HB_CONFIG_BYTES);

@@ -1,5 +1,6 @@
-/* The device side of protocol v1: configuration, arming, setpoint ring buffer with credit flow control,
- * sample clock, watchdog, limits, latched faults, e-stop and the velocity PI loop. Static memory only:
+/* The device side of protocol v2 (serving v1 hosts too): configuration, arming, setpoint ring buffer with
+ * credit flow control, sample clock, watchdog, limits, latched faults, e-stop, the velocity PI loop and the
+ * position PID loop. Static memory only:
  * one hb_device holds every buffer (the target decides where it lives; a board uses one static object).
  * Behaviour: docs/protocol.md; design and float policy: docs/firmware.md.
  */
@@ -13,7 +14,7 @@
 #include "hb_config.h"
 #include "hb_protocol.h"
 
-#define HB_CORE_VERSION "1.0.0"
+#define HB_CORE_VERSION "2.0.0"
 
 enum hb_pacing { HB_REALTIME = 0, HB_LOCKSTEP = 1 };
 enum hb_link { HB_LINK_SERIAL = 0, HB_LINK_CAN = 1, HB_LINK_CAN_FD = 2 };
@@ -33,11 +34,15 @@ typedef struct {
     hb_device_setup setup;
     void *hal;
     uint8_t state;
+    uint8_t version;          /* protocol spoken with the host: set by its GET_IDENTITY (1 or 2) */
     hb_config cfg;
     /* derived from the configuration */
     uint32_t window;          /* over-speed window W, samples */
     uint64_t watchdog_us;     /* 0 = off */
     hb_real dt, pos_scale, speed_scale, current_limit, velocity_limit, position_min, position_max;
+    uint32_t vps;             /* setpoint values per sample: 2 in position mode with feed-forward, else 1 */
+    uint32_t slots;           /* buffer capacity in samples: setup.capacity / vps */
+    hb_real d_alpha;          /* pole of the derivative filter, exp(-2*pi*cutoff*dt) (0 = unfiltered) */
     /* latched faults */
     uint16_t faults;
     uint64_t fault_index, fault_silence;
@@ -46,7 +51,7 @@ typedef struct {
     uint64_t t0_us, k0;       /* arrival of the stream's first block and its first sample */
     uint64_t last_rx_us;
     hb_real current_applied;
-    /* setpoint ring buffer and credit */
+    /* setpoint ring buffer and credit (head and count in samples; a sample takes vps floats) */
     uint32_t head, count;
     uint32_t expected_seq;
     uint8_t end_seen;
@@ -59,6 +64,9 @@ typedef struct {
     /* velocity PI loop */
     hb_real pi_integral, prev_position;
     uint8_t has_prev;
+    /* position PID loop: integral term (A), filtered derivative of the error (rad/s), last error (rad) */
+    hb_real pos_integral, pos_derivative, prev_error;
+    uint8_t has_prev_error;
     /* sample block being assembled */
     uint32_t block_n, sample_seq;
     uint64_t block_first;

@@ -1,4 +1,4 @@
-/* hilbench protocol v1, device side: constants, wire structs, framing and the message codec.
+/* hilbench protocol v2 (and v1 hosts), device side: constants, wire structs, framing and the message codec.
  *
  * Byte layouts: docs/protocol.md. Everything is little-endian on the wire and is assembled byte by byte,
  * so the code does not depend on the target's endianness or struct packing.
@@ -9,7 +9,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define HB_PROTOCOL_VERSION 1
+#define HB_PROTOCOL_VERSION 2       /* the newest version this core speaks */
+#define HB_PROTOCOL_VERSION_MIN 1   /* the oldest version it still serves (a v1 host) */
 #define HB_MAX_FRAME 8192            /* decoded frame limit: version + type + payload + crc32, bytes */
 #define HB_MAX_PAYLOAD (HB_MAX_FRAME - 6)
 #define HB_COBS_MAX(n) ((n) + (n) / 254 + 2) /* encoded size of n bytes, delimiter included */
@@ -26,9 +27,11 @@ enum hb_fault {
 };
 enum hb_sample_status { HB_S_ENABLED = 0x01, HB_S_FAULT = 0x02, HB_S_END = 0x04 };
 enum hb_result { HB_OK = 0, HB_FAULT_LATCHED = 1, HB_NOT_CONFIGURED = 2, HB_INVALID_CONFIG = 3, HB_BAD_STATE = 4 };
-enum hb_mode { HB_CURRENT = 0, HB_VELOCITY = 1 };
+enum hb_mode { HB_CURRENT = 0, HB_VELOCITY = 1, HB_POSITION = 2 };
+enum hb_config_flags { HB_CFG_FEEDFORWARD = 0x01 };
 
-#define HB_CONFIG_BYTES 65
+#define HB_CONFIG_BYTES_V1 65          /* protocol v1 layout: no position loop */
+#define HB_CONFIG_BYTES 106            /* protocol v2 layout: v1 + position gains + flags */
 #define HB_STATUS_BYTES 63
 #define HB_SAMPLES_HEADER_BYTES 27
 #define HB_SAMPLE_BYTES 14
@@ -45,6 +48,13 @@ typedef struct {
     double torque_constant;   /* N*m/A */
     uint32_t counts_per_rev;
     double ratio;
+    /* protocol v2: position loop (mode 2); zero in a v1 CONFIG */
+    double position_kp;       /* A/rad */
+    double position_ki;       /* A/(rad*s) */
+    double position_kd;       /* A*s/rad */
+    double position_i_limit;  /* A, bound of the integral term */
+    double position_d_cutoff; /* Hz, first-order low-pass of the derivative term, 0 = unfiltered */
+    uint8_t flags;            /* enum hb_config_flags */
 } hb_config;
 
 typedef struct {
@@ -68,6 +78,8 @@ typedef struct {
 typedef struct {
     uint8_t type;
     uint32_t token;           /* HEARTBEAT */
+    uint16_t host_version;    /* GET_IDENTITY: the protocol the host speaks (1 = empty payload) */
+    uint8_t config_version;   /* CONFIG: layout received, 1 or 2 */
     uint32_t seq;             /* SETPOINTS */
     uint8_t end;              /* SETPOINTS */
     uint32_t n_values;        /* SETPOINTS */
@@ -99,6 +111,8 @@ long hb_cobs_decode(const uint8_t *in, size_t n, uint8_t *out);
 /* Serial frame: COBS(version | type | payload | crc32) 0x00 into out. Returns the bytes written, or 0 if
  * the payload is too long. out needs HB_COBS_MAX(n + 6) bytes. */
 size_t hb_frame_encode(uint8_t type, const uint8_t *payload, size_t n, uint8_t *out);
+/* The same with the frame's version byte given (the device answers a v1 host with version-1 frames). */
+size_t hb_frame_encode_version(uint8_t version, uint8_t type, const uint8_t *payload, size_t n, uint8_t *out);
 
 /* Streaming frame decoder: feed bytes; complete valid frames come back one at a time. */
 typedef struct {
@@ -106,6 +120,7 @@ typedef struct {
     uint8_t discarding;       /* inside an oversize frame: drop until the next 0x00 */
     uint32_t crc_errors;      /* frames rejected: COBS, CRC, version, payload, oversize */
     uint32_t frames;          /* valid frames */
+    uint8_t version;          /* version byte of the last valid frame */
     uint8_t enc[HB_COBS_MAX(HB_MAX_FRAME)];
     uint8_t raw[HB_COBS_MAX(HB_MAX_FRAME)];
 } hb_frame_decoder;
@@ -120,14 +135,19 @@ int hb_frame_decoder_next(hb_frame_decoder *d, const uint8_t **data, size_t *n, 
 /* Decode a message addressed to the device; device-to-host types are checked for their layout and
  * returned as is. Returns 0, or -1 for an unknown type or a payload that does not fit its type. */
 int hb_msg_decode(uint8_t type, const uint8_t *payload, size_t n, hb_msg *msg);
-void hb_config_encode(const hb_config *c, uint8_t *out);            /* HB_CONFIG_BYTES */
-void hb_config_decode(const uint8_t *in, hb_config *c);
+void hb_config_encode(const hb_config *c, uint8_t *out);            /* HB_CONFIG_BYTES (v2 layout) */
+void hb_config_encode_v1(const hb_config *c, uint8_t *out);         /* HB_CONFIG_BYTES_V1 (v1 layout) */
+/* Decode a v1 (HB_CONFIG_BYTES_V1) or v2 (HB_CONFIG_BYTES) layout; v1 leaves the position fields zero. */
+void hb_config_decode(const uint8_t *in, size_t n, hb_config *c);
 int hb_config_valid(const hb_config *c);                            /* 1 = valid */
 void hb_status_encode(const hb_status *s, uint8_t *out);            /* HB_STATUS_BYTES */
 void hb_reply_encode(uint8_t request, uint8_t result, uint16_t faults, uint8_t *out); /* 4 bytes */
 /* IDENTITY; strings are cut at 255 bytes. Returns the payload length. out needs 3*256 + 8 bytes. */
 size_t hb_identity_encode(const char *model, const char *serial, const char *firmware, uint32_t capacity,
                           uint16_t max_block, uint8_t *out);
+/* The same reporting protocol `version` (the one agreed with the host). */
+size_t hb_identity_encode_version(const char *model, const char *serial, const char *firmware, uint32_t capacity,
+                                  uint16_t max_block, uint16_t version, uint8_t *out);
 void hb_samples_header_encode(const hb_samples_header *h, uint8_t *out); /* HB_SAMPLES_HEADER_BYTES */
 
 #endif

@@ -86,7 +86,7 @@ static void send_empty(hb_device *d, uint8_t type, uint64_t t_us) { host_send(d,
 
 static void send_config(hb_device *d, uint32_t rate, uint8_t mode, double current_limit, double velocity_limit,
                         double pmin, double pmax, double watchdog, uint32_t cpr, uint64_t t_us) {
-    hb_config c = {rate, mode, current_limit, velocity_limit, pmin, pmax, watchdog, 0.2, cpr, 1.0};
+    hb_config c = {rate, mode, current_limit, velocity_limit, pmin, pmax, watchdog, 0.2, cpr, 1.0, 0, 0, 0, 0, 0, 0};
     uint8_t p[HB_CONFIG_BYTES];
     hb_config_encode(&c, p);
     host_send(d, HB_CONFIG, p, sizeof p, t_us);
@@ -135,9 +135,9 @@ static void test_crc32_and_cobs(void) {
     CHECK(hb_cobs_decode(bad, 2, dec) == -1);
 }
 
-static size_t read_hex(const char *dir, const char *name, uint8_t *buf) {
+static size_t read_hex_version(const char *dir, int version, const char *name, uint8_t *buf) {
     char path[1024];
-    snprintf(path, sizeof path, "%s/v1_%s.hex", dir, name);
+    snprintf(path, sizeof path, "%s/v%d_%s.hex", dir, version, name);
     FILE *fp = fopen(path, "r");
     if (!fp) {
         printf("FAIL cannot open %s\n", path);
@@ -151,22 +151,35 @@ static size_t read_hex(const char *dir, const char *name, uint8_t *buf) {
     return n;
 }
 
-static int golden_equals(const char *dir, const char *name, uint8_t type, const uint8_t *payload, size_t n) {
+static size_t read_hex(const char *dir, const char *name, uint8_t *buf) { return read_hex_version(dir, 1, name, buf); }
+
+static int golden_equals_version(const char *dir, int version, const char *name, uint8_t type, const uint8_t *payload,
+                                 size_t n) {
     static uint8_t want[4096], got[4096];
-    size_t wn = read_hex(dir, name, want);
-    size_t gn = hb_frame_encode(type, payload, n, got);
+    size_t wn = read_hex_version(dir, version, name, want);
+    size_t gn = hb_frame_encode_version((uint8_t)version, type, payload, n, got);
     return wn == gn && memcmp(want, got, wn) == 0;
+}
+
+static int golden_equals(const char *dir, const char *name, uint8_t type, const uint8_t *payload, size_t n) {
+    return golden_equals_version(dir, 1, name, type, payload, n);
 }
 
 /* Device-to-host frames are encoded byte-identically; host-to-device frames decode to the values of
  * tests/drivers/protocol_examples.py. */
 static void test_golden_frames(const char *dir) {
     uint8_t p[1024];
-    size_t n = hb_identity_encode("HB-AMP-1", "SIM-0001", "1.0.0+sim", 8192, 256, p);
+    size_t n = hb_identity_encode_version("HB-AMP-1", "SIM-0001", "1.0.0+sim", 8192, 256, 1, p);
     CHECK(golden_equals(dir, "identity", HB_IDENTITY, p, n));
-    hb_config c = {10000, HB_VELOCITY, 4.5, 150.0, -INFINITY, 12.5, 0.1, 0.0452, 16384, 3.0};
-    hb_config_encode(&c, p);
-    CHECK(golden_equals(dir, "config", HB_CONFIG, p, HB_CONFIG_BYTES));
+    n = hb_identity_encode("HB-AMP-1", "SIM-0001", "1.0.0+sim", 8192, 256, p);
+    CHECK(golden_equals_version(dir, 2, "identity", HB_IDENTITY, p, n));
+    hb_config c = {10000, HB_VELOCITY, 4.5, 150.0, -INFINITY, 12.5, 0.1, 0.0452, 16384, 3.0, 0, 0, 0, 0, 0, 0};
+    hb_config_encode_v1(&c, p);
+    CHECK(golden_equals(dir, "config", HB_CONFIG, p, HB_CONFIG_BYTES_V1));
+    hb_config cp = {20000, HB_POSITION, 8.0, 300.0, -0.5, 0.75, 0.5, 0.2, 65536, 1.0,
+                    2500.0, 125000.0, 4.5, 3.25, 250.0, HB_CFG_FEEDFORWARD};
+    hb_config_encode(&cp, p);
+    CHECK(golden_equals_version(dir, 2, "config_position", HB_CONFIG, p, HB_CONFIG_BYTES));
     hb_status s = {7, HB_STREAMING, HB_F_WATCHDOG | HB_F_OVER_SPEED, 600000, 600192, 599000, 1001, 8000, 0.0f,
                    3, 2, 5000, 6000};
     hb_status_encode(&s, p);
@@ -219,6 +232,30 @@ static void test_golden_frames(const char *dir) {
     CHECK(hb_msg_decode(type, payload, len, &m) == 0 && m.config.sample_rate == 10000 && m.config.mode == 1 &&
           m.config.current_limit == 4.5 && isinf(m.config.position_min) && m.config.position_max == 12.5 &&
           m.config.counts_per_rev == 16384 && m.config.ratio == 3.0);
+    CHECK(m.config_version == 1 && m.config.position_kp == 0.0 && m.config.flags == 0);
+    /* protocol v2: GET_IDENTITY names the host's version (v1: empty), CONFIG carries the position loop,
+     * position setpoints interleave angle and feed-forward current */
+    data = buf;
+    left = read_hex(dir, "get_identity", buf);
+    CHECK(hb_frame_decoder_next(&d, &data, &left, &type, &payload, &len) == 1 && d.version == 1);
+    CHECK(hb_msg_decode(type, payload, len, &m) == 0 && m.host_version == 1);
+    data = buf;
+    left = read_hex_version(dir, 2, "get_identity", buf);
+    CHECK(hb_frame_decoder_next(&d, &data, &left, &type, &payload, &len) == 1 && d.version == 2);
+    CHECK(hb_msg_decode(type, payload, len, &m) == 0 && m.host_version == 2);
+    data = buf;
+    left = read_hex_version(dir, 2, "config_position", buf);
+    CHECK(hb_frame_decoder_next(&d, &data, &left, &type, &payload, &len) == 1);
+    CHECK(hb_msg_decode(type, payload, len, &m) == 0 && m.config_version == 2 && m.config.mode == HB_POSITION &&
+          m.config.position_kp == 2500.0 && m.config.position_ki == 125000.0 && m.config.position_kd == 4.5 &&
+          m.config.position_i_limit == 3.25 && m.config.position_d_cutoff == 250.0 &&
+          m.config.flags == HB_CFG_FEEDFORWARD && m.config.position_min == -0.5 && hb_config_valid(&m.config));
+    data = buf;
+    left = read_hex_version(dir, 2, "setpoints_position", buf);
+    CHECK(hb_frame_decoder_next(&d, &data, &left, &type, &payload, &len) == 1);
+    CHECK(hb_msg_decode(type, payload, len, &m) == 0 && m.seq == 7 && m.end == 0 && m.n_values == 6);
+    CHECK(hb_get_f32(m.values + 4) == 0.5f && hb_get_f32(m.values + 8) == 2.5e-4f &&
+          hb_get_f32(m.values + 20) == 1.25f);
     /* one flipped bit anywhere is rejected and counted, and the next frame still decodes */
     size_t good = read_hex(dir, "heartbeat", buf);
     buf[3] ^= 0x10;
@@ -437,14 +474,14 @@ static void test_can_mapping(void) {
     memset(&hal, 0, sizeof hal);
     hb_device_setup s = {"HB-TEST", "T-1", "test", 4096, 60, HB_LOCKSTEP, HB_LINK_CAN, 3, 0.5, 20.0};
     hb_device_init(&dev, &s, &hal);
-    hb_config c = {1000, HB_CURRENT, 5.0, 100.0, -INFINITY, INFINITY, 0.5, 0.2, 4096, 1.0};
+    hb_config c = {1000, HB_CURRENT, 5.0, 100.0, -INFINITY, INFINITY, 0.5, 0.2, 4096, 1.0, 0, 0, 0, 0, 0, 0};
     uint8_t p[HB_CONFIG_BYTES];
-    hb_config_encode(&c, p);
-    CHECK(hb_can_send(HB_CONFIG, p, sizeof p, 3, 0, can_sink, &dev) == 10);
+    hb_config_encode_v1(&c, p);  /* a v1 host's CONFIG */
+    CHECK(hb_can_send(HB_CONFIG, p, HB_CONFIG_BYTES_V1, 3, 0, can_sink, &dev) == 10);
     CHECK(dev.state == HB_DISARMED && hal.can_frames == 1);
     CHECK(hal.can_id[0] == (HB_REPLY << 5 | 1 << 4 | 3) && hal.can_len[0] == 7 && hal.can_data[0][0] == 0x80);
     CHECK(hal.can_data[0][1] == 4 && hal.can_data[0][3] == HB_CONFIG && hal.can_data[0][4] == HB_OK);
-    uint8_t seg0[8] = {0x00, HB_CONFIG_BYTES, 0, 1, 2, 3, 4, 5};
+    uint8_t seg0[8] = {0x00, HB_CONFIG_BYTES_V1, 0, 1, 2, 3, 4, 5};
     hb_device_rx_can(&dev, (uint16_t)(HB_CONFIG << 5 | 3), seg0, 8, 0);
     uint8_t seg2[8] = {0x02};
     hb_device_rx_can(&dev, (uint16_t)(HB_CONFIG << 5 | 3), seg2, 8, 0);

@@ -94,7 +94,7 @@ def test_layout_is_plain_h5py(tmp_path):
     path = tmp_path / "run.h5"
     _write(path, n_blocks=2, device={"name": "x"}, protocol_name="chirp", protocol_params={"a": 0.1})
     with h5py.File(path, "r", libver="latest", swmr=True) as f:
-        assert f.attrs["schema"] == "hilbench-run" and f.attrs["schema_version"] == 1
+        assert f.attrs["schema"] == "hilbench-run" and f.attrs["schema_version"] == 2
         assert f.attrs["status"] == "completed" and f.attrs["axis"] == "rotary"
         assert f["samples/torque"].attrs["unit"] == "N*m" and f["samples/t"].attrs["unit"] == "s"
         assert f["samples/t"].shape == (600,) and f["samples/t"].maxshape == (None,)

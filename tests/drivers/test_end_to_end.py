@@ -40,7 +40,7 @@ def test_stream_60_s_at_10_khz_lockstep_is_bit_identical_to_a_direct_run(sim_tom
                       watchdog_timeout=0.5, torque_constant=0.2, counts_per_rev=4096)
     with open_device(f"sim://?pacing=lockstep&config={path}") as amp:
         ident = amp.identity
-        assert (ident.model, ident.serial, ident.protocol_version) == ("HB-SIM-1", "SIM-TEST", 1)
+        assert (ident.model, ident.serial, ident.protocol_version) == ("HB-SIM-1", "SIM-TEST", p.PROTOCOL_VERSION)
         assert ident.firmware.startswith("hilbench-sim")
         amp.configure(config)
         amp.arm()

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cobs import cobs
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -17,6 +18,7 @@ from tests.drivers.protocol_examples import canonical_messages
 
 GOLDEN = Path(__file__).resolve().parents[1] / "data" / "protocol"
 MESSAGES = canonical_messages()
+VERSIONED = [(v, name) for v in (1, 2) for name in sorted(canonical_messages(v))]
 
 
 def reference_cobs(data: bytes) -> bytes:
@@ -35,21 +37,58 @@ def reference_cobs(data: bytes) -> bytes:
     return bytes(out)
 
 
-@pytest.mark.parametrize("name", sorted(MESSAGES))
-def test_golden_frame(name):
-    golden = bytes.fromhex((GOLDEN / f"v{p.PROTOCOL_VERSION}_{name}.hex").read_text().strip())
-    msg = MESSAGES[name]
-    assert p.encode_frame(msg) == golden
+@pytest.mark.parametrize(("version", "name"), VERSIONED)
+def test_golden_frame(version, name):
+    """v1 frames are kept byte for byte (a v2 host and device still read and write them); v2 adds
+    GET_IDENTITY's host version, the 106-byte CONFIG and two-value position setpoints."""
+    golden = bytes.fromhex((GOLDEN / f"v{version}_{name}.hex").read_text().strip())
+    msg = canonical_messages(version)[name]
+    assert p.encode_frame(msg, version) == golden
     assert p.decode_frame(golden[:-1]) == msg
 
 
-@pytest.mark.parametrize("name", sorted(MESSAGES))
-def test_frame_matches_independent_oracle(name):
-    msg = MESSAGES[name]
-    raw = bytes([1, int(msg.TYPE)]) + msg.encode()
+@pytest.mark.parametrize(("version", "name"), VERSIONED)
+def test_frame_matches_independent_oracle(version, name):
+    msg = canonical_messages(version)[name]
+    payload = msg.encode(version) if isinstance(msg, p.Config) else msg.encode()
+    raw = bytes([version, int(msg.TYPE)]) + payload
     expected = reference_cobs(raw + struct.pack("<I", zlib.crc32(raw) & 0xFFFFFFFF)) + b"\x00"
-    assert p.encode_frame(msg) == expected
+    assert p.encode_frame(msg, version) == expected
     assert b"\x00" not in expected[:-1]
+
+
+def test_v2_layouts_by_hand():
+    """docs/protocol.md: CONFIG v2 = the v1 65 bytes + kp, ki, kd, i_limit, d_cutoff (f64) + flags (u8);
+    GET_IDENTITY v2 = host version (u16); position setpoints interleave angle and current."""
+    cfg = canonical_messages(2)["config_position"]
+    payload = cfg.encode()
+    assert len(payload) == 106
+    assert struct.unpack_from("<5d", payload, 65) == (2500.0, 125000.0, 4.5, 3.25, 250.0)
+    assert payload[105] == 1 and payload[4] == 2
+    assert payload[:65] == struct.pack("<IBddddddId", 20000, 2, 8.0, 300.0, -0.5, 0.75, 0.5, 0.2, 65536, 1.0)
+    assert p.GetIdentity().encode() == b"\x02\x00" and p.GetIdentity(1).encode() == b""
+    assert cobs.decode(p.encode_frame(p.GetIdentity(1))[:-1])[0] == 1  # a v1 probe goes out as a v1 frame
+    assert cobs.decode(p.encode_frame(p.GetIdentity())[:-1])[0] == 2
+    sp = canonical_messages(2)["setpoints_position"].encode()
+    assert struct.unpack_from("<6f", sp, 5) == (0.0, 0.5, np.float32(2.5e-4), -0.75, np.float32(-1e-3), 1.25)
+    with pytest.raises(ProtocolError, match="v1 has no position mode"):
+        cfg.encode(1)
+
+
+def test_v1_config_decodes_without_a_position_loop():
+    v1 = bytes.fromhex((GOLDEN / "v1_config.hex").read_text().strip())
+    cfg = p.decode_frame(v1[:-1])
+    assert cfg.mode == p.Mode.VELOCITY and cfg.feedforward is False
+    assert all(getattr(cfg, g) == 0.0 for g in p.Config.GAINS)
+
+
+def test_position_config_problems():
+    assert p.Config(mode=p.Mode.POSITION, feedforward=True).problems() == []
+    text = " ".join(p.Config(mode=p.Mode.POSITION, position_kp=0.0, position_ki=-1.0, position_d_cutoff=6000.0,
+                             sample_rate=10000).problems())
+    for fragment in ("position_kp > 0", "position_ki must be finite and >= 0", "Nyquist"):
+        assert fragment in text
+    assert "position-mode option" in " ".join(p.Config(mode=p.Mode.CURRENT, feedforward=True).problems())
 
 
 def test_sample_block_layout_by_hand():
@@ -93,9 +132,9 @@ def test_decoder_drops_oversize_frame_and_recovers():
 
 
 def test_version_mismatch_is_a_protocol_error():
-    raw = bytes([2, int(p.MsgType.ARM)])
+    raw = bytes([3, int(p.MsgType.ARM)])
     frame = reference_cobs(raw + struct.pack("<I", zlib.crc32(raw)))
-    with pytest.raises(ProtocolError, match="version 2"):
+    with pytest.raises(ProtocolError, match="version 3"):
         p.decode_frame(frame)
 
 
@@ -182,6 +221,10 @@ def test_setpoint_blocks_cover_values_in_order():
     assert [b.seq for b in blocks] == [0, 1, 2, 3, 4]
     assert [b.end for b in blocks] == [False] * 4 + [True]
     assert np.array_equal(np.concatenate([b.values for b in blocks]), values)
+    pairs = np.arange(2002, dtype=np.float32).reshape(1001, 2)  # position mode with feed-forward
+    blocks = p.make_setpoint_blocks(pairs, 250)
+    assert [len(b.values) for b in blocks] == [500] * 4 + [2]
+    assert np.array_equal(np.concatenate([b.values for b in blocks]), pairs.reshape(-1))
 
 
 @settings(max_examples=200, deadline=None)
