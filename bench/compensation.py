@@ -1,7 +1,8 @@
 """The compensated-reference protocol: the device's position loop tracks a reference while the host streams a
 model-based feed-forward current with it (docs/compensation.md).
 
-Setpoints are positions (rad, encoder zero at CONFIG); :meth:`CompensatedReference.feedforward` is the
+Setpoints are angles at the encoder (motor) shaft (rad, zero at CONFIG: ratio times the load-side reference);
+:meth:`CompensatedReference.feedforward` is the
 current (A) of the chosen model along the reference, J*q''_ref + F(q_ref) + c0 converted with the
 calibration (``torque_constant``, ``ratio``, which must be the device's; the command and the campaign set them
 from the device settings), clipped to the current limit.
@@ -12,15 +13,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from hilbench.analysis.compensation.feedforward import Compensator, FeedForward, feedforward, load_compensators
 from hilbench.analysis.compensation.references import KINDS, Reference, make_reference
 from hilbench.analysis.errors import AnalysisError
 from hilbench.bench import excitations
-from hilbench.bench.protocols import ParameterSpec, Protocol, ProtocolError
+from hilbench.bench.protocols import PROTOCOLS, ParameterSpec, Protocol, ProtocolError
+
+if TYPE_CHECKING:  # the feed-forward pulls in the model code (scipy, the C plant): imported when used
+    from hilbench.analysis.compensation.feedforward import Compensator, FeedForward
 
 #: Peak memory per sample of a compensated run: position, velocity, acceleration, friction, torque and
 #: current (float64) plus the runner's copies (measured order of magnitude, like PEAK_BYTES_PER_SAMPLE).
@@ -46,6 +49,8 @@ class Case:
 
     @cached_property
     def compensator(self) -> Compensator:
+        from hilbench.analysis.compensation.feedforward import Compensator, load_compensators
+
         if self.compensation == "none":
             return Compensator("none", None)
         if not self.model:
@@ -58,6 +63,8 @@ class Case:
 
     def feedforward_result(self, limit: float) -> FeedForward:
         """Feed-forward current (A, clipped to +-``limit``) and torque (N*m) along the reference."""
+        from hilbench.analysis.compensation.feedforward import feedforward
+
         return feedforward(self.compensator, self.reference_path, self.torque_constant, self.ratio,
                            limit if math.isfinite(limit) else np.inf)
 
@@ -81,6 +88,7 @@ class CompensatedReference(Protocol):
     """Position tracking of a reference (slow sine, triangle or point-to-point) with a model feed-forward."""
 
     name: ClassVar[str] = "compensated"
+    MODES: ClassVar[tuple[str, ...]] = ("position",)
     SPECS: ClassVar[dict[str, ParameterSpec]] = {
         "reference": ParameterSpec("", None, None, "sine | triangle | point_to_point", kind="choice",
                                    choices=KINDS),
@@ -117,8 +125,6 @@ class CompensatedReference(Protocol):
     sample_rate: int = 10000
 
     def _check(self) -> None:
-        if self.mode != "position":
-            raise ProtocolError(f"compensated runs in position mode, got mode {self.mode!r}")
         try:
             self.case.reference_path  # noqa: B018 (built once: every reference parameter is checked here)
             self.case.compensator  # noqa: B018
@@ -159,8 +165,11 @@ class CompensatedReference(Protocol):
         return self.n_samples * BYTES_PER_SAMPLE
 
     def excitation(self, limit: float | None = None) -> excitations.Excitation:
+        """Setpoints: the reference at the encoder (motor) shaft, ratio*q_ref (rad); the run file's
+        ``position_cmd`` is q_ref again, at the load."""
         ref = self.reference_path
-        return excitations.Excitation("compensated_" + ref.kind, self.mode, float(self.sample_rate), ref.position,
+        return excitations.Excitation("compensated_" + ref.kind, self.mode, float(self.sample_rate),
+                                      ref.position * self.ratio,
                                       {"reference": ref.kind, **ref.params, "compensation": self.compensation})
 
     def feedforward(self, limit: float) -> np.ndarray | None:
@@ -168,3 +177,6 @@ class CompensatedReference(Protocol):
         if self.compensation == "none":
             return None
         return self.case.feedforward_result(limit).current
+
+
+PROTOCOLS[CompensatedReference.name] = CompensatedReference

@@ -81,18 +81,25 @@ def cases(model: str, references: dict[str, dict], names: list[str] | None, sett
     unknown = [n for n in chosen if n not in available]
     if unknown:
         raise BenchError(f"{model} offers feed-forward {', '.join(available)}; not {', '.join(unknown)}")
-    out = [Case(kind, tuple(params.items()), str(model), name, sample_rate, settings.torque_constant, settings.ratio)
+    path = str(Path(model).resolve())
+    out = [Case(kind, tuple(params.items()), path, name, sample_rate, settings.torque_constant, settings.ratio)
            for kind, params in references.items() for name in chosen]
     for case in out:  # every reference and feed-forward is built (and checked) before anything moves
         case.feedforward_result(settings.current_limit)
     return out
 
 
-def predict_case(case: Case, plant, gains: PositionGains, settings: MatrixSettings) -> CaseResult:
-    """Simulate one case on ``plant`` (PlantParams with the device's torque constant)."""
+def predict_case(case: Case, plant, gains: PositionGains, settings: MatrixSettings,
+                 counts_per_rev: int = 0) -> CaseResult:
+    """Simulate one case on ``plant`` (load-side PlantParams whose torque constant is k_t*ratio, N*m/A). The
+    device's loop acts on the motor-shaft error ratio*e, so at the load its gains are ratio*(kp, ki, kd);
+    the encoder resolution at the load is 2*pi/(counts_per_rev*ratio) (0 counts: exact)."""
     ref = case.reference_path
     ff = case.feedforward_result(settings.current_limit)
-    run = simulate_tracking(plant, ref.position, ff.current, ref.fs, gains, settings.current_limit)
+    r = settings.ratio
+    load_gains = PositionGains(gains.kp * r, gains.ki * r, gains.kd * r, gains.i_limit, gains.d_cutoff)
+    lsb = 2 * math.pi / (counts_per_rev * r) if counts_per_rev > 0 else 0.0
+    run = simulate_tracking(plant, ref.position, ff.current, ref.fs, load_gains, settings.current_limit, lsb)
     m = tracking_metrics(ref, run.position, run.current, window=settings.window, tolerance=settings.tolerance)
     return CaseResult(ref, case.compensation, m, ref.position - run.position, ff.clipped)
 

@@ -17,10 +17,19 @@ REFERENCE_OPTIONS = {
     "rest": (float, None, "s", "rest at 0 (sine, triangle) or after each move"),
 }
 
+GAIN_OPTIONS = {
+    "position_kp": ("A/rad", "proportional gain"),
+    "position_ki": ("A/(rad*s)", "integral gain"),
+    "position_kd": ("A*s/rad", "derivative gain"),
+    "position_i_limit": ("A", "integrator clamp"),
+    "position_d_cutoff": ("Hz", "derivative filter cut-off (0: none)"),
+}
+
 
 def register(subparsers) -> None:
     from hilbench.analysis.compensation.references import KINDS
     from hilbench.bench.commands.run import add_device_options
+    from hilbench.drivers.protocol.messages import POSITION_GAINS
 
     p = subparsers.add_parser(
         "compensate", help="position tracking with a friction-model feed-forward; one run or the matrix",
@@ -53,11 +62,10 @@ def register(subparsers) -> None:
     for name, (kind, nargs, unit, text) in REFERENCE_OPTIONS.items():
         p.add_argument("--" + name.replace("_", "-"), dest=name, type=kind, nargs=nargs, default=None,
                        help=f"{text} ({unit})")
-    g = p.add_argument_group("position loop of --predict (A/rad, A/(rad*s), A*s/rad, A)")
-    g.add_argument("--kp", type=float, default=None, help="proportional gain (default 300 A/rad)")
-    g.add_argument("--ki", type=float, default=None, help="integral gain (default 3000 A/(rad*s))")
-    g.add_argument("--kd", type=float, default=None, help="derivative gain (default 3 A*s/rad)")
-    g.add_argument("--i-limit", type=float, default=None, help="integrator clamp (default 5 A)")
+    g = p.add_argument_group("position loop at the motor shaft (sent to the device; used by --predict)")
+    for name, (unit, text) in GAIN_OPTIONS.items():
+        g.add_argument("--" + name.replace("_", "-"), dest=name, type=float, default=None,
+                       help=f"{text} ({unit}; default {POSITION_GAINS[name]:g})")
     add_device_options(p)
     p.set_defaults(func=run)
 
@@ -82,17 +90,20 @@ def _references(args) -> dict[str, dict]:
     return out
 
 
-def _gains(args):
-    from hilbench.analysis.compensation.closed_loop import PositionGains
+def _settings(args):
+    """The device settings, position gains included (SettingsError names a bad one)."""
+    from dataclasses import replace
 
-    values = {k: getattr(args, k) for k in ("kp", "ki", "kd", "i_limit") if getattr(args, k) is not None}
-    return PositionGains(**values)
+    from hilbench.bench.commands.run import settings_from_args
+
+    gains = {name: getattr(args, name) for name in GAIN_OPTIONS if getattr(args, name) is not None}
+    return replace(settings_from_args(args), **gains)
 
 
 def run(args: argparse.Namespace) -> int:
+    from hilbench.analysis.compensation.closed_loop import PositionGains
     from hilbench.analysis.compensation.feedforward import load_compensators
     from hilbench.bench import outputs
-    from hilbench.bench.commands.run import settings_from_args
     from hilbench.bench.compensation_matrix import (
         MatrixSettings,
         cases,
@@ -107,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
     # references and every case's feed-forward
     if not (args.window > 0 and args.tolerance > 0):
         raise BenchError(f"--window ({args.window} s) and --tolerance ({args.tolerance} rad) must be > 0")
-    settings = settings_from_args(args)
+    settings = _settings(args)
     comps, doc = load_compensators(args.model)
     note = check_calibration(doc, settings.torque_constant, settings.ratio)
     outputs.say(note)
@@ -130,8 +141,10 @@ def run(args: argparse.Namespace) -> int:
     if args.predict:
         ms = next(c for c in comps if c.name == "maxwell_slip").params
         plant = ms.replace(torque_constant=settings.torque_constant * settings.ratio)
-        gains = _gains(args)
-        results = run_cases(protocols, lambda p, i: predict_case(p, plant, gains, matrix))
+        gains = PositionGains(settings.position_kp, settings.position_ki, settings.position_kd,
+                              settings.position_i_limit, settings.position_d_cutoff)
+        results = run_cases(protocols, lambda p, i: predict_case(p, plant, gains, matrix,
+                                                                 settings.counts_per_rev))
     else:
         results = _on_device(args, protocols, settings, matrix)
     if args.matrix:
