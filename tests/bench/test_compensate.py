@@ -102,3 +102,61 @@ def test_predicted_matrix_counts_clipped_feedforward(tmp_path, capsys, no_device
     assert {p.name for p in out.glob("*.png")} == {"compensation_sine.png", "compensation_triangle.png",
                                                     "compensation_point_to_point.png"}
     assert not no_device
+
+
+def test_a_compensate_campaign_plays_the_matrix_on_the_device_and_writes_its_report(tmp_path):
+    """[[compensate]] in a campaign: every case runs in position mode on sim://, the run file keeps the load-side
+    reference and the feed-forward current, and the report follows. The stored feed-forward is checked against
+    an independent closed form (exact stop operators of tests/truth, J*q'' and b*q' of the reference)."""
+    from tests.truth.generator import stop_operator_forces
+
+    from hilbench.analysis.compensation.references import slow_sine
+    from hilbench.analysis.run_file import read_run_file
+    from hilbench.bench.campaign import load_campaign, run_campaign
+
+    model = _model(tmp_path)
+    (tmp_path / "c.toml").write_text(f"""
+[defaults]
+device = "sim://?pacing=lockstep"
+current_limit = "10 A"
+
+[[compensate]]
+name = "m"
+model = "{model.name}"
+references = ["sine"]
+feedforwards = ["none", "maxwell_slip"]
+amplitudes = ["1e-3 rad", "1e-2 rad"]
+frequency = "1 Hz"
+cycles = 1
+rest = "0.1 s"
+sample_rate = 1000
+""")
+    campaign = load_campaign(tmp_path / "c.toml")
+    assert [r.key for r in campaign.runs] == ["m.sine.none-1", "m.sine.maxwell_slip-1"]
+    entries = run_campaign(campaign, tmp_path / "out")
+    assert all(e["status"] == "completed" for e in entries.values())
+    ref = slow_sine(1000.0, amplitudes=(1e-3, 1e-2), frequency=1.0, cycles=1, rest=0.1)
+    rf = read_run_file(tmp_path / "out" / "m.sine.maxwell_slip-1.h5")
+    assert np.allclose(rf.channel("position_cmd"), ref.position, atol=1e-9)
+    p = dc_motor(8)
+    k = np.asarray(p.ms_stiffness)
+    torque = p.inertia * ref.acceleration + stop_operator_forces(k, np.asarray(p.ms_slip), ref.position) \
+        + p.viscous * ref.velocity
+    assert np.allclose(rf.channel("current_ff"), torque / 0.2, atol=1e-5)  # float32 on the wire
+    doc = json.loads((tmp_path / "out" / "m" / "compensation.json").read_text())
+    glitch = {r["feedforward"]: r["glitch_mean_rad"] for r in doc["runs"]}
+    # measured on sim:// (16-element truth, this 8-element model of the same virgin curve): about 30x
+    assert glitch["none"] > 3 * glitch["maxwell_slip"]
+    assert (tmp_path / "out" / "m" / "compensation_sine.png").exists()
+
+
+def test_a_compensate_step_with_a_bad_key_names_its_line(tmp_path):
+    from hilbench.bench.campaign import CampaignError, load_campaign
+
+    model = _model(tmp_path)
+    (tmp_path / "c.toml").write_text(f'[[compensate]]\nmodel = "{model.name}"\nbogus = 1\n')
+    with pytest.raises(CampaignError, match=r"c.toml:3: compensate 1: unknown key 'bogus'"):
+        load_campaign(tmp_path / "c.toml")
+    (tmp_path / "c.toml").write_text('[[compensate]]\nmodel = "missing.json"\n')
+    with pytest.raises(CampaignError, match=r"c.toml:2: compensate 1: cannot read model"):
+        load_campaign(tmp_path / "c.toml")
