@@ -18,7 +18,7 @@ from pathlib import Path
 from hilbench.analysis.compensation.closed_loop import PositionGains, simulate_tracking
 from hilbench.analysis.compensation.feedforward import load_compensators
 from hilbench.analysis.compensation.metrics import tracking_metrics
-from hilbench.analysis.compensation.report import CaseResult, document, markdown_table, write_plots
+from hilbench.analysis.compensation.report import CaseResult, document, markdown_table, section_table, write_plots
 from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.models.model_file import _clean as json_safe
 from hilbench.bench import outputs
@@ -124,6 +124,8 @@ def write_report(results: list[CaseResult], out: Path, settings: dict) -> list[P
     """compensation.md (the table), compensation.json and compensation_<reference>.png in ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     table = markdown_table(results)
+    by_section = section_table(results)
+    table += "\n" + by_section if by_section else ""
     header = ("Feed-forward compensation matrix (docs/compensation.md). Error = reference - measured position; "
               f"glitch = peak |error| within {settings['window_s'] * 1e3:g} ms after each reversal of the "
               f"reference; settling to {settings['tolerance_rad'] * 1e3:g} mrad; effort = rms commanded current."

@@ -33,7 +33,8 @@ class Reference:
     """A sampled reference. ``position`` rad, ``velocity`` rad/s, ``acceleration`` rad/s^2, all shape (n,).
 
     ``moves`` (point-to-point only) is an (m, 2) int array of [start, stop) sample ranges of each move; the
-    rest after move i runs from ``moves[i, 1]`` to the next move's start (or the end)."""
+    rest after move i runs from ``moves[i, 1]`` to the next move's start (or the end). ``sections`` (sine
+    only) names the [start, stop) samples of each amplitude, e.g. ``("A = 0.2 mrad", 5000, 45000)``."""
 
     kind: str
     fs: float
@@ -42,6 +43,7 @@ class Reference:
     acceleration: np.ndarray
     params: dict
     moves: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), int))
+    sections: list[tuple[str, int, int]] = field(default_factory=list)
 
     @property
     def n(self) -> int:
@@ -95,13 +97,16 @@ def slow_sine(fs: float, amplitudes: Sequence[float] = (2e-4, 1e-3, 1e-2, 0.1), 
     tt = np.arange(n_seg) / fs
     parts = []
     zeros = np.zeros(n_rest)
-    for a in amps:
+    sections = []
+    for j, a in enumerate(amps):
         parts.append((zeros, zeros, zeros))
         parts.append((a * (1 - np.cos(w * tt)), a * w * np.sin(w * tt), a * w * w * np.cos(w * tt)))
+        start = (j + 1) * n_rest + j * n_seg
+        sections.append((f"A = {a * 1e3:.3g} mrad", start, start + n_seg))
     parts.append((zeros, zeros, zeros))
     q, v, acc = (np.concatenate([p[i] for p in parts]) for i in range(3))
     return Reference("sine", fs, q, v, acc, {"amplitudes": amps, "frequency": f, "cycles": int(cycles),
-                                             "rest": rest})
+                                             "rest": rest}, sections=sections)
 
 
 def _ramped(knots: Sequence[tuple[float, float]], t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -52,12 +52,38 @@ def markdown_table(results: list[CaseResult]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def section_glitch(result: CaseResult) -> dict[str, float]:
+    """Mean glitch (rad) of the reversals inside each section of the reference (the sine's amplitudes)."""
+    out = {}
+    idx = result.metrics.reversal_index
+    for label, start, stop in result.reference.sections:
+        inside = (idx >= start) & (idx < stop)
+        out[label] = float(np.mean(result.metrics.glitch[inside])) if inside.any() else math.nan
+    return out
+
+
+def section_table(results: list[CaseResult]) -> str:
+    """Mean glitch (mrad) per section (sine amplitude) and feed-forward, with the reduction against none."""
+    rows = [r for r in results if r.reference.sections]
+    if not rows:
+        return ""
+    labels = [s[0] for s in rows[0].reference.sections]
+    base = section_glitch(next((r for r in rows if r.compensator == "none"), rows[0]))
+    lines = [f"Mean reversal glitch by {rows[0].reference.kind} amplitude, mrad (reduction against none, x):", "",
+             "| feed-forward | " + " | ".join(labels) + " |", "|---|" + "---|" * len(labels)]
+    for r in rows:
+        g = section_glitch(r)
+        cells = [f"{_f(g[lab], 1e3)} ({_f(base[lab] / g[lab] if g[lab] > 0 else math.nan)})" for lab in labels]
+        lines.append(f"| {r.compensator} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def document(results: list[CaseResult], settings: dict) -> dict:
     """The JSON-able report: settings and, per run, the reference parameters and every metric."""
     return {"schema": SCHEMA, "settings": settings,
             "runs": [{"reference": r.reference.kind, "reference_parameters": r.reference.params,
                       "feedforward": r.compensator, "run_file": r.run_file, "feedforward_clipped": r.clipped,
-                      **r.metrics.summary()} for r in results]}
+                      "glitch_mean_by_section_rad": section_glitch(r), **r.metrics.summary()} for r in results]}
 
 
 def write_plots(results: list[CaseResult], out: Path, *, before: float = 0.02) -> list[Path]:

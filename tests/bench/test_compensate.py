@@ -108,11 +108,10 @@ def test_a_compensate_campaign_plays_the_matrix_on_the_device_and_writes_its_rep
     """[[compensate]] in a campaign: every case runs in position mode on sim://, the run file keeps the load-side
     reference and the feed-forward current, and the report follows. The stored feed-forward is checked against
     an independent closed form (exact stop operators of tests/truth, J*q'' and b*q' of the reference)."""
-    from tests.truth.generator import stop_operator_forces
-
     from hilbench.analysis.compensation.references import slow_sine
     from hilbench.analysis.run_file import read_run_file
     from hilbench.bench.campaign import load_campaign, run_campaign
+    from tests.truth.generator import stop_operator_forces
 
     model = _model(tmp_path)
     (tmp_path / "c.toml").write_text(f"""

@@ -110,3 +110,19 @@ def test_maxwell_slip_feedforward_removes_the_glitch_in_closed_loop():
         glitch[comp.name] = tracking_metrics(ref, run.position, run.current, window=0.05).glitch_mean
     assert glitch["none"] / glitch["maxwell_slip"] > 50
     assert glitch["coulomb"] / glitch["maxwell_slip"] > 20
+
+
+def test_glitch_by_sine_amplitude():
+    from hilbench.analysis.compensation.report import CaseResult, section_glitch, section_table
+
+    fs = 1000.0
+    ref = slow_sine(fs, amplitudes=(1e-3, 1e-2), frequency=1.0, cycles=1, rest=0.1)
+    assert [s[0] for s in ref.sections] == ["A = 1 mrad", "A = 10 mrad"]
+    assert [s[1:] for s in ref.sections] == [(100, 1100), (1200, 2200)]
+    e = np.zeros(ref.n)
+    rev = ref.reversals()  # 601 (first peak), 1200 (second sine starts), 1701 (its peak)
+    e[rev] = [1e-3, 2e-3, 4e-3]
+    m = tracking_metrics(ref, ref.position - e, np.zeros(ref.n), window=0.01)
+    g = section_glitch(CaseResult(ref, "none", m, e, 0))
+    assert g == pytest.approx({"A = 1 mrad": 1e-3, "A = 10 mrad": 3e-3})
+    assert "| none | 1 (1) | 3 (1) |" in section_table([CaseResult(ref, "none", m, e, 0)])
