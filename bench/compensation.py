@@ -4,14 +4,14 @@ model-based feed-forward current with it (docs/compensation.md).
 Setpoints are angles at the encoder (motor) shaft (rad, zero at CONFIG: ratio times the load-side reference);
 :meth:`CompensatedReference.feedforward` is the
 current (A) of the chosen model along the reference, J*q''_ref + F(q_ref) + c0 converted with the
-calibration (``torque_constant``, ``ratio``, which must be the device's; the command and the campaign set them
-from the device settings), clipped to the current limit.
+calibration (``torque_constant``, ``ratio``): ``Bench.run`` binds the protocol to the device settings'
+(:meth:`CompensatedReference.bind`), so it is always the device's; clipped to the current limit.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -104,9 +104,6 @@ class CompensatedReference(Protocol):
         "targets": ParameterSpec("rad", -1e3, 1e3, "point_to_point: targets in turn", kind="floats"),
         "move_time": ParameterSpec("s", 1e-3, 100.0, "point_to_point: time of each move (minimum jerk)"),
         "rest": ParameterSpec("s", 0.0, 600.0, "rest at 0 (sine, triangle) or after each move"),
-        "torque_constant": ParameterSpec("N*m/A", 1e-6, 100.0, "k_t the feed-forward current is computed "
-                                         "with (the device's)"),
-        "ratio": ParameterSpec("1", 1e-6, 1e6, "motor revolutions per load revolution (the device's)"),
     }
     reference: str = "sine"
     model: str = ""
@@ -119,8 +116,6 @@ class CompensatedReference(Protocol):
     targets: tuple[float, ...] = field(default=(0.05, -0.05, 0.0))
     move_time: float = 0.3
     rest: float = 0.5
-    torque_constant: float = 0.2
-    ratio: float = 1.0
     mode: str = "position"
     sample_rate: int = 10000
 
@@ -140,17 +135,39 @@ class CompensatedReference(Protocol):
                     "corner": self.corner, "rest": self.rest}
         return {"targets": self.targets, "move_time": self.move_time, "rest": self.rest}
 
+    @property
+    def calibration(self) -> tuple[float, float] | None:
+        """(k_t N*m/A, ratio) the feed-forward and the motor-shaft setpoints use; None until :meth:`bind`."""
+        return self.__dict__.get("_calibration")
+
+    def bind(self, settings) -> CompensatedReference:
+        """This protocol on a device with ``settings`` (its ``torque_constant`` and ``ratio``): ``Bench.run``
+        binds every protocol that has this method, so the feed-forward always uses the device's calibration."""
+        return self.calibrated(settings.torque_constant, settings.ratio)
+
+    def calibrated(self, torque_constant: float, ratio: float) -> CompensatedReference:
+        new = replace(self)
+        new.__dict__["_calibration"] = (float(torque_constant), float(ratio))
+        new.__dict__.pop("case", None)
+        return new
+
     @cached_property
     def case(self) -> Case:
+        kt, ratio = self.calibration or (1.0, 1.0)  # unbound: the reference and the model are still checked
         return Case(self.reference, tuple(self.reference_parameters().items()), self.model, self.compensation,
-                    self.sample_rate, self.torque_constant, self.ratio)
+                    self.sample_rate, kt, ratio)
 
     @classmethod
     def of(cls, case: Case) -> CompensatedReference:
-        """The protocol that plays ``case``."""
+        """The protocol that plays ``case`` (bound to the case's calibration)."""
         return cls(reference=case.reference, model=case.model, compensation=case.compensation,
-                   sample_rate=case.sample_rate, torque_constant=case.torque_constant, ratio=case.ratio,
-                   **dict(case.parameters))
+                   sample_rate=case.sample_rate, **dict(case.parameters)).calibrated(case.torque_constant,
+                                                                                     case.ratio)
+
+    def _bound(self) -> Case:
+        if self.calibration is None:
+            raise ProtocolError("compensated: not bound to a device calibration (Bench.run binds it)")
+        return self.case
 
     @property
     def reference_path(self) -> Reference:
@@ -168,15 +185,16 @@ class CompensatedReference(Protocol):
         """Setpoints: the reference at the encoder (motor) shaft, ratio*q_ref (rad); the run file's
         ``position_cmd`` is q_ref again, at the load."""
         ref = self.reference_path
+        ratio = self.calibration[1] if self.calibration else 1.0
         return excitations.Excitation("compensated_" + ref.kind, self.mode, float(self.sample_rate),
-                                      ref.position * self.ratio,
+                                      ref.position * ratio,
                                       {"reference": ref.kind, **ref.params, "compensation": self.compensation})
 
     def feedforward(self, limit: float) -> np.ndarray | None:
         """Feed-forward current, A, shape (n,), clipped to +-``limit`` A; None without a model."""
         if self.compensation == "none":
             return None
-        return self.case.feedforward_result(limit).current
+        return self._bound().feedforward_result(limit).current
 
 
 PROTOCOLS[CompensatedReference.name] = CompensatedReference
