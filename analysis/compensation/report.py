@@ -34,21 +34,23 @@ def _f(value: float, scale: float = 1.0) -> str:
 
 
 def markdown_table(results: list[CaseResult]) -> str:
-    """One row per run; ``glitch vs none`` is the mean glitch of ``none`` on the same reference divided by
-    this row's (a factor > 1 means a smaller glitch)."""
-    base = {r.reference.kind: r.metrics.glitch_mean for r in results if r.compensator == "none"}
+    """One row per run; ``glitch reduction vs none`` (``vs coulomb``) is the mean glitch of ``none``
+    (``coulomb``) on the same reference divided by this row's (a factor > 1 means a smaller glitch)."""
+    base = {(r.reference.kind, r.compensator): r.metrics.glitch_mean for r in results}
     lines = ["| reference | feed-forward | rms error (mrad) | max error (mrad) | reversals | glitch mean (mrad) | "
-             "glitch max (mrad) | glitch reduction vs none (x) | settling max (s) | effort rms (A) | "
-             "feed-forward samples clipped |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "glitch max (mrad) | glitch reduction vs none (x) | vs coulomb (x) | settling max (s) | "
+             "effort rms (A) | feed-forward samples clipped |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         m = r.metrics
-        ratio = base.get(r.reference.kind, math.nan) / m.glitch_mean if m.glitch_mean > 0 else math.nan
+        kind = r.reference.kind
+        ratio = [base.get((kind, b), math.nan) / m.glitch_mean if m.glitch_mean > 0 else math.nan
+                 for b in ("none", "coulomb")]
         settle = "–" if not m.settling.size else ("not settled" if np.isnan(m.settling).any()
                                                   else _f(m.settling_max))
-        lines.append(f"| {r.reference.kind} | {r.compensator} | {_f(m.rms_error, 1e3)} | {_f(m.max_error, 1e3)} | "
-                     f"{m.glitch.size} | {_f(m.glitch_mean, 1e3)} | {_f(m.glitch_max, 1e3)} | {_f(ratio)} | "
-                     f"{settle} | {_f(m.effort_rms)} | {r.clipped} |")
+        lines.append(f"| {kind} | {r.compensator} | {_f(m.rms_error, 1e3)} | {_f(m.max_error, 1e3)} | "
+                     f"{m.glitch.size} | {_f(m.glitch_mean, 1e3)} | {_f(m.glitch_max, 1e3)} | {_f(ratio[0])} | "
+                     f"{_f(ratio[1])} | {settle} | {_f(m.effort_rms)} | {r.clipped} |")
     return "\n".join(lines) + "\n"
 
 

@@ -126,3 +126,21 @@ def test_glitch_by_sine_amplitude():
     g = section_glitch(CaseResult(ref, "none", m, e, 0))
     assert g == pytest.approx({"A = 1 mrad": 1e-3, "A = 10 mrad": 3e-3})
     assert "| none | 1 (1) | 3 (1) |" in section_table([CaseResult(ref, "none", m, e, 0)])
+
+
+def test_table_reduction_factors_against_none_and_coulomb():
+    from hilbench.analysis.compensation.report import CaseResult, markdown_table
+
+    ref = triangle(1000.0, amplitude=0.01, frequency=1.0, cycles=1, corner=0.01, rest=0.05)
+    rev = ref.reversals()
+    rows = []
+    for name, peak in (("none", 8e-3), ("coulomb", 2e-3), ("maxwell_slip", 1e-3)):
+        e = np.zeros(ref.n)
+        e[rev] = peak
+        m = tracking_metrics(ref, ref.position - e, np.ones(ref.n), window=0.01)
+        rows.append(CaseResult(ref, name, m, e, 0))
+    table = markdown_table(rows)
+    assert "| triangle | maxwell_slip | " in table
+    line = next(t for t in table.splitlines() if "| maxwell_slip |" in t).split("|")
+    # columns: glitch mean 1 mrad, max 1 mrad, vs none 8x, vs coulomb 2x
+    assert [c.strip() for c in line[6:10]] == ["1", "1", "8", "2"]
