@@ -105,12 +105,14 @@ def write_plots(results: list[CaseResult], out: Path, *, before: float = 0.02) -
             n0 = int(round(before * ref.fs))
             n1 = int(round(3 * m.window_s * ref.fs))
             t_ms = np.arange(-n0, n1) / ref.fs * 1e3
-            for j, k in enumerate(m.reversal_index):
+            label = r.compensator
+            for k in m.reversal_index:
                 if k - n0 < 0 or k + n1 > ref.n:
                     continue
                 direction = np.sign(ref.velocity[k])
                 ax.plot(t_ms, direction * r.error[k - n0:k + n1] * 1e3, color=f"C{colour}", lw=0.8, alpha=0.6,
-                        label=r.compensator if j == 0 else None)
+                        label=label)
+                label = None
         ax.axvline(0, color="k", lw=0.5)
         ax.set_xlabel("time after reversal (ms)")
         ax.set_ylabel("tracking error along the new direction (mrad)")

@@ -10,6 +10,7 @@ import pytest
 from hilbench.bench import cli
 from hilbench.bench.runfile import RunWriter
 from hilbench.firmware_sim.friction_models import dc_motor
+from tests.figure_checks import recording_figures
 
 SHORT = ["--sample-rate", "1000", "--amplitudes", "1e-3", "1e-2", "--cycles", "1", "--rest", "0.1",
          "--amplitude", "0.01", "--frequency", "1", "--targets", "0.01", "0", "--move-time", "0.2"]
@@ -87,9 +88,11 @@ def test_predicted_matrix_counts_clipped_feedforward(tmp_path, capsys, no_device
     out = tmp_path / "matrix"
     model = _model(tmp_path)
     # 0.5 A limit: the feed-forward of the 0.76 N*m break-away at 0.2 N*m/A (3.8 A) is clipped
-    code = cli.main(["compensate", str(model), "--matrix", "--predict", "-o", str(out), "--current-limit", "0.5",
-                     *SHORT])
+    with recording_figures() as seen:  # every axis labelled with a unit, no empty legend
+        code = cli.main(["compensate", str(model), "--matrix", "--predict", "-o", str(out), "--current-limit",
+                         "0.5", *SHORT])
     assert code == 0
+    assert seen and not any(seen.values()), seen
     doc = json.loads((out / "compensation.json").read_text())
     runs = {(r["reference"], r["feedforward"]): r for r in doc["runs"]}
     assert set(runs) == {(ref, ff) for ref in ("sine", "triangle", "point_to_point")
