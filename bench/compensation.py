@@ -10,7 +10,6 @@ calibration (``torque_constant``, ``ratio``): ``Bench.run`` binds the protocol t
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -25,8 +24,9 @@ from hilbench.bench.protocols import PROTOCOLS, ParameterSpec, Protocol, Protoco
 if TYPE_CHECKING:  # the feed-forward pulls in the model code (scipy, the C plant): imported when used
     from hilbench.analysis.compensation.feedforward import Compensator, FeedForward
 
-#: Peak memory per sample of a compensated run: position, velocity, acceleration, friction, torque and
-#: current (float64) plus the runner's copies (measured order of magnitude, like PEAK_BYTES_PER_SAMPLE).
+#: Peak memory per sample of a compensated run, bytes: the reference (position, velocity, acceleration), the
+#: feed-forward and the runner's (n, 2) stack and float32 copy. Measured with tracemalloc on 0.5-0.6 M samples
+#: (protocol built, setpoints, feed-forward, stack): triangle 71.6, sine 75.4, point-to-point 73.9; plus margin.
 BYTES_PER_SAMPLE = 96
 
 
@@ -65,8 +65,7 @@ class Case:
         """Feed-forward current (A, clipped to +-``limit``) and torque (N*m) along the reference."""
         from hilbench.analysis.compensation.feedforward import feedforward
 
-        return feedforward(self.compensator, self.reference_path, self.torque_constant, self.ratio,
-                           limit if math.isfinite(limit) else np.inf)
+        return feedforward(self.compensator, self.reference_path, self.torque_constant, self.ratio, limit)
 
 
 @dataclass(frozen=True)

@@ -121,7 +121,6 @@ def run(args: argparse.Namespace) -> int:
     settings = _settings(args)
     comps, doc = load_compensators(args.model)
     note = check_calibration(doc, settings.torque_constant, settings.ratio)
-    outputs.say(note)
     matrix = MatrixSettings(window=args.window, tolerance=args.tolerance, current_limit=settings.current_limit,
                             torque_constant=settings.torque_constant, ratio=settings.ratio)
     if args.matrix:
@@ -135,7 +134,12 @@ def run(args: argparse.Namespace) -> int:
             raise BenchError(f"{args.out / 'compensation.md'} exists; use --overwrite or another folder")
     else:
         names = [args.feedforward]
+        if args.out is not None and args.predict:
+            raise BenchError("--predict writes no run file; use --matrix -o DIR for a predicted report")
+        if args.out is not None:
+            outputs.refuse_inputs({"--output": args.out}, [args.model])
     protocols = cases(args.model, _references(args), names, matrix, args.sample_rate)
+    outputs.say(note)
     source = "prediction on the model's Maxwell-slip plant (--predict)" if args.predict else \
         f"device {args.device or 'default'}"
     if args.predict:
@@ -170,7 +174,7 @@ def _on_device(args, protocols, settings, matrix) -> list:
     from hilbench.bench.runner import Bench, signals_as_interrupt
 
     folder = args.out if args.matrix else None
-    with signals_as_interrupt(), Bench.open(args.device or "sim://", settings) as bench:
+    with signals_as_interrupt(), Bench.open(args.device, settings) as bench:
         def play(case, i):
             p = played[i]
             path = (folder / f"{p.reference}-{p.compensation}.h5") if folder else args.out

@@ -78,6 +78,7 @@ def test_a_model_identified_under_another_calibration_is_refused(tmp_path, capsy
     (["--reference", "triangle", "--corner", "5"], "corner"),
     (["--window", "0"], "--window"),
     (["--matrix"], "needs -o/--output"),
+    (["--predict", "-o", "x.h5"], "--predict writes no run file"),
 ])
 def test_bad_options_are_one_line(tmp_path, capsys, no_device, extra, match):
     assert match in _refused(capsys, ["compensate", str(_model(tmp_path)), *extra])
