@@ -43,7 +43,9 @@ LOCK_NAME = ".campaign.lock"
 RUN_KEYS = {"name", "protocol", "repeats"}
 GENERAL_KEYS = {"device", "operator", "notes"}
 SETTING_UNITS = {"current_limit": "A", "velocity_limit": "rad/s", "position_min": "rad", "position_max": "rad",
-                 "watchdog_timeout": "s", "torque_constant": "N*m/A", "counts_per_rev": "counts", "ratio": "1"}
+                 "watchdog_timeout": "s", "torque_constant": "N*m/A", "counts_per_rev": "counts", "ratio": "1",
+                 "position_kp": "A/rad", "position_ki": "A/(rad*s)", "position_kd": "A*s/rad", "position_i_limit": "A",
+                 "position_d_cutoff": "Hz"}
 _QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-z*/^0-9]+)?\s*$")
 
 
@@ -170,7 +172,9 @@ def load_campaign(path: str | Path) -> Campaign:
                 continue
             try:
                 if key in specs:
-                    unit = specs[key].unit_for(mode) if mode in ("current", "velocity") else None
+                    # (presliding's amplitudes and rate take the unit its `unit` names: plain numbers)
+                    known_unit = mode in ("current", "velocity", "position") and specs[key].unit != "unit"
+                    unit = specs[key].unit_for(mode) if known_unit else None
                     params[key] = _value(raw, unit or None, key)
                 elif key in SETTING_UNITS:
                     setting_values[key] = _value(raw, SETTING_UNITS[key], key)

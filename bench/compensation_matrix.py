@@ -152,9 +152,6 @@ def run_cases(protocols: list[Case], play: Callable[[Case, int], CaseResult],
 # ---- campaigns: a [[compensate]] step is the matrix, one planned run per case ----
 
 STEP_KEYS = {"name", "model", "references", "feedforwards", "sample_rate"}
-#: The position loop's settings (DeviceSettings), given as plain numbers in a campaign.
-GAIN_UNITS = {"position_kp": "A/rad", "position_ki": "A/(rad*s)", "position_kd": "A*s/rad", "position_i_limit": "A",
-              "position_d_cutoff": "Hz"}
 
 
 def campaign_step(table: dict, defaults: dict, index: int, path: Path, text: str) -> list:
@@ -164,8 +161,7 @@ def campaign_step(table: dict, defaults: dict, index: int, path: Path, text: str
     from hilbench.bench.campaign import GENERAL_KEYS, SETTING_UNITS, CampaignError, PlannedRun, _line_of, _value
     from hilbench.bench.runner import DeviceSettings, SettingsError
 
-    merged = {**{k: v for k, v in defaults.items() if k in SETTING_UNITS or k in GENERAL_KEYS or k in GAIN_UNITS},
-              **table}
+    merged = {**{k: v for k, v in defaults.items() if k in SETTING_UNITS or k in GENERAL_KEYS}, **table}
 
     def fail(key: str, reason: str) -> CampaignError:
         line = _line_of(text, key, None) if key not in table else _step_line(text, key, index)
@@ -189,13 +185,9 @@ def campaign_step(table: dict, defaults: dict, index: int, path: Path, text: str
                 values[key] = _value(raw, units[key], key)
             elif key in SETTING_UNITS:
                 settings_values[key] = _value(raw, SETTING_UNITS[key], key)
-            elif key in GAIN_UNITS:
-                if isinstance(raw, bool) or not isinstance(raw, int | float):
-                    raise ValueError(f"{key} must be a number in {GAIN_UNITS[key]}, got {raw!r}")
-                settings_values[key] = raw
             elif key not in STEP_KEYS and key not in GENERAL_KEYS:
-                raise ValueError(f"unknown key {key!r} (known: {', '.join(sorted(STEP_KEYS | set(units)))}, the "
-                                 f"position gains and the device settings)")
+                raise ValueError(f"unknown key {key!r} (known: {', '.join(sorted(STEP_KEYS | set(units)))} and "
+                                 f"the device settings)")
         except ValueError as exc:
             raise fail(key, str(exc)) from None
     for kind in kinds:

@@ -93,8 +93,8 @@ def _check_positive(**values: float) -> None:
 
 
 def _check_mode(mode: str) -> None:
-    if mode not in MODES:
-        raise ValueError(f"mode must be one of {sorted(MODES)}, got {mode!r}")
+    if mode not in DEFAULT_LIMITS:  # the generators play currents or velocities (positions: reversal_path)
+        raise ValueError(f"mode must be one of {sorted(DEFAULT_LIMITS)}, got {mode!r}")
 
 
 def _n_samples(duration: float, fs: float) -> int:
@@ -341,3 +341,65 @@ def stepped_sine(
         limit=limit,
     )
     return Excitation("stepped_sine", mode, float(fs), u, params, windows)
+
+
+#: Turning points of a reversal path: the sample at which the path arrives at each point (index into the
+#: setpoint array; the hold that follows starts there) and the point itself (the path's unit).
+TURNING_POINT_DTYPE = np.dtype([("index", "i8"), ("position", "f8")])
+
+
+def nested_reversal_points(amplitudes: Sequence[float], close_inner: bool = True,
+                           repeats: int = 1) -> np.ndarray:
+    """Turning points of a virgin ramp followed by nested reversals (Al-Bender & Symens' presliding test).
+
+    With amplitudes ``A1 >= A2 >= ... >= An > 0`` the turning points are ``T_i = (-1)**(i+1) * A_i``. The path
+    starts at rest at 0, ramps to ``T1`` (the virgin curve), then visits ``T2 .. Tn``: each reversal is nested
+    inside the previous one. With ``close_inner`` it then retraces ``T_{n-1} .. T1``, closing the inner loops
+    one at a time from the innermost (each return to an earlier turning point wipes out the loops inside it);
+    without, it returns to ``T1`` at once. That cycle (from ``T1`` back to ``T1``) is played ``repeats`` times.
+    Returns the points, starting with 0, shape (m,).
+    """
+    a = np.asarray(amplitudes, dtype=np.float64)
+    if a.ndim != 1 or a.size < 1 or not np.all(np.isfinite(a)) or np.any(a <= 0):
+        raise ValueError(f"amplitudes must be a non-empty list of finite values > 0, got {amplitudes!r}")
+    if np.any(np.diff(a) > 0):
+        raise ValueError(f"nested reversals need non-increasing amplitudes (A1 >= A2 >= ...), got {a.tolist()}")
+    turning = a * np.where(np.arange(a.size) % 2 == 0, 1.0, -1.0)
+    back = turning[-2::-1] if close_inner else turning[:1]
+    cycle = np.concatenate([turning[1:], back]) if a.size > 1 else np.empty(0)
+    return np.concatenate([[0.0], turning[:1], np.tile(cycle, repeats)])
+
+
+def reversal_path_lengths(points: np.ndarray, rate: float, settle: float, fs: float) -> tuple[np.ndarray, int]:
+    """Samples of each ramp between consecutive ``points`` at ``rate`` (unit/s; at least one) and of each
+    hold (``settle`` s: one at rest before the first ramp, one after every ramp): ``(ramp_samples, hold)``."""
+    _check_positive(rate=rate, fs=fs)
+    if not (math.isfinite(settle) and settle >= 0):
+        raise ValueError(f"settle must be a finite number of seconds >= 0, got {settle!r}")
+    ramps = np.maximum(1, np.round(np.abs(np.diff(points)) / rate * fs)).astype(np.int64)
+    return ramps, int(round(settle * fs))
+
+
+def reversal_path(points: np.ndarray, rate: float, settle: float, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    """Piecewise-linear displacement through ``points`` at constant speed ``rate`` (unit/s), holding each
+    point (and the start) for ``settle`` s: the quasi-static reference of a presliding test.
+
+    Ramp j has ``n_j = max(1, round(|p_{j+1} - p_j| / rate * fs))`` samples ``p_j + (p_{j+1} - p_j) * (k+1)/n_j``,
+    k = 0..n_j-1, so it ends exactly on the point. Returns ``(u, turning)``: the path, shape (n,), and the
+    :data:`TURNING_POINT_DTYPE` table of the points (index of the sample that reaches each point; the
+    start has index 0).
+    """
+    points = np.asarray(points, dtype=np.float64)
+    ramps, hold = reversal_path_lengths(points, rate, settle, fs)
+    pieces = [np.full(hold, points[0])]
+    turning = np.zeros(points.size, dtype=TURNING_POINT_DTYPE)
+    turning["position"] = points
+    n = hold
+    for j, m in enumerate(ramps):
+        k = np.arange(1, m + 1) / m
+        pieces.append(points[j] + (points[j + 1] - points[j]) * k)
+        pieces.append(np.full(hold, points[j + 1]))
+        n += m
+        turning["index"][j + 1] = n - 1
+        n += hold
+    return np.concatenate(pieces), turning

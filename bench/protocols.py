@@ -97,9 +97,10 @@ COMMON_SPECS: dict[str, ParameterSpec] = {
 class Protocol:
     """Base class: validation from ``SPECS`` and the common interface.
 
-    A protocol plays in one of its ``MODES``. In ``position`` mode its setpoints are angles at the encoder
-    (motor) shaft, rad, and it may define ``feedforward(limit) -> np.ndarray | None``: a current (A) per
-    setpoint, streamed with it (``limit`` is the current limit, A).
+    A protocol plays in one of its ``MODES``. In ``position`` mode its setpoints are angles at the load, rad
+    (the bench streams them times the ratio: at the encoder shaft), and it may define
+    ``feedforward(limit) -> np.ndarray | None``: a motor current (A) per setpoint, streamed with it
+    (``limit`` is the current limit, A).
     """
 
     name: ClassVar[str] = ""
@@ -305,7 +306,107 @@ class SteppedSine(Protocol):
         return (self.settle_periods // g + self.measure_periods // g) * per_amplitude * len(self.amplitudes)
 
 
-PROTOCOLS: dict[str, type[Protocol]] = {p.name: p for p in (Identification, Chirp, SteppedSine)}
+#: Largest presliding amplitude, rad at the load: presliding lives in milliradians; beyond this is a typo.
+MAX_PRESLIDING_RAD = 10.0
+
+
+@dataclass(frozen=True)
+class Presliding(Protocol):
+    """Presliding friction: a quasi-static displacement in position mode, a virgin ramp from rest to A1 then
+    nested reversals of decreasing amplitude (to -A2, +A3, ...), the inner loops closing again
+    (``close_inner``), each turning point held ``settle`` s. Amplitudes in rad or m at the load, or as
+    multiples ``d`` of the presliding distance you estimate. The run file is a displacement-driven record.
+    """
+
+    name: ClassVar[str] = "presliding"
+    MODES: ClassVar[tuple[str, ...]] = ("position",)
+    record: ClassVar[str] = "displacement-driven"
+    SPECS: ClassVar[dict[str, ParameterSpec]] = {
+        "amplitudes": ParameterSpec("unit", 1e-9, 1e3, "turning-point amplitudes A1 >= A2 >= ... (in `unit`)",
+                                    kind="floats"),
+        "unit": ParameterSpec("", None, None, "unit of amplitudes and rate: rad or m at the load, or d "
+                              "(multiples of presliding_distance)", kind="choice", choices=("d", "rad", "m")),
+        "presliding_distance": ParameterSpec("rad", 1e-9, 1.0, "your estimate of the presliding distance "
+                                             "(unit d)"),
+        "m_per_rad": ParameterSpec("m/rad", 0.0, 10.0, "linear travel per load radian (unit m): screw lead/2pi "
+                                   "or pulley radius; 0 = not set"),
+        "rate": ParameterSpec("unit/s", 1e-9, 1e3, "speed of the ramps between turning points"),
+        "settle": ParameterSpec("s", 0.0, 60.0, "hold at rest before the ramp and at every turning point"),
+        "repeats": ParameterSpec("", 1, 100, "times the reversal cycle (A1 back to A1) is played", kind="int"),
+        "close_inner": ParameterSpec("", None, None, "retrace the turning points to close each inner loop "
+                                     "(yes) or return to A1 at once (no)", kind="choice", choices=("yes", "no")),
+        "inertia": ParameterSpec("kg*m^2", 0.0, 100.0, "J at the load to subtract J*acceleration from the "
+                                 "torque (0 = not given: force = torque)"),
+    }
+    amplitudes: tuple[float, ...] = field(default=(4.0, 3.0, 2.0, 1.0))
+    unit: str = "d"
+    presliding_distance: float = 5e-4  # rad: the simulated DC motor's d (firmware_sim.friction_models)
+    m_per_rad: float = 0.0
+    rate: float = 2.0
+    settle: float = 0.2
+    repeats: int = 1
+    close_inner: str = "yes"
+    inertia: float = 0.0
+    mode: str = "position"
+    sample_rate: int = 10000
+
+    @property
+    def rad_per_unit(self) -> float:
+        """Load radians per amplitude unit."""
+        if self.unit == "d":
+            return self.presliding_distance
+        if self.unit == "m":
+            return 1.0 / self.m_per_rad
+        return 1.0
+
+    def _check(self) -> None:
+        if self.unit == "m" and self.m_per_rad <= 0:
+            raise ProtocolError("unit m needs m_per_rad > 0 (metres of travel per load radian)")
+        a = self.amplitudes
+        if any(later > earlier for earlier, later in zip(a, a[1:], strict=False)):
+            raise ProtocolError(f"amplitudes must not increase (nested reversals: A1 >= A2 >= ...), got {list(a)}")
+        peak = a[0] * self.rad_per_unit
+        if peak > MAX_PRESLIDING_RAD:
+            raise ProtocolError(f"amplitude A1 = {a[0]:g} {self.unit} is {peak:.6g} rad at the load, above the "
+                                f"presliding bound of {MAX_PRESLIDING_RAD:g} rad")
+
+    def points(self) -> np.ndarray:
+        """Turning points, rad at the load, starting with 0 (excitations.nested_reversal_points)."""
+        pts = excitations.nested_reversal_points(self.amplitudes, self.close_inner == "yes", self.repeats)
+        return pts * self.rad_per_unit
+
+    @property
+    def n_samples(self) -> int:
+        ramps, hold = excitations.reversal_path_lengths(self.points(), self.rate * self.rad_per_unit, self.settle,
+                                                        self.sample_rate)
+        return int(ramps.sum()) + hold * (ramps.size + 1)
+
+    def _path(self) -> tuple[np.ndarray, np.ndarray]:
+        return excitations.reversal_path(self.points(), self.rate * self.rad_per_unit, self.settle,
+                                         self.sample_rate)
+
+    def excitation(self, limit: float | None = None) -> excitations.Excitation:
+        """The reference angle at the load, rad (the bench turns it to the motor shaft with the ratio)."""
+        u, _ = self._path()
+        return excitations.Excitation(name=self.name, mode="position", fs=float(self.sample_rate), u=u,
+                                      params=self.parameters())
+
+    def parameters(self) -> dict[str, Any]:
+        out = super().parameters()
+        out["units"].update(amplitudes=self.unit, rate=f"{self.unit}/s")
+        out["rad_per_unit"] = self.rad_per_unit
+        return out
+
+    def protocol_arrays(self) -> dict[str, np.ndarray]:
+        """``turning_points``: sample index reaching each point and the point (rad at the load)."""
+        return {"turning_points": self._path()[1]}
+
+    def feedforward(self, limit: float) -> None:
+        """No feed-forward: the loop's integral carries the friction at quasi-static speed."""
+        return None
+
+
+PROTOCOLS: dict[str, type[Protocol]] = {p.name: p for p in (Identification, Chirp, SteppedSine, Presliding)}
 
 
 def make_protocol(name: str, values: dict[str, Any]) -> Protocol:

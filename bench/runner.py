@@ -239,7 +239,9 @@ class Bench:
                 raise ConfigError(f"{protocol.name}: feed-forward of shape {ff.shape} for setpoints of shape "
                                   f"{excitation.u.shape}")
         config = self.settings.config(protocol, feedforward=ff is not None)
-        stream = excitation.u if ff is None else np.column_stack([excitation.u, ff])
+        # a position protocol gives angles at the load; the device takes them at the encoder (motor) shaft
+        shaft = excitation.u * self.settings.ratio if position else excitation.u
+        stream = shaft if ff is None else np.column_stack([shaft, ff])
         stamp = uuid.uuid4().hex[:8]
         path = Path(out) if out is not None else Path("runs") / f"{protocol.name}-{stamp}.h5"
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -248,6 +250,8 @@ class Bench:
             arrays["feedforward"] = ff
         if excitation.windows is not None:
             arrays["step_windows"] = excitation.windows
+        if hasattr(protocol, "protocol_arrays"):  # e.g. presliding's turning points
+            arrays.update(protocol.protocol_arrays())
         amp = self.amplifier
         # -- startup
         amp.configure(config)

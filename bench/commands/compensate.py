@@ -17,19 +17,9 @@ REFERENCE_OPTIONS = {
     "rest": (float, None, "s", "rest at 0 (sine, triangle) or after each move"),
 }
 
-GAIN_OPTIONS = {
-    "position_kp": ("A/rad", "proportional gain"),
-    "position_ki": ("A/(rad*s)", "integral gain"),
-    "position_kd": ("A*s/rad", "derivative gain"),
-    "position_i_limit": ("A", "integrator clamp"),
-    "position_d_cutoff": ("Hz", "derivative filter cut-off (0: none)"),
-}
-
-
 def register(subparsers) -> None:
     from hilbench.analysis.compensation.references import KINDS
     from hilbench.bench.commands.run import add_device_options
-    from hilbench.drivers.protocol.messages import POSITION_GAINS
 
     p = subparsers.add_parser(
         "compensate", help="position tracking with a friction-model feed-forward; one run or the matrix",
@@ -62,10 +52,6 @@ def register(subparsers) -> None:
     for name, (kind, nargs, unit, text) in REFERENCE_OPTIONS.items():
         p.add_argument("--" + name.replace("_", "-"), dest=name, type=kind, nargs=nargs, default=None,
                        help=f"{text} ({unit})")
-    g = p.add_argument_group("position loop at the motor shaft (sent to the device; used by --predict)")
-    for name, (unit, text) in GAIN_OPTIONS.items():
-        g.add_argument("--" + name.replace("_", "-"), dest=name, type=float, default=None,
-                       help=f"{text} ({unit}; default {POSITION_GAINS[name]:g})")
     add_device_options(p)
     p.set_defaults(func=run)
 
@@ -90,20 +76,11 @@ def _references(args) -> dict[str, dict]:
     return out
 
 
-def _settings(args):
-    """The device settings, position gains included (SettingsError names a bad one)."""
-    from dataclasses import replace
-
-    from hilbench.bench.commands.run import settings_from_args
-
-    gains = {name: getattr(args, name) for name in GAIN_OPTIONS if getattr(args, name) is not None}
-    return replace(settings_from_args(args), **gains)
-
-
 def run(args: argparse.Namespace) -> int:
     from hilbench.analysis.compensation.closed_loop import PositionGains
     from hilbench.analysis.compensation.feedforward import load_compensators
     from hilbench.bench import outputs
+    from hilbench.bench.commands.run import settings_from_args
     from hilbench.bench.compensation_matrix import (
         MatrixSettings,
         cases,
@@ -118,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     # references and every case's feed-forward
     if not (args.window > 0 and args.tolerance > 0):
         raise BenchError(f"--window ({args.window} s) and --tolerance ({args.tolerance} rad) must be > 0")
-    settings = _settings(args)
+    settings = settings_from_args(args)  # limits, calibration and the position loop's gains
     comps, doc = load_compensators(args.model)
     note = check_calibration(doc, settings.torque_constant, settings.ratio)
     matrix = MatrixSettings(window=args.window, tolerance=args.tolerance, current_limit=settings.current_limit,

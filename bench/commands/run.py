@@ -1,4 +1,4 @@
-"""``hilbench run {identify,chirp,afrf}``: run one measurement protocol on a device and log it."""
+"""``hilbench run {identify,chirp,afrf,presliding}``: run one measurement protocol on a device and log it."""
 
 from __future__ import annotations
 
@@ -20,6 +20,11 @@ DEVICE_OPTIONS = {
     "torque_constant": ("N*m/A", "calibration: torque constant"),
     "counts_per_rev": ("counts", "calibration: encoder counts per motor revolution"),
     "ratio": ("1", "calibration: motor revolutions per load revolution"),
+    "position_kp": ("A/rad", "position loop: proportional gain (position mode)"),
+    "position_ki": ("A/(rad*s)", "position loop: integral gain (0 = off)"),
+    "position_kd": ("A*s/rad", "position loop: derivative gain (0 = off)"),
+    "position_i_limit": ("A", "position loop: bound of the integral term"),
+    "position_d_cutoff": ("Hz", "position loop: low-pass of the derivative (0 = unfiltered)"),
 }
 
 
@@ -61,13 +66,15 @@ def protocol_from_args(cls: type[Protocol], args: argparse.Namespace) -> Protoco
 
 
 def settings_from_args(args: argparse.Namespace):
+    """Device settings: the options given, over the config file's ``[settings]``, over the defaults."""
     from hilbench.bench.runner import DeviceSettings
+    from hilbench.bench.user_config import default_settings
 
     values = {name: getattr(args, name) for name in DEVICE_OPTIONS if getattr(args, name, None) is not None}
     for name, value in values.items():
         if isinstance(value, float) and math.isnan(value):
             raise ValueError(f"--{name.replace('_', '-')} is NaN")
-    return DeviceSettings(**values)
+    return DeviceSettings(**{**default_settings(), **values})
 
 
 def register(sub: argparse._SubParsersAction) -> None:

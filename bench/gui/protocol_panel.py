@@ -15,7 +15,8 @@ from hilbench.bench.protocols import PROTOCOLS, ParameterSpec, Protocol, Protoco
 
 #: forms build the setpoints (to run their checks) up to this many samples; longer runs are checked at start
 CHECK_SETPOINTS_UP_TO = 600_000
-TITLES = {"identification": "Identification", "chirp": "Chirp", "stepped_sine": "Stepped sine"}
+TITLES = {"identification": "Identification", "chirp": "Chirp", "stepped_sine": "Stepped sine",
+          "presliding": "Presliding"}
 
 
 def default_values(cls: type[Protocol]) -> dict[str, Any]:
@@ -156,7 +157,13 @@ class DeviceSettingsForm(QtWidgets.QWidget):
         from hilbench.bench.runner import DeviceSettings
 
         super().__init__(parent)
-        defaults = DeviceSettings()
+        from hilbench.bench.errors import BenchError
+        from hilbench.bench.user_config import default_settings
+
+        try:  # the config file's [settings] (docs/cli.md); a bad file is reported by the CLI, not here
+            defaults = DeviceSettings(**default_settings())
+        except (BenchError, ValueError):
+            defaults = DeviceSettings()
         self.fields: dict[str, QtWidgets.QLineEdit] = {}
         form = QtWidgets.QFormLayout(self)
         for name, (unit, text) in DEVICE_OPTIONS.items():

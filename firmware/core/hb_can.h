@@ -11,7 +11,7 @@
 
 #define HB_CAN_HOST_TO_DEVICE 0
 #define HB_CAN_DEVICE_TO_HOST 1
-#define HB_CAN_SMALL_PAYLOAD 80      /* largest non-SETPOINTS host message reassembled, bytes (CONFIG: 65) */
+#define HB_CAN_SMALL_PAYLOAD 112     /* largest non-SETPOINTS host message reassembled, bytes (CONFIG v2: 106) */
 #define HB_CAN_SETPOINT_PAYLOAD (5 + 4 * HB_MAX_BLOCK)
 
 uint16_t hb_can_id(uint8_t type, uint8_t direction, uint8_t node);

@@ -1,5 +1,6 @@
 #include "fake_hal.h"
 
+#include <math.h>
 #include <string.h>
 
 #include "hb_hal.h"
@@ -16,6 +17,7 @@ void hb_hal_measure(void *hal, int64_t *counts, hb_real *current) {
     fake_hal *f = hal;
     size_t k = f->measured < f->n_script ? f->measured : (f->n_script ? f->n_script - 1 : 0);
     *counts = f->n_script ? f->script[k] : 0;
+    if (f->inertia > 0) *counts = (int64_t)floor(f->theta * f->cpr / 6.283185307179586 + 0.5);
     *current = (hb_real)(f->gain * f->applied);
 }
 
@@ -23,6 +25,11 @@ void hb_hal_apply(void *hal, hb_real current, int enabled) {
     fake_hal *f = hal;
     f->applied = enabled ? (double)current : 0.0;
     f->enabled = enabled;
+    if (f->inertia > 0) {
+        double acc = f->kt * f->applied / f->inertia;
+        f->theta += f->omega * f->dt + 0.5 * acc * f->dt * f->dt;
+        f->omega += acc * f->dt;
+    }
     f->measured++;
 }
 

@@ -1,5 +1,7 @@
 /* A scripted HAL for the core's unit tests: the encoder reads a script (or holds), the measured current
- * is the last applied command times `gain`, and every write is captured. */
+ * is the last applied command times `gain`, and every write is captured. With `inertia` > 0 the encoder
+ * reads a pure inertia instead: J*theta'' = kt*i, the current held over each sample period `dt` (exact
+ * zero-order-hold integration), theta quantised to `cpr` counts per revolution. */
 #ifndef FAKE_HAL_H
 #define FAKE_HAL_H
 
@@ -19,6 +21,8 @@ typedef struct {
     double applied;               /* last applied current, A */
     int enabled;
     int configured;
+    double inertia, kt, dt, cpr;  /* pure-inertia encoder: kg*m^2, N*m/A, s, counts/rev (0 = script) */
+    double theta, omega;          /* rad, rad/s */
     size_t tx_len;
     uint8_t tx[FAKE_TX];
     uint32_t can_frames;

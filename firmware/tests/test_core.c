@@ -36,6 +36,9 @@ typedef struct {
     uint8_t last_status[HB_STATUS_BYTES];
 } output;
 
+static hb_device dev;
+static fake_hal hal;
+static output out;
 static uint8_t raw[HB_MAX_FRAME * 2];
 
 /* Parse (and consume) everything the device wrote; frames are checked independently of the decoder. */
@@ -47,7 +50,7 @@ static void parse(fake_hal *f, output *o) {
         long n = hb_cobs_decode(f->tx + start, i - start, raw);
         start = i + 1;
         CHECK(n >= 6);
-        CHECK(raw[0] == HB_PROTOCOL_VERSION);
+        CHECK(raw[0] == dev.version);  /* the device answers in the version its host named */
         CHECK(hb_crc32(0, raw, (size_t)n - 4) == hb_get_u32(raw + n - 4));
         const uint8_t *p = raw + 2;
         size_t len = (size_t)n - 6;
@@ -100,9 +103,6 @@ static void send_block(hb_device *d, uint32_t seq, const float *v, uint32_t n, i
     host_send(d, HB_SETPOINTS, p, 5 + 4 * (size_t)n, t_us);
 }
 
-static hb_device dev;
-static fake_hal hal;
-static output out;
 
 static void fresh(uint8_t pacing, uint32_t rate, uint8_t mode, double watchdog) {
     memset(&hal, 0, sizeof hal);
@@ -462,6 +462,199 @@ static void test_velocity_loop_closed_form(void) {
     CHECK(out.status[511] == (HB_S_ENABLED | HB_S_END) && dev.state == HB_ARMED);
 }
 
+/* ------------------------------------------------------------------ position mode (protocol v2) */
+
+static void send_position_config(hb_device *d, uint32_t rate, double current_limit, uint32_t cpr, double kp,
+                                 double ki, double kd, double i_limit, double cutoff, uint8_t flags) {
+    hb_config c = {rate, HB_POSITION, current_limit, 1e4, -INFINITY, INFINITY, 0.0, 0.2, cpr, 1.0,
+                   kp, ki, kd, i_limit, cutoff, flags};
+    uint8_t p[HB_CONFIG_BYTES];
+    hb_config_encode(&c, p);
+    host_send(d, HB_CONFIG, p, sizeof p, 0);
+}
+
+/* Polynomials in z, descending powers: p[0] z^n + ... + p[n]. */
+static void poly_mul(const double *a, int na, const double *b, int nb, double *out) {
+    for (int i = 0; i <= na + nb; i++) out[i] = 0;
+    for (int i = 0; i <= na; i++)
+        for (int j = 0; j <= nb; j++) out[i + j] += a[i] * b[j];
+}
+
+/* Step response of the position loop on a pure inertia (J 0.0022 kg*m^2, Kt 0.2 N*m/A, 10 kHz), against the
+ * closed loop computed here from transfer functions, independently of the core and of the fake plant's
+ * state update: plant G(z) = Kt/J * dt^2/2 * (z+1)/(z-1)^2 (a double integrator under zero-order hold);
+ * controller C(z) = kp + ki*dt*z/(z-1) + kd*(1-a)/dt*(z-1)/(z-a), a = exp(-2*pi*fc*dt); no delay (sample k
+ * is measured, then its current is held over [t_k, t_k+1)). y = CG/(1+CG) r as a difference equation.
+ * The encoder has 2^30 counts/rev (quantum 5.9e-9 rad against a 1 mrad step). */
+static void test_position_loop_step_closed_form(void) {
+    const double J = 0.0022, kt = 0.2, dt = 1e-4, kp = 3000, ki = 3e5, kd = 5, fc = 300, step = 1e-3;
+    const uint32_t cpr = 1u << 30;
+    fresh(HB_LOCKSTEP, 10000, HB_CURRENT, 0.0);
+    send_empty(&dev, HB_DISARM, 0);
+    send_position_config(&dev, 10000, 1e3, cpr, kp, ki, kd, 100.0, fc, 0);
+    send_empty(&dev, HB_ARM, 0);
+    hal.inertia = J;
+    hal.kt = kt;
+    hal.dt = dt;
+    hal.cpr = (double)cpr;
+    enum { N = 2048, K0 = 16 };
+    static float r[N];
+    for (int k = 0; k < N; k++) r[k] = k < K0 ? 0.0f : (float)step;
+    for (uint32_t b = 0; b < N / 128; b++) send_block(&dev, b, r + 128 * b, 128, b == N / 128 - 1, 0);
+    for (int t = 0; t < 8; t++) hb_device_tick(&dev, 0);  /* lockstep: at most 4 blocks per tick */
+    parse(&hal, &out);
+    CHECK(out.n_samples == N && dev.faults == 0);
+
+    double a = exp(-2.0 * 3.141592653589793 * fc * dt), g = kt / J * dt * dt / 2.0;
+    double z1[2] = {1, -1}, za[2] = {1, -a}, zz[2] = {1, 0}, z11[3], z1a[3], zza[3];
+    poly_mul(z1, 1, z1, 1, z11);
+    poly_mul(z1, 1, za, 1, z1a);
+    poly_mul(zz, 1, za, 1, zza);
+    double cn[3], cd[3], gn[2] = {g, g}, *gd = z11, num[4], den[5], cg[5];
+    for (int i = 0; i < 3; i++) {
+        cn[i] = kp * z1a[i] + ki * dt * zza[i] + kd * (1 - a) / dt * z11[i];
+        cd[i] = z1a[i];
+    }
+    poly_mul(cn, 2, gn, 1, num);  /* degree 3 */
+    poly_mul(cd, 2, gd, 2, den);  /* degree 4 */
+    for (int i = 0; i < 4; i++) den[i + 1] += num[i];
+    for (int i = 0; i < 5; i++) cg[i] = den[i] / den[0];
+    static double y[N];
+    double worst = 0;
+    for (int k = 0; k < N; k++) {
+        double acc = 0;
+        for (int i = 1; i <= 4 && k - i >= 0; i++) acc += -cg[i] * y[k - i] + num[i - 1] / den[0] * (double)r[k - i];
+        y[k] = acc;
+        double measured = (double)out.counts[k] * 2.0 * 3.141592653589793 / (double)cpr;
+        double e = fabs(measured - y[k]);
+        if (e > worst) worst = e;
+    }
+    /* double: quantisation (half a count, 3e-9 rad) dominates; float: the loop runs in single precision */
+    double tol = sizeof(hb_real) == sizeof(float) ? 2e-3 * step : 2e-5 * step;
+    printf("position step on a pure inertia: worst |y - closed loop| = %.3g rad (tolerance %.3g rad)\n", worst, tol);
+    CHECK(worst <= tol);
+    CHECK(fabs(y[N - 1] - step) < 1e-3 * step);  /* the integral removes the static error */
+    /* the first current of the step: kp*e + kd*(1-a)*e/dt + ki*dt*e with e = step (float32 on the wire) */
+    double e0 = (double)(float)step, i0 = kp * e0 + kd * (1 - a) * e0 / dt + ki * dt * e0;
+    CHECK(fabs(out.cmd[K0] - i0) <= 1e-5 * i0 && out.cmd[K0 - 1] == 0.0f);
+    hal.inertia = 0;
+}
+
+/* Stalled encoder, feed-forward on (two values per sample): e = r constant, D = 0, so
+ * i[k] = kp*r + min(ki*r*dt*(k+1), i_limit) + ff[k], clipped at the current limit; the buffer counts
+ * samples, an odd number of values is a broken stream, a feed-forward beyond the limit is OVER_CURRENT. */
+static void test_position_feedforward_and_integral_limit(void) {
+    fresh(HB_LOCKSTEP, 1000, HB_CURRENT, 0.0);
+    send_empty(&dev, HB_DISARM, 0);
+    const double kp = 1000, ki = 1e4, ilim = 0.25, dt = 1e-3, lim = 5.0;
+    send_position_config(&dev, 1000, lim, 4096, kp, ki, 0.0, ilim, 0.0, HB_CFG_FEEDFORWARD);
+    send_empty(&dev, HB_ARM, 0);
+    parse(&hal, &out);
+    CHECK(out.reply[0][1] == HB_OK && out.reply[1][1] == HB_OK && dev.vps == 2 && dev.slots == 2048);
+    static float v[2 * 400];
+    for (int k = 0; k < 400; k++) {
+        v[2 * k] = 1e-3f;
+        v[2 * k + 1] = k < 300 ? 0.5f : -3.5f + 0.01f * (float)(k - 300);
+    }
+    hb_status st;
+    send_block(&dev, 0, v, 2 * 128, 0, 0);
+    hb_device_status(&dev, 0, &st);
+    CHECK(st.free == 2048 - 128 && st.received == 128);
+    for (uint32_t b = 1; b < 4; b++) send_block(&dev, b, v + 256 * b, b == 3 ? 2 * 16 : 2 * 128, b == 3, 0);
+    hb_device_tick(&dev, 0);
+    parse(&hal, &out);
+    CHECK(out.n_samples == 400 && dev.faults == 0 && dev.state == HB_ARMED);
+    double r = (double)1e-3f;
+    int ok = 1, clamped = 0;
+    for (int k = 0; k < 400; k++) {
+        double integral = ki * r * dt * (k + 1);
+        if (integral > ilim) {
+            integral = ilim;
+            clamped++;
+        }
+        double want = kp * r + integral + (double)v[2 * k + 1];
+        want = want > lim ? lim : want < -lim ? -lim : want;
+        ok &= fabs(out.cmd[k] - want) <= 1e-6 * fabs(want) + 1e-7;
+    }
+    CHECK(ok && clamped > 100);
+    /* an odd number of values cannot be whole samples: the stream breaks (BUFFER_UNDERRUN) */
+    send_block(&dev, 0, v, 3, 1, 0);
+    CHECK(dev.faults == HB_F_BUFFER_UNDERRUN && dev.state == HB_DISARMED);
+    parse(&hal, &out);
+    /* a feed-forward current beyond the limit trips OVER_CURRENT at its sample */
+    send_empty(&dev, HB_CLEAR_FAULTS, 0);
+    send_empty(&dev, HB_ARM, 0);
+    float over[6] = {0.0f, 0.1f, 0.0f, 6.0f, 0.0f, 0.1f};
+    send_block(&dev, 0, over, 6, 1, 0);
+    hb_device_tick(&dev, 0);
+    parse(&hal, &out);
+    CHECK(dev.faults == HB_F_OVER_CURRENT && dev.fault_index == dev.index - 1 && out.n_samples == 2 &&
+          out.cmd[1] == 0.0f && out.status[1] == (HB_S_FAULT | HB_S_END));
+}
+
+/* The last frame of `type` the device wrote (payload into buf): its version byte, or -1. */
+static int last_frame(uint8_t type, uint8_t *buf, size_t *len) {
+    int version = -1;
+    size_t start = 0;
+    for (size_t i = 0; i < hal.tx_len; i++) {
+        if (hal.tx[i] != 0) continue;
+        long n = hb_cobs_decode(hal.tx + start, i - start, raw);
+        start = i + 1;
+        if (n >= 6 && raw[1] == type) {
+            version = raw[0];
+            *len = (size_t)n - 6;
+            memcpy(buf, raw + 2, *len);
+        }
+    }
+    hal.tx_len = 0;
+    return version;
+}
+
+/* Version negotiation: a v1 host (empty GET_IDENTITY, version-1 frames, 65-byte CONFIG) is answered as a v1
+ * device, and cannot configure position mode; a v2 host is answered in v2 and reads the position CONFIG;
+ * a v1 host then asking for it gets NOT_CONFIGURED (v1 cannot express it). */
+static void test_version_negotiation(void) {
+    memset(&hal, 0, sizeof hal);
+    hb_device_setup s = {"HB-TEST", "T-1", "test", 4096, 128, HB_LOCKSTEP, HB_LINK_SERIAL, 1, 0.5, 20.0};
+    hb_device_init(&dev, &s, &hal);
+    static uint8_t buf[HB_MAX_FRAME], p[HB_CONFIG_BYTES];
+    size_t len = 0;
+    host_send(&dev, HB_GET_IDENTITY, NULL, 0, 0);
+    CHECK(dev.version == 1 && last_frame(HB_IDENTITY, buf, &len) == 1 && hb_get_u16(buf + len - 8) == 1);
+    hb_config c = {1000, HB_VELOCITY, 5.0, 100.0, -INFINITY, INFINITY, 0.5, 0.2, 4096, 1.0, 0, 0, 0, 0, 0, 0};
+    hb_config_encode_v1(&c, p);
+    host_send(&dev, HB_CONFIG, p, HB_CONFIG_BYTES_V1, 0);
+    CHECK(last_frame(HB_REPLY, buf, &len) == 1 && buf[1] == HB_OK && dev.state == HB_DISARMED);
+    send_empty(&dev, HB_GET_CONFIG, 0);
+    CHECK(last_frame(HB_CONFIG, buf, &len) == 1 && len == HB_CONFIG_BYTES_V1 && memcmp(buf, p, len) == 0);
+    c.mode = HB_POSITION;  /* a v1 layout has no gains: position mode is refused */
+    hb_config_encode_v1(&c, p);
+    host_send(&dev, HB_CONFIG, p, HB_CONFIG_BYTES_V1, 0);
+    CHECK(last_frame(HB_REPLY, buf, &len) == 1 && buf[1] == HB_INVALID_CONFIG && dev.cfg.mode == HB_VELOCITY);
+    uint8_t v2[2] = {2, 0};
+    host_send(&dev, HB_GET_IDENTITY, v2, 2, 0);
+    CHECK(dev.version == 2 && last_frame(HB_IDENTITY, buf, &len) == 2 && hb_get_u16(buf + len - 8) == 2);
+    send_position_config(&dev, 1000, 5.0, 4096, 100.0, 0.0, 0.0, 0.0, 0.0, 0);
+    CHECK(last_frame(HB_REPLY, buf, &len) == 2 && buf[1] == HB_OK && dev.cfg.mode == HB_POSITION);
+    send_empty(&dev, HB_GET_CONFIG, 0);
+    CHECK(last_frame(HB_CONFIG, buf, &len) == 2 && len == HB_CONFIG_BYTES && buf[4] == HB_POSITION &&
+          hb_get_f64(buf + 65) == 100.0);
+    host_send(&dev, HB_GET_IDENTITY, NULL, 0, 0);
+    send_empty(&dev, HB_GET_CONFIG, 0);
+    CHECK(last_frame(HB_REPLY, buf, &len) == 1 && buf[0] == HB_GET_CONFIG && buf[1] == HB_NOT_CONFIGURED);
+    /* invalid position configurations: no kp, a derivative cut-off at Nyquist, feed-forward outside mode 2 */
+    host_send(&dev, HB_GET_IDENTITY, v2, 2, 0);
+    send_position_config(&dev, 1000, 5.0, 4096, 0.0, 0.0, 0.0, 0.0, 0.0, 0);
+    CHECK(last_frame(HB_REPLY, buf, &len) == 2 && buf[1] == HB_INVALID_CONFIG);
+    send_position_config(&dev, 1000, 5.0, 4096, 100.0, 0.0, 1.0, 0.0, 500.0, 0);
+    CHECK(last_frame(HB_REPLY, buf, &len) == 2 && buf[1] == HB_INVALID_CONFIG);
+    c.mode = HB_CURRENT;
+    c.flags = HB_CFG_FEEDFORWARD;
+    hb_config_encode(&c, p);
+    host_send(&dev, HB_CONFIG, p, HB_CONFIG_BYTES, 0);
+    CHECK(last_frame(HB_REPLY, buf, &len) == 2 && buf[1] == HB_INVALID_CONFIG);
+}
+
 static void can_sink(void *ctx, uint16_t id, const uint8_t *data, uint8_t len) {
     hb_device *d = ctx;
     /* host-to-device: flip the direction bit of a frame the device would send */
@@ -491,6 +684,14 @@ static void test_can_mapping(void) {
     CHECK(hal.can_frames > 1 && hal.can_id[1] == (HB_STATUS << 5 | 1 << 4 | 3));
     hb_device_rx_can(&dev, (uint16_t)(HB_HEARTBEAT << 5 | 4), hb, 7, 0);  /* another node: ignored */
     CHECK(dev.rx_frames == 2);
+    /* a v2 CONFIG (106 bytes, 16 classic segments) is reassembled too */
+    hb_config cp = {1000, HB_POSITION, 5.0, 100.0, -INFINITY, INFINITY, 0.5, 0.2, 4096, 1.0,
+                    3000.0, 3e5, 5.0, 5.0, 300.0, HB_CFG_FEEDFORWARD};
+    hb_config_encode(&cp, p);
+    hal.can_frames = 0;
+    CHECK(hb_can_send(HB_CONFIG, p, HB_CONFIG_BYTES, 3, 0, can_sink, &dev) == 16);
+    CHECK(hal.can_frames == 1 && hal.can_data[0][3] == HB_CONFIG && hal.can_data[0][4] == HB_OK &&
+          dev.cfg.mode == HB_POSITION && dev.cfg.position_ki == 3e5 && dev.vps == 2);
 }
 
 int main(int argc, char **argv) {
@@ -508,6 +709,9 @@ int main(int argc, char **argv) {
     test_estop_disarm_and_latching();
     test_limits_closed_form();
     test_velocity_loop_closed_form();
+    test_position_loop_step_closed_form();
+    test_position_feedforward_and_integral_limit();
+    test_version_negotiation();
     test_can_mapping();
     printf("%d checks, %d failed\n", checks, failures);
     return failures ? 1 : 0;
