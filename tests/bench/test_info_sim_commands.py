@@ -12,7 +12,7 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_bench_info_on_the_simulator(capsys):
     assert main(["info", "--device", "sim://?pacing=lockstep"]) == 0
     out = capsys.readouterr().out
-    for line in ("model: HB-SIM-1", "protocol version: 1", "state: UNCONFIGURED", "faults: none",
+    for line in ("model: HB-SIM-1", "protocol version: 2", "state: UNCONFIGURED", "faults: none",
                  "config: not configured", "counters: crc_errors=0"):
         assert line in out
 
