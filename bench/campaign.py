@@ -125,16 +125,20 @@ def load_campaign(path: str | Path) -> Campaign:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise CampaignError(f"{path}: not valid TOML: {exc}") from None
-    unknown_top = sorted(set(data) - {"defaults", "run"})
+    unknown_top = sorted(set(data) - {"defaults", "run", "compensate"})
     if unknown_top:
         raise CampaignError(f"{path}:{_line_of(text, unknown_top[0], None)}: unknown table or key "
-                            f"{unknown_top[0]!r} (expected [defaults] and [[run]])")
+                            f"{unknown_top[0]!r} (expected [defaults], [[run]] and [[compensate]])")
+    steps = data.get("compensate", [])
+    if not isinstance(steps, list) or not all(isinstance(t, dict) for t in steps):
+        raise CampaignError(f"{path}:{_line_of(text, 'compensate', None)}: compensate must be an array of tables "
+                            f"([[compensate]])")
     defaults = data.get("defaults", {})
     runs = data.get("run", [])
     if not isinstance(defaults, dict):
         raise CampaignError(f"{path}:{_line_of(text, 'defaults', None)}: defaults must be a table "
                             f"([defaults]), got {defaults!r}")
-    if not isinstance(runs, list) or not runs:
+    if not isinstance(runs, list) or not (runs or steps):
         raise CampaignError(f"{path}: no [[run]] tables")
     if not all(isinstance(t, dict) for t in runs):
         raise CampaignError(f"{path}:{_line_of(text, 'run', None)}: run must be an array of tables "
@@ -204,6 +208,13 @@ def load_campaign(path: str | Path) -> Campaign:
         for r in range(1, repeats + 1):
             campaign.runs.append(PlannedRun(name, r, protocol, settings, device,
                                             str(merged.get("operator", "")), str(merged.get("notes", ""))))
+    if steps:  # the compensation matrix: one planned run per case (docs/compensation.md)
+        from hilbench.bench.compensation_matrix import campaign_step
+
+        for j, table in enumerate(steps):
+            campaign.runs += campaign_step(table, defaults, j, path, text)
+        if len({r.key for r in campaign.runs}) != len(campaign.runs):
+            raise CampaignError(f"{path}: two runs or [[compensate]] steps share a name")
     devices = {r.device for r in campaign.runs}
     if len(devices) > 1:
         raise CampaignError(f"{path}: one campaign runs on one device; found {', '.join(sorted(devices))}")
@@ -257,7 +268,11 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, resume: bool = Fals
     out_dir.mkdir(parents=True, exist_ok=True)
     lock_fd = _lock_folder(out_dir)  # one campaign per folder: a second --resume is refused
     try:
-        return _play(campaign, out_dir, resume, progress, control, bench)
+        entries = _play(campaign, out_dir, resume, progress, control, bench)
+        from hilbench.bench.compensation_matrix import campaign_report
+
+        campaign_report(campaign, out_dir, entries)  # nothing unless the campaign has [[compensate]] steps
+        return entries
     finally:
         os.unlink(out_dir / LOCK_NAME)
         os.close(lock_fd)

@@ -222,6 +222,8 @@ class Bench:
         :class:`AbortRun` and Ctrl-C are turned into an ``aborted`` result (Ctrl-C is re-raised).
         """
         control = control or RunControl()
+        if hasattr(protocol, "bind"):  # a protocol that needs the device's calibration (bench/compensation.py)
+            protocol = protocol.bind(self.settings)
         protocol.check_memory()
         why = refusal(self.url, self.amplifier.capabilities, protocol.mode, protocol.sample_rate)  # type: ignore
         if why:  # before anything moves

@@ -6,9 +6,9 @@ import argparse
 import math
 from pathlib import Path
 
-from hilbench.bench.protocols import Chirp, Identification, Presliding, Protocol, SteppedSine
+from hilbench.bench.protocols import PROTOCOLS, Protocol
 
-RUNNABLE: dict[str, type[Protocol]] = {cls.name: cls for cls in (Identification, Chirp, SteppedSine, Presliding)}
+RUNNABLE: dict[str, type[Protocol]] = dict(PROTOCOLS)  # every protocol of the table (campaign names)
 # Old spellings of `run`'s protocol names, kept as argparse aliases (they map onto the one name; docs/cli.md).
 ALIASES = {"identification": ["identify"], "stepped_sine": ["afrf"]}
 DEVICE_OPTIONS = {
@@ -41,6 +41,8 @@ def add_protocol_options(parser: argparse.ArgumentParser, cls: type[Protocol]) -
             parser.add_argument(flag, dest=name, type=float, nargs="+", default=None, help=help_)
         elif spec.kind == "choice":
             parser.add_argument(flag, dest=name, choices=spec.choices, default=None, help=help_)
+        elif spec.kind == "str":
+            parser.add_argument(flag, dest=name, default=None, help=help_)
         else:
             parser.add_argument(flag, dest=name, type=int if spec.kind == "int" else float, default=None,
                                 help=help_)
