@@ -29,7 +29,8 @@ from hilbench.analysis.compensation.references import Reference
 from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.models.families import substeps_for
 from hilbench.analysis.models.friction_model import AXES
-from hilbench.analysis.models.model_file import SCHEMA as MODEL_SCHEMA
+from hilbench.analysis.models.model_file import READABLE as MODEL_SCHEMAS
+from hilbench.analysis.models.model_file import read_family
 from hilbench.analysis.models.model_file import read_model
 from hilbench.firmware_sim.plant import Plant, PlantParameterError, PlantParams
 
@@ -102,7 +103,8 @@ def _check_units(units: dict, axis: str, where: str) -> None:
 
 
 def load_compensators(path: str | Path, device_axis: str = "rotary") -> tuple[list[Compensator], dict]:
-    """Compensators of a model file (``hilbench identify``: none, coulomb, maxwell_slip) or a comparison
+    """Compensators of a model file (``hilbench identify``: none, coulomb, maxwell_slip; a family file of
+    ``hilbench compare``: none and that family) or a comparison
     (``hilbench compare``: none, coulomb from its Maxwell-slip row, and every family row). Refuses a model
     whose axis or units are not those of ``device_axis``. Returns the list and the document."""
     try:
@@ -113,7 +115,13 @@ def load_compensators(path: str | Path, device_axis: str = "rotary") -> tuple[li
         raise AnalysisError(f"{path}: not a hilbench model (a JSON object is expected)")
     schema = doc.get("schema")
     out = [Compensator("none", None, "no feed-forward")]
-    if schema == MODEL_SCHEMA:
+    if schema in MODEL_SCHEMAS and doc.get("family", "maxwell_slip") != "maxwell_slip":
+        fam, doc = read_family(path)  # one family of `hilbench compare` (OUT/models/FAMILY.json)
+        if fam.axis != device_axis:
+            raise AnalysisError(f"{path}: the model is for a {fam.axis} axis; the device is {device_axis}")
+        _check_units(fam.units, fam.axis, str(path))
+        return out + [Compensator(fam.family, fam.plant, f"{path}")], doc
+    if schema in MODEL_SCHEMAS:
         model, doc = read_model(path)
         if model.axis != device_axis:
             raise AnalysisError(f"{path}: the model is for a {model.axis} axis; the device is {device_axis}")

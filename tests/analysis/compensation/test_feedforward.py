@@ -192,3 +192,18 @@ def test_a_model_for_another_axis_or_units_is_refused(tmp_path, doc, match):
     path.write_text(json.dumps(doc))
     with pytest.raises(AnalysisError, match=match):
         load_compensators(path)
+
+
+def test_a_family_file_of_compare_gives_that_family(tmp_path):
+    # schema 2 family file (`hilbench compare` writes OUT/models/FAMILY.json): none plus that family's plant
+    plant = dc_motor(4).replace(torque_constant=1.0)
+    doc = {"schema": "hilbench.friction-model/2", "family": "gms", "plant": plant.to_dict(),
+           "parameters": {"axis": "rotary", "units": {"inertia": "kg*m^2"}, "inertia": plant.inertia}}
+    path = tmp_path / "gms.json"
+    path.write_text(json.dumps(doc))
+    comps, _ = load_compensators(path)
+    assert [c.name for c in comps] == ["none", "gms"]
+    assert comps[1].params.ms_stiffness == pytest.approx(plant.ms_stiffness)
+    with pytest.raises(AnalysisError, match="linear axis"):
+        path.write_text(json.dumps({**doc, "parameters": {**doc["parameters"], "axis": "linear"}}))
+        load_compensators(path, "rotary")
