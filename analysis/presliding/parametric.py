@@ -40,6 +40,11 @@ class RollingFit:
     travel: float
     rms_error: float
     samples: int
+    slope_rms: float = 0.0  # rms of the fitted curve's slope dF/dx over the fitted samples (N*m/rad or N/m)
+
+    def expected_error(self, step: float, noise: float) -> float:
+        """The rms residual quantisation (step, rad or m, uniform error) and force noise alone would leave."""
+        return math.sqrt((self.slope_rms * step) ** 2 / 12 + noise ** 2)
 
     def virgin_curve(self, s: np.ndarray) -> np.ndarray:
         return rolling_virgin(s, self.h, self.d)
@@ -106,7 +111,8 @@ def fit_rolling(x: np.ndarray, force: np.ndarray, fs: float, reversals: np.ndarr
     except ValueError as exc:  # non-finite residuals
         raise AnalysisError(f"the parametric virgin-curve fit failed: {exc}") from None
     if not sol.success or not np.all(np.isfinite(sol.x)) or abs(sol.x[0]) >= 60 or abs(sol.x[1]) >= 60:
-        raise AnalysisError(f"the parametric virgin-curve fit did not converge: {sol.message}")
+        raise AnalysisError("the parametric virgin-curve fit found no finite h and d: the ramp does not determine "
+                            f"the shape ({sol.message})")
     resid = sol.fun
     dof = max(y.size - 4, 1)
     s2 = float(resid @ resid) / dof
@@ -119,5 +125,8 @@ def fit_rolling(x: np.ndarray, force: np.ndarray, fs: float, reversals: np.ndarr
     cov[3, :] /= vs
     cov[:, 3] /= vs
     p = sol.x
-    return RollingFit(math.exp(p[0]), math.exp(p[1]), p[2] * scale, p[3] * scale / vs, cov, float(travel),
-                      math.sqrt(float(resid @ resid) / y.size), int(y.size))
+    h, d = math.exp(p[0]), math.exp(p[1])
+    s = np.concatenate([np.abs(x[ramp] - x[0]), np.abs(x[branch] - x[r0]) / 2])
+    slope = 2 * h * d ** 2 / (d + s) ** 3  # phi'(s); Masing's branch has the same slope at half the travel
+    return RollingFit(h, d, p[2] * scale, p[3] * scale / vs, cov, float(travel),
+                      math.sqrt(float(resid @ resid) / y.size), int(y.size), float(np.sqrt(np.mean(slope ** 2))))

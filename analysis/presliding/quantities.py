@@ -36,6 +36,8 @@ TOP_SHARE = 0.02
 PARAMETRIC_REL = 0.1
 #: ... and the rolling-friction shape fits the data within this fraction of h (rms residual)
 PARAMETRIC_FIT = 0.01
+#: ... or within this factor of the residual the quantisation and the force noise alone leave
+PARAMETRIC_EXCESS = 2.0
 
 
 def presliding_distance(model: FrictionModel, fraction: float = DEFAULT_FRACTION) -> float:
@@ -154,16 +156,17 @@ def resolution(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, loop_travel
     lines.append(f"reversal forces and memory checks: {loop_travels.size - small} of {loop_travels.size} branches "
                  f"resolved" + (f"; {small} travel less than {MIN_COUNTS:g} steps ({MIN_COUNTS * step:.3g} {unit})"
                                 if small else ""))
-    line, ok["parametric"] = trust_line(rolling, ok["initial_stiffness"], step, fraction, unit, kunit)
+    line, ok["parametric"] = trust_line(rolling, ok["initial_stiffness"], step, noise, fraction, unit, kunit)
     lines.append(line)
     return Resolution(step, source, noise, lines, {k: bool(v) for k, v in ok.items()})
 
 
-def trust_line(rolling: RollingFit | None, nnls_k0_resolved: bool, step: float, fraction: float, unit: str,
-               kunit: str) -> tuple[str, bool]:
+def trust_line(rolling: RollingFit | None, nnls_k0_resolved: bool, step: float, noise: float, fraction: float,
+               unit: str, kunit: str) -> tuple[str, bool]:
     """(sentence, parametric usable): which estimate of the virgin curve and sum(k) to trust. The parametric one
-    is usable when its virgin ramp spans >= MIN_COUNTS steps, sum(k) is within PARAMETRIC_REL of itself (Jacobian
-    uncertainty) and the shape fits within PARAMETRIC_FIT of h (rms residual)."""
+    is usable when its virgin ramp spans >= MIN_COUNTS steps (step: rad or m), sum(k) is within PARAMETRIC_REL of
+    itself (Jacobian uncertainty) and the shape fits: rms residual within PARAMETRIC_FIT of h, or within
+    PARAMETRIC_EXCESS times what the quantisation and the force noise (N*m or N) alone leave."""
     if rolling is None:
         return ("virgin curve and sum(k): no parametric fit; the NNLS estimate is the only one"
                 + ("" if nnls_k0_resolved else " and its sum(k) is a lower bound")), False
@@ -171,9 +174,12 @@ def trust_line(rolling: RollingFit | None, nnls_k0_resolved: bool, step: float, 
     k0, u = q["initial_stiffness"], e["initial_stiffness"]
     fit_share = rolling.rms_error / rolling.h
     span = rolling.travel / step
-    usable = span >= MIN_COUNTS and u <= PARAMETRIC_REL * k0 and fit_share <= PARAMETRIC_FIT
+    expected = rolling.expected_error(step, noise)
+    fits = fit_share <= PARAMETRIC_FIT or rolling.rms_error <= PARAMETRIC_EXCESS * expected
+    usable = span >= MIN_COUNTS and u <= PARAMETRIC_REL * k0 and fits
     facts = (f"parametric sum(k) = 2h/d = {k0:.4g} +- {u:.2g} {kunit}, d = {rolling.d:.3g} {unit}; the virgin ramp "
-             f"spans {span:.3g} position steps, the shape fits within {100 * fit_share:.2g} % of h")
+             f"spans {span:.3g} position steps; rms residual {100 * fit_share:.2g} % of h, "
+             f"{rolling.rms_error / expected:.2g}x what quantisation and noise alone leave")
     if nnls_k0_resolved:
         verdict = "trust the NNLS (model-free, resolved); the parametric one assumes the rolling-friction shape"
     elif usable:
