@@ -13,6 +13,7 @@ from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.identification.regressors import position_resolution
 from hilbench.analysis.models.friction_model import AXES
 from hilbench.analysis.presliding.identify import PreslidingFit, PreslidingSettings, fit_presliding
+from hilbench.analysis.presliding.parametric import RollingFit, fit_rolling
 from hilbench.analysis.presliding.quantities import DEFAULT_FRACTION, Resolution, bootstrap, quantities, resolution
 from hilbench.analysis.presliding.reversals import MemoryCheck, find_reversals, memory_check
 
@@ -41,6 +42,8 @@ class PreslidingResult:
     resolution: Resolution
     fraction: float
     block: int = 1  # samples averaged into one (block_means)
+    parametric: RollingFit | None = None  # the rolling-friction shape fitted beside the NNLS (parametric.py)
+    parametric_error: str = ""  # why there is no parametric fit
 
     @property
     def units(self) -> dict[str, str]:
@@ -96,9 +99,13 @@ def analyse(t: np.ndarray, x: np.ndarray, force: np.ndarray, fs: float, axis: st
     ends = np.concatenate([[0], rev, [x.size - 1]])
     travels = np.abs(np.diff(x[ends]))
     unc = bootstrap(fit, x, force, fs, rev, replicates=replicates, fraction=fraction, seed=seed)
-    res = resolution(fit, x, force, travels, counts_per_rev, fraction, step=step)
+    try:
+        rolling, why = fit_rolling(x, force, fs, rev), ""
+    except AnalysisError as exc:
+        rolling, why = None, str(exc)
+    res = resolution(fit, x, force, travels, counts_per_rev, fraction, step=step, rolling=rolling)
     return PreslidingResult(t, x, force, axis, fit, rev, travels[:-1], check,
-                            quantities(fit.model, fraction), unc, res, fraction, block)
+                            quantities(fit.model, fraction), unc, res, fraction, block, rolling, why)
 
 
 def block_means(t: np.ndarray, x: np.ndarray, force: np.ndarray, max_samples: int = MAX_SAMPLES):
@@ -171,7 +178,10 @@ def figures(result: PreslidingResult) -> dict:
             label="measured virgin ramp")
     grid = np.linspace(0, float(s.max()), 400)
     ax.plot(grid, result.fit.model.virgin_curve(grid) + result.fit.model.coulomb * (grid > 0), color="tab:red",
-            label="identified virgin curve")
+            label="identified virgin curve (NNLS)")
+    if result.parametric is not None:
+        ax.plot(grid, result.parametric.virgin_curve(grid), color="tab:green", ls="--",
+                label="parametric virgin curve h(1-(d/(d+x))^2)")
     xp = result.quantities["presliding_distance"]
     ax.axvline(xp, color="k", ls=":", label=f"x_p({result.fraction:g}) = {xp:.3g} {u['position']}")
     ax.set(xlabel=f"travel from the relaxed state ({u['position']})", ylabel=f"force change ({u['torque']})",

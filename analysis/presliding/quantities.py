@@ -23,6 +23,7 @@ from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.identification.regressors import position_resolution
 from hilbench.analysis.models.friction_model import FrictionModel
 from hilbench.analysis.presliding.identify import PreslidingFit, fit_presliding
+from hilbench.analysis.presliding.parametric import RollingFit
 
 #: default fraction of the sliding level that defines the presliding distance (see docs/presliding.md)
 DEFAULT_FRACTION = 0.9
@@ -31,6 +32,12 @@ MIN_COUNTS = 5.0
 #: F_b is resolved when the elements at the top of the threshold grid (still sticking at the largest travel) hold at
 #: most this fraction of it
 TOP_SHARE = 0.02
+#: the parametric sum(k) is usable when its standard uncertainty is at most this fraction of it ...
+PARAMETRIC_REL = 0.1
+#: ... and the rolling-friction shape fits the data within this fraction of h (rms residual)
+PARAMETRIC_FIT = 0.01
+#: ... or within this factor of the residual the quantisation and the force noise alone leave
+PARAMETRIC_EXCESS = 2.0
 
 
 def presliding_distance(model: FrictionModel, fraction: float = DEFAULT_FRACTION) -> float:
@@ -90,7 +97,7 @@ class Resolution:
 
 def resolution(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, loop_travels: np.ndarray,
                counts_per_rev: float | None = None, fraction: float = DEFAULT_FRACTION,
-               step: float | None = None) -> Resolution:
+               step: float | None = None, rolling: RollingFit | None = None) -> Resolution:
     """Which quantities the position step and the force noise still resolve (docs/presliding.md, "Resolution").
 
     Args:
@@ -103,6 +110,8 @@ def resolution(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, loop_travel
     above 3x the force noise; F_b needs a travel of 2*x_p + MIN_COUNTS steps, F_b above 10x the noise
     and at most TOP_SHARE of it in elements at the grid's top;
     a loop's reversal force and memory checks need its travel >= MIN_COUNTS steps.
+    ``rolling``: the parametric fit beside the NNLS; one more line says which virgin curve and sum(k) to trust
+    (:func:`trust_line`).
     """
     if counts_per_rev and fit.model.axis == "rotary":
         step, source = 2 * math.pi / float(counts_per_rev), f"{counts_per_rev:.0f} counts/rev"
@@ -147,5 +156,36 @@ def resolution(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, loop_travel
     lines.append(f"reversal forces and memory checks: {loop_travels.size - small} of {loop_travels.size} branches "
                  f"resolved" + (f"; {small} travel less than {MIN_COUNTS:g} steps ({MIN_COUNTS * step:.3g} {unit})"
                                 if small else ""))
+    line, ok["parametric"] = trust_line(rolling, ok["initial_stiffness"], step, noise, fraction, unit, kunit)
+    lines.append(line)
     return Resolution(step, source, noise, lines, {k: bool(v) for k, v in ok.items()})
+
+
+def trust_line(rolling: RollingFit | None, nnls_k0_resolved: bool, step: float, noise: float, fraction: float,
+               unit: str, kunit: str) -> tuple[str, bool]:
+    """(sentence, parametric usable): which estimate of the virgin curve and sum(k) to trust. The parametric one
+    is usable when its virgin ramp spans >= MIN_COUNTS steps (step: rad or m), sum(k) is within PARAMETRIC_REL of
+    itself (Jacobian uncertainty) and the shape fits: rms residual within PARAMETRIC_FIT of h, or within
+    PARAMETRIC_EXCESS times what the quantisation and the force noise (N*m or N) alone leave."""
+    if rolling is None:
+        return ("virgin curve and sum(k): no parametric fit; the NNLS estimate is the only one"
+                + ("" if nnls_k0_resolved else " and its sum(k) is a lower bound")), False
+    q, e = rolling.quantities(fraction), rolling.uncertainties(fraction)
+    k0, u = q["initial_stiffness"], e["initial_stiffness"]
+    fit_share = rolling.rms_error / rolling.h
+    span = rolling.travel / step
+    expected = rolling.expected_error(step, noise)
+    fits = fit_share <= PARAMETRIC_FIT or rolling.rms_error <= PARAMETRIC_EXCESS * expected
+    usable = span >= MIN_COUNTS and u <= PARAMETRIC_REL * k0 and fits
+    facts = (f"parametric sum(k) = 2h/d = {k0:.4g} +- {u:.2g} {kunit}, d = {rolling.d:.3g} {unit}; the virgin ramp "
+             f"spans {span:.3g} position steps; rms residual {100 * fit_share:.2g} % of h, "
+             f"{rolling.rms_error / expected:.2g}x what quantisation and noise alone leave")
+    if nnls_k0_resolved:
+        verdict = "trust the NNLS (model-free, resolved); the parametric one assumes the rolling-friction shape"
+    elif usable:
+        verdict = ("trust the parametric estimate (it assumes the rolling-friction shape h(1-(d/(d+x))^2)); the "
+                   "NNLS sum(k) is a lower bound below one position step")
+    else:
+        verdict = "NEITHER resolves sum(k): the NNLS value is a lower bound and the parametric one is not determined"
+    return f"virgin curve and sum(k): {verdict} ({facts})", usable
 

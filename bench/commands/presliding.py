@@ -120,6 +120,7 @@ def report(res, path: str, channel: str) -> dict:
                        "unit": u["torque"],
                        "what": "force simulated from the measured displacement against the measured force; "
                                "relative to the model's sliding level"},
+        "parametric": _parametric(res, units),
         "checks": res.checks(),
         "resolution": {"step": res.resolution.step, "step_unit": u["position"], "step_source":
                        res.resolution.step_source, "force_noise": res.resolution.force_noise,
@@ -128,11 +129,37 @@ def report(res, path: str, channel: str) -> dict:
     }
 
 
+def _parametric(res, units: dict) -> dict:
+    """The rolling-friction fit beside the NNLS (analysis/presliding/parametric.py), or why there is none."""
+    r = res.parametric
+    if r is None:
+        return {"error": res.parametric_error}
+    q, e = r.quantities(res.fraction), r.uncertainties(res.fraction)
+    units = {**units, "breakaway_extrapolated": units["breakaway"]}
+    u = res.units
+    return {"shape": "h*(1-(d/(d+|x|))^2)*sign(x)", "h": r.h, "d": r.d, "offset": r.offset, "viscous": r.viscous,
+            "units": {"h": u["torque"], "d": u["position"], "offset": u["torque"], "viscous": u["viscous"]},
+            "quantities": {k: {"value": q[k], "std_uncertainty": e[k], "unit": units[k]} for k in q},
+            "uncertainty_method": "Jacobian covariance of scipy.optimize.least_squares (independent residuals)",
+            "virgin_travel": r.travel, "level_reached": r.level_reached(), "fit_rms_error": r.rms_error,
+            "samples": r.samples}
+
+
 def summary_lines(doc: dict) -> list[str]:
     """The human summary: quantities with uncertainties, the checks, the resolution verdicts."""
     lines = []
     for name, q in doc["quantities"].items():
-        lines.append(f"{name.replace('_', ' ')}: {q['value']:.5g} +- {q['std_uncertainty']:.2g} {q['unit']}")
+        lines.append(f"{name.replace('_', ' ')} (NNLS, model-free): {q['value']:.5g} +- {q['std_uncertainty']:.2g} "
+                     f"{q['unit']}")
+    p = doc["parametric"]
+    if "error" in p:
+        lines.append(f"parametric virgin curve: not fitted ({p['error']})")
+    else:
+        for name, q in p["quantities"].items():
+            lines.append(f"{name.replace('_', ' ')} (parametric, h(1-(d/(d+x))^2)): {q['value']:.5g} +- "
+                         f"{q['std_uncertainty']:.2g} {q['unit']}")
+        lines[-3] += (f" (h, extrapolated beyond the measured travel {p['virgin_travel']:.3g} "
+                      f"{p['units']['d']}, where the curve reaches {100 * p['level_reached']:.3g} % of it)")
     c, v = doc["checks"], doc["validation"]
     lines.append(f"model: force simulated from the measured displacement, rms error {v['force_rms_error']:.3g} "
                  f"{v['unit']} ({100 * v['force_rms_error_relative']:.3g} % of the sliding level)")
