@@ -30,8 +30,7 @@ from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.models.families import substeps_for
 from hilbench.analysis.models.friction_model import AXES
 from hilbench.analysis.models.model_file import READABLE as MODEL_SCHEMAS
-from hilbench.analysis.models.model_file import read_family
-from hilbench.analysis.models.model_file import read_model
+from hilbench.analysis.models.model_file import read_family, read_model
 from hilbench.firmware_sim.plant import Plant, PlantParameterError, PlantParams
 
 COMPARE_SCHEMA = "hilbench.compare/1"
