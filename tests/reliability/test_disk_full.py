@@ -7,6 +7,8 @@ import numpy as np
 from hilbench.bench.runfile import open_run
 
 RUN = ["run", "identify", "--device", "sim://?pacing=lockstep", "--duration", "20", "--quiet"]
+#: real-time pacing, so that a kill lands mid-run (a lockstep run of 20 s can complete between two polls)
+RUN_REALTIME = ["run", "identify", "--device", "sim://", "--duration", "20", "--quiet"]
 
 
 def _one_line_error(proc) -> str:
@@ -53,7 +55,7 @@ def test_repair_and_import_on_a_full_disk(small_disk, tmp_path):
 
         pytest.skip("filling a disk needs a tmpfs (root); the write-failure path is covered by the test above")
     # a run killed mid-way: a crashed file on the disk
-    host = subprocess.Popen([sys.executable, "-m", "hilbench", *RUN, "-o", str(disk.path / "c.h5")],
+    host = subprocess.Popen([sys.executable, "-m", "hilbench", *RUN_REALTIME, "-o", str(disk.path / "c.h5")],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
