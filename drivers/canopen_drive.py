@@ -35,7 +35,7 @@ from hilbench.drivers import cia402 as c
 from hilbench.drivers import protocol as p
 from hilbench.drivers.amplifier import check_setpoints
 from hilbench.drivers.calibration import Calibration, CountUnwrapper
-from hilbench.drivers.device import Capabilities, CycleSamples, refusal
+from hilbench.drivers.device import Capabilities, CycleSamples
 from hilbench.drivers.errors import (
     CommandRefusedError,
     ConfigError,
@@ -186,13 +186,7 @@ class CanopenDrive(HostClockedDevice):
 
     # ------------------------------------------------------------------ Device API
     def configure(self, config: p.Config) -> None:
-        problems = config.problems()
-        if problems:
-            raise ConfigError("; ".join(problems))
-        mode = "current" if config.mode == p.Mode.CURRENT else "velocity"
-        why = refusal(self.name, self.capabilities, mode, config.sample_rate)
-        if why:
-            raise ConfigError(why)
+        self._check_config(config)
         if config.counts_per_rev != self.counts_per_rev:
             raise ConfigError(f"counts_per_rev {config.counts_per_rev} differs from the drive's encoder resolution "
                               f"0x608F = {self.counts_per_rev} increments/rev")

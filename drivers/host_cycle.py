@@ -23,7 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hilbench.drivers.device import Device
+from hilbench.drivers.device import Device, refusal
+from hilbench.drivers.errors import ConfigError
 
 LATE_FRACTION = 0.25
 JITTER_LIMIT = 0.10
@@ -110,6 +111,15 @@ class HostClockedDevice(Device):
         """For an operator display, without disturbing a stream: ``state`` (text), ``armed`` (power stage on),
         ``streaming``, ``faults`` (one-line texts), ``cycle`` (cycles sent in the current or last stream),
         ``current_cmd`` (A, the last command sent) and ``counters`` (name: (value, unit)) of the last stream."""
+
+    def _check_config(self, config) -> None:
+        """Refuse, before anything is sent, a CONFIG with problems or one the drive's capabilities cannot run."""
+        problems = config.problems()
+        if problems:
+            raise ConfigError("; ".join(problems))
+        why = refusal(self.name, self.capabilities, config.mode.name.lower(), config.sample_rate)
+        if why:
+            raise ConfigError(why)
 
     def timing_counters(self) -> dict[str, tuple[float, str]]:
         """The last stream's timing figures as (value, unit) for a display."""

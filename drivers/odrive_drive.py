@@ -32,8 +32,8 @@ import numpy as np
 from hilbench.drivers import odrive_can as o
 from hilbench.drivers import protocol as p
 from hilbench.drivers.amplifier import check_setpoints
-from hilbench.drivers.device import Capabilities, CycleSamples, refusal
-from hilbench.drivers.errors import CommandRefusedError, ConfigError, DeviceFaultError, DeviceTimeoutError, DriverError
+from hilbench.drivers.device import Capabilities, CycleSamples
+from hilbench.drivers.errors import CommandRefusedError, DeviceFaultError, DeviceTimeoutError, DriverError
 from hilbench.drivers.host_cycle import CanCycle, CanCycleSpec, HostClockedDevice, timing_summary
 
 FEED_PERIOD = 0.02  # s between watchdog feeds while armed and not streaming
@@ -121,13 +121,7 @@ class OdriveDrive(HostClockedDevice):
 
     # ------------------------------------------------------------------ Device API
     def configure(self, config: p.Config) -> None:
-        problems = config.problems()
-        if problems:
-            raise ConfigError("; ".join(problems))
-        mode = "current" if config.mode == p.Mode.CURRENT else "velocity"
-        why = refusal(self.name, self.capabilities, mode, config.sample_rate)
-        if why:
-            raise ConfigError(why)
+        self._check_config(config)
         self._send(o.Cmd.SET_CONTROLLER_MODE, o.U32x2.pack(o.CONTROL_MODE_TORQUE, o.INPUT_MODE_PASSTHROUGH))
         self._send(o.Cmd.SET_LIMITS, o.FLOAT2.pack(config.velocity_limit / (2 * math.pi), config.current_limit))
         # enable_torque_mode_vel_limit off, then read back (it reshapes the commanded torque near vel_limit)

@@ -82,7 +82,11 @@ def _arrays(path: str, requested: str | None, timing: str):
                                            arrays.torque, timing)
             arrays = RunArrays(t, tau, x, run.axis, arrays.name)
             origin = f"{origin}; {line}"
-    return arrays, name, timing, origin
+        record = run.meta.get("record")
+        # a host-clocked run says how its cycle went (docs/drives.md)
+        cycle_lines = [str(e["message"]) for e in run.events
+                       if e["kind"] == "info" and str(e["message"]).startswith("host-clocked timing")]
+    return arrays, name, timing, origin, record, cycle_lines
 
 
 def run(args) -> int:
@@ -94,7 +98,6 @@ def run(args) -> int:
     from hilbench.bench import outputs
     from hilbench.bench.analysis_input import MAX_THRESHOLDS, check_count, check_cutoff
     from hilbench.bench.errors import BenchError
-    from hilbench.bench.runfile import open_run
     from hilbench.bench.verdict import judge
 
     outputs.refuse_inputs({"--json": args.json, "--plots": args.plots}, [args.run, args.validate])
@@ -102,19 +105,17 @@ def run(args) -> int:
                 "candidate thresholds; a model must fit the plant's element limit")
     if args.inertia is not None and not (math.isfinite(args.inertia) and args.inertia >= 0):
         raise BenchError(f"--inertia must be finite and >= 0, got {args.inertia}")
-    train, channel, timing, origin = _arrays(args.run, args.torque_channel, args.torque_timing)
+    train, channel, timing, origin, record, cycle_lines = _arrays(args.run, args.torque_channel,
+                                                                  args.torque_timing)
     outputs.say(f"torque timing: {timing} ({origin})", args.json)
     val = _arrays(args.validate, args.torque_channel, args.torque_timing)[0] if args.validate else None
     check_cutoff(args.cutoff, train.fs)
-    with open_run(args.run) as r:
-        record = record_kind(r.meta.get("record"), args.run)
-        for event in r.events:  # a host-clocked run says how its cycle went (docs/drives.md)
-            text = str(event["message"])
-            if event["kind"] == "info" and text.startswith("host-clocked timing"):
-                if "UNFIT" in text:
-                    print(f"{args.run}: {text}", file=sys.stderr)
-                else:
-                    outputs.say(f"{args.run}: {text}", args.json)
+    record = record_kind(record, args.run)
+    for text in cycle_lines:
+        if "UNFIT" in text:
+            print(f"{args.run}: {text}", file=sys.stderr)
+        else:
+            outputs.say(f"{args.run}: {text}", args.json)
     inertia = 0.0 if args.inertia is None and record == "displacement-driven" else args.inertia
     settings = LipSettings(
         n_thresholds=args.thresholds,
