@@ -190,7 +190,7 @@ def load_campaign(path: str | Path) -> Campaign:
             bad = next((k for k in params if str(exc).startswith(k)), "protocol")
             raise fail(bad, str(exc)) from None
         try:
-            settings = DeviceSettings(**setting_values)
+            settings = DeviceSettings(**{**cls.RECOMMENDED_SETTINGS, **setting_values})
         except SettingsError as exc:
             raise fail(str(exc).split()[0], str(exc)) from None
         try:

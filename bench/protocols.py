@@ -106,6 +106,9 @@ class Protocol:
     name: ClassVar[str] = ""
     SPECS: ClassVar[dict[str, ParameterSpec]] = {}
     MODES: ClassVar[tuple[str, ...]] = ("current", "velocity")
+    #: device settings (``DeviceSettings`` names, their units) this protocol measures best with; the config
+    #: file's ``[settings]``, a campaign's keys and the command line all override them
+    RECOMMENDED_SETTINGS: ClassVar[dict[str, float]] = {}
 
     def __post_init__(self) -> None:
         mode = self.mode  # type: ignore[attr-defined]
@@ -320,6 +323,12 @@ class Presliding(Protocol):
 
     name: ClassVar[str] = "presliding"
     MODES: ClassVar[tuple[str, ...]] = ("position",)
+    # A gentle, integral-led loop. On a quantised encoder the proportional and derivative terms kick the
+    # current at every count edge, the contact then runs minor loops, and the averaged force falls below the
+    # virgin curve: -1.3 % of the sliding level with the stiff defaults (kp 3000, ki 3e5, kd 5), -0.2 % with
+    # these on the simulated DC motor at 2^16 counts/rev (docs/presliding.md, "Loop gains").
+    RECOMMENDED_SETTINGS: ClassVar[dict[str, float]] = {"position_kp": 100.0, "position_ki": 3.0e4,
+                                                        "position_kd": 0.5}
     record: ClassVar[str] = "displacement-driven"
     SPECS: ClassVar[dict[str, ParameterSpec]] = {
         "amplitudes": ParameterSpec("unit", 1e-9, 1e3, "turning-point amplitudes A1 >= A2 >= ... (in `unit`)",

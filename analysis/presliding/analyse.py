@@ -5,24 +5,32 @@ The caller writes the outputs (plain data and matplotlib figures here; analysis 
 from __future__ import annotations
 
 import io
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.identification.regressors import position_resolution
 from hilbench.analysis.models.friction_model import AXES
+from hilbench.analysis.presliding.edges import EdgePoints, edge_points
 from hilbench.analysis.presliding.identify import PreslidingFit, PreslidingSettings, fit_presliding
 from hilbench.analysis.presliding.parametric import RollingFit, fit_rolling
 from hilbench.analysis.presliding.quantities import DEFAULT_FRACTION, Resolution, bootstrap, quantities, resolution
-from hilbench.analysis.presliding.reversals import MemoryCheck, find_reversals, memory_check
+from hilbench.analysis.presliding.reversals import MemoryCheck, extreme_forces, find_reversals, memory_check
 
 #: the reversal hysteresis, in position steps, when none is given
 HYSTERESIS_STEPS = 1.5
+#: count edges the virgin ramp must cross before the edge-pinned fit is made
+MIN_EDGE_RAMP = 5
 #: records longer than this are averaged in blocks first (samples)
 MAX_SAMPLES = 10_000
-TABLE_COLUMNS = ("n", "sample", "t_s", "x", "kind", "depth", "travel", "force_measured", "force_rules",
-                 "force_model")
+TABLE_COLUMNS = ("n", "sample", "t_s", "x", "kind", "depth", "travel", "force_measured", "force_extreme",
+                 "force_rules", "force_model")
+#: the moving average (s) over which a branch's extreme force is read (reversals.extreme_forces)
+EXTREME_WINDOW_S = 0.01
+#: an excursion past a count edge shorter than this (s) is dither, not a turning point (edges.edge_points)
+MIN_EXCURSION_S = 0.01
 
 
 @dataclass
@@ -44,6 +52,11 @@ class PreslidingResult:
     block: int = 1  # samples averaged into one (block_means)
     parametric: RollingFit | None = None  # the rolling-friction shape fitted beside the NNLS (parametric.py)
     parametric_error: str = ""  # why there is no parametric fit
+    edges: EdgePoints | None = None  # dwells at count edges of a quantised record (edges.py)
+    edge_fit: PreslidingFit | None = None  # the force model fitted on the edge-pinned path
+    edge_error: str = ""  # why there is no edge-pinned fit
+    extremes: np.ndarray | None = None  # each turning point's extreme force (reversals.extreme_forces)
+    edge_rolling: RollingFit | None = None  # the rolling-friction shape fitted to the edge-pinned virgin ramp
 
     @property
     def units(self) -> dict[str, str]:
@@ -56,7 +69,9 @@ class PreslidingResult:
             rows.append({"n": n + 1, "sample": int(i), "t_s": float(self.t[i]), "x": float(self.x[i]),
                          "kind": "max" if self.x[i] > self.x[self.reversals[n - 1] if n else 0] else "min",
                          "depth": int(self.check.depth[n]), "travel": float(travel),
-                         "force_measured": float(self.force[i]), "force_rules": float(self.check.reversal_rules[n]),
+                         "force_measured": float(self.force[i]),
+                         "force_extreme": float(self.extremes[n]) if self.extremes is not None else float("nan"),
+                         "force_rules": float(self.check.reversal_rules[n]),
                          "force_model": float(self.fit.simulated[i])})
         return rows
 
@@ -86,6 +101,10 @@ def analyse(t: np.ndarray, x: np.ndarray, force: np.ndarray, fs: float, axis: st
     steps. ``replicates``: bootstrap replicates for the uncertainties. A record longer than ``max_samples`` is
     first averaged in blocks (:func:`block_means`). AnalysisError for unusable input (e.g. no reversal)."""
     step = position_resolution(np.asarray(x, float))  # of the samples as recorded, before any averaging
+    raw = np.asarray(force, float)
+    edges, edge_fit, edge_why, edge_rolling = _edge_fit(np.asarray(x, float), raw, step, axis, settings,
+                                                        max(1, math.ceil(MIN_EXCURSION_S * fs)))
+    window = max(1, round(EXTREME_WINDOW_S * fs))
     t, x, force, block = block_means(t, x, force, max_samples)
     fs = fs / block
     if hysteresis is None:
@@ -103,9 +122,43 @@ def analyse(t: np.ndarray, x: np.ndarray, force: np.ndarray, fs: float, axis: st
         rolling, why = fit_rolling(x, force, fs, rev), ""
     except AnalysisError as exc:
         rolling, why = None, str(exc)
-    res = resolution(fit, x, force, travels, counts_per_rev, fraction, step=step, rolling=rolling)
+    res = resolution(fit, x, force, travels, counts_per_rev, fraction, step=step, rolling=rolling,
+                     edge_rolling=edge_rolling)
+    extremes = extreme_forces(raw, rev * block + block // 2, window)
     return PreslidingResult(t, x, force, axis, fit, rev, travels[:-1], check,
-                            quantities(fit.model, fraction), unc, res, fraction, block, rolling, why)
+                            quantities(fit.model, fraction), unc, res, fraction, block, rolling, why,
+                            edges, edge_fit, edge_why, extremes, edge_rolling)
+
+
+def is_quantised(x: np.ndarray, step: float) -> bool:
+    """True when x holds still for most samples and moves in whole steps: an encoder record, not a
+    continuous (noisy) one."""
+    dx = np.diff(x)
+    moves = dx[dx != 0]
+    if step <= 0 or moves.size == 0 or moves.size > 0.5 * dx.size:
+        return False
+    return bool(np.all(np.abs(moves / step - np.round(moves / step)) < 1e-3))
+
+
+def _edge_fit(x: np.ndarray, force: np.ndarray, step: float, axis: str, settings: PreslidingSettings | None,
+              min_excursion: int) -> tuple[EdgePoints | None, PreslidingFit | None, str, RollingFit | None]:
+    """The force model on the edge-pinned path of a quantised record, or why there is none, and the rolling-friction
+    shape fitted to the edge-pinned virgin ramp alone (None when that fit fails). The dwell means carry no mean
+    velocity or acceleration, so neither has a viscous or inertia term."""
+    if not is_quantised(x, step):
+        return None, None, "the displacement is not quantised in whole steps", None
+    edges = edge_points(x, force, step, min_excursion=min_excursion)
+    rev = find_reversals(edges.x, 0.5 * step)
+    ramp = slice(0, int(rev[0]) + 1 if rev.size else edges.size)
+    ramp_edges = np.unique(edges.x[ramp][edges.crossings[ramp] > 0]).size  # edges crossed, not excursions
+    if rev.size == 0 or ramp_edges < MIN_EDGE_RAMP:
+        return edges, None, (f"the virgin ramp crosses {ramp_edges} count edges, fewer than {MIN_EDGE_RAMP}"), None
+    s = replace(settings or PreslidingSettings(), viscous=False, inertia=0.0)
+    try:  # the ramp alone: a branch's edges hold turning points no edge pins (edges.py)
+        rolling = fit_rolling(edges.x[ramp], edges.force[ramp], 1.0, rev[:1], viscous=False)
+    except AnalysisError:
+        rolling = None
+    return edges, fit_presliding(edges.x, edges.force, 1.0, axis, s, step=step), "", rolling
 
 
 def block_means(t: np.ndarray, x: np.ndarray, force: np.ndarray, max_samples: int = MAX_SAMPLES):
@@ -143,7 +196,7 @@ def table_markdown(result: PreslidingResult) -> str:
 def _headers(result: PreslidingResult) -> list[str]:
     u = result.units
     unit = {"t_s": "s", "x": u["position"], "travel": u["position"], "force_measured": u["torque"],
-            "force_rules": u["torque"], "force_model": u["torque"]}
+            "force_extreme": u["torque"], "force_rules": u["torque"], "force_model": u["torque"]}
     return [f"{c} ({unit[c]})" if c in unit and c != "t_s" else c for c in TABLE_COLUMNS]
 
 
@@ -179,9 +232,20 @@ def figures(result: PreslidingResult) -> dict:
     grid = np.linspace(0, float(s.max()), 400)
     ax.plot(grid, result.fit.model.virgin_curve(grid) + result.fit.model.coulomb * (grid > 0), color="tab:red",
             label="identified virgin curve (NNLS)")
+    if result.edge_fit is not None:
+        e = result.edges
+        r = find_reversals(e.x, 0.5 * result.resolution.step)
+        ramp = slice(0, int(r[0]) + 1) if r.size else slice(None)
+        ax.plot(sgn * (e.x[ramp] - e.x[0]), sgn * (e.force[ramp] - e.force[0]), "o", ms=3, mfc="none",
+                color="tab:purple", label="dwells at count edges (position exact)")
+        ax.plot(grid, result.edge_fit.model.virgin_curve(grid), color="tab:purple",
+                label="identified virgin curve (edge-pinned NNLS)")
+    if result.edge_rolling is not None:
+        ax.plot(grid, result.edge_rolling.virgin_curve(grid), color="tab:orange", ls="-.",
+                label="parametric virgin curve on the edge-pinned ramp")
     if result.parametric is not None:
         ax.plot(grid, result.parametric.virgin_curve(grid), color="tab:green", ls="--",
-                label="parametric virgin curve h(1-(d/(d+x))^2)")
+                label="parametric virgin curve h(1-(d/(d+x))^2) on the samples")
     xp = result.quantities["presliding_distance"]
     ax.axvline(xp, color="k", ls=":", label=f"x_p({result.fraction:g}) = {xp:.3g} {u['position']}")
     ax.set(xlabel=f"travel from the relaxed state ({u['position']})", ylabel=f"force change ({u['torque']})",

@@ -68,12 +68,13 @@ class RollingFit:
         return float(rolling_virgin(self.travel, 1.0, self.d))
 
 
-def fit_rolling(x: np.ndarray, force: np.ndarray, fs: float, reversals: np.ndarray) -> RollingFit:
+def fit_rolling(x: np.ndarray, force: np.ndarray, fs: float, reversals: np.ndarray, viscous: bool = True) -> RollingFit:
     """Fit phi to the virgin ramp and the first Masing branch of a presliding record.
 
     Args:
         x: displacement, shape (n,), rad or m, relaxed at x[0]; force: shape (n,), N*m or N; fs: Hz.
         reversals: turning-point indices (at least one: the end of the virgin ramp).
+        viscous: fit b*x' too; False for points without a velocity (the dwells of edges.py), b is then 0.
     Returns:
         :class:`RollingFit`; AnalysisError when the ramp is too short or the fit fails.
     """
@@ -90,14 +91,15 @@ def fit_rolling(x: np.ndarray, force: np.ndarray, fs: float, reversals: np.ndarr
     branch = np.arange(r0 + 1, r1 + 1)
     branch = branch[np.abs(x[branch] - x[r0]) <= 2 * travel]  # beyond, the branch joins the mirrored virgin curve
     ramp = np.arange(0, r0 + 1)
-    v = np.gradient(x) * fs
+    v = np.gradient(x) * fs if viscous else np.zeros_like(x)
     y = np.concatenate([force[ramp], force[branch]])
     scale = float(np.ptp(force[ramp])) or 1.0
     vs = float(np.max(np.abs(v))) or 1.0
+    n_par = 4 if viscous else 3
 
     def model(p):
         h, d = (math.exp(min(max(v, -60.0), 60.0)) for v in p[:2])  # a diverging step stays finite
-        c0, b = p[2] * scale, p[3] * scale / vs
+        c0, b = p[2] * scale, (p[3] * scale / vs if viscous else 0.0)
         fr = c0 + rolling_virgin(x[r0] - x[0], h, d)
         return np.concatenate([c0 + rolling_virgin(x[ramp] - x[0], h, d) + b * v[ramp],
                                fr + 2 * rolling_virgin((x[branch] - x[r0]) / 2, h, d) + b * v[branch]])
@@ -105,7 +107,7 @@ def fit_rolling(x: np.ndarray, force: np.ndarray, fs: float, reversals: np.ndarr
     rise = np.abs(force[ramp] - force[0])
     half = np.abs(x[ramp] - x[0])[np.argmax(rise >= 0.5 * rise.max())]
     d0 = max(half / 0.414, travel * 1e-3)
-    p0 = [math.log(1.2 * rise.max() or 1.0), math.log(d0), force[0] / scale, 0.0]
+    p0 = [math.log(1.2 * rise.max() or 1.0), math.log(d0), force[0] / scale, 0.0][:n_par]
     try:
         sol = least_squares(lambda p: model(p) - y, p0, x_scale="jac", method="lm")
     except ValueError as exc:  # non-finite residuals
@@ -114,12 +116,13 @@ def fit_rolling(x: np.ndarray, force: np.ndarray, fs: float, reversals: np.ndarr
         raise AnalysisError("the parametric virgin-curve fit found no finite h and d: the ramp does not determine "
                             f"the shape ({sol.message})")
     resid = sol.fun
-    dof = max(y.size - 4, 1)
+    dof = max(y.size - n_par, 1)
     s2 = float(resid @ resid) / dof
+    cov = np.zeros((4, 4))
     try:
-        cov = np.linalg.inv(sol.jac.T @ sol.jac) * s2
+        cov[:n_par, :n_par] = np.linalg.inv(sol.jac.T @ sol.jac) * s2
     except np.linalg.LinAlgError:
-        cov = np.full((4, 4), np.inf)
+        cov[:n_par, :n_par] = np.inf
     cov[2:, :] *= scale
     cov[:, 2:] *= scale
     cov[3, :] /= vs
@@ -128,5 +131,5 @@ def fit_rolling(x: np.ndarray, force: np.ndarray, fs: float, reversals: np.ndarr
     h, d = math.exp(p[0]), math.exp(p[1])
     s = np.concatenate([np.abs(x[ramp] - x[0]), np.abs(x[branch] - x[r0]) / 2])
     slope = 2 * h * d ** 2 / (d + s) ** 3  # phi'(s); Masing's branch has the same slope at half the travel
-    return RollingFit(h, d, p[2] * scale, p[3] * scale / vs, cov, float(travel),
+    return RollingFit(h, d, p[2] * scale, p[3] * scale / vs if viscous else 0.0, cov, float(travel),
                       math.sqrt(float(resid @ resid) / y.size), int(y.size), float(np.sqrt(np.mean(slope ** 2))))

@@ -97,7 +97,8 @@ class Resolution:
 
 def resolution(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, loop_travels: np.ndarray,
                counts_per_rev: float | None = None, fraction: float = DEFAULT_FRACTION,
-               step: float | None = None, rolling: RollingFit | None = None) -> Resolution:
+               step: float | None = None, rolling: RollingFit | None = None,
+               edge_rolling: RollingFit | None = None) -> Resolution:
     """Which quantities the position step and the force noise still resolve (docs/presliding.md, "Resolution").
 
     Args:
@@ -110,8 +111,8 @@ def resolution(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, loop_travel
     above 3x the force noise; F_b needs a travel of 2*x_p + MIN_COUNTS steps, F_b above 10x the noise
     and at most TOP_SHARE of it in elements at the grid's top;
     a loop's reversal force and memory checks need its travel >= MIN_COUNTS steps.
-    ``rolling``: the parametric fit beside the NNLS; one more line says which virgin curve and sum(k) to trust
-    (:func:`trust_line`).
+    ``rolling``: the parametric fit beside the NNLS, ``edge_rolling`` the same shape on the edge-pinned virgin
+    ramp (edges.py); one more line says which virgin curve and sum(k) to trust (:func:`trust_line`).
     """
     if counts_per_rev and fit.model.axis == "rotary":
         step, source = 2 * math.pi / float(counts_per_rev), f"{counts_per_rev:.0f} counts/rev"
@@ -156,17 +157,30 @@ def resolution(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, loop_travel
     lines.append(f"reversal forces and memory checks: {loop_travels.size - small} of {loop_travels.size} branches "
                  f"resolved" + (f"; {small} travel less than {MIN_COUNTS:g} steps ({MIN_COUNTS * step:.3g} {unit})"
                                 if small else ""))
-    line, ok["parametric"] = trust_line(rolling, ok["initial_stiffness"], step, noise, fraction, unit, kunit)
+    line, ok["parametric"] = trust_line(rolling, ok["initial_stiffness"], step, noise, fraction, unit, kunit,
+                                        edge_rolling)
     lines.append(line)
     return Resolution(step, source, noise, lines, {k: bool(v) for k, v in ok.items()})
 
 
 def trust_line(rolling: RollingFit | None, nnls_k0_resolved: bool, step: float, noise: float, fraction: float,
-               unit: str, kunit: str) -> tuple[str, bool]:
+               unit: str, kunit: str, edge_rolling: RollingFit | None = None) -> tuple[str, bool]:
     """(sentence, parametric usable): which estimate of the virgin curve and sum(k) to trust. The parametric one
     is usable when its virgin ramp spans >= MIN_COUNTS steps (step: rad or m), sum(k) is within PARAMETRIC_REL of
     itself (Jacobian uncertainty) and the shape fits: rms residual within PARAMETRIC_FIT of h, or within
-    PARAMETRIC_EXCESS times what the quantisation and the force noise (N*m or N) alone leave."""
+    PARAMETRIC_EXCESS times what the quantisation and the force noise (N*m or N) alone leave. ``edge_rolling``
+    (positions exact at count edges, so no quantisation error) is preferred when its sum(k) is within
+    PARAMETRIC_REL of itself and its rms residual within PARAMETRIC_FIT of h."""
+    if edge_rolling is not None and not nnls_k0_resolved:
+        eq, ee = edge_rolling.quantities(fraction), edge_rolling.uncertainties(fraction)
+        ek0, eu = eq["initial_stiffness"], ee["initial_stiffness"]
+        share = edge_rolling.rms_error / edge_rolling.h
+        if eu <= PARAMETRIC_REL * ek0 and share <= PARAMETRIC_FIT:
+            return (f"virgin curve and sum(k): trust the parametric estimate on the edge-pinned virgin ramp "
+                    f"(positions exact at {edge_rolling.samples - 1} count edges; it assumes the rolling-friction "
+                    f"shape h(1-(d/(d+x))^2)); the NNLS sum(k) is a lower bound below one position step "
+                    f"(sum(k) = 2h/d = {ek0:.4g} +- {eu:.2g} {kunit}, d = {edge_rolling.d:.3g} {unit}; rms residual "
+                    f"{100 * share:.2g} % of h)"), True
     if rolling is None:
         return ("virgin curve and sum(k): no parametric fit; the NNLS estimate is the only one"
                 + ("" if nnls_k0_resolved else " and its sum(k) is a lower bound")), False

@@ -159,3 +159,31 @@ def _interp_closure(x: np.ndarray, f: np.ndarray, j: int, xc: float) -> float:
         return float(f[j])
     a = (xc - x1) / (x2 - x1)
     return float(f[j - 1] + min(max(a, 0.0), 1.0) * (f[j] - f[j - 1]))
+
+
+def extreme_forces(force: np.ndarray, reversals: np.ndarray, window: int) -> np.ndarray:
+    """The force at each turning point, read as the branch's extreme: on a Maxwell-slip branch the force is monotone
+    in the travel, so the turning point carries the largest force (into a maximum of x) or the smallest (into a
+    minimum). The force is first averaged over ``window`` samples (scipy.ndimage.uniform_filter1d), and the extreme
+    is searched from half-way back to the previous turning point to half-way on to the next one. Unlike the force
+    at the turning sample, this needs no position: an encoder that does not resolve where the path turned, or a
+    position loop that creeps back during a hold, does not move it.
+
+    Args:
+        force: shape (n,), N or N*m; reversals: turning-point indices into force (find_reversals), increasing,
+        the first one the end of the virgin ramp (a maximum when the ramp rose); window: samples, >= 1.
+    Returns:
+        shape (reversals.size,), N or N*m.
+    """
+    from scipy.ndimage import uniform_filter1d
+
+    force = np.asarray(force, float)
+    smooth = uniform_filter1d(force, max(1, int(window)), mode="nearest")
+    bounds = np.concatenate([[0], reversals, [force.size - 1]])
+    rising = force[reversals[0]] >= force[0] if reversals.size else True
+    out = np.empty(reversals.size)
+    for n, r in enumerate(reversals):
+        a, z = (r + bounds[n]) // 2, (r + bounds[n + 2]) // 2 + 1
+        is_max = (n % 2 == 0) == rising
+        out[n] = smooth[a:z].max() if is_max else smooth[a:z].min()
+    return out

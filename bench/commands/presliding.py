@@ -102,13 +102,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 def report(res, path: str, channel: str) -> dict:
-    """The JSON document (schema hilbench-presliding 1, docs/presliding.md)."""
+    """The JSON document (schema hilbench-presliding 2, docs/presliding.md)."""
     u = res.units
     q, e = res.quantities, res.uncertainties
     units = {"breakaway": u["torque"], "initial_stiffness": u["stiffness"], "presliding_distance": u["position"]}
     m = res.fit.model
     return {
-        "schema": "hilbench-presliding", "schema_version": 1, "run": str(Path(path).resolve()),
+        "schema": "hilbench-presliding", "schema_version": 2, "run": str(Path(path).resolve()),
         "force_channel": channel, "axis": res.axis, "fraction": res.fraction, "samples_averaged": res.block,
         "quantities": {k: {"value": q[k], "std_uncertainty": e[k], "unit": units[k]} for k in q},
         "uncertainty_method": "moving-block residual bootstrap, refit on the same threshold grid",
@@ -121,6 +121,7 @@ def report(res, path: str, channel: str) -> dict:
                        "what": "force simulated from the measured displacement against the measured force; "
                                "relative to the model's sliding level"},
         "parametric": _parametric(res, units),
+        "edge_pinned": _edge_pinned(res, units),
         "checks": res.checks(),
         "resolution": {"step": res.resolution.step, "step_unit": u["position"], "step_source":
                        res.resolution.step_source, "force_noise": res.resolution.force_noise,
@@ -145,6 +146,35 @@ def _parametric(res, units: dict) -> dict:
             "samples": r.samples}
 
 
+def _edge_pinned(res, units: dict) -> dict:
+    """The force model on the dwells at count edges (analysis/presliding/edges.py), or why there is none."""
+    f = res.edge_fit
+    if f is None:
+        return {"error": res.edge_error}
+    from hilbench.analysis.presliding.quantities import quantities
+
+    u, m = res.units, f.model
+    q = quantities(m, res.fraction)
+    return {"points": res.edges.size, "crossings": int(res.edges.crossings.sum()),
+            "ms_stiffness": m.ms_stiffness.tolist(), "ms_delta": m.ms_delta.tolist(), "offset": m.offset,
+            "units": {"ms_stiffness": u["stiffness"], "ms_delta": u["position"], "offset": u["torque"]},
+            "quantities": {k: {"value": q[k], "unit": units[k]} for k in q},
+            "force_rms_error": f.rms_error, "force_rms_error_relative": f.relative_rms,
+            "parametric_ramp": _rolling_doc(res.edge_rolling, res, units)}
+
+
+def _rolling_doc(r, res, units: dict) -> dict:
+    if r is None:
+        return {"error": "the rolling-friction shape found no finite h and d on the edge-pinned virgin ramp"}
+    q, e = r.quantities(res.fraction), r.uncertainties(res.fraction)
+    u = res.units
+    return {"h": r.h, "d": r.d, "offset": r.offset, "units": {"h": u["torque"], "d": u["position"],
+                                                              "offset": u["torque"]},
+            "quantities": {k: {"value": q[k], "std_uncertainty": e[k],
+                               "unit": {**units, "breakaway_extrapolated": units["breakaway"]}[k]} for k in q},
+            "fit_rms_error": r.rms_error, "points": r.samples}
+
+
 def summary_lines(doc: dict) -> list[str]:
     """The human summary: quantities with uncertainties, the checks, the resolution verdicts."""
     lines = []
@@ -160,6 +190,19 @@ def summary_lines(doc: dict) -> list[str]:
                          f"{q['std_uncertainty']:.2g} {q['unit']}")
         lines[-3] += (f" (h, extrapolated beyond the measured travel {p['virgin_travel']:.3g} "
                       f"{p['units']['d']}, where the curve reaches {100 * p['level_reached']:.3g} % of it)")
+    e = doc.get("edge_pinned", {"error": "not made"})
+    if "error" in e:
+        lines.append(f"edge-pinned virgin curve: not fitted ({e['error']})")
+    else:
+        for name, q in e["quantities"].items():
+            bound = " (a lower bound: no edge lies inside the first half step)" if name == "initial_stiffness" else ""
+            lines.append(f"{name.replace('_', ' ')} (edge-pinned NNLS, {e['points']} dwells at count edges): "
+                         f"{q['value']:.5g} {q['unit']}{bound}")
+        pr = e["parametric_ramp"]
+        if "error" not in pr:
+            k0 = pr["quantities"]["initial_stiffness"]
+            lines.append(f"initial stiffness (edge-pinned virgin ramp, h(1-(d/(d+x))^2), {pr['points']} points): "
+                         f"{k0['value']:.5g} +- {k0['std_uncertainty']:.2g} {k0['unit']}")
     c, v = doc["checks"], doc["validation"]
     lines.append(f"model: force simulated from the measured displacement, rms error {v['force_rms_error']:.3g} "
                  f"{v['unit']} ({100 * v['force_rms_error_relative']:.3g} % of the sliding level)")
@@ -167,6 +210,10 @@ def summary_lines(doc: dict) -> list[str]:
                  f"max {c['wiping_out_max']:.3g}, rms {c['wiping_out_rms']:.3g}, loop closure {c['closure_max']:.3g} "
                  f"over {c['closed_loops']} closed loops (fractions of the largest virgin force "
                  f"{c['scale']:.4g} {v['unit']}; force noise {c['force_noise_relative']:.2g})")
+    ext = [r["force_extreme"] for r in doc["reversals"]]
+    unit = v["unit"]
+    lines.append("reversal forces (each branch's extreme, 10 ms moving average): "
+                 + ", ".join(f"{f:.4g}" for f in ext) + f" {unit}")
     lines.append(f"reversal forces: by the memory rules within {c['reversal_rules_max']:.3g}, by the model within "
                  f"{c['reversal_model_max']:.3g} (fractions of the largest virgin force)")
     lines += [f"resolution: {line}" for line in doc["resolution"]["lines"]]

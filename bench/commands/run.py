@@ -66,7 +66,8 @@ def protocol_from_args(cls: type[Protocol], args: argparse.Namespace) -> Protoco
 
 
 def settings_from_args(args: argparse.Namespace):
-    """Device settings: the options given, over the config file's ``[settings]``, over the defaults."""
+    """Device settings: the options given, over the config file's ``[settings]``, over the protocol's
+    ``RECOMMENDED_SETTINGS``, over the defaults."""
     from hilbench.bench.runner import DeviceSettings
     from hilbench.bench.user_config import default_settings
 
@@ -74,7 +75,9 @@ def settings_from_args(args: argparse.Namespace):
     for name, value in values.items():
         if isinstance(value, float) and math.isnan(value):
             raise ValueError(f"--{name.replace('_', '-')} is NaN")
-    return DeviceSettings(**{**default_settings(), **values})
+    protocol = getattr(args, "protocol_class", None)
+    recommended = protocol.RECOMMENDED_SETTINGS if protocol else {}
+    return DeviceSettings(**{**recommended, **default_settings(), **values})
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -39,7 +39,7 @@ def tribometer(tmp_path_factory):
 def test_imported_csv_goes_through_the_analysis(tribometer, capsys):
     d, h5, out, k, w = tribometer
     doc = json.loads((out / "presliding.json").read_text())
-    assert doc["schema"] == "hilbench-presliding" and doc["axis"] == "linear"
+    assert doc["schema"] == "hilbench-presliding" and doc["schema_version"] == 2 and doc["axis"] == "linear"
     q = doc["quantities"]
     assert q["breakaway"]["unit"] == "N" and q["presliding_distance"]["unit"] == "m"
     assert q["breakaway"]["value"] == pytest.approx(BREAKAWAY, rel=0.02)
@@ -107,29 +107,55 @@ def test_bad_input_is_one_line_and_exit_2(tribometer, tmp_path, capsys):
 
 
 def test_a_simulated_presliding_run_end_to_end(tmp_path, capsys):
-    """hilbench run presliding on the simulated DC-motor bench (position mode, 10 mA noise, 2^16 counts/rev), then
-    hilbench presliding: the model's reversal forces against the truth's exact force at the commanded turning
-    points. Measured: within 1.6 % of sum W at 8 d/s (1.0 % at the default 2 d/s, docs/presliding.md)."""
+    """The done-when run: hilbench run presliding with its defaults on the simulated DC-motor bench (position mode
+    with the protocol's recommended gains, 10 mA noise, 2^16 counts/rev), then hilbench presliding. The truth is the
+    plant's exact Maxwell-slip force (tests/truth, independent stop operators) along the commanded path.
+    Measured over seeds 0, 1, 2: edge-pinned virgin curve 0.53-0.64 % RMS of sum W; reversal forces (each branch's
+    extreme) within 0.76 %; sum(k) from the edge-pinned ramp -2.5 to -3.0 % (the 2 % target is not met,
+    docs/presliding.md)."""
+    import h5py
+
     from hilbench.analysis.presliding.reversals import find_reversals
     from hilbench.analysis.run_file import read_run_file
-    from hilbench.firmware_sim.plant import stop_operator
+    from tests.truth.generator import stop_operator_forces
 
     h5, out = tmp_path / "p.h5", tmp_path / "out"
     config = Path(__file__).resolve().parents[2] / "examples" / "presliding_sim.toml"
-    assert main(["run", "presliding", "--rate", "8", "--settle", "0.05", "--counts-per-rev", "65536",
-                 "--device", f"sim://?config={config}", "-o", str(h5), "--quiet"]) == 0
+    assert main(["run", "presliding", "--counts-per-rev", "65536", "--device", f"sim://?config={config}",
+                 "-o", str(h5), "--quiet"]) == 0
+    with h5py.File(h5) as f:
+        sent = json.loads(f["device/config"][()])
+    assert (sent["position_kp"], sent["position_ki"], sent["position_kd"]) == (100.0, 3.0e4, 0.5)
     assert main(["presliding", str(h5), "-o", str(out), "--replicates", "4"]) == 0
     doc = json.loads((out / "presliding.json").read_text())
     k, w = dc_elements()
     x_cmd = read_run_file(h5).channel("position_cmd")
-    truth = stop_operator(x_cmd, w / k) @ k
+    truth = stop_operator_forces(k, w, x_cmd)
     turns = find_reversals(x_cmd, 1e-9)
-    model = np.array([r["force_model"] for r in doc["reversals"]])
-    assert model.size == turns.size == 6
-    assert np.max(np.abs(model - truth[turns])) / w.sum() < 0.03
+    extremes = np.array([r["force_extreme"] for r in doc["reversals"]])
+    assert extremes.size == turns.size == 6
+    assert np.max(np.abs(extremes - truth[turns])) / w.sum() < 0.01
+    edge = doc["edge_pinned"]
+    s = np.linspace(0, x_cmd.max(), 400)
+    virgin = np.minimum.outer(s, w / k) @ k
+    fitted = np.minimum.outer(s, np.array(edge["ms_delta"])) @ np.array(edge["ms_stiffness"])
+    assert np.sqrt(np.mean((fitted - virgin) ** 2)) / w.sum() < 0.01
+    k0 = edge["parametric_ramp"]["quantities"]["initial_stiffness"]["value"]
+    assert k0 == pytest.approx(k.sum(), rel=0.05)
     res = doc["resolution"]["resolved"]
     assert res["presliding_distance"] and not res["initial_stiffness"]
-    # the parametric sum(k) against the discretisation's: measured -11.8 % (NNLS lower bound -48 %); h -0.4 %
-    par = doc["parametric"]
-    assert par["quantities"]["initial_stiffness"]["value"] == pytest.approx(k.sum(), rel=0.2)
-    assert par["h"] == pytest.approx(w.sum(), rel=0.03)
+
+
+def test_a_device_run_at_2_12_counts_completes_and_says_what_is_not_resolved(tmp_path):
+    """At 2^12 counts/rev one count (1.53 mrad) is wider than the presliding distance. With the stiff default gains
+    the device tripped OVER_CURRENT; with the protocol's recommended gains the run completes, and the analysis flags
+    every derived quantity and declines the edge-pinned fit (2 edges on the ramp)."""
+    h5, out = tmp_path / "p.h5", tmp_path / "out"
+    config = Path(__file__).resolve().parents[2] / "examples" / "presliding_sim.toml"
+    assert main(["run", "presliding", "--rate", "8", "--settle", "0.05", "--counts-per-rev", "4096",
+                 "--device", f"sim://?config={config}", "-o", str(h5), "--quiet"]) == 0
+    assert main(["presliding", str(h5), "-o", str(out), "--replicates", "2"]) == 0
+    doc = json.loads((out / "presliding.json").read_text())
+    res = doc["resolution"]["resolved"]
+    assert not (res["presliding_distance"] or res["initial_stiffness"] or res["breakaway"])
+    assert "fewer than 5" in doc["edge_pinned"]["error"]

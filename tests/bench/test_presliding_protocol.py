@@ -159,6 +159,9 @@ def test_settings_come_from_the_config_file_under_the_options(tmp_path, monkeypa
     with h5py.File(out, "r") as f:
         config = json.loads(f["device/config"][()])
     assert (config["counts_per_rev"], config["position_kp"], config["position_kd"]) == (65536, 2500.0, 4.0)
+    # what neither the file nor the options set comes from the protocol's recommendation, then the defaults
+    assert config["position_ki"] == Presliding.RECOMMENDED_SETTINGS["position_ki"] == 3.0e4
+    assert config["position_i_limit"] == DeviceSettings().position_i_limit
     cfg.write_text('[settings]\nposition_gain = 1.0\n')
     assert main(["run", "presliding", "-o", str(tmp_path / "q.h5")]) == 2
     err = capsys.readouterr().err.strip()

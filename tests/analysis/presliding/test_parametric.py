@@ -48,3 +48,15 @@ def test_on_the_exact_dc_discretisation_sum_k_matches_the_discretisation():
     fit = fit_rolling(x, f, FS, find_reversals(x, 1e-9))
     assert fit.quantities(0.9)["initial_stiffness"] == pytest.approx(k.sum(), rel=0.02)
     assert fit.h == pytest.approx(w.sum(), rel=0.01)
+
+
+def test_points_without_velocity_fit_without_a_viscous_term():
+    """viscous=False (the dwells of edges.py, at rest): the closed-form ramp at 12 exact points, 2 % offset,
+    recovers h and d to 1e-6 and reports no viscous term."""
+    from hilbench.analysis.presliding.parametric import rolling_virgin
+
+    h, d = 0.76, 5e-4
+    x = np.concatenate([[0.0], (np.arange(12) + 0.5) * 1e-4])
+    fit = fit_rolling(x, 0.02 + rolling_virgin(x, h, d), 1.0, np.array([x.size - 1]), viscous=False)
+    assert fit.h == pytest.approx(h, rel=1e-6) and fit.d == pytest.approx(d, rel=1e-6)
+    assert fit.viscous == 0.0 and fit.offset == pytest.approx(0.02, abs=1e-9)

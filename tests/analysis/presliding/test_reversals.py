@@ -59,3 +59,23 @@ def test_no_reversal_is_refused():
     x = np.linspace(0, 1e-3, 100)
     with pytest.raises(AnalysisError, match="no reversal"):
         memory_check(x, x * 1e3, find_reversals(x, 1e-6))
+
+
+def test_extreme_forces_read_each_branch_s_turning_force_through_noise():
+    """Branches of a known triangle force path (turning forces 1.0, -0.8, 0.6, held 200 samples each, then a creep
+    back of 2 % as a position loop leaves the turning point), 10 mN of white noise. The 101-sample moving-average
+    extreme is within 3 noise/sqrt(101) of each turning force; the force at the turning sample is not."""
+    from hilbench.analysis.presliding.reversals import extreme_forces
+
+    turns = [0.0, 1.0, -0.8, 0.6]
+    parts, idx = [], []
+    for a, b in zip(turns[:-1], turns[1:], strict=True):
+        parts.append(np.linspace(a, b, 1000, endpoint=False))
+        parts.append(np.full(200, b))
+        parts.append(b - 0.02 * b * np.linspace(0, 1, 300))  # the creep back during the hold
+        idx.append(sum(p.size for p in parts) - 1)  # the turning sample: the end of the hold, as find_reversals says
+    force = np.concatenate(parts + [np.full(500, 0.588)])
+    noisy = force + np.random.default_rng(3).normal(0, 0.01, force.size)
+    got = extreme_forces(noisy, np.array(idx), 101)
+    assert np.max(np.abs(got - np.array(turns[1:]))) < 3 * 0.01 / np.sqrt(101)
+    assert np.max(np.abs(noisy[idx] - np.array(turns[1:]))) > 0.01  # at the sample: the creep and the noise
