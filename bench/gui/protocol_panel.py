@@ -161,9 +161,12 @@ class DeviceSettingsForm(QtWidgets.QWidget):
         from hilbench.bench.user_config import default_settings
 
         try:  # the config file's [settings] (docs/cli.md); a bad file is reported by the CLI, not here
-            defaults = DeviceSettings(**default_settings())
+            configured = default_settings()
+            defaults = DeviceSettings(**configured)
         except (BenchError, ValueError):
-            defaults = DeviceSettings()
+            configured, defaults = {}, DeviceSettings()
+        self._defaults, self._configured = defaults, set(configured)
+        self._shown: dict[str, str] = {}  # the text the form itself last put in each field
         self.fields: dict[str, QtWidgets.QLineEdit] = {}
         form = QtWidgets.QFormLayout(self)
         for name, (unit, text) in DEVICE_OPTIONS.items():
@@ -176,6 +179,17 @@ class DeviceSettingsForm(QtWidgets.QWidget):
             row.addWidget(QtWidgets.QLabel(unit))
             form.addRow(name.replace("_", " "), row)
             self.fields[name] = edit
+            self._shown[name] = edit.text()
+
+    def recommend(self, cls: type[Protocol]) -> None:
+        """Show ``cls.RECOMMENDED_SETTINGS`` (else the defaults) in every field that neither the operator has
+        edited nor the config file's ``[settings]`` sets: the order ``hilbench run`` applies."""
+        for name, edit in self.fields.items():
+            if name in self._configured or edit.text() != self._shown[name]:
+                continue
+            text = format_value(cls.RECOMMENDED_SETTINGS.get(name, getattr(self._defaults, name)))
+            self._shown[name] = text
+            edit.setText(text)
 
     def set_value(self, name: str, value: Any) -> None:
         self.fields[name].setText(value if isinstance(value, str) else format_value(value))
@@ -289,6 +303,7 @@ class ProtocolPanel(QtWidgets.QGroupBox):
         if index < len(self.forms):
             self._protocol_index = index
             self._new_out_name()
+            self.device_form.recommend(PROTOCOLS[self.current_name])
         self.validate()
 
     _protocol_index = 0

@@ -124,3 +124,21 @@ def test_device_settings_are_checked(panel):
     assert panel.validate() is None and "limit" in panel.summary.text()
     form.set_value("amplitude", "0.5")
     assert panel.validate() is not None and panel.settings.current_limit == 2.0
+
+
+def test_presliding_shows_its_recommended_gains_unless_the_operator_set_them(panel):
+    """Choosing presliding puts its RECOMMENDED_SETTINGS in the device form (as `hilbench run` does), leaving the
+    others at the defaults; another protocol puts the defaults back; a field the operator typed in is kept."""
+    from hilbench.bench.protocols import Presliding
+    from hilbench.bench.runner import DeviceSettings
+
+    panel.select("presliding")
+    settings = panel.device_form.settings()
+    assert settings.position_kp == Presliding.RECOMMENDED_SETTINGS["position_kp"] == 100.0
+    assert settings.position_i_limit == DeviceSettings().position_i_limit
+    panel.select("identification")
+    assert panel.device_form.settings().position_kp == DeviceSettings().position_kp
+    panel.device_form.set_value("position_ki", 1234.0)  # the operator's own value
+    panel.select("presliding")
+    assert panel.device_form.settings().position_ki == 1234.0
+    assert panel.device_form.settings().position_kd == 0.5
