@@ -356,17 +356,26 @@ class Bench:
 
 
 @contextmanager
-def signals_as_interrupt(signums: tuple[int, ...] = (signal.SIGTERM, signal.SIGHUP)) -> Iterator[None]:
+def signals_as_interrupt(signums: tuple[int, ...] = (signal.SIGTERM, signal.SIGHUP),
+                         control: RunControl | None = None) -> Iterator[None]:
     """While active, SIGTERM and SIGHUP end a run the way Ctrl-C does: a KeyboardInterrupt naming the
     signal, so shutdown zeroes the current, disarms and finishes the file ``aborted``. Main thread only
-    (elsewhere Python cannot take signals, and this does nothing)."""
+    (elsewhere Python cannot take signals, and this does nothing).
+
+    With ``control``, Ctrl-C (SIGINT) is taken too, and every signal also sets ``control``'s abort flag: an
+    exception raised while C code holds the thread can be cleared there and lost, the flag cannot, and the
+    run loop checks it after every sample block."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def interrupt(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt(signal.Signals(signum).name)
+        if control is not None:
+            control.abort()
+        raise KeyboardInterrupt() if signum == signal.SIGINT else KeyboardInterrupt(signal.Signals(signum).name)
 
+    if control is not None:
+        signums = (*signums, signal.SIGINT)
     previous = {s: signal.signal(s, interrupt) for s in signums}
     try:
         yield

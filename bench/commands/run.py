@@ -101,15 +101,16 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from hilbench.bench.progress import ProgressBar
-    from hilbench.bench.runner import Bench, signals_as_interrupt
+    from hilbench.bench.runner import Bench, RunControl, signals_as_interrupt
 
     protocol = protocol_from_args(args.protocol_class, args)
     settings = settings_from_args(args)
-    with signals_as_interrupt(), Bench.open(args.device, settings) as bench, \
+    control = RunControl()
+    with signals_as_interrupt(control=control), Bench.open(args.device, settings) as bench, \
             ProgressBar(disable=args.quiet) as bar:
         try:
             result = bench.run(protocol, args.out, operator=args.operator, notes=args.notes,
-                               progress=bar.update, overwrite=args.overwrite)
+                               progress=bar.update, overwrite=args.overwrite, control=control)
         except KeyboardInterrupt as exc:
             bar.close()
             print(f"hilbench run: interrupted ({exc or 'Ctrl-C'}); device disarmed, run file marked aborted")
