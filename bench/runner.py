@@ -364,7 +364,8 @@ def signals_as_interrupt(signums: tuple[int, ...] = (signal.SIGTERM, signal.SIGH
 
     With ``control``, Ctrl-C (SIGINT) is taken too, and every signal also sets ``control``'s abort flag: an
     exception raised while C code holds the thread can be cleared there and lost, the flag cannot, and the
-    run loop checks it after every sample block."""
+    run loop checks it after every sample block. A SIGINT the process was started ignoring (a background job
+    of a script) stays ignored, as Python itself leaves it."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -374,7 +375,7 @@ def signals_as_interrupt(signums: tuple[int, ...] = (signal.SIGTERM, signal.SIGH
             control.abort()
         raise KeyboardInterrupt() if signum == signal.SIGINT else KeyboardInterrupt(signal.Signals(signum).name)
 
-    if control is not None:
+    if control is not None and signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
         signums = (*signums, signal.SIGINT)
     previous = {s: signal.signal(s, interrupt) for s in signums}
     try:

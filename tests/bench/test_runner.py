@@ -91,9 +91,11 @@ def test_host_refuses_out_of_range_parameters_before_anything_moves(bench, tmp_p
 
 def _start_cli_run(tmp_path, duration=30):
     out = tmp_path / "cli.h5"
+    # an operator's Ctrl-C reaches a foreground process, whose SIGINT is at its default; a test suite started
+    # in the background of a script inherits SIGINT ignored, and so would the CLI (Python keeps it ignored)
     proc = subprocess.Popen([sys.executable, "-m", "hilbench.bench.cli", "run", "identify", "--duration", str(duration),
                              "--quiet", "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+                            text=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline:
         if out.exists():
@@ -161,12 +163,19 @@ def test_a_ctrl_c_lost_as_an_exception_still_aborts_through_the_flag():
     calls swallows the exception (C code that clears a pending error), the run loop still sees the flag."""
     from hilbench.bench.runner import RunControl, signals_as_interrupt
 
-    control = RunControl()
-    with signals_as_interrupt(control=control):
-        try:
-            os.kill(os.getpid(), signal.SIGINT)
-            time.sleep(1)  # the handler runs here
-        except KeyboardInterrupt:
-            pass  # the exception is lost...
-    assert control.aborted  # ...the flag is not
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # restored on exit
+    outer = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a foreground process
+    try:
+        control = RunControl()
+        with signals_as_interrupt(control=control):
+            try:
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(1)  # the handler runs here
+            except KeyboardInterrupt:
+                pass  # the exception is lost...
+        assert control.aborted  # ...the flag is not
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # restored on exit
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # started in the background of a script: stays ignored
+        with signals_as_interrupt(control=RunControl()):
+            assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, outer)
