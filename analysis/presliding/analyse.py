@@ -15,7 +15,7 @@ from hilbench.analysis.identification.regressors import position_resolution
 from hilbench.analysis.models.friction_model import AXES
 from hilbench.analysis.presliding.edges import EdgePoints, edge_points
 from hilbench.analysis.presliding.identify import PreslidingFit, PreslidingSettings, fit_presliding
-from hilbench.analysis.presliding.parametric import RollingFit, fit_rolling
+from hilbench.analysis.presliding.parametric import RollingFit, fit_rolling, origin_uncertainty
 from hilbench.analysis.presliding.quantities import DEFAULT_FRACTION, Resolution, bootstrap, quantities, resolution
 from hilbench.analysis.presliding.reversals import MemoryCheck, extreme_forces, find_reversals, memory_check
 
@@ -56,7 +56,8 @@ class PreslidingResult:
     edge_fit: PreslidingFit | None = None  # the force model fitted on the edge-pinned path
     edge_error: str = ""  # why there is no edge-pinned fit
     extremes: np.ndarray | None = None  # each turning point's extreme force (reversals.extreme_forces)
-    edge_rolling: RollingFit | None = None  # the rolling-friction shape fitted to the edge-pinned virgin ramp
+    edge_rolling: RollingFit | None = None  # the shape with a free exponent fitted to the edge-pinned virgin ramp
+    edge_rolling_fixed: RollingFit | None = None  # the same with the rolling-friction exponent 2 (the baseline)
 
     @property
     def units(self) -> dict[str, str]:
@@ -102,8 +103,8 @@ def analyse(t: np.ndarray, x: np.ndarray, force: np.ndarray, fs: float, axis: st
     first averaged in blocks (:func:`block_means`). AnalysisError for unusable input (e.g. no reversal)."""
     step = position_resolution(np.asarray(x, float))  # of the samples as recorded, before any averaging
     raw = np.asarray(force, float)
-    edges, edge_fit, edge_why, edge_rolling = _edge_fit(np.asarray(x, float), raw, step, axis, settings,
-                                                        max(1, math.ceil(MIN_EXCURSION_S * fs)))
+    edges, edge_fit, edge_why, edge_rolling, edge_fixed = _edge_fit(np.asarray(x, float), raw, step, axis,
+                                                                    settings, max(1, math.ceil(MIN_EXCURSION_S * fs)))
     window = max(1, round(EXTREME_WINDOW_S * fs))
     t, x, force, block = block_means(t, x, force, max_samples)
     fs = fs / block
@@ -123,11 +124,11 @@ def analyse(t: np.ndarray, x: np.ndarray, force: np.ndarray, fs: float, axis: st
     except AnalysisError as exc:
         rolling, why = None, str(exc)
     res = resolution(fit, x, force, travels, counts_per_rev, fraction, step=step, rolling=rolling,
-                     edge_rolling=edge_rolling)
+                     edge_rolling=edge_rolling, edge_fixed=edge_fixed)
     extremes = extreme_forces(raw, rev * block + block // 2, window)
     return PreslidingResult(t, x, force, axis, fit, rev, travels[:-1], check,
                             quantities(fit.model, fraction), unc, res, fraction, block, rolling, why,
-                            edges, edge_fit, edge_why, extremes, edge_rolling)
+                            edges, edge_fit, edge_why, extremes, edge_rolling, edge_fixed)
 
 
 def is_quantised(x: np.ndarray, step: float) -> bool:
@@ -141,24 +142,54 @@ def is_quantised(x: np.ndarray, step: float) -> bool:
 
 
 def _edge_fit(x: np.ndarray, force: np.ndarray, step: float, axis: str, settings: PreslidingSettings | None,
-              min_excursion: int) -> tuple[EdgePoints | None, PreslidingFit | None, str, RollingFit | None]:
-    """The force model on the edge-pinned path of a quantised record, or why there is none, and the rolling-friction
-    shape fitted to the edge-pinned virgin ramp alone (None when that fit fails). The dwell means carry no mean
-    velocity or acceleration, so neither has a viscous or inertia term."""
+              min_excursion: int):
+    """(edges, model, why not, free-exponent shape, exponent-2 shape): the force model on the edge-pinned path of a
+    quantised record, or why there is none, and the parametric virgin curve fitted to the edge-pinned virgin ramp
+    alone, with its exponent free and held at 2 (None where a fit fails). The dwell means carry no mean velocity or
+    acceleration, so neither has a viscous or inertia term.
+
+    Why a free exponent there: the ramp's first edge lies a whole step from rest, so sum(k) is the shape's
+    extrapolated slope at 0, and a shape held at p = 2 carries its own bias into it (docs/presliding.md,
+    "Initial stiffness below one count")."""
     if not is_quantised(x, step):
-        return None, None, "the displacement is not quantised in whole steps", None
+        return None, None, "the displacement is not quantised in whole steps", None, None
     edges = edge_points(x, force, step, min_excursion=min_excursion)
-    rev = find_reversals(edges.x, 0.5 * step)
+    rev = find_reversals(edges.x, HYSTERESIS_STEPS * step)
     ramp = slice(0, int(rev[0]) + 1 if rev.size else edges.size)
     ramp_edges = np.unique(edges.x[ramp][edges.crossings[ramp] > 0]).size  # edges crossed, not excursions
     if rev.size == 0 or ramp_edges < MIN_EDGE_RAMP:
-        return edges, None, (f"the virgin ramp crosses {ramp_edges} count edges, fewer than {MIN_EDGE_RAMP}"), None
+        return (edges, None, f"the virgin ramp crosses {ramp_edges} count edges, fewer than {MIN_EDGE_RAMP}",
+                None, None)
     s = replace(settings or PreslidingSettings(), viscous=False, inertia=0.0)
-    try:  # the ramp alone: a branch's edges hold turning points no edge pins (edges.py)
-        rolling = fit_rolling(edges.x[ramp], edges.force[ramp], 1.0, rev[:1], viscous=False)
+    shapes = [_edge_shape(edges, rev, step, exponent) for exponent in (None, 2.0)]
+    return (edges, fit_presliding(edges.x, edges.force, 1.0, axis, s, step=step), "", *shapes)
+
+
+def _edge_shape(edges: EdgePoints, rev: np.ndarray, step: float, exponent: float | None) -> RollingFit | None:
+    """The parametric virgin curve on the edge-pinned points (None when the fit fails).
+
+    The relaxed position x0 is known only to within the step the contact rests in. The ramp and the first Masing
+    branch are fitted together with x0 free within that step: the ramp sees phi from x0 and the branch from the
+    turning point x_r, and only the right x0 lets both agree. x_r is exact when the turn is a dwell at a count edge
+    (the loop held the contact there); when it is an excursion into the next count, x_r is fitted within that count
+    too. With no branch, the ramp is fitted alone, x0 at the count, and x0's own uncertainty (step/sqrt(12)) is
+    carried into the quantities (parametric.origin_uncertainty)."""
+    r0 = int(rev[0])
+    try:
+        if rev.size > 1:
+            r1 = int(rev[1])
+            x = edges.x[: r1 + 1].copy()
+            pinned = edges.crossings[r0] > 0
+            if not pinned:  # the count the contact turned in, after the last edge it crossed
+                x[r0] = x[r0 - 1] + 0.5 * step * np.sign(x[r0] - x[r0 - 1])
+            return fit_rolling(x, edges.force[: r1 + 1], 1.0, rev[:2], viscous=False, exponent=exponent,
+                               origin_range=step, turn_range=0.0 if pinned else step)
+
+        def refit(force: np.ndarray) -> RollingFit:
+            return fit_rolling(edges.x[: r0 + 1], force, 1.0, rev[:1], viscous=False, exponent=exponent)
+        return origin_uncertainty(refit(edges.force[: r0 + 1]), edges.x[: r0 + 1], refit, step)
     except AnalysisError:
-        rolling = None
-    return edges, fit_presliding(edges.x, edges.force, 1.0, axis, s, step=step), "", rolling
+        return None
 
 
 def block_means(t: np.ndarray, x: np.ndarray, force: np.ndarray, max_samples: int = MAX_SAMPLES):
@@ -223,8 +254,8 @@ def figures(result: PreslidingResult) -> dict:
     ax.legend(fontsize=7, loc="lower right")
     ax.grid(alpha=0.3)
     loops = fig
-    fig = Figure(figsize=(6.5, 4.5))
-    ax = fig.add_subplot()
+    fig = Figure(figsize=(11.5, 4.8))
+    ax, zoom = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.6, 1]})
     sgn = 1.0 if result.x[r0] > result.x[0] else -1.0
     s = sgn * (result.x[: r0 + 1] - result.x[0])
     ax.plot(s, sgn * (result.force[: r0 + 1] - result.force[0]), ".", ms=2, color="tab:blue",
@@ -234,15 +265,15 @@ def figures(result: PreslidingResult) -> dict:
             label="identified virgin curve (NNLS)")
     if result.edge_fit is not None:
         e = result.edges
-        r = find_reversals(e.x, 0.5 * result.resolution.step)
+        r = find_reversals(e.x, HYSTERESIS_STEPS * result.resolution.step)
         ramp = slice(0, int(r[0]) + 1) if r.size else slice(None)
         ax.plot(sgn * (e.x[ramp] - e.x[0]), sgn * (e.force[ramp] - e.force[0]), "o", ms=3, mfc="none",
                 color="tab:purple", label="dwells at count edges (position exact)")
         ax.plot(grid, result.edge_fit.model.virgin_curve(grid), color="tab:purple",
                 label="identified virgin curve (edge-pinned NNLS)")
     if result.edge_rolling is not None:
-        ax.plot(grid, result.edge_rolling.virgin_curve(grid), color="tab:orange", ls="-.",
-                label="parametric virgin curve on the edge-pinned ramp")
+        ax.plot(grid, _shape_curve(result.edge_rolling, grid, sgn), color="tab:orange", ls="-.",
+                label=f"parametric virgin curve on the edge points ({result.edge_rolling.exponent_text()})")
     if result.parametric is not None:
         ax.plot(grid, result.parametric.virgin_curve(grid), color="tab:green", ls="--",
                 label="parametric virgin curve h(1-(d/(d+x))^2) on the samples")
@@ -252,4 +283,49 @@ def figures(result: PreslidingResult) -> dict:
            title="virgin curve")
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
+    _initial_slopes(zoom, result, s, sgn)
+    fig.tight_layout()
     return {"loops": loops, "virgin": fig}
+
+
+def _shape_curve(fit: RollingFit, s: np.ndarray, sgn: float) -> np.ndarray:
+    """The fitted parametric curve over travel s from the rest count (its relaxed position where it was fitted)."""
+    return fit.virgin_curve(np.clip(s - sgn * (fit.origin or 0.0), 0, None))
+
+
+def _initial_slopes(ax, result: PreslidingResult, s: np.ndarray, sgn: float) -> None:
+    """The first few position steps of the virgin ramp, where sum(k) lives: the samples, the edge dwells, and the
+    tangent sum(k)*x at 0 of each estimate."""
+    u = result.units
+    step = result.resolution.step
+    span = min(float(s.max()), 4 * step)
+    near = s <= span
+    ax.plot(s[near], sgn * (result.force[: s.size][near] - result.force[0]), ".", ms=2, color="tab:blue",
+            label="measured virgin ramp")
+    grid = np.linspace(0, span, 200)
+    slopes = [("NNLS (samples)", result.quantities["initial_stiffness"], "tab:red", None, 0.0)]
+    if result.edge_fit is not None:
+        e = result.edges
+        r = find_reversals(e.x, HYSTERESIS_STEPS * step)
+        ramp = slice(0, int(r[0]) + 1) if r.size else slice(None)
+        es, ef = sgn * (e.x[ramp] - e.x[0]), sgn * (e.force[ramp] - e.force[0])
+        ax.plot(es[es <= span], ef[es <= span], "o", ms=5, mfc="none", color="tab:purple",
+                label="dwells at count edges")
+        slopes.append(("edge-pinned NNLS", float(np.sum(result.edge_fit.model.ms_stiffness)), "tab:purple", None,
+                       0.0))
+    for name, fit, color in (("edge points, p free", result.edge_rolling, "tab:orange"),
+                             ("edge points, p = 2", result.edge_rolling_fixed, "tab:brown")):
+        if fit is not None:
+            ax.plot(grid, _shape_curve(fit, grid, sgn), color=color, lw=1, label=f"parametric, {name}")
+            slopes.append((f"parametric, {name}", fit.quantities(result.fraction)["initial_stiffness"], color, ":",
+                           sgn * (fit.origin or 0.0)))
+    top = float(np.max(np.abs(ax.get_ylim())))
+    for name, k0, color, ls, x0 in slopes:
+        ax.plot(grid, k0 * np.clip(grid - x0, 0, None), color=color, ls=ls or "--", lw=0.8,
+                label=f"slope at 0, {name}: {k0:.4g} {u['stiffness']}")
+    for n in range(1, int(span / step) + 2):  # edges lie half a step either side of a count
+        ax.axvline((n - 0.5) * step, color="0.8", lw=0.6)
+    ax.set(xlim=(0, span), ylim=(0, 1.05 * top), xlabel=f"travel ({u['position']}; grey: count edges)",
+           ylabel=f"force change ({u['torque']})", title="the first position steps: sum(k) is the slope at 0")
+    ax.legend(fontsize=6, loc="lower right")
+    ax.grid(alpha=0.3)

@@ -98,7 +98,7 @@ class Resolution:
 def resolution(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, loop_travels: np.ndarray,
                counts_per_rev: float | None = None, fraction: float = DEFAULT_FRACTION,
                step: float | None = None, rolling: RollingFit | None = None,
-               edge_rolling: RollingFit | None = None) -> Resolution:
+               edge_rolling: RollingFit | None = None, edge_fixed: RollingFit | None = None) -> Resolution:
     """Which quantities the position step and the force noise still resolve (docs/presliding.md, "Resolution").
 
     Args:
@@ -111,8 +111,9 @@ def resolution(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, loop_travel
     above 3x the force noise; F_b needs a travel of 2*x_p + MIN_COUNTS steps, F_b above 10x the noise
     and at most TOP_SHARE of it in elements at the grid's top;
     a loop's reversal force and memory checks need its travel >= MIN_COUNTS steps.
-    ``rolling``: the parametric fit beside the NNLS, ``edge_rolling`` the same shape on the edge-pinned virgin
-    ramp (edges.py); one more line says which virgin curve and sum(k) to trust (:func:`trust_line`).
+    ``rolling``: the parametric fit beside the NNLS, ``edge_rolling`` the shape with a free exponent on the
+    edge-pinned virgin ramp (edges.py), ``edge_fixed`` the same with p = 2; one more line says which virgin curve
+    and sum(k) to trust (:func:`trust_line`).
     """
     if counts_per_rev and fit.model.axis == "rotary":
         step, source = 2 * math.pi / float(counts_per_rev), f"{counts_per_rev:.0f} counts/rev"
@@ -164,23 +165,29 @@ def resolution(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, loop_travel
 
 
 def trust_line(rolling: RollingFit | None, nnls_k0_resolved: bool, step: float, noise: float, fraction: float,
-               unit: str, kunit: str, edge_rolling: RollingFit | None = None) -> tuple[str, bool]:
+               unit: str, kunit: str, edge_rolling: RollingFit | None = None,
+               edge_fixed: RollingFit | None = None) -> tuple[str, bool]:
     """(sentence, parametric usable): which estimate of the virgin curve and sum(k) to trust. The parametric one
     is usable when its virgin ramp spans >= MIN_COUNTS steps (step: rad or m), sum(k) is within PARAMETRIC_REL of
     itself (Jacobian uncertainty) and the shape fits: rms residual within PARAMETRIC_FIT of h, or within
     PARAMETRIC_EXCESS times what the quantisation and the force noise (N*m or N) alone leave. ``edge_rolling``
     (positions exact at count edges, so no quantisation error) is preferred when its sum(k) is within
-    PARAMETRIC_REL of itself and its rms residual within PARAMETRIC_FIT of h."""
-    if edge_rolling is not None and not nnls_k0_resolved:
-        eq, ee = edge_rolling.quantities(fraction), edge_rolling.uncertainties(fraction)
+    PARAMETRIC_REL of itself and its rms residual within PARAMETRIC_FIT of h: with its exponent free first, then
+    ``edge_fixed`` (p = 2) when the free exponent leaves sum(k) too uncertain."""
+    for edge in (edge_rolling, edge_fixed):
+        if edge is None or nnls_k0_resolved:
+            continue
+        eq, ee = edge.quantities(fraction), edge.uncertainties(fraction)
         ek0, eu = eq["initial_stiffness"], ee["initial_stiffness"]
-        share = edge_rolling.rms_error / edge_rolling.h
+        share = edge.rms_error / edge.h
         if eu <= PARAMETRIC_REL * ek0 and share <= PARAMETRIC_FIT:
-            return (f"virgin curve and sum(k): trust the parametric estimate on the edge-pinned virgin ramp "
-                    f"(positions exact at {edge_rolling.samples - 1} count edges; it assumes the rolling-friction "
-                    f"shape h(1-(d/(d+x))^2)); the NNLS sum(k) is a lower bound below one position step "
-                    f"(sum(k) = 2h/d = {ek0:.4g} +- {eu:.2g} {kunit}, d = {edge_rolling.d:.3g} {unit}; rms residual "
-                    f"{100 * share:.2g} % of h)"), True
+            where = "virgin ramp and first branch" if edge.origin is not None else "virgin ramp"
+            return (f"virgin curve and sum(k): trust the parametric estimate on the edge-pinned {where} "
+                    f"({edge.samples} points at count edges, positions exact; it assumes the shape {edge.shape}, "
+                    f"extrapolated below the first edge; {edge.origin_text(step, unit)}); the NNLS sum(k) is a lower "
+                    f"bound below one position step (sum(k) = p*h/d = {ek0:.4g} +- {eu:.2g} {kunit}, "
+                    f"{edge.exponent_text(fraction)}, d = {edge.d:.3g} {unit}; rms residual {100 * share:.2g} % "
+                    f"of h)"), True
     if rolling is None:
         return ("virgin curve and sum(k): no parametric fit; the NNLS estimate is the only one"
                 + ("" if nnls_k0_resolved else " and its sum(k) is a lower bound")), False

@@ -102,13 +102,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 def report(res, path: str, channel: str) -> dict:
-    """The JSON document (schema hilbench-presliding 2, docs/presliding.md)."""
+    """The JSON document (schema hilbench-presliding 3, docs/presliding.md)."""
     u = res.units
     q, e = res.quantities, res.uncertainties
     units = {"breakaway": u["torque"], "initial_stiffness": u["stiffness"], "presliding_distance": u["position"]}
     m = res.fit.model
     return {
-        "schema": "hilbench-presliding", "schema_version": 2, "run": str(Path(path).resolve()),
+        "schema": "hilbench-presliding", "schema_version": 3, "run": str(Path(path).resolve()),
         "force_channel": channel, "axis": res.axis, "fraction": res.fraction, "samples_averaged": res.block,
         "quantities": {k: {"value": q[k], "std_uncertainty": e[k], "unit": units[k]} for k in q},
         "uncertainty_method": "moving-block residual bootstrap, refit on the same threshold grid",
@@ -138,7 +138,7 @@ def _parametric(res, units: dict) -> dict:
     q, e = r.quantities(res.fraction), r.uncertainties(res.fraction)
     units = {**units, "breakaway_extrapolated": units["breakaway"]}
     u = res.units
-    return {"shape": "h*(1-(d/(d+|x|))^2)*sign(x)", "h": r.h, "d": r.d, "offset": r.offset, "viscous": r.viscous,
+    return {"shape": r.shape, "h": r.h, "d": r.d, "offset": r.offset, "viscous": r.viscous,
             "units": {"h": u["torque"], "d": u["position"], "offset": u["torque"], "viscous": u["viscous"]},
             "quantities": {k: {"value": q[k], "std_uncertainty": e[k], "unit": units[k]} for k in q},
             "uncertainty_method": "Jacobian covariance of scipy.optimize.least_squares (independent residuals)",
@@ -160,18 +160,26 @@ def _edge_pinned(res, units: dict) -> dict:
             "units": {"ms_stiffness": u["stiffness"], "ms_delta": u["position"], "offset": u["torque"]},
             "quantities": {k: {"value": q[k], "unit": units[k]} for k in q},
             "force_rms_error": f.rms_error, "force_rms_error_relative": f.relative_rms,
-            "parametric_ramp": _rolling_doc(res.edge_rolling, res, units)}
+            "parametric_ramp": _rolling_doc(res.edge_rolling, res, units),
+            "parametric_ramp_exponent_2": _rolling_doc(res.edge_rolling_fixed, res, units)}
 
 
 def _rolling_doc(r, res, units: dict) -> dict:
     if r is None:
-        return {"error": "the rolling-friction shape found no finite h and d on the edge-pinned virgin ramp"}
+        return {"error": "the parametric virgin curve found no finite h, d and p on the edge-pinned virgin ramp"}
     q, e = r.quantities(res.fraction), r.uncertainties(res.fraction)
     u = res.units
-    return {"h": r.h, "d": r.d, "offset": r.offset, "units": {"h": u["torque"], "d": u["position"],
-                                                              "offset": u["torque"]},
+    return {"shape": r.shape, "h": r.h, "d": r.d, "exponent": r.exponent,
+            "exponent_std_uncertainty": e["exponent"], "offset": r.offset,
+            "units": {"h": u["torque"], "d": u["position"], "exponent": "1", "offset": u["torque"]},
             "quantities": {k: {"value": q[k], "std_uncertainty": e[k],
                                "unit": {**units, "breakaway_extrapolated": units["breakaway"]}[k]} for k in q},
+            "origin": {"fitted": r.origin is not None, "value": r.origin, "unit": u["position"],
+                       "meaning": "relaxed position minus the rest count's position (None: assumed 0; its type-B "
+                                  "uncertainty is then in the quantities' uncertainties)"},
+            "turn": {"fitted": r.turn is not None, "value": r.turn, "unit": u["position"],
+                     "meaning": "first turning point minus its count's centre, when the turn was an excursion "
+                                "into a count (None: a dwell at an edge, exact, or no branch fitted)"},
             "fit_rms_error": r.rms_error, "points": r.samples}
 
 
@@ -198,11 +206,16 @@ def summary_lines(doc: dict) -> list[str]:
             bound = " (a lower bound: no edge lies inside the first half step)" if name == "initial_stiffness" else ""
             lines.append(f"{name.replace('_', ' ')} (edge-pinned NNLS, {e['points']} dwells at count edges): "
                          f"{q['value']:.5g} {q['unit']}{bound}")
-        pr = e["parametric_ramp"]
-        if "error" not in pr:
-            k0 = pr["quantities"]["initial_stiffness"]
-            lines.append(f"initial stiffness (edge-pinned virgin ramp, h(1-(d/(d+x))^2), {pr['points']} points): "
-                         f"{k0['value']:.5g} +- {k0['std_uncertainty']:.2g} {k0['unit']}")
+        for key in ("parametric_ramp", "parametric_ramp_exponent_2"):
+            pr = e.get(key, {"error": ""})
+            if "error" not in pr:
+                k0 = pr["quantities"]["initial_stiffness"]
+                p = (f"p = {pr['exponent']:.3g} +- {pr['exponent_std_uncertainty']:.2g}"
+                     if pr["exponent_std_uncertainty"] else f"p = {pr['exponent']:g} (held)")
+                where = ("virgin ramp and first branch, relaxed position fitted" if pr["origin"]["fitted"]
+                         else "virgin ramp, relaxed position assumed")
+                lines.append(f"initial stiffness (edge-pinned {where}, {pr['shape']}, {p}, {pr['points']} points): "
+                             f"{k0['value']:.5g} +- {k0['std_uncertainty']:.2g} {k0['unit']}")
     c, v = doc["checks"], doc["validation"]
     lines.append(f"model: force simulated from the measured displacement, rms error {v['force_rms_error']:.3g} "
                  f"{v['unit']} ({100 * v['force_rms_error_relative']:.3g} % of the sliding level)")

@@ -39,7 +39,7 @@ def tribometer(tmp_path_factory):
 def test_imported_csv_goes_through_the_analysis(tribometer, capsys):
     d, h5, out, k, w = tribometer
     doc = json.loads((out / "presliding.json").read_text())
-    assert doc["schema"] == "hilbench-presliding" and doc["schema_version"] == 2 and doc["axis"] == "linear"
+    assert doc["schema"] == "hilbench-presliding" and doc["schema_version"] == 3 and doc["axis"] == "linear"
     q = doc["quantities"]
     assert q["breakaway"]["unit"] == "N" and q["presliding_distance"]["unit"] == "m"
     assert q["breakaway"]["value"] == pytest.approx(BREAKAWAY, rel=0.02)
@@ -111,7 +111,8 @@ def test_a_simulated_presliding_run_end_to_end(tmp_path, capsys):
     with the protocol's recommended gains, 10 mA noise, 2^16 counts/rev), then hilbench presliding. The truth is the
     plant's exact Maxwell-slip force (tests/truth, independent stop operators) along the commanded path.
     Measured over seeds 0, 1, 2: edge-pinned virgin curve 0.53-0.64 % RMS of sum W; reversal forces (each branch's
-    extreme) within 0.76 %; sum(k) from the edge-pinned ramp -2.5 to -3.0 % (the 2 % target is not met,
+    extreme) within 0.76 %; sum(k) from the edge points of the virgin ramp and the first branch, shape exponent and
+    relaxed position fitted, -0.35 to +0.16 % (+- 1.1 %) over seeds 0-5 (held at p = 2: -2.9 to -3.0 %,
     docs/presliding.md)."""
     import h5py
 
@@ -140,8 +141,10 @@ def test_a_simulated_presliding_run_end_to_end(tmp_path, capsys):
     virgin = np.minimum.outer(s, w / k) @ k
     fitted = np.minimum.outer(s, np.array(edge["ms_delta"])) @ np.array(edge["ms_stiffness"])
     assert np.sqrt(np.mean((fitted - virgin) ** 2)) / w.sum() < 0.01
-    k0 = edge["parametric_ramp"]["quantities"]["initial_stiffness"]["value"]
-    assert k0 == pytest.approx(k.sum(), rel=0.05)
+    k0 = edge["parametric_ramp"]["quantities"]["initial_stiffness"]
+    assert k0["value"] == pytest.approx(k.sum(), rel=0.02)
+    assert abs(k0["value"] - k.sum()) < 3 * k0["std_uncertainty"] < 0.05 * k.sum()
+    assert edge["parametric_ramp"]["origin"]["fitted"]
     res = doc["resolution"]["resolved"]
     assert res["presliding_distance"] and not res["initial_stiffness"]
 
