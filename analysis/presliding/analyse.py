@@ -327,5 +327,6 @@ def _initial_slopes(ax, result: PreslidingResult, s: np.ndarray, sgn: float) -> 
         ax.axvline((n - 0.5) * step, color="0.8", lw=0.6)
     ax.set(xlim=(0, span), ylim=(0, 1.05 * top), xlabel=f"travel ({u['position']}; grey: count edges)",
            ylabel=f"force change ({u['torque']})", title="the first position steps: sum(k) is the slope at 0")
+    ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 0))
     ax.legend(fontsize=6, loc="lower right")
     ax.grid(alpha=0.3)
