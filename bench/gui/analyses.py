@@ -47,11 +47,12 @@ ENTRY_POINTS: dict[str, list[tuple[str, str]]] = {
     "skeleton": [("hilbench.analysis.skeleton.forcevib", "forcevib")],
     "afrf": [("hilbench.analysis.afrf.frf", "afrf_from_run")],
     "residual": [("hilbench.analysis.residual", "residual_loop"), ("hilbench.analysis.residual", "prepare_run")],
+    "presliding": [("hilbench.analysis.presliding.analyse", "analyse")],
 }
 #: analyses that read the file themselves (by path): no other handle of it may be open in this process
 BY_PATH = ("afrf",)
 TITLES = {"identification": "Identification (Maxwell-slip, NNLS)", "skeleton": "Skeleton (ForceVib)",
-          "afrf": "AFRF", "residual": "Residual loop"}
+          "afrf": "AFRF", "residual": "Residual loop", "presliding": "Presliding (force from displacement)"}
 
 
 def availability(name: str) -> str:
@@ -193,5 +194,58 @@ def residual(run, options: dict | None = None) -> AnalysisResult:
     return AnalysisResult(TITLES["residual"], numbers, figures)
 
 
+def presliding(run, options: dict | None = None) -> AnalysisResult:
+    """The presliding analysis (``analysis.presliding.analyse.analyse``) of a displacement-driven run, with the
+    numbers ``hilbench presliding`` writes (bench/commands/presliding.report): the quantities with their
+    uncertainties, the edge-pinned sum(k), the memory checks, the reversal forces; the resolution verdicts as
+    warnings. ``options['replicates']``: bootstrap replicates (default 8)."""
+    analyse = _entry("presliding")
+    from hilbench.analysis.presliding.identify import PreslidingSettings
+    from hilbench.bench.commands.presliding import report
+
+    record = run.meta.get("record", "torque-driven")
+    if record != "displacement-driven":
+        raise BenchError(f"{os.path.basename(run.path)}: a {record} record; the presliding analysis needs a "
+                         "displacement-driven one (a presliding run, or an import with --record displacement-driven)")
+    options = options or {}
+    inertia = float(run.protocol_params.get("inertia", 0.0) or 0.0)
+    res = analyse(run.t, run.channel("position"), run.channel("torque"), run.sample_rate, run.axis,
+                  PreslidingSettings(inertia=inertia), counts_per_rev=run.calibration.get("counts_per_rev"),
+                  replicates=int(options.get("replicates", 8)))
+    doc = report(res, run.path, "torque")
+    numbers = [(f"{name.replace('_', ' ')} (NNLS, model-free)", f"{q['value']:.5g} +- {q['std_uncertainty']:.2g}",
+                q["unit"]) for name, q in doc["quantities"].items()]
+    edge = doc["edge_pinned"]
+    for key, label in (("parametric_ramp", "p free"), ("parametric_ramp_exponent_2", "p = 2, baseline")):
+        pr = edge.get(key, {"error": ""})
+        if "error" not in pr:
+            k0 = pr["quantities"]["initial_stiffness"]
+            numbers.append((f"initial stiffness sum(k) (edge points, {label})",
+                            f"{k0['value']:.5g} +- {k0['std_uncertainty']:.2g}", k0["unit"]))
+            numbers.append((f"shape exponent p (edge points, {label})",
+                            f"{pr['exponent']:.4g} +- {pr['exponent_std_uncertainty']:.2g}", "1"))
+    c, v = doc["checks"], doc["validation"]
+    numbers += [("model force rms error (force from displacement)", f"{v['force_rms_error']:.4g}", v["unit"]),
+                ("Masing rule departure, max", f"{c['masing_max']:.3g}", "1 (of the largest virgin force)"),
+                ("wiping-out departure, max", f"{c['wiping_out_max']:.3g}", "1 (of the largest virgin force)"),
+                ("loop closure departure, max", f"{c['closure_max']:.3g}", "1 (of the largest virgin force)")]
+    pos, tq = res.units["position"], res.units["torque"]
+    for row in doc["reversals"]:
+        numbers.append((f"reversal {row['n']}: x, extreme force", f"{row['x']:.5g}, {row['force_extreme']:.5g}",
+                        f"{pos}, {tq}"))
+    loops = Figure("force against displacement", f"displacement ({pos})", f"force ({tq})",
+                   [("measured", *_thin(res.x, res.force)), ("model: force from the displacement",
+                                                            *_thin(res.x, res.fit.simulated))])
+    virgin = Figure("virgin curve", f"travel from rest ({pos})", f"force change ({tq})")
+    grid = np.linspace(0.0, float(res.travels[0]) if res.travels.size else 0.0, 400)
+    virgin.curves.append(("NNLS on the samples", grid, res.fit.model.virgin_curve(grid)))
+    if res.edge_fit is not None:
+        virgin.curves.append(("NNLS on the edge points", grid, res.edge_fit.model.virgin_curve(grid)))
+    if res.edge_rolling is not None:
+        virgin.curves.append((f"parametric on the edge points ({res.edge_rolling.exponent_text()})", grid,
+                              res.edge_rolling.virgin_curve(grid)))
+    return AnalysisResult(TITLES["presliding"], numbers, [loops, virgin], list(res.resolution.lines))
+
+
 ANALYSES: dict[str, Callable] = {"identification": identification, "skeleton": skeleton, "afrf": afrf,
-                                 "residual": residual}
+                                 "residual": residual, "presliding": presliding}

@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import json
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from hilbench.bench.cli import main
 from tests.analysis.presliding.records import dc_elements, maxwell_force, smooth_path
+from tests.bench.presliding_runs import run_and_analyse
 from tests.truth.generator import elements
 
 PRESLIDING = 0.1e-3  # m, the truth's largest element
@@ -120,15 +120,10 @@ def test_a_simulated_presliding_run_end_to_end(tmp_path, capsys):
     from hilbench.analysis.run_file import read_run_file
     from tests.truth.generator import stop_operator_forces
 
-    h5, out = tmp_path / "p.h5", tmp_path / "out"
-    config = Path(__file__).resolve().parents[2] / "examples" / "presliding_sim.toml"
-    assert main(["run", "presliding", "--counts-per-rev", "65536", "--device", f"sim://?config={config}",
-                 "-o", str(h5), "--quiet"]) == 0
+    h5, doc = run_and_analyse(tmp_path, 65536, replicates=4)
     with h5py.File(h5) as f:
         sent = json.loads(f["device/config"][()])
     assert (sent["position_kp"], sent["position_ki"], sent["position_kd"]) == (100.0, 3.0e4, 0.5)
-    assert main(["presliding", str(h5), "-o", str(out), "--replicates", "4"]) == 0
-    doc = json.loads((out / "presliding.json").read_text())
     k, w = dc_elements()
     x_cmd = read_run_file(h5).channel("position_cmd")
     truth = stop_operator_forces(k, w, x_cmd)
@@ -153,12 +148,7 @@ def test_a_device_run_at_2_12_counts_completes_and_says_what_is_not_resolved(tmp
     """At 2^12 counts/rev one count (1.53 mrad) is wider than the presliding distance. With the stiff default gains
     the device tripped OVER_CURRENT; with the protocol's recommended gains the run completes, and the analysis flags
     every derived quantity and declines the edge-pinned fit (2 edges on the ramp)."""
-    h5, out = tmp_path / "p.h5", tmp_path / "out"
-    config = Path(__file__).resolve().parents[2] / "examples" / "presliding_sim.toml"
-    assert main(["run", "presliding", "--rate", "8", "--settle", "0.05", "--counts-per-rev", "4096",
-                 "--device", f"sim://?config={config}", "-o", str(h5), "--quiet"]) == 0
-    assert main(["presliding", str(h5), "-o", str(out), "--replicates", "2"]) == 0
-    doc = json.loads((out / "presliding.json").read_text())
+    _h5, doc = run_and_analyse(tmp_path, 4096, "--rate", "8", "--settle", "0.05")
     res = doc["resolution"]["resolved"]
     assert not (res["presliding_distance"] or res["initial_stiffness"] or res["breakaway"])
     assert "fewer than 5" in doc["edge_pinned"]["error"]
