@@ -62,6 +62,7 @@ class PlannedRun:
     device: str
     operator: str = ""
     notes: str = ""
+    report: dict[str, float] = field(default_factory=dict)  # a [[compensate]] step's metric settings (SI)
 
     @property
     def key(self) -> str:

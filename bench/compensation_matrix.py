@@ -178,15 +178,21 @@ def campaign_step(table: dict, defaults: dict, index: int, path: Path, text: str
         raise fail("references", f"references must be a list of {', '.join(DEFAULT_REFERENCES)}, got {kinds!r}")
     units = {"amplitudes": "rad", "amplitude": "rad", "frequency": "Hz", "cycles": "periods", "corner": "s",
              "targets": "rad", "move_time": "s", "rest": "s"}
-    values = {}
+    metric_units = {"window": "s", "tolerance": "rad"}  # the report's glitch window and settling band
+    values, metrics = {}, {}
     for key, raw in merged.items():
         try:
             if key in units:
                 values[key] = _value(raw, units[key], key)
+            elif key in metric_units:
+                metrics[key] = _value(raw, metric_units[key], key)
+                if not (isinstance(metrics[key], float | int) and math.isfinite(metrics[key]) and metrics[key] > 0):
+                    raise ValueError(f"{key} must be > 0 {metric_units[key]}, got {raw!r}")
             elif key in SETTING_UNITS:
                 settings_values[key] = _value(raw, SETTING_UNITS[key], key)
             elif key not in STEP_KEYS and key not in GENERAL_KEYS:
-                raise ValueError(f"unknown key {key!r} (known: {', '.join(sorted(STEP_KEYS | set(units)))} and "
+                raise ValueError(f"unknown key {key!r} (known: "
+                                 f"{', '.join(sorted(STEP_KEYS | set(units) | set(metric_units)))} and "
                                  f"the device settings)")
         except ValueError as exc:
             raise fail(key, str(exc)) from None
@@ -199,7 +205,7 @@ def campaign_step(table: dict, defaults: dict, index: int, path: Path, text: str
     except SettingsError as exc:
         raise fail(str(exc).split()[0], str(exc)) from None
     matrix = MatrixSettings(current_limit=settings.current_limit, torque_constant=settings.torque_constant,
-                            ratio=settings.ratio)
+                            ratio=settings.ratio, **metrics)
     names = merged.get("feedforwards")
     try:
         from hilbench.bench.compensation import CompensatedReference
@@ -212,7 +218,8 @@ def campaign_step(table: dict, defaults: dict, index: int, path: Path, text: str
         raise fail("model", str(exc)) from None
     device = merged.get("device", "sim://")
     return [PlannedRun(f"{name}.{p.reference}.{p.compensation}", 1, p, settings, device,
-                       str(merged.get("operator", "")), str(merged.get("notes", ""))) for p in protocols]
+                       str(merged.get("operator", "")), str(merged.get("notes", "")),
+                       {"window": matrix.window, "tolerance": matrix.tolerance}) for p in protocols]
 
 
 def _step_line(text: str, key: str, index: int) -> int:
@@ -243,7 +250,7 @@ def campaign_report(campaign, out_dir: Path, entries: dict[str, dict]) -> list[P
             continue
         settings = runs[0].settings
         matrix = MatrixSettings(current_limit=settings.current_limit, torque_constant=settings.torque_constant,
-                                ratio=settings.ratio)
+                                ratio=settings.ratio, **runs[0].report)
         results = [measured_case(r.protocol.case, out_dir / entries[r.key]["file"], matrix) for r in runs]
         meta = {"source": f"campaign {campaign.path}, device {runs[0].device}", "model": runs[0].protocol.model,
                 "window_s": matrix.window, "tolerance_rad": matrix.tolerance,

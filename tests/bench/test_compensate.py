@@ -133,6 +133,8 @@ frequency = "1 Hz"
 cycles = 1
 rest = "0.1 s"
 sample_rate = 1000
+window = "0.02 s"
+tolerance = "2e-4 rad"
 """)
     campaign = load_campaign(tmp_path / "c.toml")
     assert [r.key for r in campaign.runs] == ["m.sine.none-1", "m.sine.maxwell_slip-1"]
@@ -147,6 +149,7 @@ sample_rate = 1000
         + p.viscous * ref.velocity
     assert np.allclose(rf.channel("current_ff"), torque / 0.2, atol=1e-5)  # float32 on the wire
     doc = json.loads((tmp_path / "out" / "m" / "compensation.json").read_text())
+    assert (doc["settings"]["window_s"], doc["settings"]["tolerance_rad"]) == (0.02, 2e-4)  # the step's own
     glitch = {r["feedforward"]: r["glitch_mean_rad"] for r in doc["runs"]}
     # measured on sim:// (16-element truth, this 8-element model of the same virgin curve): about 30x
     assert glitch["none"] > 3 * glitch["maxwell_slip"]
@@ -159,6 +162,9 @@ def test_a_compensate_step_with_a_bad_key_names_its_line(tmp_path):
     model = _model(tmp_path)
     (tmp_path / "c.toml").write_text(f'[[compensate]]\nmodel = "{model.name}"\nbogus = 1\n')
     with pytest.raises(CampaignError, match=r"c.toml:3: compensate 1: unknown key 'bogus'"):
+        load_campaign(tmp_path / "c.toml")
+    (tmp_path / "c.toml").write_text(f'[[compensate]]\nmodel = "{model.name}"\nwindow = "-0.005 s"\n')
+    with pytest.raises(CampaignError, match=r"c.toml:3: compensate 1: window must be > 0 s"):
         load_campaign(tmp_path / "c.toml")
     (tmp_path / "c.toml").write_text('[[compensate]]\nmodel = "missing.json"\n')
     with pytest.raises(CampaignError, match=r"c.toml:2: compensate 1: cannot read model"):
