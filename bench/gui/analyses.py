@@ -213,8 +213,10 @@ def presliding(run, options: dict | None = None) -> AnalysisResult:
                   PreslidingSettings(inertia=inertia), counts_per_rev=run.calibration.get("counts_per_rev"),
                   replicates=int(options.get("replicates", 8)))
     doc = report(res, run.path, "torque")
-    numbers = [(f"{name.replace('_', ' ')} (NNLS, model-free)", f"{q['value']:.5g} +- {q['std_uncertainty']:.2g}",
-                q["unit"]) for name, q in doc["quantities"].items()]
+    resolved = doc["resolution"]["resolved"]
+    numbers = [(f"{name.replace('_', ' ')} (NNLS, model-free)" + ("" if resolved.get(name, True) else
+                                                                 ", NOT resolved"),
+                f"{q['value']:.5g} +- {q['std_uncertainty']:.2g}", q["unit"]) for name, q in doc["quantities"].items()]
     edge = doc["edge_pinned"]
     for key, label in (("parametric_ramp", "p free"), ("parametric_ramp_exponent_2", "p = 2, baseline")):
         pr = edge.get(key, {"error": ""})

@@ -22,8 +22,11 @@ def test_the_presliding_analysis_shows_the_numbers_the_command_writes(tmp_path):
         result = presliding(run)
     shown = {q: (v, u) for q, v, u in result.numbers}
     assert all(u for _q, (_v, u) in shown.items())
+    resolved = doc["resolution"]["resolved"]
+    assert not resolved["initial_stiffness"]  # below one count: the NNLS sum(k) is a lower bound, and says so
     for name, q in doc["quantities"].items():
-        value, unit = shown[f"{name.replace('_', ' ')} (NNLS, model-free)"]
+        value, unit = shown[f"{name.replace('_', ' ')} (NNLS, model-free)" + ("" if resolved[name] else
+                                                                            ", NOT resolved")]
         assert value == f"{q['value']:.5g} +- {q['std_uncertainty']:.2g}" and unit == q["unit"]
     k0 = doc["edge_pinned"]["parametric_ramp"]["quantities"]["initial_stiffness"]
     value, unit = shown["initial stiffness sum(k) (edge points, p free)"]
