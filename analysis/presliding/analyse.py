@@ -162,7 +162,10 @@ def _edge_fit(x: np.ndarray, force: np.ndarray, step: float, axis: str, settings
                 None, None)
     s = replace(settings or PreslidingSettings(), viscous=False, inertia=0.0)
     shapes = [_edge_shape(edges, rev, step, exponent) for exponent in (None, 2.0)]
-    return (edges, fit_presliding(edges.x, edges.force, 1.0, axis, s, step=step), "", *shapes)
+    try:
+        return (edges, fit_presliding(edges.x, edges.force, 1.0, axis, s, step=step), "", *shapes)
+    except AnalysisError as exc:  # e.g. a short record: too few edge points for the NNLS; the shape may still fit
+        return edges, None, f"the NNLS on the edge points: {exc}", *shapes
 
 
 def _edge_shape(edges: EdgePoints, rev: np.ndarray, step: float, exponent: float | None) -> RollingFit | None:
@@ -173,23 +176,42 @@ def _edge_shape(edges: EdgePoints, rev: np.ndarray, step: float, exponent: float
     turning point x_r, and only the right x0 lets both agree. x_r is exact when the turn is a dwell at a count edge
     (the loop held the contact there); when it is an excursion into the next count, x_r is fitted within that count
     too. With no branch, the ramp is fitted alone, x0 at the count, and x0's own uncertainty (step/sqrt(12)) is
-    carried into the quantities (parametric.origin_uncertainty)."""
+    carried into the quantities (parametric.origin_uncertainty). Only the monotone path is fitted
+    (:func:`_envelope`): Masing's rule gives no closed form for a point on a minor loop."""
     r0 = int(rev[0])
+    x, crossings = edges.x, edges.crossings
+    ramp = [0, *_envelope(x, crossings, 1, r0, np.sign(x[r0] - x[0])), r0]
+    branch = _envelope(x, crossings, r0 + 1, int(rev[1]) + 1, np.sign(x[0] - x[r0])) if rev.size > 1 else []
     try:
-        if rev.size > 1:
-            r1 = int(rev[1])
-            x = edges.x[: r1 + 1].copy()
-            pinned = edges.crossings[r0] > 0
+        if branch:
+            idx = np.array(ramp + branch)
+            xs = x[idx].copy()
+            turn = len(ramp) - 1
+            pinned = crossings[r0] > 0
             if not pinned:  # the count the contact turned in, after the last edge it crossed
-                x[r0] = x[r0 - 1] + 0.5 * step * np.sign(x[r0] - x[r0 - 1])
-            return fit_rolling(x, edges.force[: r1 + 1], 1.0, rev[:2], viscous=False, exponent=exponent,
-                               origin_range=step, turn_range=0.0 if pinned else step)
+                xs[turn] = xs[turn - 1] + 0.5 * step * np.sign(xs[turn] - xs[turn - 1])
+            return fit_rolling(xs, edges.force[idx], 1.0, np.array([turn, idx.size - 1]), viscous=False,
+                               exponent=exponent, origin_range=step, turn_range=0.0 if pinned else step)
+        idx = np.array(ramp)
 
         def refit(force: np.ndarray) -> RollingFit:
-            return fit_rolling(edges.x[: r0 + 1], force, 1.0, rev[:1], viscous=False, exponent=exponent)
-        return origin_uncertainty(refit(edges.force[: r0 + 1]), edges.x[: r0 + 1], refit, step)
+            return fit_rolling(x[idx], force, 1.0, np.array([idx.size - 1]), viscous=False, exponent=exponent)
+        return origin_uncertainty(refit(edges.force[idx]), x[idx], refit, step)
     except AnalysisError:
         return None
+
+
+def _envelope(x: np.ndarray, crossings: np.ndarray, start: int, stop: int, sign: float) -> list[int]:
+    """Indices in [start, stop) of the dwells (crossings > 0: positions exact) that go past every point before them
+    in the direction ``sign``, from x[start - 1]: the monotone path. A dwell back inside the travel already made lies
+    on a minor loop (dither past an edge and back), and an excursion point's position is an estimate."""
+    keep, reach = [], x[start - 1]
+    for i in range(start, stop):
+        if crossings[i] > 0 and sign * (x[i] - reach) > 0:
+            keep.append(i)
+        if sign * (x[i] - reach) > 0:
+            reach = x[i]
+    return keep
 
 
 def block_means(t: np.ndarray, x: np.ndarray, force: np.ndarray, max_samples: int = MAX_SAMPLES):

@@ -150,7 +150,11 @@ def _edge_pinned(res, units: dict) -> dict:
     """The force model on the dwells at count edges (analysis/presliding/edges.py), or why there is none."""
     f = res.edge_fit
     if f is None:
-        return {"error": res.edge_error}
+        doc = {"error": res.edge_error}
+        if res.edge_rolling is not None or res.edge_rolling_fixed is not None:  # the shape fitted all the same
+            doc.update(parametric_ramp=_rolling_doc(res.edge_rolling, res, units),
+                       parametric_ramp_exponent_2=_rolling_doc(res.edge_rolling_fixed, res, units))
+        return doc
     from hilbench.analysis.presliding.quantities import quantities
 
     u, m = res.units, f.model
@@ -206,16 +210,16 @@ def summary_lines(doc: dict) -> list[str]:
             bound = " (a lower bound: no edge lies inside the first half step)" if name == "initial_stiffness" else ""
             lines.append(f"{name.replace('_', ' ')} (edge-pinned NNLS, {e['points']} dwells at count edges): "
                          f"{q['value']:.5g} {q['unit']}{bound}")
-        for key in ("parametric_ramp", "parametric_ramp_exponent_2"):
-            pr = e.get(key, {"error": ""})
-            if "error" not in pr:
-                k0 = pr["quantities"]["initial_stiffness"]
-                p = (f"p = {pr['exponent']:.3g} +- {pr['exponent_std_uncertainty']:.2g}"
-                     if pr["exponent_std_uncertainty"] else f"p = {pr['exponent']:g} (held)")
-                where = ("virgin ramp and first branch, relaxed position fitted" if pr["origin"]["fitted"]
-                         else "virgin ramp, relaxed position assumed")
-                lines.append(f"initial stiffness (edge-pinned {where}, {pr['shape']}, {p}, {pr['points']} points): "
-                             f"{k0['value']:.5g} +- {k0['std_uncertainty']:.2g} {k0['unit']}")
+    for key in ("parametric_ramp", "parametric_ramp_exponent_2"):
+        pr = e.get(key, {"error": ""})
+        if "error" not in pr:
+            k0 = pr["quantities"]["initial_stiffness"]
+            p = (f"p = {pr['exponent']:.3g} +- {pr['exponent_std_uncertainty']:.2g}"
+                 if pr["exponent_std_uncertainty"] else f"p = {pr['exponent']:g} (held)")
+            where = ("virgin ramp and first branch, relaxed position fitted" if pr["origin"]["fitted"]
+                     else "virgin ramp, relaxed position assumed")
+            lines.append(f"initial stiffness (edge-pinned {where}, {pr['shape']}, {p}, {pr['points']} points): "
+                         f"{k0['value']:.5g} +- {k0['std_uncertainty']:.2g} {k0['unit']}")
     c, v = doc["checks"], doc["validation"]
     lines.append(f"model: force simulated from the measured displacement, rms error {v['force_rms_error']:.3g} "
                  f"{v['unit']} ({100 * v['force_rms_error_relative']:.3g} % of the sliding level)")
