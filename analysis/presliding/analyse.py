@@ -181,7 +181,8 @@ def _edge_shape(edges: EdgePoints, rev: np.ndarray, step: float, exponent: float
     r0 = int(rev[0])
     x, crossings = edges.x, edges.crossings
     ramp = [0, *_envelope(x, crossings, 1, r0, np.sign(x[r0] - x[0])), r0]
-    branch = _envelope(x, crossings, r0 + 1, int(rev[1]) + 1, np.sign(x[0] - x[r0])) if rev.size > 1 else []
+    end = int(rev[1]) if rev.size > 1 else x.size - 1  # the first branch runs to the next turn or the record's end
+    branch = _envelope(x, crossings, r0 + 1, end + 1, np.sign(x[0] - x[r0]))
     try:
         if branch:
             idx = np.array(ramp + branch)
