@@ -39,9 +39,8 @@ def rolling_virgin(s: np.ndarray, h: float, d: float, p: float = 2.0) -> np.ndar
 @dataclass
 class RollingFit:
     """The fitted shape. ``cov``: covariance of (log h, log d, c0, b, log p, x0, x_r), zero rows for what was held
-    fixed;
-    ``exponent``: p (2 unless fitted free); ``travel``: the virgin ramp's travel
-    (rad or m); ``rms_error``: rms residual of the fit (N*m or N); ``samples``: samples fitted."""
+    fixed; ``exponent``: p (2 unless fitted free); ``travel``: the virgin ramp's travel (rad or m); ``rms_error``:
+    rms residual of the fit (N*m or N); ``samples``: samples fitted."""
 
     h: float
     d: float
