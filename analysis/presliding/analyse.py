@@ -142,7 +142,8 @@ def is_quantised(x: np.ndarray, step: float) -> bool:
 
 
 def _edge_fit(x: np.ndarray, force: np.ndarray, step: float, axis: str, settings: PreslidingSettings | None,
-              min_excursion: int):
+              min_excursion: int) -> tuple[EdgePoints | None, PreslidingFit | None, str, RollingFit | None,
+                                           RollingFit | None]:
     """(edges, model, why not, free-exponent shape, exponent-2 shape): the force model on the edge-pinned path of a
     quantised record, or why there is none, and the parametric virgin curve fitted to the edge-pinned virgin ramp
     alone, with its exponent free and held at 2 (None where a fit fails). The dwell means carry no mean velocity or
@@ -287,9 +288,7 @@ def figures(result: PreslidingResult) -> dict:
     ax.plot(grid, result.fit.model.virgin_curve(grid) + result.fit.model.coulomb * (grid > 0), color="tab:red",
             label="identified virgin curve (NNLS)")
     if result.edge_fit is not None:
-        e = result.edges
-        r = find_reversals(e.x, HYSTERESIS_STEPS * result.resolution.step)
-        ramp = slice(0, int(r[0]) + 1) if r.size else slice(None)
+        e, ramp = result.edges, _edge_ramp(result)
         ax.plot(sgn * (e.x[ramp] - e.x[0]), sgn * (e.force[ramp] - e.force[0]), "o", ms=3, mfc="none",
                 color="tab:purple", label="dwells at count edges (position exact)")
         ax.plot(grid, result.edge_fit.model.virgin_curve(grid), color="tab:purple",
@@ -311,6 +310,12 @@ def figures(result: PreslidingResult) -> dict:
     return {"loops": loops, "virgin": fig}
 
 
+def _edge_ramp(result: PreslidingResult) -> slice:
+    """The edge points of the virgin ramp: up to the first reversal, found as _edge_fit finds it."""
+    r = find_reversals(result.edges.x, HYSTERESIS_STEPS * result.resolution.step)
+    return slice(0, int(r[0]) + 1) if r.size else slice(None)
+
+
 def _shape_curve(fit: RollingFit, s: np.ndarray, sgn: float) -> np.ndarray:
     """The fitted parametric curve over travel s from the rest count (its relaxed position where it was fitted)."""
     return fit.virgin_curve(np.clip(s - sgn * (fit.origin or 0.0), 0, None))
@@ -328,9 +333,7 @@ def _initial_slopes(ax, result: PreslidingResult, s: np.ndarray, sgn: float) -> 
     grid = np.linspace(0, span, 200)
     slopes = [("NNLS (samples)", result.quantities["initial_stiffness"], "tab:red", None, 0.0)]
     if result.edge_fit is not None:
-        e = result.edges
-        r = find_reversals(e.x, HYSTERESIS_STEPS * step)
-        ramp = slice(0, int(r[0]) + 1) if r.size else slice(None)
+        e, ramp = result.edges, _edge_ramp(result)
         es, ef = sgn * (e.x[ramp] - e.x[0]), sgn * (e.force[ramp] - e.force[0])
         ax.plot(es[es <= span], ef[es <= span], "o", ms=5, mfc="none", color="tab:purple",
                 label="dwells at count edges")

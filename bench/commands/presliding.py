@@ -81,9 +81,7 @@ def run(args: argparse.Namespace) -> int:
     x = numeric(rf.channel("position"), "position", args.run)
     force = numeric(rf.channels[name], name, args.run)
     cpr = args.counts_per_rev if args.counts_per_rev is not None else rf.calibration.get("counts_per_rev")
-    inertia = args.inertia if args.inertia is not None else float(rf.protocol_params.get("inertia", 0.0) or 0.0)
-    if not (math.isfinite(inertia) and inertia >= 0):
-        raise BenchError(f"{args.run}: the run file's protocol inertia must be finite and >= 0, got {inertia}")
+    inertia = args.inertia if args.inertia is not None else protocol_inertia(rf.protocol_params, args.run)
     settings = PreslidingSettings(inertia=inertia, viscous=not args.no_viscous, coulomb=args.coulomb,
                                   n_thresholds=args.thresholds)
     res = analyse(rf.t, x, force, rf.sample_rate, rf.axis, settings, counts_per_rev=cpr,
@@ -99,6 +97,16 @@ def run(args: argparse.Namespace) -> int:
         outputs.say(line)
     outputs.say(f"-> {out}/ ({', '.join(OUTPUT_FILES)})")
     return 0
+
+
+def protocol_inertia(params: dict, path: str) -> float:
+    """J (kg*m^2 or kg) the run's protocol recorded to subtract J*x'' (0 when none), or a one-line BenchError."""
+    from hilbench.bench.errors import BenchError
+
+    inertia = float(params.get("inertia", 0.0) or 0.0)
+    if not (math.isfinite(inertia) and inertia >= 0):
+        raise BenchError(f"{path}: the run file's protocol inertia must be finite and >= 0, got {inertia}")
+    return inertia
 
 
 def report(res, path: str, channel: str) -> dict:

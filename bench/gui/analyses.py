@@ -201,14 +201,14 @@ def presliding(run, options: dict | None = None) -> AnalysisResult:
     warnings. ``options['replicates']``: bootstrap replicates (default 8)."""
     analyse = _entry("presliding")
     from hilbench.analysis.presliding.identify import PreslidingSettings
-    from hilbench.bench.commands.presliding import report
+    from hilbench.bench.commands.presliding import protocol_inertia, report
 
     record = run.meta.get("record", "torque-driven")
     if record != "displacement-driven":
         raise BenchError(f"{os.path.basename(run.path)}: a {record} record; the presliding analysis needs a "
                          "displacement-driven one (a presliding run, or an import with --record displacement-driven)")
     options = options or {}
-    inertia = float(run.protocol_params.get("inertia", 0.0) or 0.0)
+    inertia = protocol_inertia(run.protocol_params, run.path)
     res = analyse(run.t, run.channel("position"), run.channel("torque"), run.sample_rate, run.axis,
                   PreslidingSettings(inertia=inertia), counts_per_rev=run.calibration.get("counts_per_rev"),
                   replicates=int(options.get("replicates", 8)))
