@@ -9,7 +9,7 @@ Every run file is then checked against the setpoints it stores: sample indices 0
 (``lost``) and no repeat, and every sample's commanded current equal to its float32 setpoint
 (``invented`` counts samples that are neither). A killed run must repair to ``crashed`` and open.
 Targets: 0 samples lost or invented, 0 files that do not open, 0 faults in runs that were not killed.
-Full length 10 min (``python -m benchmarks --only soak``); ``--quick`` 20 s (the smoke test's).
+Full length 10 min (``python -m benchmarks --only soak``); ``--quick`` 8 s (the smoke test's).
 """
 
 from __future__ import annotations
@@ -128,7 +128,7 @@ def soak(seconds: float, seed: int = 12, work: Path | None = None) -> dict:
 
 
 def run(quick: bool = False) -> list[dict]:
-    seconds = 20.0 if quick else 600.0
+    seconds = 8.0 if quick else 600.0
     t = soak(seconds)
     tag = f"soak {seconds:g} s, 10 kHz"
 

@@ -34,6 +34,7 @@ import numpy as np
 from hilbench.drivers import cia402 as c
 from hilbench.firmware_sim.plant import Plant
 from hilbench.firmware_sim.sim_config import SimConfig, substeps_for
+from hilbench.firmware_sim.stall_grace import StallGrace
 
 EDS_PATH = Path(__file__).with_name("hb_cia402.eds")
 SYNC_TIMEOUT = 0.1  # s without SYNC (while operation is enabled) that count as a lost host
@@ -178,15 +179,19 @@ class SimCia402Drive:
         self.last_host_heartbeat = time.monotonic()
 
     def _watch(self) -> None:
+        stalls = StallGrace()
         while not self._stop.wait(0.002):
             now = time.monotonic()
+            shortest = min(self.sync_timeout, self._host_hb[1] if self._host_hb is not None else math.inf)
+            if not stalls.may_judge(now, shortest):
+                continue
             with self._lock:
                 if self.state is not c.State.OPERATION_ENABLED:
                     continue
                 if self._host_hb is not None and now - self.last_host_heartbeat > self._host_hb[1]:
                     self._lost(EMCY_HEARTBEAT)
                     continue
-                if now - self.last_sync > self.sync_timeout:  # -inf before the first SYNC
+                if now - self.last_sync > self.sync_timeout:  # +inf before the first SYNC
                     self._lost(EMCY_SYNC_LOST)
 
     # ------------------------------------------------------------------ NMT, PDOs, SYNC

@@ -163,6 +163,9 @@ def serve(transport: PtyTransport | CanTransport, device: CoreDevice, tick: floa
         transport.exchange(device, timeout)
         now = time.monotonic()
         if device.pacing == "lockstep" or now >= next_tick:
+            # A real device hears the host in an interrupt; this process may have been descheduled since
+            # it last read. Whatever the host sent before `now` is read before the watchdog is judged at `now`.
+            transport.exchange(device, 0.0)
             device.tick(now)
             next_tick = max(next_tick + tick, now)
         transport.deliver(device)

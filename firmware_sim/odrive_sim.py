@@ -26,6 +26,7 @@ import numpy as np
 from hilbench.drivers import odrive_can as o
 from hilbench.firmware_sim.plant import Plant
 from hilbench.firmware_sim.sim_config import SimConfig, substeps_for
+from hilbench.firmware_sim.stall_grace import StallGrace
 
 TVL_ENDPOINT = 394
 HEARTBEAT_PERIOD = 0.1
@@ -107,6 +108,7 @@ class SimOdrive:
         t0 = time.monotonic()
         next_heartbeat = t0
         u_held = 0.0
+        stalls = StallGrace()
         while not self._stop.is_set():
             self.ticks += 1
             due = t0 + self.ticks * period
@@ -114,8 +116,10 @@ class SimOdrive:
             if wait > 0:
                 time.sleep(wait)
             now = time.monotonic()
+            judge = stalls.may_judge(now, self.watchdog_timeout)  # not right after this process's own stall
             with self._lock:
-                if self.state == o.AxisState.CLOSED_LOOP_CONTROL and now - self.last_rx > self.watchdog_timeout:
+                if (judge and self.state == o.AxisState.CLOSED_LOOP_CONTROL
+                        and now - self.last_rx > self.watchdog_timeout):
                     self._trip(o.WATCHDOG_TIMER_EXPIRED)
                 closed = self.state == o.AxisState.CLOSED_LOOP_CONTROL
                 u_new = self._torque(self.plant.omega) / self.kt if closed else 0.0

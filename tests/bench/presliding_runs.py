@@ -1,4 +1,8 @@
-"""A presliding run on the simulated bench and its analysis, as the tests that need one make it."""
+"""A presliding run on the simulated bench and its analysis, as the tests that need one make it.
+
+The simulated device is paced in lockstep: the device owns the sample clock, so its samples are bit for bit
+those of a realtime run (checked on a 46 500-sample run), computed as fast as the link allows instead of
+in 18 s of wall time."""
 
 from __future__ import annotations
 
@@ -16,6 +20,6 @@ def run_and_analyse(tmp_path: Path, counts_per_rev: int, *run_args: str, replica
     (the run file, the presliding.json document)."""
     h5, out = tmp_path / "p.h5", tmp_path / "out"
     assert main(["run", "presliding", *run_args, "--counts-per-rev", str(counts_per_rev),
-                 "--device", f"sim://?config={SIM_CONFIG}", "-o", str(h5), "--quiet"]) == 0
+                 "--device", f"sim://?pacing=lockstep&config={SIM_CONFIG}", "-o", str(h5), "--quiet"]) == 0
     assert main(["presliding", str(h5), "-o", str(out), "--replicates", str(replicates)]) == 0
     return h5, json.loads((out / "presliding.json").read_text())

@@ -15,7 +15,7 @@ from tests.reliability.wire import Wire
 def test_a_second_program_on_the_port_is_refused_and_the_run_completes(simulator, tmp_path):
     _, pty = simulator(pacing="realtime")
     out = tmp_path / "run.h5"
-    run = start("run", "identify", "--device", f"serial://{pty}", "--sample-rate", "1000", "--duration", "20",
+    run = start("run", "identify", "--device", f"serial://{pty}", "--sample-rate", "1000", "--duration", "10",
                 "--quiet", "-o", out)
     wait_for_samples(out, 1000)
     line = one_line_error(hilbench("info", "--device", f"serial://{pty}"))
@@ -27,7 +27,7 @@ def test_a_second_program_on_the_port_is_refused_and_the_run_completes(simulator
     stdout, stderr = run.communicate(timeout=60)
     assert run.returncode == 0, stderr
     with open_run(out) as r:
-        assert r.status == "completed" and r.n_samples == 20000
+        assert r.status == "completed" and r.n_samples == 10000
         assert [e for e in r.events if e["kind"] in ("abort", "fault")] == []
     assert hilbench("info", "--device", f"serial://{pty}").returncode == 0  # free again
 
