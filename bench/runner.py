@@ -157,6 +157,7 @@ class RunControl:
 
     _resume: threading.Event = field(default_factory=threading.Event)
     _abort: threading.Event = field(default_factory=threading.Event)
+    reason: str = "aborted by operator"
 
     def __post_init__(self) -> None:
         self._resume.set()
@@ -167,7 +168,10 @@ class RunControl:
     def resume(self) -> None:
         self._resume.set()
 
-    def abort(self) -> None:
+    def abort(self, reason: str = "aborted by operator") -> None:
+        """End the run at the next block; ``reason`` starts the run's abort event."""
+        if not self._abort.is_set():
+            self.reason = reason
         self._abort.set()
         self._resume.set()
 
@@ -270,10 +274,10 @@ class Bench:
             protocol_name=protocol.name, protocol_params=protocol.parameters(), protocol_arrays=arrays,
             operator=operator, notes=notes, overwrite=overwrite,
         )
-        status, message, done = "aborted", "", 0
+        status, message = "aborted", ""
         try:
             amp.arm()
-            done = self._execute(protocol, stream, segments, writer, progress, control)
+            self._execute(protocol, stream, segments, writer, progress, control)
             status = "completed"
         except AbortRun as exc:
             message = str(exc)
@@ -302,7 +306,7 @@ class Bench:
             for kind, text in amp.run_events():  # host-clocked timing, latched EMCY
                 writer.add_event(kind, text)
             writer.finish(status)
-        return RunResult(path, status, done, writer.uid, message)
+        return RunResult(path, status, writer.n_samples, writer.uid, message)  # what the file holds
 
     def _execute(self, protocol: Protocol, u: np.ndarray, segments: list[tuple[int, int]], writer: RunWriter,
                  progress: Callable[[Progress], None] | None, control: RunControl) -> int:
@@ -323,7 +327,7 @@ class Bench:
                     writer.add_event("resume", f"resumed at step {seg}")
                     amp.arm()
             if control.aborted:
-                raise AbortRun(f"aborted by operator after {done} of {total} samples")
+                raise AbortRun(f"{control.reason} after {done} of {total} samples")
             k = a  # setpoint of the block's first sample
             for blk in amp.stream(u[a:b]):
                 n = len(blk)
@@ -351,7 +355,7 @@ class Bench:
                 if n:
                     last_pos = float(measured[-1])
                 if control.aborted:
-                    raise AbortRun(f"aborted by operator after {done} of {total} samples")
+                    raise AbortRun(f"{control.reason} after {done} of {total} samples")
         return done
 
 

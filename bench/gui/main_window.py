@@ -188,9 +188,10 @@ class MainWindow(QtWidgets.QMainWindow):
         if worker is None:
             return
         if worker.control.paused:
-            worker.control.abort()
+            worker.control.abort("E-STOP while paused: aborted")
             return
-        timer = threading.Timer(1.0, lambda: worker.control.abort() if worker.isRunning() else None)
+        reason = "E-STOP: the run did not end by itself within 1 s of the e-stop; aborted"
+        timer = threading.Timer(1.0, lambda: worker.control.abort(reason) if worker.isRunning() else None)
         timer.daemon = True
         timer.start()
 

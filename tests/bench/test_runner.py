@@ -76,6 +76,19 @@ def test_abort_marks_the_file_and_disarms(bench, tmp_path):
     with open_run(result.path) as run:
         assert run.status == "aborted"
         assert 5000 < run.channel("t").size < 50_000
+        # the result counts what the file holds (it said 0 for every aborted run), and the event says why
+        assert result.samples == run.n_samples
+        assert run.events["message"][-1].startswith("aborted by operator after ")
+
+
+def test_an_abort_with_a_reason_records_it(bench, tmp_path):
+    control = RunControl()
+    result = bench.run(Identification(duration=5.0, amplitude=3.0), tmp_path / "ab.h5", control=control,
+                       progress=lambda p: control.abort("E-STOP: test") if p.done > 5000 else None)
+    control.abort("a later abort does not replace the first reason")
+    with open_run(result.path) as run:
+        assert result.status == "aborted" and 5000 < result.samples == run.n_samples
+        assert run.events["message"][-1] == f"E-STOP: test after {result.samples} of 50000 samples"
 
 
 def test_host_refuses_out_of_range_parameters_before_anything_moves(bench, tmp_path):
