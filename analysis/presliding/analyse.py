@@ -121,6 +121,8 @@ def analyse(t: np.ndarray, x: np.ndarray, force: np.ndarray, fs: float, axis: st
     unc = bootstrap(fit, x, force, fs, rev, replicates=replicates, fraction=fraction, seed=seed)
     try:
         rolling, why = fit_rolling(x, force, fs, rev), ""
+        if edges is not None:  # a quantised record: the contact rested somewhere in its first step
+            rolling = _assumed_origin(rolling, x, fs, int(rev[0]), step)
     except AnalysisError as exc:
         rolling, why = None, str(exc)
     res = resolution(fit, x, force, travels, counts_per_rev, fraction, step=step, rolling=rolling,
@@ -129,6 +131,18 @@ def analyse(t: np.ndarray, x: np.ndarray, force: np.ndarray, fs: float, axis: st
     return PreslidingResult(t, x, force, axis, fit, rev, travels[:-1], check,
                             quantities(fit.model, fraction), unc, res, fraction, block, rolling, why,
                             edges, edge_fit, edge_why, extremes, edge_rolling, edge_fixed)
+
+
+def _assumed_origin(fit: RollingFit, x: np.ndarray, fs: float, r0: int, step: float) -> RollingFit:
+    """The sample-based fit of a quantised record takes the contact at rest at x[0], where the encoder only says
+    which step it is in: ``fit`` with that assumption's type-B uncertainty (parametric.origin_uncertainty, on
+    the virgin ramp x[:r0 + 1]). Without it, a 2^14-count record's sum(k) came out 42 % low at +- 0.9 %."""
+    ramp = np.asarray(x[: r0 + 1], float)
+
+    def refit(force: np.ndarray) -> RollingFit:
+        return fit_rolling(ramp, force, fs, np.array([r0]), viscous=False)
+
+    return origin_uncertainty(fit, ramp, refit, step)
 
 
 def is_quantised(x: np.ndarray, step: float) -> bool:

@@ -149,7 +149,9 @@ def _parametric(res, units: dict) -> dict:
     return {"shape": r.shape, "h": r.h, "d": r.d, "offset": r.offset, "viscous": r.viscous,
             "units": {"h": u["torque"], "d": u["position"], "offset": u["torque"], "viscous": u["viscous"]},
             "quantities": {k: {"value": q[k], "std_uncertainty": e[k], "unit": units[k]} for k in q},
-            "uncertainty_method": "Jacobian covariance of scipy.optimize.least_squares (independent residuals)",
+            "uncertainty_method": "Jacobian covariance of scipy.optimize.least_squares (independent residuals)"
+                                  + ("; plus the type-B term of the relaxed position assumed at the first sample of a "
+                                     "quantised record" if r.origin_uncertainty else ""),
             "virgin_travel": r.travel, "level_reached": r.level_reached(), "fit_rms_error": r.rms_error,
             "samples": r.samples}
 

@@ -152,3 +152,14 @@ def test_a_device_run_at_2_12_counts_completes_and_says_what_is_not_resolved(tmp
     res = doc["resolution"]["resolved"]
     assert not (res["presliding_distance"] or res["initial_stiffness"] or res["breakaway"])
     assert "fewer than 5" in doc["edge_pinned"]["error"]
+
+
+def test_at_2_14_counts_the_sample_based_fit_carries_its_assumed_origin_and_is_not_trusted(tmp_path):
+    """At 2^14 counts/rev the edge-pinned fits fail (6 steps on the ramp) and the sample-based parametric fit is
+    left. It assumes the contact rested at the first sample; the encoder says only which step it was in. Without
+    that assumption's type-B term it reported sum(k) = 1735 +- 16 N*m/rad (truth 3019, -42 %) and was trusted."""
+    _h5, doc = run_and_analyse(tmp_path, 16384)
+    k0 = doc["parametric"]["quantities"]["initial_stiffness"]
+    assert k0["std_uncertainty"] > 0.1 * k0["value"]
+    assert not doc["resolution"]["resolved"]["parametric"]
+    assert "NEITHER resolves sum(k)" in doc["resolution"]["lines"][-1]
