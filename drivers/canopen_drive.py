@@ -378,12 +378,17 @@ class CanopenDrive(HostClockedDevice):
                     t2 = arrays["rx"][1, done:ready, :8].copy().view(dt2).ravel()
                     enabled = np.array([c.state_of(int(w)) is c.State.OPERATION_ENABLED for w in t1["status"]])
                     if not enabled.all():  # the drive left operation enabled: keep the sample that says so
-                        ready = done + int(np.argmin(enabled)) + 1
+                        first = int(np.argmin(enabled))
+                        # ...unless it is switched on: only the end-of-stream SWITCH_ON gets there, so this TPDO
+                        # answers the end's own SYNC, and arrived as a cycle's because TPDOs were lost before it
+                        ours = c.state_of(int(t1["status"][first])) is c.State.SWITCHED_ON
+                        ready = done + first + (0 if ours and not self._estop_requested else 1)
                         t1, t2 = t1[: ready - done], t2[: ready - done]
                         cycle.stop()
                         ended = True
                         cycle.join()
-                    yield self._block(done, ready, pm, t1, t2, arrays["host_time"], unwrap)
+                    if ready > done:
+                        yield self._block(done, ready, pm, t1, t2, arrays["host_time"], unwrap)
                     done = ready
                     hb_deadline = None
                 elif not ended and sent > done + rate * 0.25:  # a quarter second of SYNCs unanswered
@@ -413,7 +418,9 @@ class CanopenDrive(HostClockedDevice):
                                            f"{done - 1}: {why}")
                 lost = sent - done
                 if lost and not allow_loss:
-                    raise SampleLossError(f"CANopen node {self.node_id}: {lost} of {sent} SYNCs got no TPDO back")
+                    raise SampleLossError(f"CANopen node {self.node_id}: {lost} of {sent} SYNCs got no TPDO back "
+                                          "(TPDOs are matched to SYNCs in order: the samples after the first loss "
+                                          "are shifted)")
         finally:
             cycle.stop()
             cycle.join()

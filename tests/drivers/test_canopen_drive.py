@@ -20,7 +20,13 @@ from hilbench.drivers import cia402 as c
 from hilbench.drivers import protocol as p
 from hilbench.drivers.canopen_drive import CanopenDrive
 from hilbench.drivers.device_url import open_device
-from hilbench.drivers.errors import CommandRefusedError, ConfigError, DeviceFaultError, DeviceTimeoutError
+from hilbench.drivers.errors import (
+    CommandRefusedError,
+    ConfigError,
+    DeviceFaultError,
+    DeviceTimeoutError,
+    SampleLossError,
+)
 from hilbench.firmware_sim.cia402_drive import EDS_PATH, SimCia402Drive
 from hilbench.firmware_sim.plant import simulate
 from hilbench.firmware_sim.sim_config import load_sim_config, substeps_for
@@ -93,6 +99,36 @@ def test_stream_matches_the_plant_sample_for_sample(bus):
     np.testing.assert_allclose(got["torque"], np.rint(out.current_meas[k] * KT / RATED * 1000) * RATED / 1000)
     np.testing.assert_allclose(got["torque_cmd"], pm * RATED / 1000)
     assert np.ptp(got["counts"]) > CPR / 10  # it really moved
+
+
+def test_a_lost_tpdo_is_reported_as_sample_loss_not_as_the_drive_leaving_operation(bus):
+    """The drive does not answer SYNC 300 (a frame lost on a loaded host). The answer to the end-of-stream SYNC,
+    sent after SWITCH_ON, then arrives where cycle 599's TPDO should be. It said "left operation enabled at cycle
+    599: switched on"; it is the loss of one TPDO, and no sample may carry that state."""
+    calls = []
+
+    def lossy(can_id, data, timestamp):
+        calls.append(can_id)
+        if len(calls) != 300:
+            bus.drive._on_sync(can_id, data, timestamp)
+
+    bus.network.unsubscribe(0x80, bus.drive._on_sync)
+    bus.network.subscribe(0x80, lossy)
+    host = bus.host()
+    blocks = []
+    try:
+        host.configure(config())
+        host.arm()
+        with pytest.raises(SampleLossError, match=r"1 of 600 SYNCs got no TPDO back .*shifted"):
+            for block in host.stream(np.full(600, 1.0)):
+                blocks.append(block)
+    finally:
+        host.close()
+        bus.network.unsubscribe(0x80, lossy)
+        bus.network.subscribe(0x80, bus.drive._on_sync)  # what the drive unsubscribes when it closes
+    status = np.concatenate([b.status for b in blocks])
+    assert status.size == 599
+    assert all(c.state_of(int(w)) is c.State.OPERATION_ENABLED for w in status)
 
 
 def test_absent_node_is_one_line_naming_node_and_what_timed_out(bus):
