@@ -35,6 +35,7 @@ from hilbench.drivers import cia402 as c
 from hilbench.drivers import protocol as p
 from hilbench.drivers.amplifier import check_setpoints
 from hilbench.drivers.calibration import Calibration, CountUnwrapper
+from hilbench.drivers.can_buffer import enlarge_receive_buffer
 from hilbench.drivers.device import Capabilities, CycleSamples
 from hilbench.drivers.errors import (
     CommandRefusedError,
@@ -80,6 +81,7 @@ class CanopenDrive(HostClockedDevice):
             self.network.connect(interface=interface, channel=channel, **bus_kwargs)
         except Exception as exc:  # python-can raises many types for a missing interface
             raise DriverError(f"{self.name}: cannot open the CAN bus: {' '.join(str(exc).split())}") from exc
+        enlarge_receive_buffer(self.network.bus)
         try:
             self.node = self.network.add_node(node_id, eds)
             self.node.sdo.RESPONSE_TIMEOUT = timeout

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hilbench.drivers.can_buffer import enlarge_receive_buffer
 from hilbench.drivers.device import Device, refusal
 from hilbench.drivers.errors import ConfigError
 
@@ -319,6 +320,7 @@ def _cycle_main(spec: CanCycleSpec, shm_name: str, n: int, start_delay: float, p
             ctl[_ERROR] = 1
             ctl[_STOP] = 1
             return
+        enlarge_receive_buffer(bus)
         try:
             _cycle_loop(bus, spec, n, start_delay, ctl, host_time, scheduled, (rx, rx_time), tx, parent)
         finally:

@@ -16,6 +16,7 @@ from typing import Protocol
 import serial
 
 from hilbench.drivers import protocol as p
+from hilbench.drivers.can_buffer import enlarge_receive_buffer
 from hilbench.drivers.errors import LinkClosedError, PortBusyError
 
 
@@ -132,6 +133,7 @@ class CanLink:
                 bus = can.Bus(interface=interface, channel=channel, fd=fd, **bus_kwargs)
             except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
                 raise LinkClosedError(f"cannot open CAN {interface}:{channel}: {exc}") from exc
+            enlarge_receive_buffer(bus)
         self._bus = bus
         try:
             bus.set_filters([{"can_id": p.DEVICE_TO_HOST << 4 | node, "can_mask": 0x1F, "extended": False}])

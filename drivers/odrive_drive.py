@@ -32,6 +32,7 @@ import numpy as np
 from hilbench.drivers import odrive_can as o
 from hilbench.drivers import protocol as p
 from hilbench.drivers.amplifier import check_setpoints
+from hilbench.drivers.can_buffer import enlarge_receive_buffer
 from hilbench.drivers.device import Capabilities, CycleSamples
 from hilbench.drivers.errors import CommandRefusedError, DeviceFaultError, DeviceTimeoutError, DriverError
 from hilbench.drivers.host_cycle import CanCycle, CanCycleSpec, HostClockedDevice, timing_summary
@@ -65,6 +66,7 @@ class OdriveDrive(HostClockedDevice):
             self.bus = can.Bus(interface=interface, channel=channel, **bus_kwargs)
         except Exception as exc:
             raise DriverError(f"{self.name}: cannot open the CAN bus: {' '.join(str(exc).split())}") from exc
+        enlarge_receive_buffer(self.bus)
         self.notifier = can.Notifier(self.bus, [self._on_message])
         if not self._heartbeat.wait(timeout):
             self.close()
