@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from hilbench.drivers.can_buffer import enlarge_receive_buffer
+from hilbench.firmware_sim.bus_buffer import widen_device_buffer
 
 PACINGS = ("realtime", "lockstep")
 
@@ -104,7 +104,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m hilbench.firmware
                 raise ValueError(f"--node must be 1..15, got {args.node}")
 
             bus = can.Bus(interface=args.interface, channel=args.can, fd=args.fd)
-            enlarge_receive_buffer(bus)
+            widen_device_buffer(bus)
             transport = CanTransport(bus, args.node, args.fd)
     except (ValueError, OSError, ImportError, RuntimeError) as exc:  # RuntimeError: python-can's CanError
         print(f"{prog}: error: {' '.join(str(exc).split())}", file=sys.stderr)

@@ -32,7 +32,7 @@ import canopen
 import numpy as np
 
 from hilbench.drivers import cia402 as c
-from hilbench.drivers.can_buffer import enlarge_receive_buffer
+from hilbench.firmware_sim.bus_buffer import widen_device_buffer
 from hilbench.firmware_sim.plant import Plant
 from hilbench.firmware_sim.sim_config import SimConfig, substeps_for
 from hilbench.firmware_sim.stall_grace import StallGrace
@@ -311,7 +311,7 @@ def serve(interface: str, channel: str, node_id: int, sim: SimConfig, clock: str
     if port is not None:
         kwargs["port"] = port
     network.connect(interface=interface, channel=channel, **kwargs)
-    enlarge_receive_buffer(network.bus)
+    widen_device_buffer(network.bus)
     drive = SimCia402Drive(network, node_id, sim, clock=clock, supported_modes=supported_modes)
     print(f"canopen://{interface}/{channel}?node={node_id}&eds={EDS_PATH}" + (f"&port={port}" if port else ""),
           flush=True)

@@ -24,7 +24,7 @@ import can
 import numpy as np
 
 from hilbench.drivers import odrive_can as o
-from hilbench.drivers.can_buffer import enlarge_receive_buffer
+from hilbench.firmware_sim.bus_buffer import widen_device_buffer
 from hilbench.firmware_sim.plant import Plant
 from hilbench.firmware_sim.sim_config import SimConfig, substeps_for
 from hilbench.firmware_sim.stall_grace import StallGrace
@@ -153,7 +153,7 @@ def serve(interface: str, channel: str, node_id: int, sim: SimConfig, stop: thre
     if port is not None:
         kwargs["port"] = port
     bus = can.Bus(interface=interface, channel=channel, **kwargs)
-    enlarge_receive_buffer(bus)
+    widen_device_buffer(bus)
     drive = SimOdrive(bus, node_id, sim)
     print(f"odrive://{interface}/{channel}?node={node_id}&tvl_endpoint={TVL_ENDPOINT}"
           + (f"&port={port}" if port else ""), flush=True)
