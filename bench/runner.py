@@ -151,13 +151,16 @@ class RunResult:
     message: str = ""
 
 
+OPERATOR_ABORT = "aborted by operator"  # the abort event's opening words unless a reason is given
+
+
 @dataclass
 class RunControl:
     """Thread-safe pause/resume/abort of a run. Pause takes effect at the next segment boundary."""
 
     _resume: threading.Event = field(default_factory=threading.Event)
     _abort: threading.Event = field(default_factory=threading.Event)
-    reason: str = "aborted by operator"
+    reason: str = OPERATOR_ABORT
 
     def __post_init__(self) -> None:
         self._resume.set()
@@ -168,7 +171,7 @@ class RunControl:
     def resume(self) -> None:
         self._resume.set()
 
-    def abort(self, reason: str = "aborted by operator") -> None:
+    def abort(self, reason: str = OPERATOR_ABORT) -> None:
         """End the run at the next block; ``reason`` starts the run's abort event."""
         if not self._abort.is_set():
             self.reason = reason

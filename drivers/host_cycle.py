@@ -406,13 +406,13 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
     # every trigger, in order: wait while answers keep coming, and count as lost only what stays silent.
     quiet = max(1.0, 20 * period)
     end, last_call = clock() + quiet, clock() + TAIL_LIMIT
-    while min(counts or [0]) < ctl[_SENT] and clock() < min(end, last_call):
-        msg = bus.recv(timeout=max(0.0, min(end, last_call) - clock()))
+    answered = min(counts or [0])
+    while answered < ctl[_SENT] and (left := min(end, last_call) - clock()) > 0:
+        msg = bus.recv(timeout=left)
         if msg is not None:
-            before = min(counts or [0])
             take(msg)
-            if min(counts or [0]) > before:
-                end = clock() + quiet
+            if min(counts or [0]) > answered:
+                answered, end = min(counts or [0]), clock() + quiet
     ctl[_STOP] = 1
 
 

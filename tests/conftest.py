@@ -14,6 +14,6 @@ REALTIME = {"bench", "drivers", "reliability", "benchmarks", "firmware"}
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
-        parts = Path(str(item.path)).resolve().relative_to(TESTS).parts
+        parts = Path(item.path).resolve().relative_to(TESTS).parts
         if parts[0] in REALTIME:
             item.add_marker(pytest.mark.realtime)
