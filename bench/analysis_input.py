@@ -1,25 +1,22 @@
-"""What the analysis commands (identify, residual, skeleton, afrf) read from a run file, checked once.
+"""The analysis commands' shared options, a thin adapter over :func:`hilbench.analysis.record.load_record`.
 
-- One default torque channel for every analysis: the measured ``torque`` when the file has it, else the
-  commanded ``torque_cmd`` (``force``/``force_cmd`` on a linear axis are the same channels). ``--torque-channel``
-  chooses another.
-- A channel must hold finite numbers within :data:`MAX_ABS_VALUE`; strings, NaN and values near the float64
-  range (1e300, whose squares overflow) are refused with one line naming the channel.
+- Every analysis command reads its runs through :func:`load` (channel choice, torque timing, host-clock resampling,
+  numeric and completeness checks all live in the loader, so the CLI, the GUI and campaigns read a run alike).
 - Option values that size an allocation are checked against a stated bound before anything is allocated.
 """
 
 from __future__ import annotations
 
+import argparse
 import math
-
-import numpy as np
+import sys
+from typing import TYPE_CHECKING, Any
 
 from hilbench.bench.errors import BenchError
 
-TORQUE_CHANNELS = ("torque", "torque_cmd")
-# Largest magnitude accepted in a channel. The analyses square and sum samples: 1e100 squared is 1e200, far
-# from float64's 1.8e308 even summed over 1e9 samples; real torques, forces and positions are many decades below.
-MAX_ABS_VALUE = 1e100
+if TYPE_CHECKING:
+    from hilbench.analysis.record import Record
+
 # --thresholds: candidate Maxwell-slip thresholds; each one is a regressor column of the record's length, and
 # a fitted model must fit the C plant, whose element limit is 1024.
 MAX_THRESHOLDS = 1024
@@ -38,38 +35,25 @@ def whole_number(text: str) -> int:
     return int(value)
 
 
-def torque_channel(channels, requested: str | None, path: str, axis: str = "rotary") -> str:
-    """The torque channel to analyse: ``requested`` if given (must exist), else ``torque``, else
-    ``torque_cmd``."""
-    names = set(channels)
-    aliases = {"force": "torque", "force_cmd": "torque_cmd"} if axis == "linear" else {}
-    if requested is not None:
-        name = aliases.get(requested, requested)
-        if name not in names:
-            raise BenchError(f"{path}: no channel {requested!r} (has: {', '.join(sorted(names))})")
-        return name
-    for name in TORQUE_CHANNELS:
-        if name in names:
-            return name
-    raise BenchError(f"{path}: no torque channel (torque or torque_cmd; has: {', '.join(sorted(names))})")
+def add_record_options(parser: argparse.ArgumentParser) -> None:
+    """The options every analysis command shares for reading its runs (hilbench.analysis.record)."""
+    parser.add_argument("--allow-incomplete", action="store_true",
+                        help="analyse a run that is aborted, crashed, shorter than its plan or marked unfit by its "
+                        "device (refused by default); every report then says the record is incomplete")
 
 
-def numeric(values, name: str, path: str) -> np.ndarray:
-    """``values`` as a float64 array, or a one-line :class:`BenchError` saying what is wrong with it."""
-    raw = np.asarray(values)
-    if raw.dtype.kind not in "biuf":
-        what = "strings" if raw.dtype.kind in "SUO" else raw.dtype.name
-        raise BenchError(f"{path}: channel {name!r} holds {what}, not numbers")
-    arr = raw.astype(float)
-    bad = ~np.isfinite(arr)
-    if bad.any():
-        i = int(np.argmax(bad))
-        raise BenchError(f"{path}: channel {name!r} has {int(bad.sum())} non-finite value(s), first at sample {i}")
-    if arr.size and float(np.max(np.abs(arr))) > MAX_ABS_VALUE:
-        i = int(np.argmax(np.abs(arr)))
-        raise BenchError(f"{path}: channel {name!r} sample {i} is {arr[i]:.3g}, beyond the analysis bound "
-                         f"+-{MAX_ABS_VALUE:g}")
-    return arr
+def load(path: str, args: argparse.Namespace, **options: Any) -> Record:
+    """:func:`hilbench.analysis.record.load_record` with the command's ``--torque-channel``, ``--torque-timing``
+    and ``--allow-incomplete``; an incomplete record let through is said on standard error."""
+    from hilbench.analysis.record import load_record
+
+    options.setdefault("torque_channel", getattr(args, "torque_channel", None))
+    options.setdefault("timing", getattr(args, "torque_timing", None) or "auto")
+    rec = load_record(path, allow_incomplete=bool(getattr(args, "allow_incomplete", False)), **options)
+    line = rec.incomplete_line()
+    if line:
+        print(f"warning: {line}", file=sys.stderr)
+    return rec
 
 
 def check_cutoff(cutoff: float | None, sample_rate: float, option: str = "--cutoff") -> None:

@@ -31,9 +31,9 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+from hilbench.analysis.runfile import writer_alive
 from hilbench.bench.errors import BenchError
 from hilbench.bench.protocols import PROTOCOLS, Protocol, ProtocolError
-from hilbench.bench.runfile import writer_alive
 from hilbench.bench.runner import Bench, DeviceSettings, Progress, RunControl, SettingsError, settings_dict
 from hilbench.drivers.device_url import check_device_url
 from hilbench.drivers.errors import DeviceURLError
@@ -242,7 +242,7 @@ def _write_index(out_dir: Path, campaign: Campaign, entries: dict[str, dict]) ->
 
 
 def _file_status(path: Path) -> str:
-    from hilbench.bench.runfile import open_run
+    from hilbench.analysis.runfile import open_run
 
     try:
         with open_run(path) as run:

@@ -50,7 +50,7 @@ def check_calibration(model_doc: dict, torque_constant: float, ratio: float) -> 
     """Refuse a model identified under another calibration than the device's. The model file names its
     training run; when that run file is readable, its calibration must equal ``torque_constant`` (N*m/A) and
     ``ratio`` to 1e-9. Returns a note on what was checked."""
-    from hilbench.analysis.run_file import read_run_file
+    from hilbench.analysis.runfile import open_run
 
     data = model_doc.get("data") or {}
     train = data.get("train") if isinstance(data.get("train"), dict) else None
@@ -60,7 +60,8 @@ def check_calibration(model_doc: dict, torque_constant: float, ratio: float) -> 
     if not path or not Path(path).is_file():
         return "calibration not checked: the model's training run file is not here"
     try:
-        cal = read_run_file(path).calibration
+        with open_run(path) as run:
+            cal = run.calibration
     except Exception as exc:  # an unreadable training run is not the user's fault here: say so, go on
         return f"calibration not checked: {path}: {exc}"
     for name, device in (("torque_constant", torque_constant), ("ratio", ratio)):
@@ -106,11 +107,11 @@ def predict_case(case: Case, plant, gains: PositionGains, settings: MatrixSettin
 
 def measured_case(case: Case, run_file: str | Path, settings: MatrixSettings) -> CaseResult:
     """Metrics of a played case from its run file (position rad, commanded current A)."""
-    from hilbench.analysis.run_file import read_run_file
+    from hilbench.analysis.record import load_record
 
     ref = case.reference_path
-    rf = read_run_file(run_file)
-    q = rf.channel("position")
+    rf = load_record(run_file, need_torque=False, channels=("current_cmd",), allow_incomplete=True)
+    q = rf.position
     current = rf.channel("current_cmd")
     if q.size != ref.n:
         raise BenchError(f"{run_file}: {q.size} samples recorded, the reference has {ref.n}; the run did not "

@@ -61,7 +61,8 @@ def identification_errors(path: Path) -> tuple[float, float]:
     from hilbench.analysis.identification.maxwell_fit import LipSettings
     from hilbench.analysis.identification.regressors import reversal_travels
     from hilbench.analysis.models.friction_model import FrictionModel
-    from hilbench.analysis.run_file import host_sampled, on_host_time
+    from hilbench.analysis.record import on_host_time
+    from hilbench.analysis.runfile import host_sampled
     from hilbench.firmware_sim.sim_config import load_sim_config
 
     with h5py.File(path) as f:

@@ -104,7 +104,7 @@ def m4_sustains(elf, rate: int, seconds: float) -> tuple[bool, int, float]:
     from hilbench.drivers import protocol as p
     from hilbench.drivers.device_url import open_device
     from hilbench.drivers.errors import DriverError
-    from hilbench.firmware_sim import qemu_target
+    from tests.firmware import qemu_target
 
     n, received, t0 = int(seconds * rate), 0, time.perf_counter()
     with qemu_target.running_qemu(elf) as (_, pty):
@@ -128,7 +128,7 @@ def m4_lockstep_rate(elf, n: int) -> float:
     """Samples per second of wall time the lockstep image streams (1 kHz configuration, current mode)."""
     from hilbench.drivers import protocol as p
     from hilbench.drivers.device_url import open_device
-    from hilbench.firmware_sim import qemu_target
+    from tests.firmware import qemu_target
 
     with qemu_target.running_qemu(elf) as (_, pty), open_device(f"serial://{pty}", timeout=5.0) as amp:
         # a heartbeat can wait behind blocks in the emulated link for longer than 0.5 s on a loaded host;
@@ -167,7 +167,7 @@ def run(quick: bool = False) -> list[dict]:
         py_ns = ns_per_sample_reference(n, sim)
         rows.append(_row(f"host, {label}: C core, ns per sample", c_ns, "ns", "Python/numpy reference loop", py_ns))
 
-    from hilbench.firmware_sim import qemu_target
+    from tests.firmware import qemu_target
 
     if qemu_target.missing_tools():
         return rows

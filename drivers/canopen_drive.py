@@ -137,7 +137,7 @@ class CanopenDrive(HostClockedDevice):
         inc = int(self._read(c.ENCODER_RESOLUTION, 1, "encoder increments"))
         revs = int(self._read(c.ENCODER_RESOLUTION, 2, "motor revolutions"))
         self.counts_per_rev = inc // max(revs, 1)
-        # the drive samples at each SYNC: the analysis resamples on host_time (analysis/run_file.py)
+        # the drive samples at each SYNC: the analysis resamples on host_time (analysis/record.py)
         self._info = {"protocol": "CiA 402 over CANopen", "url": self.name, "sample_times": "host_time",
                       "device_type": f"0x{device_type:08X}", "supported_modes": f"0x{supported:08X}",
                       "rated_torque_Nm": self.rated_torque, "encoder_counts_per_rev": self.counts_per_rev}

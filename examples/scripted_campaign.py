@@ -8,7 +8,8 @@ import sys
 from pathlib import Path
 
 from hilbench.analysis.identification.identify import identify
-from hilbench.analysis.run_file import read_run_file
+from hilbench.analysis.identification.maxwell_fit import LipSettings
+from hilbench.analysis.record import load_record
 from hilbench.bench.protocols import Identification
 from hilbench.bench.runner import Bench
 
@@ -21,9 +22,9 @@ def main(out: Path) -> None:
                                operator="script", overwrite=True)
             print(result.status, result.path)
             files.append(result.path)
-    train = read_run_file(files[0]).arrays()
+    train = load_record(files[0])  # the one loader: channel, torque timing and checks as the CLI reads them
     for path in files[1:]:
-        fit = identify(train, validate=read_run_file(path).arrays())
+        fit = identify(train.arrays(), validate=load_record(path).arrays(), settings=LipSettings(timing=train.timing))
         m = fit.model
         print(f"{path.name}: J = {m.inertia:.6g} kg*m^2, break-away {m.breakaway:.4f} N*m, "
               f"validation position NRMSE {fit.figures['validation_position_nrmse']:.3f}")

@@ -103,7 +103,7 @@ def test_a_users_own_generic_folders_do_not_shadow_ours(installed, tmp_path):
     script.write_text(
         "import analysis, bench  # the user's own, next to the script\n"
         "from hilbench.analysis.identification.regressors import held_torque\n"
-        "from hilbench.bench.runfile import CHANNELS\n"
+        "from hilbench.analysis.runfile import CHANNELS\n"
         "print(held_torque([1.0, 2.0, 4.0], 'instant').tolist(), CHANNELS['torque'].unit('rotary'))\n"
     )
     for name in GENERIC:  # make the user's packages importable (their own code), not raising
@@ -111,3 +111,33 @@ def test_a_users_own_generic_folders_do_not_shadow_ours(installed, tmp_path):
     out = _run([str(installed["py"]), str(script)], tmp_path, installed["env"]).stdout
     assert out.strip() == "[1.5, 3.0, 4.0] N*m"
     assert not (installed["venv"] / "bin" / "bench").exists()  # no `bench` command to clash with
+
+
+def _python_blocks(doc: Path) -> list[str]:
+    """The ```python blocks of a Markdown file, in order."""
+    blocks, current = [], None
+    for line in doc.read_text(encoding="utf-8").splitlines():
+        if current is None and line.strip() == "```python":
+            current = []
+        elif current is not None and line.strip() == "```":
+            blocks.append("\n".join(current) + "\n")
+            current = None
+        elif current is not None:
+            current.append(line)
+    return blocks
+
+
+def test_every_python_example_of_the_readme_and_docs_runs_from_the_wheel(installed, tmp_path):
+    """Each block, in order (the README's make the runs the docs' read), in a folder outside the source tree,
+    against the installed hilbench.* names: a stale name or a changed signature fails here."""
+    docs = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
+    blocks = [(doc, code) for doc in docs for code in _python_blocks(doc)]
+    assert len(blocks) >= 5 and all("hilbench" in code or "h5py" in code or "savemat" in code for _d, code in blocks)
+    work = tmp_path / "examples"
+    work.mkdir()
+    for doc, code in blocks:
+        if doc.name == "run-file.md" and not (work / "run.h5").exists():
+            shutil.copyfile(work / "runs" / "id.h5", work / "run.h5")  # the docs' examples read "run.h5"
+        res = subprocess.run([str(installed["py"]), "-c", code], cwd=work, env=installed["env"], capture_output=True,
+                             text=True, timeout=600)
+        assert res.returncode == 0, f"{doc.name}:\n{code}\n{res.stderr[-2000:]}"

@@ -486,15 +486,17 @@ class SteppedSineRun:
     torque: np.ndarray | None
     mode: str
     axis: str
+    incomplete: str | None = None  # why the record is incomplete (only when allow_incomplete let it through)
 
 
-def read_stepped_sine_run(path: str | Path) -> SteppedSineRun:
-    """Read a stepped-sine run file with plain h5py (through :func:`analysis.run_file.read_run_file`,
-    docs/run-file.md). Raises :class:`AnalysisError` for a missing, foreign or damaged file, a run without
-    ``step_windows`` or without a position channel."""
-    from hilbench.analysis.run_file import read_run_file
+def read_stepped_sine_run(path: str | Path, allow_incomplete: bool = False) -> SteppedSineRun:
+    """Read a stepped-sine run file through the one loader (:func:`hilbench.analysis.record.load_record`).
+    Raises :class:`AnalysisError` for a missing, foreign, damaged or (unless ``allow_incomplete``) incomplete
+    file, a run without ``step_windows`` or without a position channel."""
+    from hilbench.analysis.record import load_record
 
-    run = read_run_file(path)
+    run = load_record(path, need_torque=False, channels=("torque",), protocol_arrays=("step_windows",),
+                      allow_incomplete=allow_incomplete)
     windows = run.protocol_arrays.get("step_windows")
     need = ("frequency", "amplitude", "measure_start", "measure_stop")
     if windows is None or windows.dtype.names is None or not all(n in windows.dtype.names for n in need):
@@ -504,11 +506,11 @@ def read_stepped_sine_run(path: str | Path) -> SteppedSineRun:
         raise AnalysisError(f"{run.path}: the step_windows table is empty")
     params = run.protocol_params
     mode = params.get("mode") or params.get("params", {}).get("mode") or "current"
-    return SteppedSineRun(run.path, run.sample_rate, windows, np.asarray(run.channel("position"), float),
-                          run.channels.get("torque"), str(mode), run.axis)
+    return SteppedSineRun(run.path, run.sample_rate, windows, np.asarray(run.position, float),
+                          run.channels.get("torque"), str(mode), run.axis, run.incomplete)
 
 
-def afrf_from_run(path: str | Path, n_harmonics: int = 3) -> AfrfResult:
+def afrf_from_run(path: str | Path, n_harmonics: int = 3, allow_incomplete: bool = False) -> AfrfResult:
     """AFRF of a measured stepped-sine run: harmonics of ``position`` over each step's measure window.
 
     The grid is the run's amplitudes x requested frequencies; the reported frequency is the played one
@@ -520,7 +522,7 @@ def afrf_from_run(path: str | Path, n_harmonics: int = 3) -> AfrfResult:
         AnalysisError: bad file, no step windows, no complete step, a window with fewer than one whole
             period or not whole periods.
     """
-    run = read_stepped_sine_run(path)
+    run = read_stepped_sine_run(path, allow_incomplete)
     w = run.windows
     amps = np.unique(w["amplitude"])
     req = w["frequency_requested"] if "frequency_requested" in w.dtype.names else w["frequency"]
@@ -558,7 +560,8 @@ def afrf_from_run(path: str | Path, n_harmonics: int = 3) -> AfrfResult:
         amplitudes=amps, frequencies=np.nanmean(played, axis=0), response=response, drive=drive,
         convergence=conv, amplitude_unit="A" if run.mode == "current" else ("m/s" if linear else "rad/s"),
         displacement_unit="m" if linear else "rad", drive_unit="N" if linear else "N*m",
-        label=run.path.name, settings={"source": str(run.path), "mode": run.mode, "sample_rate": run.fs},
+        label=run.path.name, settings={"source": str(run.path), "mode": run.mode, "sample_rate": run.fs,
+                                               "incomplete": run.incomplete},
     )
 
 

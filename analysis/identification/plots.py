@@ -31,7 +31,7 @@ def _figure(width: float, height: float, rows: int = 1, cols: int = 1, **kw):
 
 
 def _save(fig, path: Path, paths: list[Path], dpi: int = 110) -> None:
-    from hilbench.bench.outputs import save_figure
+    from hilbench.analysis.output_files import save_figure
 
     save_figure(fig, path, dpi=dpi, bbox_inches="tight")
     paths.append(path)

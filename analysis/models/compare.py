@@ -90,22 +90,26 @@ def markdown_table(result: Comparison) -> str:
     unit = "rad" if result.train.axis == "rotary" else "m"
     lines = [
         f"Train: {result.train.name} ({result.train.x.size} samples at {result.train.fs:g} Hz); validation: "
-        f"{result.validation.name} ({result.validation.x.size} samples). NRMSE = rms(error)/std(measured); "
+        f"{result.validation.name} ({result.validation.x.size} samples). NRMSE = 100*rms(error)/std(measured), in % "
+        "(docs/metrics.md); "
         f"position simulated with restarts every {result.segment_s:g} s ({unit}).",
         "",
-        f"| model | parameters | fit time (s) | validation torque NRMSE | validation position NRMSE (segmented) "
-        f"| validation position rms error ({unit}) | train torque NRMSE | train position NRMSE (segmented) |",
+        f"| model | parameters | fit time (s) | validation torque NRMSE (%) | validation position NRMSE (segmented, "
+        f"%) | validation position rms error ({unit}) | train torque NRMSE (%) | train position NRMSE (segmented, %) |",
         "|---|---|---|---|---|---|---|---|",
     ]
 
     def f(v: float) -> str:
         return "–" if v is None or not math.isfinite(v) else f"{v:.4g}"
 
+    def pct(v: float) -> str:
+        return f(None if v is None else 100.0 * v)
+
     for r in result.rows:
-        lines.append(f"| {r.name} | {r.n_parameters} | {f(r.fit_time_s)} | {f(r.validation['torque_nrmse'])} | "
-                     f"{f(r.validation['position_nrmse_segmented'])} | {f(r.validation['position_rms_segmented'])} | "
-                     f"{f(r.train['torque_nrmse'])} | "
-                     f"{f(r.train['position_nrmse_segmented'])} |")
+        lines.append(f"| {r.name} | {r.n_parameters} | {f(r.fit_time_s)} | {pct(r.validation['torque_nrmse'])} | "
+                     f"{pct(r.validation['position_nrmse_segmented'])} | {f(r.validation['position_rms_segmented'])} "
+                     f"| {pct(r.train['torque_nrmse'])} | "
+                     f"{pct(r.train['position_nrmse_segmented'])} |")
     return "\n".join(lines) + "\n"
 
 

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import sys
+
 MODELS = ("paper", "coulomb", "equivalent")
 MAX_FREQUENCIES = 1000  # simulated grid points per amplitude: each is a separate simulation
 
 
 def register(subparsers) -> None:
+    from hilbench.bench.analysis_input import add_record_options
+
     parser = subparsers.add_parser(
         "afrf",
         help="absolute frequency response of the 1st-3rd harmonic (stepped-sine run or simulated model)",
@@ -35,6 +39,7 @@ def register(subparsers) -> None:
     parser.add_argument("--workers", type=int, help="processes (default: all cores)")
     parser.add_argument("--json", metavar="OUT.json", help="write the AFRF as JSON ('-': stdout)")
     parser.add_argument("--plot", metavar="OUT.png", help="write the paper-style figure")
+    add_record_options(parser)
     parser.set_defaults(func=run)
 
 
@@ -102,7 +107,13 @@ def run(args) -> int:
     if (args.run is None) == (args.model is None):
         raise ValueError("give either a stepped-sine RUN.h5 or --model (not both)")
     outputs.refuse_inputs({"--json": args.json, "--plot": args.plot}, [args.run])
-    result = afrf_from_run(args.run) if args.run else _simulate(args)
+    if args.run:
+        result = afrf_from_run(args.run, allow_incomplete=args.allow_incomplete)
+        if result.settings.get("incomplete"):
+            print(f"warning: INCOMPLETE RECORD {args.run}: {result.settings['incomplete']} "
+                  "(analysed with --allow-incomplete)", file=sys.stderr)
+    else:
+        result = _simulate(args)
     outputs.say(_summary(result), args.json)
     if args.json:
         outputs.write_json(args.json, result.to_dict())

@@ -12,6 +12,7 @@ PUBLISHED = {"emps": ("EMPS published (IDIM-LS)", 95.1089, 203.5034, 20.3935, -3
 
 def register(subparsers) -> None:
     from hilbench.analysis.models.families import FAMILIES
+    from hilbench.bench.analysis_input import add_record_options
 
     parser = subparsers.add_parser(
         "compare",
@@ -32,26 +33,25 @@ def register(subparsers) -> None:
                         help="restart interval of the segmented simulation, s (default 1)")
     parser.add_argument("--max-evaluations", type=int, default=40,
                         help="output-error refinement budget per family (default 40)")
-    parser.add_argument("--torque-channel", default="torque",
-                        help="channel holding the drive torque or force (default torque; e.g. torque_cmd for "
-                        "a commanded torque, which is then held over the next interval)")
+    parser.add_argument("--torque-channel", default=None,
+                        help="channel holding the drive torque or force (default: torque if present, else "
+                        "torque_cmd, as identify; a *_cmd channel is held over the next interval)")
     parser.add_argument("--torque-timing", choices=("auto", "hold_previous", "hold_next", "instant"),
                         default="auto", help="what torque sample k means (as in hilbench identify)")
+    add_record_options(parser)
     parser.set_defaults(func=run)
 
 
-def _load(path: str, channel: str, timing_option: str):
+def _load(path: str, args):
+    """The run through the one loader: (torque, RunData, timing, record)."""
     from hilbench.analysis.models.families import RunData
-    from hilbench.analysis.run_file import read_run_file, run_torque_timing
     from hilbench.bench import outputs
+    from hilbench.bench.analysis_input import load
 
-    rf = read_run_file(path)
-    torque = rf.channel(channel)
-    declared = {"source": rf.source, "torque_timing": rf.declared_timing}
-    timing, origin = run_torque_timing({k: v for k, v in declared.items() if v is not None}, timing_option, channel)
-    outputs.say(f"{path}: torque timing of {channel}: {timing} ({origin})")
-    run = RunData.from_arrays(Path(path).name, rf.axis, rf.sample_rate, rf.channel("position"), torque, timing)
-    return torque, run, timing
+    rec = load(path, args)
+    outputs.say(f"{path}: torque timing of {rec.torque_channel}: {rec.timing} ({rec.timing_origin})")
+    run = RunData.from_arrays(rec.name, rec.axis, rec.sample_rate, rec.position, rec.torque, rec.timing)
+    return rec.torque, run, rec.timing, rec
 
 
 def run(args) -> int:
@@ -75,8 +75,8 @@ def run(args) -> int:
     out = Path(args.out)
     outputs.refuse_inputs({"--output": out, **{f"--output {out / name}": out / name for name in OUTPUTS}},
                           [args.run, args.validate])
-    train_torque, train, timing = _load(args.run, args.torque_channel, args.torque_timing)
-    _, val, _ = _load(args.validate, args.torque_channel, args.torque_timing)
+    train_torque, train, timing, train_rec = _load(args.run, args)
+    _, val, _, val_rec = _load(args.validate, args)
     if val.axis != train.axis:
         raise AnalysisError(f"validation run axis {val.axis!r} differs from the training run's {train.axis!r}")
     published = {}
@@ -92,9 +92,10 @@ def run(args) -> int:
     table = markdown_table(result)
     outputs.write_text(out / "compare.md", table)
     data = {"train": {"file": str(Path(args.run).resolve()), "samples": int(train.x.size),
-                      "sample_rate_hz": train.fs, "torque_channel": args.torque_channel, "torque_timing": timing},
+                      "sample_rate_hz": train.fs, "torque_channel": train_rec.torque_channel, "torque_timing": timing,
+                      "incomplete": train_rec.incomplete},
             "validation": {"file": str(Path(args.validate).resolve()), "samples": int(val.x.size),
-                           "sample_rate_hz": val.fs}}
+                           "sample_rate_hz": val.fs, "incomplete": val_rec.incomplete}}
     outputs.write_json(out / "compare.json", document(result, data), indent=2, allow_nan=False)
     (out / "models").mkdir(exist_ok=True)
     for row in result.rows:  # one model file per fitted family (schema hilbench.friction-model/2)

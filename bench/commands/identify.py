@@ -8,7 +8,7 @@ from pathlib import Path
 
 
 def register(subparsers) -> None:
-    from hilbench.bench.analysis_input import MAX_THRESHOLDS, whole_number
+    from hilbench.bench.analysis_input import MAX_THRESHOLDS, add_record_options, whole_number
 
     parser = subparsers.add_parser(
         "identify",
@@ -51,50 +51,23 @@ def register(subparsers) -> None:
         help="known inertia (kg*m^2, or kg on a linear axis), not estimated; 0 allowed: force against displacement. "
         "Default: estimated, or 0 for a displacement-driven record (run-file attribute record)",
     )
+    add_record_options(parser)
     parser.set_defaults(func=run)
 
 
-def _arrays(path: str, requested: str | None, timing: str):
-    from hilbench.analysis.identification.identify import RunArrays
-    from hilbench.analysis.run_file import host_sampled, on_host_time, run_torque_timing
-    from hilbench.bench.analysis_input import numeric, torque_channel
-    from hilbench.bench.errors import BenchError
-    from hilbench.bench.runfile import open_run
+def _arrays(path: str, args):
+    """The run through the one loader: (RunArrays, the record)."""
+    from hilbench.bench.analysis_input import load
 
-    with open_run(path) as run:
-        missing = [c for c in ("t", "position") if c not in run.channels]
-        if missing:
-            raise BenchError(
-                f"{path}: missing channel(s) {', '.join(missing)}; identification needs the "
-                "position and the torque (or force)"
-            )
-        name = torque_channel(run.channels, requested, path, run.axis)
-        arrays = RunArrays(
-            t=numeric(run.channel("t"), "t", path),
-            torque=numeric(run.channel(name), name, path),
-            position=numeric(run.channel("position"), "position", path),
-            axis=run.axis,
-            name=Path(path).name,
-        )
-        timing, origin = run_torque_timing(run.meta, timing, name)
-        if host_sampled(run.device, run.channels):  # a drive sampled at each SYNC: on its real times
-            t, x, tau, line = on_host_time(run.channel("host_time"), run.sample_rate, arrays.position,
-                                           arrays.torque, timing)
-            arrays = RunArrays(t, tau, x, run.axis, arrays.name)
-            origin = f"{origin}; {line}"
-        record = run.meta.get("record")
-        # a host-clocked run says how its cycle went (docs/drives.md)
-        cycle_lines = [str(e["message"]) for e in run.events
-                       if e["kind"] == "info" and str(e["message"]).startswith("host-clocked timing")]
-    return arrays, name, timing, origin, record, cycle_lines
+    rec = load(path, args)
+    return rec.arrays(), rec
 
 
 def run(args) -> int:
-    from hilbench.analysis.identification.identify import identify
+    from hilbench.analysis.identification import analyse, report
     from hilbench.analysis.identification.maxwell_fit import LipSettings
     from hilbench.analysis.models.friction_model import AXES
     from hilbench.analysis.models.model_file import model_document
-    from hilbench.analysis.run_file import record_kind
     from hilbench.bench import outputs
     from hilbench.bench.analysis_input import MAX_THRESHOLDS, check_count, check_cutoff
     from hilbench.bench.errors import BenchError
@@ -105,29 +78,27 @@ def run(args) -> int:
                 "candidate thresholds; a model must fit the plant's element limit")
     if args.inertia is not None and not (math.isfinite(args.inertia) and args.inertia >= 0):
         raise BenchError(f"--inertia must be finite and >= 0, got {args.inertia}")
-    train, channel, timing, origin, record, cycle_lines = _arrays(args.run, args.torque_channel,
-                                                                  args.torque_timing)
-    outputs.say(f"torque timing: {timing} ({origin})", args.json)
-    val = _arrays(args.validate, args.torque_channel, args.torque_timing)[0] if args.validate else None
+    train, rec = _arrays(args.run, args)
+    channel, timing, record = rec.torque_channel, rec.timing, rec.kind
+    outputs.say(f"torque timing: {timing} ({rec.timing_origin})", args.json)
+    val_rec = _arrays(args.validate, args)[1] if args.validate else None
+    val = val_rec.arrays() if val_rec is not None else None
     check_cutoff(args.cutoff, train.fs)
-    record = record_kind(record, args.run)
-    for text in cycle_lines:
+    for text in [n for n in rec.notes if n.startswith("host-clocked timing")]:
         if "UNFIT" in text:
             print(f"{args.run}: {text}", file=sys.stderr)
         else:
             outputs.say(f"{args.run}: {text}", args.json)
-    inertia = 0.0 if args.inertia is None and record == "displacement-driven" else args.inertia
     settings = LipSettings(
         n_thresholds=args.thresholds,
         cutoff=args.cutoff,
         coulomb=args.coulomb,
         offset=args.offset,
         spring=args.spring,
-        timing=timing,
         refine=args.refine,
-        fixed_inertia=inertia,
+        fixed_inertia=args.inertia,
     )
-    res = identify(train, method=args.method, validate=val, settings=settings, record=record)
+    res = analyse(rec, settings, method=args.method, validation=val_rec)
     data = {
         "train": {
             "file": str(Path(args.run).resolve()),
@@ -136,6 +107,7 @@ def run(args) -> int:
             "axis": train.axis,
             "torque_channel": channel,
             "torque_timing": timing,
+            "incomplete": rec.incomplete,
         }
     }
     if val is not None:
@@ -143,6 +115,7 @@ def run(args) -> int:
             "file": str(Path(args.validate).resolve()),
             "samples": int(val.t.size),
             "sample_rate_hz": val.fs,
+            "incomplete": val_rec.incomplete,
         }
     doc = model_document(res.model, method=res.method, settings=res.settings, figures=res.figures, data=data)
     outputs.write_json(args.json, doc, indent=2, allow_nan=False)
@@ -166,9 +139,7 @@ def run(args) -> int:
     say(judge(100 * f[f"{where}_torque_nrmse"], 100 * f[f"{where}_position_nrmse"],
               100 * f[f"{where}_position_nrmse_segmented"], where))
     if args.plots:
-        from hilbench.analysis.identification.plots import write_plots
-
-        for p in write_plots(res, args.plots):
+        for p in report(res, args.plots):
             say(f"plot: {p}")
     return 0
 

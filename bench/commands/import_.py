@@ -188,6 +188,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _unit(name: str, axis: str) -> str:
-    from hilbench.bench.runfile import CHANNELS
+    from hilbench.analysis.runfile import CHANNELS
 
     return CHANNELS[name].unit(axis)

@@ -9,6 +9,8 @@ import math
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from hilbench.bench.analysis_input import add_record_options
+
     parser = subparsers.add_parser(
         "residual",
         help="residual loop: find the physical effects a friction model lacks, validated on held-out data",
@@ -46,31 +48,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "or 0 for a displacement-driven record (run-file attribute record)")
     parser.add_argument("--candidates", default=None, metavar="TERMS",
                         help="comma-separated candidate terms to try (default: all registered)")
+    add_record_options(parser)
     parser.set_defaults(func=run)
 
 
-def _load(path: str, channel: str | None, timing: str | None, cutoff: float | None, json_target=None):
+def _load(path: str, args: argparse.Namespace):
+    """The run through the one loader, prepared for the loop: (RunData, channel, timing, record kind, source)."""
     from hilbench.analysis.residual import prepare_run
-    from hilbench.analysis.run_file import host_sampled, on_host_time, record_kind, run_torque_timing
     from hilbench.bench import outputs
-    from hilbench.bench.analysis_input import check_cutoff, numeric, torque_channel
-    from hilbench.bench.runfile import open_run
+    from hilbench.bench.analysis_input import check_cutoff, load
 
-    with open_run(path) as r:
-        name = torque_channel(r.channels, channel, path, r.axis)
-        position = numeric(r.channel("position"), "position", path)
-        torque = numeric(r.channel(name), name, path)
-        fs, axis = r.sample_rate, r.axis
-        timing, origin = run_torque_timing(r.meta, timing or "auto", name)
-        if host_sampled(r.device, r.channels):  # a drive sampled at each SYNC: on its real times
-            _, position, torque, line = on_host_time(r.channel("host_time"), fs, position, torque, timing)
-            origin = f"{origin}; {line}"
-        record = record_kind(r.meta.get("record"), path)
-        source = str(r.meta.get("source", "device"))
-    check_cutoff(cutoff, fs)
-    outputs.say(f"{path}: torque timing of {name}: {timing} ({origin})", json_target)
-    run = prepare_run(position, torque, fs, axis=axis, name=path, cutoff=cutoff, timing=timing)
-    return run, name, timing, record, source
+    rec = load(path, args, timing=args.timing or "auto")
+    check_cutoff(args.cutoff, rec.sample_rate)
+    outputs.say(f"{path}: torque timing of {rec.torque_channel}: {rec.timing} ({rec.timing_origin})", args.json)
+    run = prepare_run(rec.position, rec.torque, rec.sample_rate, axis=rec.axis, name=path, cutoff=args.cutoff,
+                      timing=rec.timing)
+    return run, rec.torque_channel, rec.timing, rec.kind, rec.source, rec.incomplete
 
 
 def _inertia(model: dict, fixed: float | None) -> float:
@@ -116,9 +109,8 @@ def run(args: argparse.Namespace) -> int:
     cands = None if args.candidates is None else tuple(t.strip() for t in args.candidates.split(",") if t.strip())
     if args.inertia is not None and not (math.isfinite(args.inertia) and args.inertia >= 0):
         raise BenchError(f"--inertia must be finite and >= 0, got {args.inertia}")
-    train, channel, timing, record, source = _load(args.run, args.torque_channel, args.timing, args.cutoff,
-                                                   args.json)
-    loaded = [_load(p, args.torque_channel, args.timing, args.cutoff, args.json) for p in args.validate]
+    train, channel, timing, record, source, incomplete = _load(args.run, args)
+    loaded = [_load(p, args) for p in args.validate]
     if any(v[3] != record for v in loaded):
         raise BenchError(f"{args.run} is {record}; every --validate run must be too")
     validation = [v[0] for v in loaded]
@@ -138,7 +130,9 @@ def run(args: argparse.Namespace) -> int:
               "start_option": args.start, "torque_channel": channel,
               "timing": timing, "cutoff_hz": train.data.cutoff, "decimation": train.data.decimation,
               "fixed_inertia": args.inertia if record == "torque-driven" or args.inertia is not None else 0.0,
-              "record": record}
+              "record": record,
+              "incomplete": {p: v for p, v in zip([args.run, *args.validate], [incomplete, *(v[5] for v in loaded)],
+                                                  strict=True) if v is not None}}
     outputs.write_json(args.json, report_dict(result, inputs), indent=2, allow_nan=False)
     say = lambda text: outputs.say(text, args.json)  # noqa: E731
     if args.report:

@@ -6,26 +6,12 @@ import argparse
 import math
 from pathlib import Path
 
+from hilbench.bench.device_options import DEVICE_OPTIONS
 from hilbench.bench.protocols import PROTOCOLS, Protocol
 
 RUNNABLE: dict[str, type[Protocol]] = dict(PROTOCOLS)  # every protocol of the table (campaign names)
 # Old spellings of `run`'s protocol names, kept as argparse aliases (they map onto the one name; docs/cli.md).
 ALIASES = {"identification": ["identify"], "stepped_sine": ["afrf"]}
-DEVICE_OPTIONS = {
-    "current_limit": ("A", "device current limit"),
-    "velocity_limit": ("rad/s", "device velocity limit"),
-    "position_min": ("rad", "lower end of the position window"),
-    "position_max": ("rad", "upper end of the position window"),
-    "watchdog_timeout": ("s", "device watchdog timeout (0 = off)"),
-    "torque_constant": ("N*m/A", "calibration: torque constant"),
-    "counts_per_rev": ("counts", "calibration: encoder counts per motor revolution"),
-    "ratio": ("1", "calibration: motor revolutions per load revolution"),
-    "position_kp": ("A/rad", "position loop: proportional gain (position mode)"),
-    "position_ki": ("A/(rad*s)", "position loop: integral gain (0 = off)"),
-    "position_kd": ("A*s/rad", "position loop: derivative gain (0 = off)"),
-    "position_i_limit": ("A", "position loop: bound of the integral term"),
-    "position_d_cutoff": ("Hz", "position loop: low-pass of the derivative (0 = unfiltered)"),
-}
 
 
 def add_protocol_options(parser: argparse.ArgumentParser, cls: type[Protocol]) -> None:

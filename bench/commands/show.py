@@ -31,8 +31,8 @@ def _fmt(value: float | None) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hilbench.analysis.runfile import channel_summary, open_run, repair
     from hilbench.bench import outputs
-    from hilbench.bench.runfile import channel_summary, open_run, repair
 
     outputs.refuse_inputs({"--json": args.json}, [args.run])
     repaired = None

@@ -8,7 +8,7 @@ import sys
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from hilbench.bench.analysis_input import whole_number
+    from hilbench.bench.analysis_input import add_record_options, whole_number
 
     parser = subparsers.add_parser(
         "skeleton",
@@ -47,6 +47,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--json", metavar="OUT.json", help="write the composed curves as JSON ('-': stdout)")
     parser.add_argument("--plot", metavar="OUT.png", help="write the skeleton plot")
+    parser.add_argument("--torque-channel", default=None, metavar="NAME",
+                        help="force channel (default: torque if present, else torque_cmd; as identify)")
+    add_record_options(parser)
     parser.set_defaults(func=run)
 
 
@@ -80,16 +83,14 @@ def centred_force(torque, timing: str):
 
 
 def run(args: argparse.Namespace) -> int:
-
-    from hilbench.analysis.run_file import read_run_file
     from hilbench.analysis.skeleton.forcevib import compose, forcevib
     from hilbench.bench import outputs
-    from hilbench.bench.analysis_input import MAX_BINS, check_count, numeric
+    from hilbench.bench.analysis_input import MAX_BINS, check_count, load
     from hilbench.bench.errors import BenchError
 
     outputs.refuse_inputs({"--json": args.json, "--plot": args.plot}, args.runs)
     check_count(args.bins, "--bins", 1, MAX_BINS, "log-spaced bins per skeleton curve")
-    runs = [read_run_file(p) for p in args.runs]
+    runs = [load(p, args) for p in args.runs]
     if len({r.axis for r in runs}) > 1:
         raise BenchError("runs mix rotary and linear axes")
     if not (math.isfinite(args.spring) and args.spring >= 0):
@@ -100,11 +101,9 @@ def run(args: argparse.Namespace) -> int:
         options["freq_range"] = tuple(args.band)
     results = []
     for r in runs:
-        x = numeric(r.channel("position"), "position", str(r.path))
-        force = centred_force(numeric(r.channel("torque"), "torque", str(r.path)), r.torque_timing)
-        origin = "declared" if r.declared_timing else "default"
-        outputs.say(f"{r.path.name}: torque timing {r.torque_timing} ({origin})")
-        results.append(forcevib(x, force, r.sample_rate, mass, args.method, spring=args.spring, **options))
+        force = centred_force(r.torque, r.timing)
+        outputs.say(f"{r.name}: torque timing of {r.torque_channel}: {r.timing} ({r.timing_origin})")
+        results.append(forcevib(r.position, force, r.sample_rate, mass, args.method, spring=args.spring, **options))
     pos, trq = ("rad", "N*m") if runs[0].axis == "rotary" else ("m", "N")
     for r, res in zip(runs, results, strict=True):
         v = res.valid
@@ -114,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
     warnings = _stiffness_warnings(curves, pos, trq, args.spring, mass)
     doc = {
         "runs": [str(p) for p in args.runs],
+        "incomplete": {str(r.path): r.incomplete for r in runs if r.incomplete is not None},
         "mass": mass,
         "spring": args.spring,
         "method": args.method,

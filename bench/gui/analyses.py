@@ -43,7 +43,7 @@ class AnalysisResult:
 
 #: analysis name -> (module, attribute) entry points it needs
 ENTRY_POINTS: dict[str, list[tuple[str, str]]] = {
-    "identification": [("hilbench.analysis.identification.maxwell_fit", "fit_lip")],
+    "identification": [("hilbench.analysis.identification", "analyse")],
     "skeleton": [("hilbench.analysis.skeleton.forcevib", "forcevib")],
     "afrf": [("hilbench.analysis.afrf.frf", "afrf_from_run")],
     "residual": [("hilbench.analysis.residual", "residual_loop"), ("hilbench.analysis.residual", "prepare_run")],
@@ -81,12 +81,15 @@ def _thin(x: np.ndarray, *ys: np.ndarray, n: int = 20000) -> list[np.ndarray]:
 
 
 def identification(run, options: dict | None = None) -> AnalysisResult:
-    """Maxwell-slip identification (``analysis.identification.maxwell_fit.fit_lip``) of ``run``."""
-    fit_lip = _entry("identification")
-    position = run.channel("position")
-    torque = run.channel("torque")
-    fit = fit_lip(position, torque, run.sample_rate, axis=run.axis)
-    m = fit.model
+    """Maxwell-slip identification of a :class:`hilbench.analysis.record.Record`, by the same call as ``hilbench
+    identify`` (``hilbench.analysis.identification.analyse``), so both report the same numbers (docs/metrics.md)."""
+    analyse = _entry("identification")
+    from hilbench.analysis.metrics import percent
+
+    position = run.position
+    res = analyse(run)
+    fit = res.lip
+    m = res.model
     d = m.to_dict()
     u = d["units"]
     numbers = [
@@ -97,7 +100,7 @@ def identification(run, options: dict | None = None) -> AnalysisResult:
         ("spring K", f"{m.spring:.6g}", u["spring"]),
         ("Maxwell-slip elements N", str(m.ms_stiffness.size), ""),
         ("breakaway sum W_i + Fc", f"{m.breakaway:.6g}", u["coulomb"]),
-        ("torque NRMSE (filtered)", f"{fit.torque_nrmse:.4g}", "1"),
+        ("train torque NRMSE", f"{percent(res.figures['train_torque_nrmse']):.3g}", "%"),
         ("filter cut-off", f"{fit.cutoff:.4g}", "Hz"),
     ]
     for i, (k, delta) in enumerate(zip(m.ms_stiffness, m.ms_delta, strict=True)):
@@ -173,18 +176,19 @@ def residual(run, options: dict | None = None) -> AnalysisResult:
     """Residual loop (``analysis.residual.residual_loop``) on position and torque, blocked
     cross-validation (no separate validation run)."""
     residual_loop = _entry("residual")
+    from hilbench.analysis.metrics import percent
     from hilbench.analysis.residual import prepare_run
 
-    data = prepare_run(run.channel("position"), run.channel("torque"), run.sample_rate, axis=run.axis,
-                       name=os.path.basename(run.path))
+    data = prepare_run(run.position, run.torque, run.sample_rate, axis=run.axis, name=os.path.basename(run.path),
+                       timing=run.timing)
     res = residual_loop(data)
     numbers = [("verdict", str(res.verdict), ""), ("validation", str(res.validation_mode), ""),
                ("start model", ", ".join(res.start), ""),
                ("effects added", ", ".join(res.names_added) or "none", "")]
-    for label, errors in (("before", res.error_before), ("after", res.error_after)):
-        for key, value in errors.items():
-            if isinstance(value, int | float):
-                numbers.append((f"error {label}: {key}", f"{value:.4g}", ""))
+    for label, errors in (("start model", res.error_before), ("final model", res.error_after)):
+        v = errors.get("validation") or {}
+        if v.get("torque_nrmse") is not None:
+            numbers.append((f"{res.validation_mode} torque NRMSE, {label}", f"{percent(v['torque_nrmse']):.3g}", "%"))
     tq = run.unit("torque")
     sb, sa = res.signals_before, res.signals_after
     figures = [Figure("residual over time", "t (s)", f"residual ({tq})",
@@ -201,18 +205,18 @@ def presliding(run, options: dict | None = None) -> AnalysisResult:
     warnings. ``options['replicates']``: bootstrap replicates (default 8)."""
     analyse = _entry("presliding")
     from hilbench.analysis.presliding.identify import PreslidingSettings
-    from hilbench.bench.commands.presliding import protocol_inertia, report
+    from hilbench.analysis.presliding.report import protocol_inertia, report
 
-    record = run.meta.get("record", "torque-driven")
+    record = run.kind
     if record != "displacement-driven":
         raise BenchError(f"{os.path.basename(run.path)}: a {record} record; the presliding analysis needs a "
                          "displacement-driven one (a presliding run, or an import with --record displacement-driven)")
     options = options or {}
     inertia = protocol_inertia(run.protocol_params, run.path)
-    res = analyse(run.t, run.channel("position"), run.channel("torque"), run.sample_rate, run.axis,
+    res = analyse(run.t, run.position, run.torque, run.sample_rate, run.axis,
                   PreslidingSettings(inertia=inertia), counts_per_rev=run.calibration.get("counts_per_rev"),
                   replicates=int(options.get("replicates", 8)))
-    doc = report(res, run.path, "torque")
+    doc = report(res, str(run.path), run.torque_channel)
     resolved = doc["resolution"]["resolved"]
     numbers = [(f"{name.replace('_', ' ')} (NNLS, model-free)" + ("" if resolved.get(name, True) else
                                                                  ", NOT resolved"),

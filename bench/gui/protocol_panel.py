@@ -153,7 +153,7 @@ class DeviceSettingsForm(QtWidgets.QWidget):
     changed = QtCore.Signal()
 
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
-        from hilbench.bench.commands.run import DEVICE_OPTIONS
+        from hilbench.bench.device_options import DEVICE_OPTIONS
         from hilbench.bench.runner import DeviceSettings
 
         super().__init__(parent)

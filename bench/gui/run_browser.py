@@ -28,14 +28,17 @@ class AnalysisWorker(QtCore.QThread):
     def run(self) -> None:
         from types import SimpleNamespace
 
-        from hilbench.bench.runfile import open_run
+        from hilbench.analysis.record import load_record
 
+        allow = bool(self.options.get("allow_incomplete", False))
         try:
             if self.name in analyses.BY_PATH:
                 result = analyses.ANALYSES[self.name](SimpleNamespace(path=self.path), self.options)
-            else:
-                with open_run(self.path) as r:
-                    result = analyses.ANALYSES[self.name](r, self.options)
+            else:  # the one loader, as the CLI reads the run (channel, torque timing, resampling, checks)
+                record = load_record(self.path, allow_incomplete=allow)
+                result = analyses.ANALYSES[self.name](record, self.options)
+                if record.incomplete_line():
+                    result.warnings.insert(0, record.incomplete_line())
         except Exception as exc:  # shown in the browser; the GUI keeps running
             self.failed.emit(f"{analyses.TITLES[self.name]} failed: {one_line(exc)}")
             return
@@ -182,7 +185,7 @@ class RunBrowser(QtWidgets.QWidget):
 
     def open(self, path: str) -> bool:
         """Open ``path``; a bad file gives a message in the window, never an exception."""
-        from hilbench.bench.runfile import open_run
+        from hilbench.analysis.runfile import open_run
 
         path = str(path).strip()
         if not path:
@@ -378,7 +381,7 @@ def _entries(values: dict, units: dict[str, str], indent: str = "  ") -> list[st
 
 def describe_run(r) -> list[str]:
     """The metadata pane: one fact per line, units named, dicts spelled out as ``key = value unit``."""
-    from hilbench.bench.commands.run import DEVICE_OPTIONS
+    from hilbench.bench.device_options import DEVICE_OPTIONS
     from hilbench.bench.protocols import PROTOCOLS
 
     device_units = {k: unit for k, (unit, _text) in DEVICE_OPTIONS.items()}

@@ -15,7 +15,7 @@ from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.identification.identify import RunArrays, identify
 from hilbench.analysis.identification.maxwell_fit import LipSettings
 from hilbench.analysis.identification.regressors import reversal_travels
-from hilbench.analysis.run_file import on_host_time, resample_host_clocked
+from hilbench.analysis.record import on_host_time, resample_host_clocked
 
 RATE, FINE, KT, CPR = 1000, 20, 0.2, 1 << 20  # Hz, plant steps per cycle, N*m/A, counts/rev
 
@@ -130,8 +130,8 @@ def test_identification_on_host_time_matches_the_device_clocked_run(runs):
 
 
 def test_identify_command_resamples_a_host_sampled_run(runs, tmp_path, capsys):
+    from hilbench.analysis.runfile import RunWriter
     from hilbench.bench.cli import main
-    from hilbench.bench.runfile import RunWriter
 
     tau, x = runs["jittered"]
     host_time = runs["host_time"]

@@ -9,8 +9,8 @@ import time
 
 import pytest
 
+from hilbench.analysis.runfile import open_run
 from hilbench.bench.campaign import CampaignError, load_campaign
-from hilbench.bench.runfile import open_run
 
 GOOD = """
 [defaults]

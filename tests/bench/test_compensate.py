@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
+from hilbench.analysis.runfile import RunWriter
 from hilbench.bench import cli
-from hilbench.bench.runfile import RunWriter
 from hilbench.firmware_sim.friction_models import dc_motor
 from tests.figure_checks import recording_figures
 
@@ -113,7 +113,7 @@ def test_a_compensate_campaign_plays_the_matrix_on_the_device_and_writes_its_rep
     reference and the feed-forward current, and the report follows. The stored feed-forward is checked against
     an independent closed form (exact stop operators of tests/truth, J*q'' and b*q' of the reference)."""
     from hilbench.analysis.compensation.references import slow_sine
-    from hilbench.analysis.run_file import read_run_file
+    from hilbench.analysis.record import load_record
     from hilbench.bench.campaign import load_campaign, run_campaign
     from tests.truth.generator import stop_operator_forces
 
@@ -141,7 +141,8 @@ tolerance = "2e-4 rad"
     entries = run_campaign(campaign, tmp_path / "out")
     assert all(e["status"] == "completed" for e in entries.values())
     ref = slow_sine(1000.0, amplitudes=(1e-3, 1e-2), frequency=1.0, cycles=1, rest=0.1)
-    rf = read_run_file(tmp_path / "out" / "m.sine.maxwell_slip-1.h5")
+    rf = load_record(tmp_path / "out" / "m.sine.maxwell_slip-1.h5", need_torque=False,
+                     channels=("position_cmd", "current_ff"))
     assert np.allclose(rf.channel("position_cmd"), ref.position, atol=1e-9)
     p = dc_motor(8)
     k = np.asarray(p.ms_stiffness)

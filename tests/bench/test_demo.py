@@ -2,7 +2,7 @@
 
 import json
 
-from hilbench.analysis.run_file import read_run_file
+from hilbench.analysis.record import load_record
 from hilbench.bench.cli import main
 
 
@@ -10,7 +10,7 @@ def test_demo_runs_everything_and_finds_the_undeclared_cogging(tmp_path, capsys)
     tmp_path = tmp_path / "a+b &c=d"  # characters that mean something in a URL query (issue 12 item 12)
     assert main(["demo", "-o", str(tmp_path), "--duration", "10"]) == 0  # 20 s by default; 10 s finds both
     for role in ("identification", "validation", "afrf"):
-        assert read_run_file(tmp_path / "runs" / f"{role}.h5").status == "completed"
+        assert load_record(tmp_path / "runs" / f"{role}.h5").status == "completed"
     model = json.loads((tmp_path / "model.json").read_text())
     assert model  # identification wrote its model file
     assert json.loads((tmp_path / "afrf.json").read_text())

@@ -4,8 +4,8 @@ import json
 
 import numpy as np
 
+from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.cli import main
-from hilbench.bench.runfile import RunWriter
 from hilbench.firmware_sim.friction_models import dc_motor
 from hilbench.firmware_sim.plant import simulate
 from tests import real_data

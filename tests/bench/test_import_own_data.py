@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from scipy.io import savemat
 
-from hilbench.analysis.run_file import read_run_file, run_torque_timing
+from hilbench.analysis.record import load_record
+from hilbench.analysis.runfile import open_run, run_torque_timing
 from hilbench.bench import importers
 from hilbench.bench.cli import main
-from hilbench.bench.runfile import open_run
 from tests import real_data
 from tests.bench.test_identify_command import _write_run
 
@@ -160,7 +160,7 @@ def test_declared_torque_timing_gives_the_device_model(tmp_path, device_run, cap
         assert f.attrs["torque_timing"] == "hold_previous"
     with h5py.File(undeclared, "r") as f:
         assert "torque_timing" not in f.attrs
-    assert read_run_file(declared).torque_timing == "hold_previous"
+    assert load_record(declared).timing == "hold_previous"
 
     device, out_dev = _identify(capsys, path, tmp_path / "dev.json")
     assert "torque timing: hold_previous (default for device runs)" in out_dev

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from hilbench.analysis.reproductions.paper import maxwell_slip_closed_form
+from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.cli import main
-from hilbench.bench.runfile import RunWriter
 from hilbench.firmware_sim.friction_models import paper_system
 from hilbench.firmware_sim.plant import simulate
 

@@ -117,7 +117,7 @@ def test_a_simulated_presliding_run_end_to_end(tmp_path, capsys):
     import h5py
 
     from hilbench.analysis.presliding.reversals import find_reversals
-    from hilbench.analysis.run_file import read_run_file
+    from hilbench.analysis.record import load_record
     from tests.truth.generator import stop_operator_forces
 
     h5, doc = run_and_analyse(tmp_path, 65536, replicates=4)
@@ -125,7 +125,7 @@ def test_a_simulated_presliding_run_end_to_end(tmp_path, capsys):
         sent = json.loads(f["device/config"][()])
     assert (sent["position_kp"], sent["position_ki"], sent["position_kd"]) == (100.0, 3.0e4, 0.5)
     k, w = dc_elements()
-    x_cmd = read_run_file(h5).channel("position_cmd")
+    x_cmd = load_record(h5, need_torque=False, channels=("position_cmd",)).channel("position_cmd")
     truth = stop_operator_forces(k, w, x_cmd)
     turns = find_reversals(x_cmd, 1e-9)
     extremes = np.array([r["force_extreme"] for r in doc["reversals"]])

@@ -9,7 +9,7 @@ import h5py
 import numpy as np
 import pytest
 
-from hilbench.bench import runfile as rf
+from hilbench.analysis import runfile as rf
 from hilbench.bench.cli import main as bench_main
 from hilbench.bench.excitations import stepped_sine
 

@@ -10,8 +10,8 @@ import time
 import numpy as np
 import pytest
 
+from hilbench.analysis.runfile import open_run
 from hilbench.bench.protocols import Identification, ProtocolError, SteppedSine
-from hilbench.bench.runfile import open_run
 from hilbench.bench.runner import Bench, DeviceSettings, RunControl
 from hilbench.drivers import protocol as wire
 

@@ -15,7 +15,7 @@ import pytest
 from hilbench.bench.protocols import Identification
 from hilbench.bench.runner import Bench, DeviceSettings
 from hilbench.drivers.device_url import open_device
-from hilbench.firmware_sim import qemu_target
+from tests.firmware import qemu_target
 
 pytestmark = pytest.mark.target
 
@@ -74,10 +74,10 @@ def test_qemu_never_outlives_its_host(lockstep_image):
             pid = proc.pid
             raise RuntimeError("the block failed")
     assert _gone(pid)
-    code = ("import sys, time\nfrom hilbench.firmware_sim import qemu_target\n"
+    code = ("import sys, time\nfrom tests.firmware import qemu_target\n"
             f"proc, pty = qemu_target.start_qemu({str(lockstep_image)!r})\n"
             "print(proc.pid, flush=True)\ntime.sleep(60)\n")
-    host = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    host = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, cwd=qemu_target.ROOT)
     try:
         qemu_pid = int(host.stdout.readline())
         os.kill(qemu_pid, 0)  # running

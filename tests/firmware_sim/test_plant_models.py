@@ -18,7 +18,7 @@ from hilbench.firmware_sim.plant import (
     PlantParams,
     simulate,
 )
-from hilbench.firmware_sim.reference import reference_friction_path, reference_simulate
+from tests.firmware_sim.reference import reference_friction_path, reference_simulate
 
 LG = LuGre(sigma0=1e4, coulomb=0.3, sigma1=5.0, sigma2=0.01, static=0.5, stribeck_velocity=0.1, exponent=1.5)
 

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from hilbench.analysis.errors import AnalysisError
-from hilbench.analysis.run_file import MAX_SAMPLES, read_run_file
-from hilbench.bench.runfile import RunFileError, RunWriter, open_run, repair
+from hilbench.analysis.record import load_record
+from hilbench.analysis.runfile import MAX_SAMPLES, RunFileError, RunWriter, open_run, repair
 from tests.reliability.cli import ENV, hilbench, one_line_error
 
 
@@ -55,7 +55,7 @@ def test_overwrite_replaces_only_with_a_complete_file(tmp_path):
 
 CREATE = r"""
 import sys, numpy as np
-from hilbench.bench.runfile import RunWriter
+from hilbench.analysis.runfile import RunWriter
 u = np.random.default_rng(0).normal(size=4_000_000)  # 32 MB of setpoints: seconds to compress and write
 print("go", flush=True)
 RunWriter(sys.argv[1], sample_rate=10000.0, protocol_arrays={"setpoints": u})
@@ -121,7 +121,7 @@ def test_a_small_file_claiming_2_to_the_33_samples_is_refused(tmp_path):
     with pytest.raises(RunFileError, match=f"above the bound of {MAX_SAMPLES}"):
         open_run(path)
     with pytest.raises(AnalysisError, match="MAX_SAMPLES"):
-        read_run_file(path)
+        load_record(path)
     for cmd in (["show", path],):  # in a process capped at 3 GiB of address space
         proc = subprocess.run([sys.executable, "-m", "hilbench", *map(str, cmd)], capture_output=True, text=True,
                               env=ENV, timeout=60, preexec_fn=_address_space_limit)

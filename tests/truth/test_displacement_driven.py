@@ -11,7 +11,7 @@ import h5py
 import numpy as np
 import pytest
 
-from hilbench.analysis.run_file import read_run_file
+from hilbench.analysis.record import load_record
 from hilbench.bench.cli import main
 from tests.truth.generator import displacement_driven, virgin_curve
 
@@ -38,7 +38,7 @@ def test_record_attribute_is_written_and_read(tribometer):
     _, paths, _, _ = tribometer
     with h5py.File(paths["train"], "r") as f:
         assert f.attrs["record"] == "displacement-driven"
-    assert read_run_file(paths["train"]).record == "displacement-driven"
+    assert load_record(paths["train"]).kind == "displacement-driven"
 
 
 def test_identify_inertia_zero_recovers_the_virgin_curve(tribometer, capsys):

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from hilbench.analysis import runfile as rf
 from hilbench.analysis.afrf.frf import afrf_from_run
 from hilbench.analysis.errors import AnalysisError
-from hilbench.bench import runfile as rf
 from hilbench.bench.cli import main as bench_main
 from hilbench.bench.excitations import stepped_sine
 from hilbench.firmware_sim.plant import PlantParams, simulate

@@ -8,7 +8,7 @@ from scipy import stats
 
 from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.residual.selection import _dm_two_sided, _evidence
-from hilbench.analysis.run_file import record_kind
+from hilbench.analysis.runfile import record_kind
 
 
 def test_evidence_without_a_diagnostic_is_the_held_out_test():

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hilbench.bench import runfile as rf
+from hilbench.analysis import runfile as rf
+from hilbench.analysis.record import load_record
 from hilbench.bench.errors import BenchError
 from hilbench.bench.gui.analyses import ANALYSES, TITLES, availability, presliding
 from tests.bench.presliding_runs import run_and_analyse
@@ -18,8 +19,7 @@ def test_the_presliding_analysis_shows_the_numbers_the_command_writes(tmp_path):
     extreme force agree to the digits shown; every number names its unit; the resolution lines are the warnings."""
     assert availability("presliding") == "" and ANALYSES["presliding"] is presliding and "presliding" in TITLES
     h5, doc = run_and_analyse(tmp_path, 65536, "--rate", "8", "--settle", "0.05", replicates=8)
-    with rf.open_run(h5) as run:
-        result = presliding(run)
+    result = presliding(load_record(h5))
     shown = {q: (v, u) for q, v, u in result.numbers}
     assert all(u for _q, (_v, u) in shown.items())
     resolved = doc["resolution"]["resolved"]
@@ -45,7 +45,7 @@ def test_a_torque_driven_run_is_refused_in_one_line(tmp_path):
         t = np.arange(300) / 1000.0
         w.append({"sample_index": np.arange(300), "t": t, "current_cmd": np.sin(t), "current": np.sin(t),
                   "torque": 0.05 * np.sin(t), "position": np.cos(t), "counts": np.arange(300)})
-    with rf.open_run(path) as run, pytest.raises(BenchError) as err:
-        presliding(run)
+    with pytest.raises(BenchError) as err:
+        presliding(load_record(path))
     assert "torque-driven" in str(err.value) and "displacement-driven" in str(err.value)
     assert "\n" not in str(err.value)

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from PySide6 import QtCore
 
+from hilbench.analysis.runfile import RunFileError, open_run
 from hilbench.bench.gui.main_window import MainWindow
-from hilbench.bench.runfile import RunFileError, open_run
 
 ESTOP_LIMIT_S = 0.050  # the requirement: e-stop reaches the device within 50 ms of the click
 

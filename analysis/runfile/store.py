@@ -1,4 +1,5 @@
-"""HDF5 run files, schema v1: a crash-safe incremental writer and a small reader.
+"""HDF5 run files (schema in :mod:`hilbench.analysis.runfile.schema`): the crash-safe incremental writer, the one
+reader (:class:`Run`, live refresh included) and repair.
 
 The layout is documented in ``docs/run-file.md``; plain h5py can read every part of it. In short::
 
@@ -31,7 +32,6 @@ import sys
 import time
 import uuid
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any
 
@@ -39,77 +39,31 @@ import h5py
 import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
-from hilbench.analysis.run_file import MAX_SAMPLES, check_size
-from hilbench.bench.errors import BenchError
-
-SCHEMA = "hilbench-run"
-#: root attribute ``record``: what drives the run (absent in older files: torque-driven)
-RECORDS = ("torque-driven", "displacement-driven")
-SCHEMA_VERSION = 2
-#: Versions this reader opens (2 added the position-mode channels position_cmd and current_ff).
-SCHEMA_VERSIONS = (1, 2)
-AXES = ("rotary", "linear")
-FINAL_STATUSES = ("completed", "aborted")
-#: ``failed``: the writer itself could not go on (disk full, I/O error); the file keeps every flushed sample.
-STATUSES = ("running", "completed", "aborted", "failed", "crashed")
-#: Bytes kept in the lock file while a writer runs, given back when a write fails so that the writer can
-#: still roll the file back and mark it ``failed`` on a full disk (HDF5 needs a few KiB of metadata for it).
-RESERVE_BYTES = 1 << 18
-#: The largest chunk, samples: the writer buffers one chunk per channel (``flush_interval`` of device time,
-#: capped here so that an absurd sample rate cannot ask for absurd memory).
-MAX_CHUNK = 1 << 20
-EVENT_KINDS = ("fault", "pause", "resume", "abort", "error", "info", "crash")
-EVENT_MESSAGE_BYTES = 256
-TORQUE_TIMINGS = ("hold_next", "hold_previous", "instant")  # docs/science.md §6
-
-
-@dataclass(frozen=True)
-class ChannelSpec:
-    """A known sample channel: unit on a rotary and on a linear axis, dtype and a one-line description."""
-
-    rotary_unit: str
-    linear_unit: str
-    dtype: str
-    description: str
-
-    def unit(self, axis: str) -> str:
-        return self.rotary_unit if axis == "rotary" else self.linear_unit
-
-
-CHANNELS: dict[str, ChannelSpec] = {
-    "sample_index": ChannelSpec("1", "1", "i8", "device sample counter"),
-    "t": ChannelSpec("s", "s", "f8", "device time of the sample"),
-    "current_cmd": ChannelSpec("A", "A", "f8", "commanded motor current"),
-    "current": ChannelSpec("A", "A", "f8", "measured motor current"),
-    "torque": ChannelSpec("N*m", "N", "f8", "motor torque (force on a linear axis)"),
-    "torque_cmd": ChannelSpec("N*m", "N", "f8", "commanded torque (force on a linear axis)"),
-    "position": ChannelSpec("rad", "m", "f8", "measured position"),
-    "position_cmd": ChannelSpec("rad", "m", "f8", "position reference"),
-    "counts": ChannelSpec("counts", "counts", "i8", "raw encoder counts"),
-    "velocity": ChannelSpec("rad/s", "m/s", "f8", "measured velocity"),
-    "velocity_cmd": ChannelSpec("rad/s", "m/s", "f8", "commanded velocity (velocity mode)"),
-    "current_ff": ChannelSpec("A", "A", "f8", "feed-forward current streamed with the position reference"),
-}
-DEVICE_CHANNELS = ("sample_index", "t", "current_cmd", "current", "torque", "position", "counts")
-REQUIRED_CHANNELS = ("sample_index", "t")
-# On a linear axis analysis may ask for the honest names; they are the same datasets.
-LINEAR_ALIASES = {"force": "torque", "force_cmd": "torque_cmd"}
-
-EVENT_DTYPE = np.dtype(
-    [
-        ("sample_index", "i8"),
-        ("t", "f8"),  # device time, s
-        ("wall_time", "f8"),  # host UNIX time, s
-        ("kind", "S16"),
-        ("message", f"S{EVENT_MESSAGE_BYTES}"),
-    ]
+from hilbench.analysis.runfile.schema import (
+    AXES,
+    CHANNELS,
+    DEVICE_CHANNELS,
+    EVENT_DTYPE,
+    EVENT_KINDS,
+    EVENT_MESSAGE_BYTES,
+    FINAL_STATUSES,
+    LINEAR_ALIASES,
+    MAX_CHUNK,
+    MAX_SAMPLES,
+    RECORDS,
+    REQUIRED_CHANNELS,
+    RESERVE_BYTES,
+    SCHEMA,
+    SCHEMA_VERSION,
+    SCHEMA_VERSIONS,
+    TORQUE_TIMINGS,
+    RunFileError,
+    _text,
+    check_size,
 )
 
 _NAME_RE = re.compile(r"^[a-z][a-z0-9_]{0,63}$")
 
-
-class RunFileError(BenchError):
-    """A run file cannot be created, read or repaired (the message names the file and the reason)."""
 
 
 def software_versions() -> dict[str, str]:
@@ -668,10 +622,6 @@ class RunWriter:
 # ---- reading ---------------------------------------------------------------------------------------------
 
 
-def _text(value: Any) -> str:
-    if isinstance(value, bytes | np.bytes_):
-        return value.decode("utf-8", errors="replace")
-    return str(value)
 
 
 def _one_line(exc: BaseException) -> str:

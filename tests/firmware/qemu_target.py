@@ -18,7 +18,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]  # tests/firmware/ -> the repository
 FIRMWARE = ROOT / "firmware"
 PACINGS = ("lockstep", "realtime")
 QEMU_START_TIMEOUT = 20.0  # s, for QEMU to name its pseudo-terminal

@@ -1,0 +1,311 @@
+"""One front door for every analysis: :func:`load_record` reads a run file into a :class:`Record`.
+
+It does, once and the same way for the CLI, the GUI, campaigns and scripts (docs/record.md):
+
+- the channel choice: the measured ``torque`` when the file has it, else the commanded ``torque_cmd``
+  (``force``/``force_cmd`` on a linear axis name the same datasets), or the channel the caller asks for;
+- the torque timing (what sample k of that channel means), from the caller, the file's declaration or its source;
+- host-clock resampling: a drive that samples at each SYNC (CiA 402) is put on a uniform grid;
+- the numeric checks (finite numbers within :data:`MAX_ABS_VALUE`), with one line naming the channel;
+- the record kind (torque- or displacement-driven);
+- the completeness checks: a run that is ``aborted``, ``crashed``, ``failed`` or still ``running``, that holds
+  fewer samples than its plan, or that its device marked unfit is refused in one line naming the reason, unless
+  the caller passes ``allow_incomplete`` (CLI ``--allow-incomplete``); then :attr:`Record.incomplete` says why
+  and every report carries it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hilbench.analysis.errors import AnalysisError
+from hilbench.analysis.runfile import (
+    LINEAR_ALIASES,
+    SAMPLE_KINDS,
+    RunFileError,
+    host_sampled,
+    open_run,
+    record_kind,
+    run_torque_timing,
+)
+
+#: the default torque channels, in order of preference
+TORQUE_CHANNELS = ("torque", "torque_cmd")
+#: Largest magnitude accepted in a channel. The analyses square and sum samples: 1e100 squared is 1e200, far from
+#: float64's 1.8e308 even summed over 1e9 samples; real torques, forces and positions are many decades below.
+MAX_ABS_VALUE = 1e100
+#: the CLI option that lets an incomplete record through
+ALLOW_OPTION = "--allow-incomplete"
+
+
+class IncompleteRecordError(AnalysisError):
+    """The record is aborted, crashed, short of its plan or marked unfit by its device."""
+
+
+@dataclass
+class Record:
+    """One run as every analysis reads it.
+
+    Attributes:
+        path: the run file. ``name``: its file name.
+        axis: ``rotary`` (rad, N*m) or ``linear`` (m, N).
+        sample_rate: Hz (the uniform grid of ``t``; a host-clocked run is resampled onto it).
+        t: s, shape (n,), uniform. ``position``: rad or m, shape (n,). ``torque``: N*m or N, shape (n,), the
+            channel ``torque_channel`` with sample timing ``timing`` (None when the caller did not need it).
+        timing_origin: where ``timing`` comes from (given, declared in the file, default for its source).
+        kind: ``torque-driven`` or ``displacement-driven``. ``source``: ``device`` or ``import:<format>``.
+        status: as stored (``completed``, ``aborted``, ...); a ``running`` file without a writer reads ``crashed``.
+        incomplete: None for a complete record, else why it is not (only when ``allow_incomplete`` let it through).
+        channels: further channels the caller asked for, name -> array (same grid as ``t``).
+        units: unit of every channel in the file.
+        protocol_name, protocol_params, protocol_arrays: what the run played (only the arrays asked for).
+        calibration, device: the file's device calibration and identity (dicts).
+        events: (kind, message) of every event, in order.
+        notes: what the loader did that a report should mention (resampling, the device's timing figures).
+    """
+
+    path: Path
+    axis: str
+    sample_rate: float
+    t: np.ndarray
+    position: np.ndarray | None
+    torque: np.ndarray | None
+    torque_channel: str | None
+    timing: str
+    timing_origin: str
+    kind: str
+    source: str
+    status: str
+    incomplete: str | None = None
+    channels: dict[str, np.ndarray] = field(default_factory=dict)
+    units: dict[str, str] = field(default_factory=dict)
+    protocol_name: str = ""
+    protocol_params: dict[str, Any] = field(default_factory=dict)
+    protocol_arrays: dict[str, np.ndarray] = field(default_factory=dict)
+    calibration: dict[str, Any] = field(default_factory=dict)
+    device: dict[str, Any] = field(default_factory=dict)
+    events: list[tuple[str, str]] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def name(self) -> str:
+        return self.path.name
+
+    @property
+    def fs(self) -> float:
+        return self.sample_rate
+
+    def channel(self, name: str) -> np.ndarray:
+        """A loaded channel by name (``position``, the torque channel, or one asked for in ``channels``)."""
+        key = LINEAR_ALIASES.get(name, name) if self.axis == "linear" else name
+        if key == "position" and self.position is not None:
+            return self.position
+        if key == self.torque_channel and self.torque is not None:
+            return self.torque
+        if key in self.channels:
+            return self.channels[key]
+        raise AnalysisError(f"{self.path}: channel {name!r} was not loaded (loaded: "
+                            f"{', '.join(['position', str(self.torque_channel), *self.channels])})")
+
+    def unit(self, name: str) -> str:
+        """Unit of a channel of the file (``force`` names ``torque`` on a linear axis)."""
+        key = LINEAR_ALIASES.get(name, name) if self.axis == "linear" else name
+        if key not in self.units:
+            raise AnalysisError(f"{self.path}: no channel {name!r} (has: {', '.join(sorted(self.units))})")
+        return self.units[key]
+
+    def arrays(self):
+        """The record as :class:`hilbench.analysis.identification.identify.RunArrays`."""
+        from hilbench.analysis.identification.identify import RunArrays
+
+        if self.position is None:
+            raise AnalysisError(f"{self.path}: no position channel loaded")
+        return RunArrays(self.t, self.torque, self.position, self.axis, self.name)
+
+    def incomplete_line(self) -> str | None:
+        """One line for a report when the record is incomplete, else None."""
+        if self.incomplete is None:
+            return None
+        return f"INCOMPLETE RECORD {self.name}: {self.incomplete} (analysed with {ALLOW_OPTION})"
+
+
+def choose_torque_channel(channels: Sequence[str], requested: str | None, path: object, axis: str = "rotary") -> str:
+    """The torque channel to analyse: ``requested`` if given (must exist), else ``torque``, else ``torque_cmd``."""
+    names = set(channels)
+    aliases = LINEAR_ALIASES if axis == "linear" else {}
+    if requested is not None:
+        name = aliases.get(requested, requested)
+        if name not in names:
+            raise AnalysisError(f"{path}: no channel {requested!r} (has: {', '.join(sorted(names))})")
+        return name
+    for name in TORQUE_CHANNELS:
+        if name in names:
+            return name
+    raise AnalysisError(f"{path}: no torque channel (torque or torque_cmd; has: {', '.join(sorted(names))})")
+
+
+def numeric(values: Any, name: str, path: object) -> np.ndarray:
+    """``values`` as a float64 array, or a one-line :class:`AnalysisError` saying what is wrong with it."""
+    raw = np.asarray(values)
+    if raw.dtype.kind not in "biuf":
+        what = "strings" if raw.dtype.kind in "SUO" else raw.dtype.name
+        raise AnalysisError(f"{path}: channel {name!r} holds {what}, not numbers")
+    arr = raw.astype(float)
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise AnalysisError(f"{path}: channel {name!r} has {int(bad.sum())} non-finite value(s), first at sample {i}")
+    if arr.size and float(np.max(np.abs(arr))) > MAX_ABS_VALUE:
+        i = int(np.argmax(np.abs(arr)))
+        raise AnalysisError(f"{path}: channel {name!r} sample {i} is {arr[i]:.3g}, beyond the analysis bound "
+                            f"+-{MAX_ABS_VALUE:g}")
+    return arr
+
+
+def completeness(run) -> str | None:
+    """Why an open :class:`hilbench.analysis.runfile.Run` is not a complete record, or None.
+
+    Incomplete: a status other than ``completed`` (with the abort or fault event's message when there is one);
+    fewer samples than the protocol's ``setpoints`` (the plan; only its shape is read); an ``info`` event of the
+    device that says the record is UNFIT (a host-clocked drive whose cycle timing broke its limits)."""
+    status = run.status
+    events = run.events
+    if status != "completed":
+        why = [str(e["message"]) for e in events if e["kind"] in ("abort", "fault", "error", "crash")]
+        return f"the run is {status}" + (f" ({why[-1]})" if why else "")
+    if "setpoints" in run.protocol_array_names:
+        planned = int(run._file["protocol"]["setpoints"].shape[0])
+        if run.n_samples < planned:
+            return f"it holds {run.n_samples} of the {planned} planned samples"
+    for e in events:
+        if e["kind"] == "info" and "UNFIT" in str(e["message"]):
+            return f"its device marked it unfit: {e['message']}"
+    return None
+
+
+def load_record(path: str | Path, *, torque_channel: str | None = None, timing: str = "auto",
+                need_torque: bool = True, need_position: bool = True, channels: Sequence[str] = (),
+                protocol_arrays: Sequence[str] = (), allow_incomplete: bool = False) -> Record:
+    """Read a run file into a :class:`Record` (module docstring). Raises :class:`AnalysisError` in one line for a
+    missing, damaged or foreign file, a missing or non-numeric channel, and (:class:`IncompleteRecordError`) an
+    incomplete record unless ``allow_incomplete``."""
+    path = Path(path)
+    if not path.exists():
+        raise AnalysisError(f"{path}: no such run file")
+    try:
+        run = open_run(path)
+    except RunFileError:
+        raise
+    except OSError as exc:
+        raise AnalysisError(f"{path}: cannot open: {' '.join(str(exc).split())}") from None
+    with run:
+        reason = completeness(run)
+        if reason is not None and not allow_incomplete:
+            raise IncompleteRecordError(f"{path}: refusing an incomplete record: {reason}; pass {ALLOW_OPTION} to "
+                                        "analyse it anyway (every report then says so)")
+        if need_position and "position" not in run.channels:
+            raise AnalysisError(f"{path}: no position channel (has: {', '.join(run.channels)})")
+        name = choose_torque_channel(run.channels, torque_channel, path, run.axis) if need_torque else None
+        t = numeric(run.channel("t"), "t", path)
+        position = numeric(run.channel("position"), "position", path) if need_position else None
+        torque = numeric(run.channel(name), name, path) if name is not None else None
+        resolved, origin = run_torque_timing(run.meta, timing, name or "torque")
+        extra = {}
+        for c in channels:
+            key = LINEAR_ALIASES.get(c, c) if run.axis == "linear" else c
+            if key in run.channels and key not in ("position", name):
+                extra[key] = numeric(run.channel(key), key, path)
+        notes: list[str] = []
+        if host_sampled(run.device, run.channels):  # a drive sampled at each SYNC: on its real times
+            host_time = numeric(run.channel("host_time"), "host_time", path)
+            group: dict[str, tuple[np.ndarray, str]] = {}
+            if position is not None:
+                group["position"] = (position, "instant")
+            if torque is not None:
+                group["torque"] = (torque, resolved)
+            for k, v in extra.items():
+                group[k] = (v, "instant")
+            t, out = resample_host_clocked(host_time, run.sample_rate, group)
+            period = np.diff(host_time)
+            line = (f"resampled on host_time: {period.size + 1} samples taken at {1e3 * period.min():.3f} to "
+                    f"{1e3 * period.max():.3f} ms intervals -> {t.size} at {run.sample_rate:g} Hz")
+            origin = f"{origin}; {line}"
+            notes.append(line)
+            position = out.get("position")
+            torque = out.get("torque")
+            extra = {k: out[k] for k in extra}
+        events = [(str(e["kind"]), str(e["message"])) for e in run.events]
+        notes += [m for k, m in events if k == "info" and m.startswith("host-clocked timing")]
+        arrays = {}
+        for a in protocol_arrays:
+            if a in run.protocol_array_names:
+                arrays[a] = run.protocol_array(a)
+        return Record(
+            path=path, axis=run.axis, sample_rate=run.sample_rate, t=t, position=position, torque=torque,
+            torque_channel=name, timing=resolved, timing_origin=origin,
+            kind=record_kind(run.meta.get("record"), path), source=str(run.meta.get("source", "device")),
+            status=run.status, incomplete=reason, channels=extra, units=run.units,
+            protocol_name=run.protocol_name, protocol_params=run.protocol_params, protocol_arrays=arrays,
+            calibration=run.calibration, device=run.device, events=events, notes=notes)
+
+
+
+
+def on_host_time(host_time: np.ndarray, rate: float, position: np.ndarray, torque: np.ndarray, timing: str
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
+    """Position (sampled at ``host_time``) and torque (of sample timing ``timing``) of a host-clocked run on
+    a uniform grid at ``rate``: (t, position, torque, one line saying so). See :func:`resample_host_clocked`."""
+    t, r = resample_host_clocked(host_time, rate, {"position": (position, "instant"), "torque": (torque, timing)})
+    period = np.diff(np.asarray(host_time, dtype=np.float64))
+    line = (f"resampled on host_time: {period.size + 1} samples taken at {1e3 * period.min():.3f} to "
+            f"{1e3 * period.max():.3f} ms intervals -> {t.size} at {rate:g} Hz")
+    return t, r["position"], r["torque"], line
+
+
+def resample_host_clocked(host_time: np.ndarray, rate: float, channels: dict[str, tuple[np.ndarray, str]]
+                          ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Channels of a host-clocked record, sampled at the irregular times ``host_time``, on the uniform grid
+    ``t_j = j/rate`` (s, from the first sample to the last), each in its own sample timing.
+
+    Args:
+        host_time: s, shape (n,), strictly increasing: when the drive sampled (the SYNC went out).
+        rate: nominal rate, Hz.
+        channels: name -> (values of shape (n,), kind). ``instant`` (a value at s_k: position, velocity) is
+            interpolated by a cubic spline through (s_k, x_k) (not-a-knot; the motion is smooth between
+            samples, and a straight line would bend the second difference the identification reads);
+            ``hold_next`` (held over [s_k, s_k+1): a command) and ``hold_previous`` (the mean over
+            [s_k-1, s_k): a current measured at s_k) are averaged over each grid interval, which keeps the
+            integral (the impulse) of the held signal exact: out_j = (F(t_j+1) - F(t_j)) * rate with F the
+            running integral, piecewise linear between the s_k.
+    Returns:
+        (t, resampled): t of shape (m,), m = floor((s_n-1 - s_0) * rate) + 1; each channel of shape (m,).
+    """
+    from scipy.interpolate import CubicSpline
+
+    s = np.asarray(host_time, dtype=np.float64)
+    s = s - s[0]
+    if s.size < 4 or not np.all(np.diff(s) > 0):
+        raise AnalysisError("host_time must hold 4 or more strictly increasing times to resample on it")
+    period = 1.0 / rate
+    m = int(np.floor(s[-1] * rate + 1e-9)) + 1
+    t = np.arange(m) * period
+    out = {}
+    for name, (values, kind) in channels.items():
+        v = np.asarray(values, dtype=np.float64)
+        if kind == "instant":
+            out[name] = CubicSpline(s, v)(t)
+            continue
+        if kind not in SAMPLE_KINDS:
+            raise AnalysisError(f"{name}: unknown sample kind {kind!r} (expected {', '.join(SAMPLE_KINDS)})")
+        # held values h_i over [s_i, s_i+1); the last one has no end: hold it over one nominal period
+        held = v if kind == "hold_next" else np.append(v[1:], v[-1])
+        edges = np.append(s, s[-1] + period)
+        integral = np.concatenate([[0.0], np.cumsum(held * np.diff(edges))])
+        means = np.diff(np.interp(np.append(t, t[-1] + period), edges, integral)) * rate
+        out[name] = means if kind == "hold_next" else np.concatenate([[v[0]], means[:-1]])
+    return t, out

@@ -1,0 +1,164 @@
+"""The run-file contract, owned here and only here: the schema's name and versions, the channel catalogue with
+units, statuses, event kinds, record kinds, torque timings and size bounds (docs/run-file.md).
+
+The writer and the reader (:mod:`hilbench.analysis.runfile.store`), the record loader
+(:mod:`hilbench.analysis.record`), the bench, importers and every analysis take these names from this module.
+It lives under ``analysis`` so that both ``bench`` (which writes runs) and ``analysis`` (which reads them) can
+import it while the dependency arrows stay one-way (bench -> analysis).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hilbench.analysis.errors import AnalysisError
+
+SCHEMA = "hilbench-run"
+#: root attribute ``record``: what drives the run (absent in older files: torque-driven)
+RECORDS = ("torque-driven", "displacement-driven")
+SCHEMA_VERSION = 2
+#: Versions this reader opens (2 added the position-mode channels position_cmd and current_ff).
+SCHEMA_VERSIONS = (1, 2)
+AXES = ("rotary", "linear")
+FINAL_STATUSES = ("completed", "aborted")
+#: ``failed``: the writer itself could not go on (disk full, I/O error); the file keeps every flushed sample.
+STATUSES = ("running", "completed", "aborted", "failed", "crashed")
+#: Bytes kept in the lock file while a writer runs, given back when a write fails so that the writer can
+#: still roll the file back and mark it ``failed`` on a full disk (HDF5 needs a few KiB of metadata for it).
+RESERVE_BYTES = 1 << 18
+#: The largest chunk, samples: the writer buffers one chunk per channel (``flush_interval`` of device time,
+#: capped here so that an absurd sample rate cannot ask for absurd memory).
+MAX_CHUNK = 1 << 20
+EVENT_KINDS = ("fault", "pause", "resume", "abort", "error", "info", "crash")
+EVENT_MESSAGE_BYTES = 256
+
+
+@dataclass(frozen=True)
+class ChannelSpec:
+    """A known sample channel: unit on a rotary and on a linear axis, dtype and a one-line description."""
+
+    rotary_unit: str
+    linear_unit: str
+    dtype: str
+    description: str
+
+    def unit(self, axis: str) -> str:
+        return self.rotary_unit if axis == "rotary" else self.linear_unit
+
+
+CHANNELS: dict[str, ChannelSpec] = {
+    "sample_index": ChannelSpec("1", "1", "i8", "device sample counter"),
+    "t": ChannelSpec("s", "s", "f8", "device time of the sample"),
+    "current_cmd": ChannelSpec("A", "A", "f8", "commanded motor current"),
+    "current": ChannelSpec("A", "A", "f8", "measured motor current"),
+    "torque": ChannelSpec("N*m", "N", "f8", "motor torque (force on a linear axis)"),
+    "torque_cmd": ChannelSpec("N*m", "N", "f8", "commanded torque (force on a linear axis)"),
+    "position": ChannelSpec("rad", "m", "f8", "measured position"),
+    "position_cmd": ChannelSpec("rad", "m", "f8", "position reference"),
+    "counts": ChannelSpec("counts", "counts", "i8", "raw encoder counts"),
+    "velocity": ChannelSpec("rad/s", "m/s", "f8", "measured velocity"),
+    "velocity_cmd": ChannelSpec("rad/s", "m/s", "f8", "commanded velocity (velocity mode)"),
+    "current_ff": ChannelSpec("A", "A", "f8", "feed-forward current streamed with the position reference"),
+}
+DEVICE_CHANNELS = ("sample_index", "t", "current_cmd", "current", "torque", "position", "counts")
+REQUIRED_CHANNELS = ("sample_index", "t")
+# On a linear axis analysis may ask for the honest names; they are the same datasets.
+LINEAR_ALIASES = {"force": "torque", "force_cmd": "torque_cmd"}
+
+EVENT_DTYPE = np.dtype(
+    [
+        ("sample_index", "i8"),
+        ("t", "f8"),  # device time, s
+        ("wall_time", "f8"),  # host UNIX time, s
+        ("kind", "S16"),
+        ("message", f"S{EVENT_MESSAGE_BYTES}"),
+    ]
+)
+
+
+class RunFileError(AnalysisError):
+    """A run file cannot be created, read or repaired (the message names the file and the reason)."""
+
+
+#: How sample k of the torque channel relates to the plant's input convention (torque held over
+#: [t_k, t_k+1)), by the file's ``source``; see hilbench.analysis.identification.regressors.held_torque.
+TORQUE_TIMING = {"device": "hold_previous", "import:emps": "hold_next"}
+TIMINGS = ("auto", "hold_previous", "hold_next", "instant")
+#: the timings a file may declare (``auto`` is a request to the loader, never stored)
+TORQUE_TIMINGS = ("hold_next", "hold_previous", "instant")  # docs/science.md §6
+#: The largest channel (or protocol array) a run file may hold, values: 2**28 = 268 435 456, i.e. 2 GiB as
+#: float64 and 3.7 h at 20 kHz (a protocol lasts at most 1 h). A file claiming more is refused before
+#: anything is allocated: a 13 KB file may claim 2**33 samples that HDF5 would read back as 64 GiB of fill.
+MAX_SAMPLES = 1 << 28
+
+
+def check_size(path: Any, name: str, shape: tuple[int, ...]) -> None:
+    """Raise :class:`AnalysisError` if a dataset of ``shape`` holds more than :data:`MAX_SAMPLES` values."""
+    size = 1
+    for n in shape:
+        size *= int(n)
+    if size > MAX_SAMPLES:
+        raise AnalysisError(f"{path}: {name} claims {size} values, above the bound of {MAX_SAMPLES} "
+                            f"(MAX_SAMPLES); refusing to read it")
+
+
+def record_kind(value: object, path: object = "") -> str:
+    """The record kind from a ``record`` attribute value (None: torque-driven); AnalysisError if unknown."""
+    if value is None:
+        return RECORDS[0]
+    text = _text(value)
+    if text not in RECORDS:
+        raise AnalysisError(f"{path}: unknown record kind {text!r} (expected {' or '.join(RECORDS)})")
+    return text
+
+
+def torque_timing_for(source: str, timing: str = "auto", channel: str = "torque") -> str:
+    """The torque timing for ``channel`` of a run whose file says ``source``: ``timing`` unless it is
+    ``auto``. A commanded channel (``*_cmd``) is held over the next interval wherever it comes from."""
+    if timing not in TIMINGS:
+        raise AnalysisError(f"torque timing must be one of {', '.join(TIMINGS)}, got {timing!r}")
+    if timing != "auto":
+        return timing
+    if channel.endswith("_cmd"):
+        return "hold_next"
+    return TORQUE_TIMING.get(source, "instant")
+
+
+def run_torque_timing(attrs: Any, timing: str = "auto", channel: str = "torque") -> tuple[str, str]:
+    """(timing, where it comes from) for ``channel`` of a run whose root attributes are ``attrs`` (a mapping:
+    ``h5py`` attrs or ``Run.meta``). In order: ``timing`` when it is not ``auto`` ("given"); for the torque
+    channel, the ``torque_timing`` the file declares ("declared in the run file", written by ``hilbench
+    import --torque-timing``); else :func:`torque_timing_for` the file's ``source`` ("default for <source>")."""
+    source = _text(attrs.get("source", "device"))
+    resolved = torque_timing_for(source, timing, channel)
+    if timing != "auto":
+        return resolved, "given"
+    declared = attrs.get("torque_timing")
+    if declared is not None and not channel.endswith("_cmd"):
+        declared = _text(declared)
+        if declared not in TIMINGS or declared == "auto":
+            raise AnalysisError(f"run file declares an unknown torque timing {declared!r}")
+        return declared, "declared in the run file"
+    return resolved, f"default for {source} runs"
+
+
+#: ``/device/identity`` key of a host-clocked drive saying when its samples were taken: ``host_time`` (the
+#: drive samples at each trigger: CiA 402 SYNC) or ``drive`` (the drive's own clock: ODrive cyclic messages)
+SAMPLE_TIMES_KEY = "sample_times"
+#: resampled channels keep the timing of their record; these are the conventions (see ``TIMINGS``)
+SAMPLE_KINDS = ("instant", "hold_next", "hold_previous")
+
+
+def host_sampled(identity: Any, channels: Any) -> bool:
+    """Whether a run's samples were taken at its ``host_time`` (a CiA 402 drive samples at each SYNC), so
+    that the analysis must resample them (``identity``: the run's ``/device/identity``; ``channels``: names)."""
+    return isinstance(identity, dict) and identity.get(SAMPLE_TIMES_KEY) == "host_time" and "host_time" in channels
+
+
+def _text(value: Any) -> str:
+    if isinstance(value, bytes | np.bytes_):
+        return value.decode()
+    return str(value)

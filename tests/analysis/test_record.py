@@ -1,0 +1,102 @@
+"""The one record loader (hilbench.analysis.record.load_record) against files written by the bench's RunWriter."""
+
+import os
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+from hilbench.analysis.errors import AnalysisError
+from hilbench.analysis.record import IncompleteRecordError, load_record
+from hilbench.analysis.runfile import RunWriter
+
+
+def _write(path, n=5000, finish="completed", planned=None, events=()):
+    planned = n if planned is None else planned
+    w = RunWriter(path, sample_rate=1000.0, protocol_name="identification",
+                  protocol_params={"amplitude": 2.0}, protocol_arrays={"setpoints": np.arange(planned, dtype=float)},
+                  calibration={"torque_constant": 0.2})
+    k = np.arange(n)
+    w.append({"sample_index": k, "t": k / 1000.0, "current_cmd": np.sin(k / 50.0), "current": np.cos(k / 50.0),
+              "torque": 0.2 * np.cos(k / 50.0), "position": k * 1e-4, "counts": k})
+    for kind, message in events:
+        w.add_event(kind, message)
+    if finish:
+        w.finish(finish)
+    return w
+
+
+def test_reads_what_the_writer_wrote(tmp_path):
+    path = tmp_path / "r.h5"
+    _write(path)
+    r = load_record(path, channels=("current",), protocol_arrays=("setpoints",))
+    assert (r.status, r.axis, r.sample_rate, r.protocol_name, r.timing, r.torque_channel, r.incomplete) == (
+        "completed", "rotary", 1000.0, "identification", "hold_previous", "torque", None)
+    np.testing.assert_array_equal(r.position, np.arange(5000) * 1e-4)
+    np.testing.assert_array_equal(r.channel("current"), np.cos(np.arange(5000) / 50.0))
+    assert r.units["torque"] == "N*m" and r.calibration["torque_constant"] == 0.2
+    np.testing.assert_array_equal(r.protocol_arrays["setpoints"], np.arange(5000, dtype=float))
+    a = r.arrays()
+    assert a.fs == pytest.approx(1000.0) and a.torque.size == 5000
+    with pytest.raises(AnalysisError, match="'velocity' was not loaded"):
+        r.channel("velocity")
+    assert load_record(path, torque_channel="torque_cmd" if False else "current_cmd").timing == "hold_next"
+    with pytest.raises(AnalysisError, match="no channel 'velocity'"):
+        load_record(path, torque_channel="velocity")
+
+
+@pytest.mark.parametrize(("finish", "planned", "events", "reason"), [
+    ("aborted", None, [("abort", "aborted by operator")], "the run is aborted (aborted by operator)"),
+    ("completed", 6000, [], "it holds 5000 of the 6000 planned samples"),
+    ("completed", None, [("info", "host-clocked timing: jitter 40 % of T; UNFIT for identification")],
+     "its device marked it unfit"),
+])
+def test_an_incomplete_record_is_refused_in_one_line_unless_allowed(tmp_path, finish, planned, events, reason):
+    path = tmp_path / "r.h5"
+    _write(path, finish=finish, planned=planned, events=events)
+    with pytest.raises(IncompleteRecordError) as err:
+        load_record(path)
+    text = str(err.value)
+    assert "\n" not in text and reason in text and "--allow-incomplete" in text
+    r = load_record(path, allow_incomplete=True)
+    assert r.incomplete.startswith(reason) and "INCOMPLETE RECORD" in r.incomplete_line()
+
+
+def test_a_file_still_being_written_is_incomplete(tmp_path):
+    path = tmp_path / "live.h5"
+    w = _write(path, n=2000, finish=None)
+    try:
+        with pytest.raises(IncompleteRecordError, match="the run is running"):
+            load_record(path)
+        r = load_record(path, allow_incomplete=True)
+        assert r.status == "running" and r.t.size == 2000  # 2 s = 4 whole flush chunks
+    finally:
+        w.finish("completed")
+
+
+def test_non_finite_samples_are_refused_naming_the_channel(tmp_path):
+    path = tmp_path / "r.h5"
+    _write(path)
+    with h5py.File(path, "r+") as f:
+        f["samples/torque"][7] = np.nan
+    with pytest.raises(AnalysisError, match="channel 'torque' has 1 non-finite value.*sample 7"):
+        load_record(path)
+
+
+def test_truncated_and_foreign_files_fail_fast_with_one_line(tmp_path):
+    path = tmp_path / "r.h5"
+    _write(path)
+    with open(path, "r+b") as f:
+        f.truncate(os.path.getsize(path) // 2)
+    t0 = time.monotonic()
+    with pytest.raises(AnalysisError, match="truncated"):
+        load_record(path)
+    assert time.monotonic() - t0 < 5
+    foreign = tmp_path / "x.h5"
+    with h5py.File(foreign, "w") as f:
+        f["a"] = 1
+    with pytest.raises(AnalysisError, match="not a hilbench run file"):
+        load_record(foreign)
+    with pytest.raises(AnalysisError, match="missing.h5"):
+        load_record(tmp_path / "missing.h5")
