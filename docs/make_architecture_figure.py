@@ -26,7 +26,10 @@ ARROWS = [("bench", "drivers", "uses"), ("bench", "analysis", "uses"), ("analysi
           ("firmware_sim", "drivers", "protocol definitions only")]
 
 
-def main(out: Path = Path(__file__).with_name("architecture.png")) -> None:
+OUT = Path(__file__).with_name("architecture.png")
+
+
+def main(out: Path = OUT) -> None:
     fig, ax = plt.subplots(figsize=(10, 8.8))
     ax.set_xlim(0, 10)
     ax.set_ylim(0, 8.8)
