@@ -49,7 +49,7 @@ def _load(path: str, args):
     from hilbench.bench.analysis_input import load
 
     rec = load(path, args)
-    outputs.say(f"{path}: torque timing of {rec.torque_channel}: {rec.timing} ({rec.timing_origin})")
+    outputs.say(f"{path}: torque timing of {rec.torque_channel}: {rec.timing} ({rec.timing_origin})", level=2)
     run = RunData.from_arrays(rec.name, rec.axis, rec.sample_rate, rec.position, rec.torque, rec.timing)
     return rec.torque, run, rec.timing, rec
 
@@ -98,6 +98,7 @@ def run(args) -> int:
                            "sample_rate_hz": val.fs, "incomplete": val_rec.incomplete}}
     outputs.write_json(out / "compare.json", document(result, data), indent=2, allow_nan=False)
     (out / "models").mkdir(exist_ok=True)
+    written = []
     for row in result.rows:  # one model file per fitted family (schema hilbench.friction-model/2)
         if row.fit is not None:
             figures = {f"train_{k}": v for k, v in row.train.items()} | {
@@ -105,8 +106,9 @@ def run(args) -> int:
             doc = family_document(row.fit, method="compare", data=data, figures=figures,
                                   settings={"segment_s": args.segment, "max_evaluations": args.max_evaluations})
             outputs.write_json(out / "models" / f"{row.name}.json", doc, indent=2, allow_nan=False)
+            written.append(f"{row.name}.json")
     print(table, end="")
     for p in write_plots(result, out):
         print(f"plot: {p}")
-    print(f"-> {out / 'compare.md'}, {out / 'compare.json'}, {out / 'models'}/FAMILY.json")
+    print(f"-> {out / 'compare.md'}, {out / 'compare.json'}, {out / 'models'}/ ({', '.join(written) or 'no model'})")
     return 0

@@ -80,7 +80,7 @@ def run(args) -> int:
         raise BenchError(f"--inertia must be finite and >= 0, got {args.inertia}")
     train, rec = _arrays(args.run, args)
     channel, timing, record = rec.torque_channel, rec.timing, rec.kind
-    outputs.say(f"torque timing: {timing} ({rec.timing_origin})", args.json)
+    outputs.say(f"torque timing: {timing} ({rec.timing_origin})", args.json, level=2)
     val_rec = _arrays(args.validate, args)[1] if args.validate else None
     val = val_rec.arrays() if val_rec is not None else None
     check_cutoff(args.cutoff, train.fs)

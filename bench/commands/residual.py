@@ -60,7 +60,8 @@ def _load(path: str, args: argparse.Namespace):
 
     rec = load(path, args, timing=args.timing or "auto")
     check_cutoff(args.cutoff, rec.sample_rate)
-    outputs.say(f"{path}: torque timing of {rec.torque_channel}: {rec.timing} ({rec.timing_origin})", args.json)
+    outputs.say(f"{path}: torque timing of {rec.torque_channel}: {rec.timing} ({rec.timing_origin})", args.json,
+                level=2)
     run = prepare_run(rec.position, rec.torque, rec.sample_rate, axis=rec.axis, name=path, cutoff=args.cutoff,
                       timing=rec.timing)
     return run, rec.torque_channel, rec.timing, rec.kind, rec.source, rec.incomplete

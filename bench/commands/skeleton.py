@@ -102,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
     results = []
     for r in runs:
         force = centred_force(r.torque, r.timing)
-        outputs.say(f"{r.name}: torque timing of {r.torque_channel}: {r.timing} ({r.timing_origin})")
+        outputs.say(f"{r.name}: torque timing of {r.torque_channel}: {r.timing} ({r.timing_origin})", level=2)
         results.append(forcevib(r.position, force, r.sample_rate, mass, args.method, spring=args.spring, **options))
     pos, trq = ("rad", "N*m") if runs[0].axis == "rotary" else ("m", "N")
     for r, res in zip(runs, results, strict=True):

@@ -47,7 +47,7 @@ def _lab_csv(path, arrays, header="Time [ms],theta [deg],torque [mN*m]", scale=(
 
 
 def _identify(capsys, run, out):
-    assert main(["identify", str(run), "--json", str(out)]) == 0
+    assert main(["identify", str(run), "--json", str(out), "-v"]) == 0  # the timing line is a -v line
     printed = capsys.readouterr().out
     return json.loads(out.read_text())["parameters"], printed
 
@@ -176,7 +176,7 @@ def test_declared_torque_timing_gives_the_device_model(tmp_path, device_run, cap
     assert abs(device["viscous"] / params.viscous - 1) < 0.15
     assert abs(other["viscous"] / params.viscous - 1) > 1.0
     # residual reads the same attribute and says so
-    assert main(["residual", str(declared), "--json", str(tmp_path / "r.json")]) == 0
+    assert main(["residual", str(declared), "--json", str(tmp_path / "r.json"), "-v"]) == 0
     assert f"{declared}: torque timing of torque: hold_previous (declared in the run file)" in capsys.readouterr().out
 
 
