@@ -426,8 +426,3 @@ def make_protocol(name: str, values: dict[str, Any]) -> Protocol:
         return PROTOCOLS[name].from_dict(values)
     except (TypeError, ValueError) as exc:
         raise ProtocolError(str(exc)) from exc
-
-
-# The compensated-reference protocol (position mode, docs/compensation.md) lives in its own module and adds
-# itself to PROTOCOLS; a plain import, so that either module may be imported first.
-import hilbench.bench.compensation  # noqa: E402,F401

@@ -19,7 +19,7 @@ REFERENCE_OPTIONS = {
 
 def register(subparsers) -> None:
     from hilbench.analysis.compensation.references import KINDS
-    from hilbench.bench.commands.run import add_device_options
+    from hilbench.bench.device_options import add_device_options
 
     p = subparsers.add_parser(
         "compensate", help="position tracking with a friction-model feed-forward; one run or the matrix",
@@ -80,7 +80,6 @@ def run(args: argparse.Namespace) -> int:
     from hilbench.analysis.compensation.closed_loop import PositionGains
     from hilbench.analysis.compensation.feedforward import load_compensators
     from hilbench.bench import outputs
-    from hilbench.bench.commands.run import settings_from_args
     from hilbench.bench.compensation_matrix import (
         MatrixSettings,
         cases,
@@ -89,6 +88,7 @@ def run(args: argparse.Namespace) -> int:
         run_cases,
         write_report,
     )
+    from hilbench.bench.device_options import settings_from_args
     from hilbench.bench.errors import BenchError
 
     # everything is checked before anything moves: the model, its axis and units, the calibration, the

@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 
-from hilbench.bench.device_options import DEVICE_OPTIONS
+from hilbench.bench.device_options import add_device_options, settings_from_args
 from hilbench.bench.protocols import PROTOCOLS, Protocol
 
 RUNNABLE: dict[str, type[Protocol]] = dict(PROTOCOLS)  # every protocol of the table (campaign names)
@@ -34,36 +33,9 @@ def add_protocol_options(parser: argparse.ArgumentParser, cls: type[Protocol]) -
                                 help=help_)
 
 
-def add_device_options(parser: argparse.ArgumentParser) -> None:
-    from hilbench.bench.runner import DeviceSettings
-
-    parser.add_argument("--device", default=None, help="device URL (default $HILBENCH_DEVICE, the config file's "
-                        "'device', else sim://: the simulated bench; docs/cli.md)")
-    defaults = DeviceSettings()
-    for name, (unit, text) in DEVICE_OPTIONS.items():
-        parser.add_argument("--" + name.replace("_", "-"), dest=name, default=None,
-                            type=int if name == "counts_per_rev" else float,
-                            help=f"{text} ({unit}; default {getattr(defaults, name)})")
-
-
 def protocol_from_args(cls: type[Protocol], args: argparse.Namespace) -> Protocol:
     values = {name: getattr(args, name) for name in cls.specs() if getattr(args, name, None) is not None}
     return cls.from_dict(values)
-
-
-def settings_from_args(args: argparse.Namespace):
-    """Device settings: the options given, over the config file's ``[settings]``, over the protocol's
-    ``RECOMMENDED_SETTINGS``, over the defaults."""
-    from hilbench.bench.runner import DeviceSettings
-    from hilbench.bench.user_config import default_settings
-
-    values = {name: getattr(args, name) for name in DEVICE_OPTIONS if getattr(args, name, None) is not None}
-    for name, value in values.items():
-        if isinstance(value, float) and math.isnan(value):
-            raise ValueError(f"--{name.replace('_', '-')} is NaN")
-    protocol = getattr(args, "protocol_class", None)
-    recommended = protocol.RECOMMENDED_SETTINGS if protocol else {}
-    return DeviceSettings(**{**recommended, **default_settings(), **values})
 
 
 def register(sub: argparse._SubParsersAction) -> None:
