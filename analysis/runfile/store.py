@@ -244,7 +244,7 @@ class RunWriter:
                                                                (custom_channels or {}).items())):
             _check_text(self.path, name, text)
         if os.path.lexists(self.path) and not overwrite:
-            raise RunFileError(f"{self.path}: file exists (choose another name or allow overwrite)")
+            raise RunFileError(f"{self.path}: file exists (choose another name, or pass --overwrite to replace it)")
         if os.path.isdir(self.path):
             raise RunFileError(f"{self.path}: is a directory")
         self._take_lock()
@@ -295,7 +295,7 @@ class RunWriter:
                 os.link(self._tmp_path, self.path)  # fails if a file appeared meanwhile: never clobbers
                 os.unlink(self._tmp_path)
         except FileExistsError:
-            raise RunFileError(f"{self.path}: file exists (choose another name or allow overwrite)") from None
+            raise RunFileError(f"{self.path}: file exists (choose another name, or pass --overwrite to replace it)") from None
 
     # -- setup ---------------------------------------------------------------------------------------------
 

@@ -6,6 +6,10 @@ import math
 import sys
 from pathlib import Path
 
+#: what each --method is, in the summary line (the internal names stay in the model file's "method")
+METHOD_NAMES = {"lip": "Maxwell-slip (NNLS)", "oe": "Maxwell-slip (NNLS + output error)",
+                "paper": "Maxwell-slip (paper: DE + Nelder-Mead)"}
+
 
 def register(subparsers) -> None:
     from hilbench.bench.analysis_input import MAX_THRESHOLDS, add_record_options, whole_number
@@ -123,7 +127,7 @@ def run(args) -> int:
     say = lambda text: outputs.say(text, args.json)  # noqa: E731
     if "train_force_nrmse" in f:
         m, trq = res.model, u["torque"]
-        line = (f"{res.method} on {channel} ({record}, J fixed at {m.inertia:.6g} {u['inertia']}): "
+        line = (f"{METHOD_NAMES.get(res.method, res.method)} on {channel} ({record}, J fixed at {m.inertia:.6g} {u['inertia']}): "
                 f"{m.ms_stiffness.size} elements, break-away {m.breakaway:.4g} {trq}, "
                 f"b = {m.viscous:.4g} {trq}*s/{u['position']}; force simulated from the measured displacement: "
                 f"train NRMSE {f['train_force_nrmse']:.4f} ({f['train_force_rel_pct']:.3g} % relative)")
@@ -149,7 +153,7 @@ def summary_line(res, u: dict, channel: str, timing: str) -> str:
     m, f = res.model, res.figures
     pos, trq = u["position"], u["torque"]
     line = (
-        f"{res.method} on {channel} ({timing}): J = {m.inertia:.6g} {u['inertia']}, {m.ms_stiffness.size} elements, "
+        f"{METHOD_NAMES.get(res.method, res.method)} on {channel} ({timing}): J = {m.inertia:.6g} {u['inertia']}, {m.ms_stiffness.size} elements, "
         f"break-away {m.breakaway:.4g} {trq}, b = {m.viscous:.4g} {trq}*s/{pos}"
     )
     if m.coulomb:
