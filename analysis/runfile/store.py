@@ -295,7 +295,8 @@ class RunWriter:
                 os.link(self._tmp_path, self.path)  # fails if a file appeared meanwhile: never clobbers
                 os.unlink(self._tmp_path)
         except FileExistsError:
-            raise RunFileError(f"{self.path}: file exists (choose another name, or pass --overwrite to replace it)") from None
+            raise RunFileError(f"{self.path}: file exists (choose another name, or pass --overwrite to replace "
+                               "it)") from None
 
     # -- setup ---------------------------------------------------------------------------------------------
 

@@ -127,7 +127,8 @@ def run(args) -> int:
     say = lambda text: outputs.say(text, args.json)  # noqa: E731
     if "train_force_nrmse" in f:
         m, trq = res.model, u["torque"]
-        line = (f"{METHOD_NAMES.get(res.method, res.method)} on {channel} ({record}, J fixed at {m.inertia:.6g} {u['inertia']}): "
+        name = METHOD_NAMES.get(res.method, res.method)
+        line = (f"{name} on {channel} ({record}, J fixed at {m.inertia:.6g} {u['inertia']}): "
                 f"{m.ms_stiffness.size} elements, break-away {m.breakaway:.4g} {trq}, "
                 f"b = {m.viscous:.4g} {trq}*s/{u['position']}; force simulated from the measured displacement: "
                 f"train NRMSE {f['train_force_nrmse']:.4f} ({f['train_force_rel_pct']:.3g} % relative)")
@@ -153,7 +154,8 @@ def summary_line(res, u: dict, channel: str, timing: str) -> str:
     m, f = res.model, res.figures
     pos, trq = u["position"], u["torque"]
     line = (
-        f"{METHOD_NAMES.get(res.method, res.method)} on {channel} ({timing}): J = {m.inertia:.6g} {u['inertia']}, {m.ms_stiffness.size} elements, "
+        f"{METHOD_NAMES.get(res.method, res.method)} on {channel} ({timing}):"
+        f" J = {m.inertia:.6g} {u['inertia']}, {m.ms_stiffness.size} elements, "
         f"break-away {m.breakaway:.4g} {trq}, b = {m.viscous:.4g} {trq}*s/{pos}"
     )
     if m.coulomb:
