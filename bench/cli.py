@@ -6,6 +6,7 @@ import argparse
 import importlib
 import os
 import pkgutil
+import re
 import sys
 
 import hilbench.bench.commands as commands
@@ -49,7 +50,31 @@ def build_parser() -> argparse.ArgumentParser:
             continue
         module = importlib.import_module(f"hilbench.bench.commands.{info.name}")
         module.register(sub)
+    _plain_texts(parser)
     return parser
+
+
+# Docstrings (protocol classes, analyses) feed help texts; a terminal shows them as plain text, not reST.
+_RST = re.compile(r"``([^`]+)``|:(?:func|class|mod|meth|data|attr):`~?([^`]+)`")
+
+
+def plain_text(text: str | None) -> str | None:
+    """``text`` with reST markup taken out: double backquotes and Sphinx roles keep their content."""
+    if not text:
+        return text
+    return _RST.sub(lambda m: m.group(1) or m.group(2), text)
+
+
+def _plain_texts(parser: argparse.ArgumentParser) -> None:
+    """Every description, epilog and option help of ``parser`` and its subcommands, as plain text."""
+    parser.description, parser.epilog = plain_text(parser.description), plain_text(parser.epilog)
+    for action in parser._actions:
+        action.help = plain_text(action.help)
+        if isinstance(action, argparse._SubParsersAction):
+            for choice in action._choices_actions:
+                choice.help = plain_text(choice.help)
+            for sub in set(action.choices.values()):
+                _plain_texts(sub)
 
 
 def split_global_flags(argv: list[str]) -> tuple[list[str], set[str]]:

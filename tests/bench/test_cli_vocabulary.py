@@ -134,3 +134,27 @@ def test_cli_help_and_readme_name_the_same_commands():
     env = {**os.environ, "HILBENCH_DEVICE": ""}
     cp = subprocess.run([sys.executable, "-m", "hilbench", "--help"], capture_output=True, text=True, env=env)
     assert "anywhere on the line" in cp.stdout and "HILBENCH_DEVICE" in cp.stdout
+
+
+def test_every_help_text_is_plain_text():
+    """Help texts come partly from docstrings: no reST markup (double backquotes, Sphinx roles) reaches the
+    terminal, in any subcommand's description, epilog or option help."""
+    import argparse
+
+    from hilbench.bench.cli import build_parser
+
+    texts = []
+
+    def walk(parser):
+        texts.extend([parser.description or "", parser.epilog or ""])
+        for action in parser._actions:
+            texts.append(action.help or "")
+            if isinstance(action, argparse._SubParsersAction):
+                texts.extend(c.help or "" for c in action._choices_actions)
+                for sub in action.choices.values():
+                    walk(sub)
+
+    walk(build_parser())
+    assert len(texts) > 200
+    bad = [t for t in texts if "``" in t or ":func:`" in t or ":class:`" in t]
+    assert bad == []
