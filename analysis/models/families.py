@@ -159,7 +159,7 @@ def segmented_position(params: PlantParams, run: RunData, segment: float = 1.0) 
     sim = np.empty_like(run.x)
     prev = 0
     for k0 in range(0, run.x.size, n_seg):
-        plant.friction_path(run.x[prev:k0 + 1], run.v[prev:k0 + 1])
+        plant.friction_path(run.xf[prev:k0 + 1], run.v[prev:k0 + 1])
         state = plant.get_state()
         sim[k0:k0 + n_seg] = plant.run(run.u[k0:k0 + n_seg]).theta
         plant.set_state(state)

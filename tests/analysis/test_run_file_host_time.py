@@ -147,7 +147,7 @@ def test_identify_command_resamples_a_host_sampled_run(runs, tmp_path, capsys):
               "position": x, "counts": np.rint(x * CPR / (2 * np.pi)), "host_time": 100.0 + host_time})
     w.finish("completed")
     out = tmp_path / "model.json"
-    assert main(["identify", str(path), "--json", str(out)]) == 0
+    assert main(["identify", str(path), "--json", str(out), "-v"]) == 0  # the loader's notes are -v lines
     assert "resampled on host_time: 20000 samples" in capsys.readouterr().out
     samples = int(np.floor((host_time[-1] - host_time[0]) * RATE + 1e-9)) + 1
     assert json.loads(out.read_text())["data"]["train"]["samples"] == samples

@@ -99,7 +99,7 @@ def test_bad_runs(tmp_path, capsys):
     foreign = tmp_path / "foreign.h5"
     foreign.write_bytes(b"not hdf5")
     assert bench_main(["afrf", str(foreign)]) == 2
-    assert "not readable as HDF5" in capsys.readouterr().err
+    assert "not an HDF5 file" in capsys.readouterr().err
 
 
 def test_cli_run_json_plot(tmp_path, capsys):
