@@ -154,7 +154,7 @@ def skeleton(run, options: dict | None = None) -> AnalysisResult:
 def afrf(run, options: dict | None = None) -> AnalysisResult:
     """AFRF (``hilbench.analysis.afrf.frf.afrf_from_run``) of a stepped-sine run: |c_k| of the position per step."""
     afrf_from_run = _entry("afrf")
-    res = afrf_from_run(run.path)
+    res = afrf_from_run(run.path, allow_incomplete=bool((options or {}).get("allow_incomplete", False)))
     mags = res.magnitudes
     numbers = []
     for i, a in enumerate(res.amplitudes):
@@ -169,7 +169,10 @@ def afrf(run, options: dict | None = None) -> AnalysisResult:
         for i, a in enumerate(res.amplitudes):
             fig.curves.append((f"G = {a:.4g} {res.amplitude_unit}", res.frequencies, mags[i, :, k]))
         figures.append(fig)
-    return AnalysisResult(TITLES["afrf"], numbers, figures)
+    why = res.settings.get("incomplete")
+    name = os.path.basename(run.path)
+    warnings = [f"INCOMPLETE RECORD {name}: {why} (analysed with --allow-incomplete)"] if why else []
+    return AnalysisResult(TITLES["afrf"], numbers, figures, warnings)
 
 
 def residual(run, options: dict | None = None) -> AnalysisResult:

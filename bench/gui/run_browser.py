@@ -106,6 +106,11 @@ class RunBrowser(QtWidgets.QWidget):
         opts.addWidget(self.inertia_edit)
         opts.addWidget(QtWidgets.QLabel("instantaneous method"))
         opts.addWidget(self.method_box)
+        self.incomplete_box = QtWidgets.QCheckBox("analyse an incomplete run")
+        self.incomplete_box.setToolTip("an aborted, crashed or short run, or one its drive marked unfit, is refused "
+                                       "unless this is ticked; the result then says the record is incomplete "
+                                       "(hilbench ... --allow-incomplete)")
+        opts.addWidget(self.incomplete_box)
         opts.addStretch(1)
         self.analysis_status = QtWidgets.QLabel(self._availability_text())
         self.analysis_status.setWordWrap(True)
@@ -291,7 +296,8 @@ class RunBrowser(QtWidgets.QWidget):
         if self.worker is not None and self.worker.isRunning():
             self.message.emit("an analysis is still running", True)
             return
-        options = {"method": self.method_box.currentText()}
+        options = {"method": self.method_box.currentText(),
+                   "allow_incomplete": self.incomplete_box.isChecked()}
         text = self.inertia_edit.text().strip()
         if text:
             try:

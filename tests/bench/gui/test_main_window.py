@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from PySide6 import QtCore
 
+from hilbench.analysis.record import load_record
 from hilbench.analysis.runfile import RunFileError, open_run
 from hilbench.bench.gui.main_window import MainWindow
 
@@ -143,8 +144,7 @@ def test_run_browser_opens_the_file_and_shows_identification(window, qtbot, runs
     qtbot.waitUntil(lambda: browser.last_result is not None, timeout=30000)
     shown = {browser.numbers.item(r, 0).text(): browser.numbers.item(r, 1).text()
              for r in range(browser.numbers.rowCount())}
-    with open_run(runs / "id.h5") as r:
-        direct = dict((q, v) for q, v, _u in identification(r).numbers)
+    direct = dict((q, v) for q, v, _u in identification(load_record(runs / "id.h5")).numbers)
     assert shown == direct  # the table shows what analysis computed, digit for digit
     assert float(shown["inertia J"]) > 0
     assert browser.inertia_edit.text() == shown["inertia J"]
@@ -198,10 +198,17 @@ def test_browser_afrf_of_the_stepped_sine_and_residual_loop(window, qtbot, runs)
     browser = window.browser
     browser.last_result = None
     assert browser.open(str(runs / "steps.h5"))
-    browser.analyse("afrf")  # the run was aborted after a pause: its missing steps are NaN
+    browser.analyse("afrf")  # the run was aborted after a pause: refused in one line unless asked for
+    qtbot.waitUntil(lambda: "failed" in browser.analysis_status.text(), timeout=30000)
+    assert "incomplete record: the run is aborted" in browser.analysis_status.text()
+    assert browser.open(str(runs / "steps.h5"))
+    browser.incomplete_box.setChecked(True)  # then its missing steps are NaN, and the result says so
+    browser.analyse("afrf")
     qtbot.waitUntil(lambda: browser.last_result is not None or "failed" in browser.analysis_status.text(),
                     timeout=30000)
     assert browser.last_result is not None, browser.analysis_status.text()
+    assert browser.last_result.warnings[0].startswith("INCOMPLETE RECORD steps.h5: the run is aborted")
+    browser.incomplete_box.setChecked(False)
     assert browser.last_result.title.startswith("AFRF")
     assert browser.run is not None and browser.run.path.endswith("steps.h5")  # reopened after the analysis
     assert len(browser.last_result.figures) == 3 and browser.numbers.rowCount() == 4  # 2 amplitudes x 2 f
