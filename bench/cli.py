@@ -90,6 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     args.traceback = "traceback" in flags
     previous, outputs.verbosity = outputs.verbosity, 0 if "quiet" in flags else 2 if "verbose" in flags else 1
+    outputs.begin_command()
     if "quiet" in flags and hasattr(args, "quiet"):
         args.quiet = True
     show_tb = args.traceback or bool(os.environ.get("HILBENCH_TRACEBACK"))

@@ -8,6 +8,11 @@ Every command that writes an output (a JSON summary, a model file, a figure) goe
 - :func:`atomic_path` yields a temporary file beside the target; the target is replaced by ``os.replace`` only
   after the writer returned and the data reached the disk (``fsync``). A failure on the way (disk full, a bad
   value met half-way, Ctrl-C) leaves the old file as it was and removes the temporary one;
+- an output path that exists and is not a regular file is never renamed over: a character device
+  (``/dev/null``, a terminal) or a FIFO is written into, as a shell redirection would; a block device or a
+  socket is refused in one line (:func:`atomic_path`);
+- every JSON document is strict JSON (RFC 8259): NaN and infinities are written as ``null``
+  (:func:`write_json`), never as the bare ``NaN`` that standard parsers reject;
 - ``-`` as a JSON path means standard output (:func:`write_json`); the command then prints its human-readable
   lines to standard error (:func:`say`) so that standard output stays valid JSON.
 """
@@ -16,7 +21,9 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
+import stat
 import sys
 import tempfile
 from collections.abc import Iterable, Iterator
@@ -30,6 +37,16 @@ STDOUT = "-"
 # Verbosity for the whole process, set once by the CLI from -q/-v: 0 quiet, 1 normal, 2 verbose.
 verbosity = 1
 
+# The inputs the running command declared (refuse_inputs): every write through atomic_path checks its target
+# against them, so an output the command only names late (compare's models/FAMILY.json, a plot) is never one of
+# its inputs either. The CLI clears it before each command (begin_command).
+declared_inputs: list[Path] = []
+
+
+def begin_command() -> None:
+    """Forget the inputs of a previous command of this process (the CLI calls it before each command)."""
+    declared_inputs.clear()
+
 
 def _same_file(a: Path, b: Path) -> bool:
     try:
@@ -42,6 +59,7 @@ def refuse_inputs(outputs: dict[str, str | os.PathLike | None], inputs: Iterable
     """Raise :class:`BenchError` if an output path (option name -> path) is one of ``inputs``, or is a folder
     that exists where a file is expected. ``None`` and ``-`` (standard output) are skipped."""
     ins = [Path(p) for p in inputs if p is not None and str(p) != STDOUT]
+    declared_inputs.extend(p for p in ins if p not in declared_inputs)
     for option, out in outputs.items():
         if out is None or str(out) == STDOUT:
             continue
@@ -52,15 +70,42 @@ def refuse_inputs(outputs: dict[str, str | os.PathLike | None], inputs: Iterable
                                  "input: choose another path")
 
 
+def _written_in_place(target: Path) -> bool:
+    """True when ``target`` exists and is a character device or a FIFO: it is written into, never replaced
+    (renaming a regular file onto /dev/null as root would replace the device). Raises :class:`BenchError` for
+    a folder, a block device or a socket."""
+    try:
+        mode = os.stat(target).st_mode  # follows a symlink: a link to /dev/null is /dev/null
+    except FileNotFoundError:
+        return False
+    except OSError as exc:
+        raise BenchError(f"{target}: cannot use as an output ({exc.strerror})") from None
+    if stat.S_ISREG(mode):
+        return False
+    if stat.S_ISDIR(mode):
+        raise BenchError(f"{target} is a folder; give a file name")
+    if stat.S_ISCHR(mode) or stat.S_ISFIFO(mode):
+        return True
+    kind = "a block device" if stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode) else "not a regular file"
+    raise BenchError(f"{target} is {kind}; an output is a regular file, a character device or a FIFO")
+
+
 @contextlib.contextmanager
 def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``target`` (same folder, same suffix); when the block ends without an
     exception, flush it to disk and rename it onto ``target`` in one step. Otherwise remove it and leave
-    ``target`` untouched."""
+    ``target`` untouched. A ``target`` that is a character device or a FIFO is yielded itself: the writer
+    writes into it, nothing is renamed."""
     target = Path(target)
     folder = target.parent if str(target.parent) else Path(".")
-    if target.is_dir():
-        raise BenchError(f"{target} is a folder; give a file name")
+    for inp in declared_inputs:
+        if _same_file(target, inp):
+            raise BenchError(f"{target} is an input of this command ({inp}); an output never overwrites an input")
+    if _written_in_place(target):
+        yield target
+        if verbosity >= 2:
+            print(f"hilbench: wrote into {target}", file=sys.stderr, flush=True)
+        return
     if not folder.is_dir():
         raise BenchError(f"{target}: folder {folder} does not exist")
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f".tmp{target.suffix}", dir=folder)
@@ -99,10 +144,31 @@ def write_text(target: str | os.PathLike, text: str) -> None:
         tmp.write_text(text, encoding="utf-8")
 
 
+def json_safe(value: Any) -> Any:
+    """A copy of ``value`` that strict JSON can hold: NaN and infinities (Python or numpy) become None, numpy
+    scalars and arrays become Python numbers and lists, tuples become lists."""
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_safe(v) for v in value]
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if type(value).__module__ == "numpy":  # numpy scalars and arrays, without importing numpy here
+        if hasattr(value, "tolist"):
+            return json_safe(value.tolist())
+    return value
+
+
+def dumps(document: Any, indent: int | None = 1, **dump_options: Any) -> str:
+    """Strict JSON text of ``document`` (:func:`json_safe`, then ``allow_nan=False``)."""
+    dump_options.pop("allow_nan", None)  # strict everywhere: NaN is null, never the bare token NaN
+    return json.dumps(json_safe(document), indent=indent, allow_nan=False, **dump_options)
+
+
 def write_json(target: str | os.PathLike, document: Any, indent: int = 1, **dump_options: Any) -> None:
-    """Serialise ``document`` completely first, then write it with :func:`write_text`: a value that JSON
-    cannot encode fails before the old file is touched."""
-    write_text(target, json.dumps(document, indent=indent, **dump_options) + "\n")
+    """Serialise ``document`` completely first (strict JSON: NaN and infinities as null), then write it with
+    :func:`write_text`: a value that JSON cannot encode fails before the old file is touched."""
+    write_text(target, dumps(document, indent=indent, **dump_options) + "\n")
 
 
 def save_figure(fig: Any, target: str | os.PathLike, **savefig_options: Any) -> Path:
