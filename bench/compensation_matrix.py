@@ -46,18 +46,28 @@ class MatrixSettings:
     ratio: float = 1.0
 
 
+def named_runs(model_doc: dict) -> list[str]:
+    """The run files a model or comparison document names (its training and validation runs): inputs of a
+    command that reads the model, so never one of its outputs (compensate -o id.h5 replaced the training run)."""
+    data = model_doc.get("data")
+    if not isinstance(data, dict):
+        return []
+    found = [data.get("file")] + [part.get("file") for part in data.values() if isinstance(part, dict)]
+    return [f for f in found if isinstance(f, str) and f and "\0" not in f]
+
+
 def check_calibration(model_doc: dict, torque_constant: float, ratio: float) -> str:
     """Refuse a model identified under another calibration than the device's. The model file names its
     training run; when that run file is readable, its calibration must equal ``torque_constant`` (N*m/A) and
     ``ratio`` to 1e-9. Returns a note on what was checked."""
     from hilbench.analysis.run_file import read_run_file
 
-    data = model_doc.get("data") or {}
+    data = model_doc.get("data") if isinstance(model_doc.get("data"), dict) else {}
     train = data.get("train") if isinstance(data.get("train"), dict) else None
     if train is None and isinstance(data.get("file"), str):
         train = data
     path = train.get("file") if train else None
-    if not path or not Path(path).is_file():
+    if not isinstance(path, str) or not path or "\0" in path or not Path(path).is_file():
         return "calibration not checked: the model's training run file is not here"
     try:
         cal = read_run_file(path).calibration
@@ -87,6 +97,15 @@ def cases(model: str, references: dict[str, dict], names: list[str] | None, sett
     for case in out:  # every reference and feed-forward is built (and checked) before anything moves
         case.feedforward_result(settings.current_limit)
     return out
+
+
+def case_file(case: Case) -> str:
+    """File name of a case's run in the matrix folder; the feed-forward's name is a plain identifier (checked
+    when the model file is read), so the name never leaves the folder."""
+    name = f"{case.reference}-{case.compensation}.h5"
+    if "/" in name or "\0" in name or name.startswith("."):
+        raise BenchError(f"feed-forward {case.compensation!r}: not a plain name")
+    return name
 
 
 def predict_case(case: Case, plant, gains: PositionGains, settings: MatrixSettings,
