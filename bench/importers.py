@@ -343,6 +343,11 @@ def _assign_channels(names: list[str], mapping: Mapping[str, str], path: str) ->
             raise ImportDataError(f"--map {channel}={column}: {channel!r} is not a run-file channel")
         if column not in names:
             raise ImportDataError(f"{path}: --map {channel}={column}: no column {column!r} (has: {', '.join(names)})")
+    twice = sorted({c for c in mapping.values() if list(mapping.values()).count(c) > 1})
+    if twice:  # --map torque=x --map position=x stored torque == position
+        channels = [ch for ch, c in mapping.items() if c == twice[0]]
+        raise ImportDataError(f"--map: column {twice[0]!r} is mapped to {' and '.join(channels)}; a column is one "
+                              "channel")
     mapped = set(mapping.values())
     column_of: dict[str, str] = {}
     for channel, columns in found.items():
@@ -367,6 +372,9 @@ def _units(column_of: Mapping[str, str], header_unit: Mapping[str, str], given: 
         if channel is None:
             raise ImportDataError(f"--unit {key}={unit}: no channel or column {key!r} in {path} "
                                   f"(channels: {', '.join(column_of)})")
+        if channel in stated:  # --unit x=deg --unit position=rad name one column: the last won, a 57x scale
+            raise ImportDataError(f"--unit: two units for channel {channel} (column {column_of[channel]!r}): "
+                                  f"{stated[channel]} and {unit}; give one")
         stated[channel] = unit
     for channel, column in column_of.items():
         head = header_unit.get(column)
@@ -630,10 +638,15 @@ def load_csv(path: str | os.PathLike, options: TableOptions | None = None, *, de
 _MATRIX_COLUMN = re.compile(r"^(?P<var>[A-Za-z]\w*)\(\s*:\s*,\s*(?P<col>\d+)\s*\)$")
 
 
-def _mat_variables(path: str) -> dict[str, np.ndarray]:
-    """Numeric variables of a MAT file (v5/v7 with scipy, v7.3 with h5py), as MATLAB shows them (rows = samples
-    for a column vector). Sizes are checked against MAX_IMPORT_SAMPLES before any variable is read; complex
-    ones are refused; structs, cells and text are left out."""
+#: Most elements an import reads from a MAT file, over all the variables it uses together (a matrix counts
+#: whole in a v5 file, where scipy reads a variable at once; one column in a v7.3 file, read alone).
+MAX_MAT_ELEMENTS_FACTOR = 16
+_SKIPPED_CLASSES = ("struct", "cell", "char", "object", "function_handle", "opaque")
+
+
+def _mat_listing(path: str) -> tuple[bool, dict[str, tuple[tuple[int, ...], str]]]:
+    """(is v7.3, name -> (shape as MATLAB shows it, class)) of a MAT file's numeric variables, from its headers
+    only: no variable's data is read here."""
     from scipy.io import matlab
 
     if not os.path.isfile(path):
@@ -644,29 +657,15 @@ def _mat_variables(path: str) -> dict[str, np.ndarray]:
     except Exception as exc:  # scipy raises ValueError / MatReadError for what is not a MAT file
         raise ImportDataError(f"{path}: not a MAT file ({' '.join(str(exc).split())})") from None
     if major == 2:
-        return _mat73_variables(path)
+        return True, _mat73_listing(path)
     try:
         listing = matlab.whosmat(path)
     except Exception as exc:
         raise ImportDataError(f"{path}: not a readable MAT file ({' '.join(str(exc).split())})") from None
-    numeric = []
-    for name, shape, cls in listing:
-        size = math.prod(shape)
-        if size > MAX_IMPORT_SAMPLES * 16:
-            raise ImportDataError(f"{path}: variable {name!r} has {size} elements, above the import bound of "
-                                  f"{MAX_IMPORT_SAMPLES * 16} (16 x MAX_IMPORT_SAMPLES)")
-        if cls not in ("struct", "cell", "char", "object", "function_handle", "opaque"):
-            numeric.append(name)
-    mat = _loadmat(path, variable_names=numeric) if numeric else {}
-    out = {}
-    for name in numeric:
-        a = np.asarray(mat[name])
-        _refuse_complex(a, name, path)
-        out[name] = a
-    return out
+    return False, {name: (tuple(shape), cls) for name, shape, cls in listing if cls not in _SKIPPED_CLASSES}
 
 
-def _mat73_variables(path: str) -> dict[str, np.ndarray]:
+def _mat73_listing(path: str) -> dict[str, tuple[tuple[int, ...], str]]:
     import h5py
 
     try:
@@ -680,15 +679,34 @@ def _mat73_variables(path: str) -> dict[str, np.ndarray]:
                 continue
             cls = obj.attrs.get("MATLAB_class", b"")
             cls = cls.decode() if isinstance(cls, bytes) else str(cls)
-            if cls in ("char", "cell", "struct", "function_handle") or obj.attrs.get("MATLAB_empty", 0):
+            if cls in _SKIPPED_CLASSES or obj.attrs.get("MATLAB_empty", 0):
                 continue
-            if obj.size > MAX_IMPORT_SAMPLES * 16:
-                raise ImportDataError(f"{path}: variable {name!r} has {obj.size} elements, above the import bound "
-                                      f"of {MAX_IMPORT_SAMPLES * 16} (16 x MAX_IMPORT_SAMPLES)")
-            _refuse_complex(np.empty(0, obj.dtype), name, path)
-            if obj.dtype.kind not in "biuf":
+            complex_ = obj.dtype.names is not None and {"real", "imag"} <= set(obj.dtype.names)
+            if obj.dtype.kind not in "biuf" and not complex_:
                 continue
-            out[name] = np.asarray(obj[()]).T  # HDF5 stores MATLAB's column-major arrays transposed
+            out[name] = (tuple(reversed(obj.shape)), "complex" if complex_ else cls)  # HDF5 holds MATLAB's transpose
+    return out
+
+
+def _read_mat(path: str, v73: bool, wanted: set[tuple[str, int | None]]) -> dict[tuple[str, int | None], np.ndarray]:
+    """Read only ``wanted``: (variable, None) a whole variable, (variable, k) its 0-based column k, as MATLAB shows
+    them. scipy reads a v5 variable whole (the column is cut after); a v7.3 column is read alone. Complex
+    variables are refused."""
+    out = {}
+    if not v73:
+        mat = _loadmat(path, variable_names=sorted({var for var, _ in wanted}))
+        for var, col in wanted:
+            a = np.asarray(mat[var])
+            _refuse_complex(a, var, path)
+            out[var, col] = a if col is None else np.ascontiguousarray(a[:, col])
+        return out
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        for var, col in wanted:
+            obj = f[var]
+            _refuse_complex(np.empty(0, obj.dtype), var, path)
+            out[var, col] = np.asarray(obj[()]).T if col is None else np.asarray(obj[col, :])
     return out
 
 
@@ -700,33 +718,54 @@ def load_mat(path: str | os.PathLike, options: TableOptions | None = None, **kwa
     becomes that channel; ``options.mapping`` names other variables, and ``VAR(:,k)`` column k (1-based, as in
     MATLAB) of a matrix. All vectors used must have the same length. MAT files carry no units: give them with
     ``options.units``; unstated ones are taken as SI.
+
+    The channels are chosen from the file's headers; only the variables they use are read, after their sizes,
+    each and together, were checked against ``MAX_MAT_ELEMENTS_FACTOR * MAX_IMPORT_SAMPLES`` elements.
     """
     options = options or TableOptions(**kwargs)
     path = os.fspath(path)
-    variables = _mat_variables(path)
-    columns: dict[str, np.ndarray] = {}
-    for name, a in variables.items():
-        if a.ndim == 2 and 1 in a.shape and a.size > 1:
-            columns[name] = a.ravel()
+    v73, listing = _mat_listing(path)
+    # column name -> (variable, 0-based column or None for a vector, samples)
+    columns: dict[str, tuple[str, int | None, int]] = {}
+    for name, (shape, _) in listing.items():
+        if len(shape) == 2 and 1 in shape and math.prod(shape) > 1:
+            columns[name] = (name, None, math.prod(shape))
     for channel, ref in options.mapping.items():
         m = _MATRIX_COLUMN.match(ref)
         if ref in columns or not m:
             continue
         var, col = m.group("var"), int(m.group("col"))
-        if var not in variables:
-            raise ImportDataError(f"{path}: --map {channel}={ref}: no variable {var!r} (has: {', '.join(variables)})")
-        a = variables[var]
-        if a.ndim != 2 or not 1 <= col <= a.shape[1]:
-            raise ImportDataError(f"{path}: --map {channel}={ref}: {var!r} has shape {a.shape}, no column {col}")
-        columns[ref] = np.ascontiguousarray(a[:, col - 1])
-    lengths = {}
+        if var not in listing:
+            raise ImportDataError(f"{path}: --map {channel}={ref}: no variable {var!r} (has: {', '.join(listing)})")
+        shape = listing[var][0]
+        if len(shape) != 2 or not 1 <= col <= shape[1]:
+            raise ImportDataError(f"{path}: --map {channel}={ref}: {var!r} has shape {shape}, no column {col}")
+        columns[ref] = (var, col - 1, shape[0])
     column_of, _ = _assign_channels(list(columns), options.mapping, path)
+    used = set(column_of.values())
+    lengths: dict[int, list[str]] = {}
     for name in column_of.values():
-        lengths.setdefault(columns[name].size, []).append(name)
+        lengths.setdefault(columns[name][2], []).append(name)
     if len(lengths) > 1:
         detail = "; ".join(f"{', '.join(names)}: {n}" for n, names in sorted(lengths.items()))
         raise ImportDataError(f"{path}: the variables used have different lengths ({detail})")
-    return table_run(columns, path, "mat", options)
+    bound = MAX_MAT_ELEMENTS_FACTOR * MAX_IMPORT_SAMPLES
+    wanted = {columns[name][:2] for name in used}
+    # what is read: a v5 variable whole, once; a v7.3 vector whole or a matrix column alone
+    sizes = ({var: math.prod(listing[var][0]) for var, _ in wanted} if not v73 else
+             {f"{var}(:,{col + 1})" if col is not None else var:
+              listing[var][0][0] if col is not None else math.prod(listing[var][0]) for var, col in wanted})
+    for var, size in sizes.items():
+        if size > bound:
+            raise ImportDataError(f"{path}: variable {var!r} has {size} elements, above the import bound of "
+                                  f"{bound} ({MAX_MAT_ELEMENTS_FACTOR} x MAX_IMPORT_SAMPLES)")
+    if sum(sizes.values()) > bound:
+        raise ImportDataError(f"{path}: the variables used hold {sum(sizes.values())} elements together, above the "
+                              f"import bound of {bound} ({MAX_MAT_ELEMENTS_FACTOR} x MAX_IMPORT_SAMPLES)")
+    read = _read_mat(path, v73, wanted)
+    arrays = {name: read[columns[name][:2]].ravel() if name in used else np.empty(0)  # unused: never read
+              for name in columns}
+    return table_run(arrays, path, "mat", options)
 
 
 LOADERS = {"emps": load_emps, "hsm150": load_hsm150}

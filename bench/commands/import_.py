@@ -145,7 +145,10 @@ def _parse_pairs(items: list[str], option: str, form: str) -> dict[str, str]:
         key, sep, value = item.partition("=")
         if not sep or not key.strip() or not value.strip():
             raise ImportDataError(f"{option} {item!r}: expected {form}")
-        pairs[key.strip()] = value.strip()
+        key, value = key.strip(), value.strip()
+        if key in pairs:  # the last one won silently: --unit position=deg --unit position=rad
+            raise ImportDataError(f"{option} {key}= is given twice ({pairs[key]} and {value}); give it once")
+        pairs[key] = value
     return pairs
 
 

@@ -341,3 +341,64 @@ def test_nanosecond_step_is_refused_naming_the_bound(tmp_path, capsys, monkeypat
     spread.write_text("t,position,torque\n0,0,1\n1e-6,0,1\n2e-6,0,1\n1000,1,1\n")
     _one_line_error(capsys, ["import", "csv", str(spread), "--resample", "linear", "--unit", "t=s"],
                     "would make 1000000001 samples", "(MAX_IMPORT_SAMPLES)")
+
+
+# ---- issue 30 items 14 and 15: one column, one unit; MAT sizes bounded in total, unused data never read ----
+
+
+def test_two_units_or_two_channels_for_one_column_are_one_line(tmp_path, capsys):
+    src = tmp_path / "x.csv"
+    src.write_text("t,x,torque\n0,0,1\n0.001,0.1,1\n0.002,0.2,1\n")
+    # the last --unit won silently: degrees then radians on the same column is a 57x scale
+    _one_line_error(capsys, ["import", "csv", str(src), "--map", "position=x", "--unit", "x=deg", "--unit",
+                             "position=rad", "-o", str(tmp_path / "a.h5")], "two units for channel position",
+                    "deg and rad")
+    _one_line_error(capsys, ["import", "csv", str(src), "--map", "position=x", "--unit", "position=deg", "--unit",
+                             "position=deg", "-o", str(tmp_path / "a.h5")], "--unit position= is given twice")
+    # torque == position was stored
+    _one_line_error(capsys, ["import", "csv", str(src), "--map", "torque=x", "--map", "position=x", "-o",
+                             str(tmp_path / "a.h5")], "column 'x' is mapped to torque and position")
+    _one_line_error(capsys, ["import", "csv", str(src), "--map", "position=x", "--map", "position=torque", "-o",
+                             str(tmp_path / "a.h5")], "--map position= is given twice")
+    assert not (tmp_path / "a.h5").exists()
+    assert main(["import", "csv", str(src), "--map", "position=x", "--unit", "x=deg", "-o",
+                 str(tmp_path / "a.h5")]) == 0
+    with open_run(tmp_path / "a.h5") as r:
+        np.testing.assert_allclose(r.channel("position"), np.radians([0, 0.1, 0.2]), rtol=1e-15)
+
+
+def test_unused_mat_variables_are_never_read(tmp_path, capsys):
+    # a 27 KB v7.3 file with four unused chunked variables of 7.9e8 elements each was read whole (23.6 GiB)
+    src = tmp_path / "bomb.mat"
+    t = np.arange(100)[:, None] * 1e-3
+    _mat73(src, {"t": t, "position": np.sin(t), "torque": np.cos(t)})
+    with h5py.File(src, "a") as f:
+        for k in range(4):
+            ds = f.create_dataset(f"junk{k}", shape=(1, 790_000_000), dtype="f8", chunks=(1, 1 << 20),
+                                  compression="gzip")
+            ds.attrs["MATLAB_class"] = np.bytes_("double")
+    assert src.stat().st_size < 64_000
+    import time
+
+    t0 = time.perf_counter()
+    assert main(["import", "mat", str(src), "-o", str(tmp_path / "b.h5")]) == 0
+    assert time.perf_counter() - t0 < 10.0  # reading one 7.9e8-element variable alone takes minutes and 6.3 GB
+    with open_run(tmp_path / "b.h5") as r:
+        np.testing.assert_allclose(r.channel("torque"), np.cos(t).ravel(), rtol=0, atol=0)
+    assert "ignored columns: junk0, junk1, junk2, junk3" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("version", ["v5", "v7.3"])
+def test_mat_sizes_are_bounded_in_total_and_unused_ones_are_not_counted(tmp_path, capsys, monkeypatch, version):
+    t = np.arange(40)[:, None] * 1e-3
+    variables = {"t": t, "position": t, "torque": t, "unused": np.zeros((1000, 1))}
+    src = tmp_path / "m.mat"
+    savemat(src, variables) if version == "v5" else _mat73(src, variables)
+    monkeypatch.setattr(importers, "MAX_IMPORT_SAMPLES", 40)
+    monkeypatch.setattr(importers, "MAX_MAT_ELEMENTS_FACTOR", 2)  # 80 elements: each used one fits, 120 do not
+    _one_line_error(capsys, ["import", "mat", str(src), "-o", str(tmp_path / "m.h5")],
+                    "the variables used hold 120 elements together, above the import bound of 80")
+    monkeypatch.setattr(importers, "MAX_MAT_ELEMENTS_FACTOR", 3)  # 120: the 1000 unused elements are not read
+    assert main(["import", "mat", str(src), "-o", str(tmp_path / "m.h5")]) == 0
+    with open_run(tmp_path / "m.h5") as r:
+        assert r.channel("t").size == 40
