@@ -15,13 +15,16 @@
 
 Output: one run file per run and repeat in the output folder (``<name>-<repeat>.h5``) plus
 ``index.json``, rewritten atomically after every run. ``--resume`` keeps the runs whose file says
-``completed`` and redoes the others (a crashed or aborted file is kept beside as ``*.failed-N.h5``).
+``completed`` and whose stored plan (protocol parameters, device settings, the model file's SHA-256) is the
+campaign file's, and redoes the others (a crashed or aborted file is kept beside as ``*.failed-N.h5``, a run
+of another plan as ``*.replanned-N.h5``). Every repeat plays its own seed (:func:`repeat_seed`).
 Everything is validated before anything moves: a bad key, unit or value is reported with file, line
 and reason.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import re
@@ -51,6 +54,18 @@ _QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Z
 
 class CampaignError(BenchError):
     """A campaign file that cannot run; the message names the file, the line and the reason."""
+
+
+def repeat_seed(seed: int, repeat: int) -> int:
+    """The seed repeat ``repeat`` (1-based) of a run with ``seed`` plays: repeat 1 the seed itself (a campaign
+    of single runs plays as it always did), repeat r > 1 the first 32-bit word of numpy's
+    ``SeedSequence([seed, r])``, so repeats play different inputs and runs of different seeds do not share
+    them."""
+    if repeat == 1:
+        return seed
+    import numpy as np
+
+    return int(np.random.SeedSequence([seed, repeat]).generate_state(1, np.uint32)[0])
 
 
 @dataclass
@@ -207,7 +222,10 @@ def load_campaign(path: str | Path) -> Campaign:
         except DeviceURLError as exc:
             raise fail("device", str(exc)) from None
         for r in range(1, repeats + 1):
-            campaign.runs.append(PlannedRun(name, r, protocol, settings, device,
+            played = protocol
+            if r > 1 and "seed" in specs:  # each repeat its own input (all repeats played seed 0 before)
+                played = cls.from_dict({**params, "seed": repeat_seed(protocol.seed, r)})  # type: ignore[attr-defined]
+            campaign.runs.append(PlannedRun(name, r, played, settings, device,
                                             str(merged.get("operator", "")), str(merged.get("notes", ""))))
     if steps:  # the compensation matrix: one planned run per case (docs/compensation.md)
         from hilbench.bench.compensation_matrix import campaign_step
@@ -220,6 +238,56 @@ def load_campaign(path: str | Path) -> Campaign:
     if len(devices) > 1:
         raise CampaignError(f"{path}: one campaign runs on one device; found {', '.join(sorted(devices))}")
     return campaign
+
+
+def _model_sha256(planned: PlannedRun, cache: dict[str, str]) -> str | None:
+    """SHA-256 of the model file a compensated run's feed-forward comes from (None: the run has none)."""
+    model = getattr(planned.protocol, "model", "")
+    if not isinstance(model, str) or not model:
+        return None
+    if model not in cache:
+        digest = hashlib.sha256()
+        try:
+            with open(model, "rb") as fh:
+                for block in iter(lambda: fh.read(1 << 20), b""):
+                    digest.update(block)
+        except OSError as exc:
+            raise CampaignError(f"{model}: cannot read the model file ({exc.strerror})") from None
+        cache[model] = digest.hexdigest()
+    return cache[model]
+
+
+def _plan(planned: PlannedRun, cache: dict[str, str]) -> dict[str, Any]:
+    """What a run's data depend on, as the index stores it: protocol, parameters, device settings, and the
+    model file's content (its SHA-256) for a compensated run."""
+    from hilbench.bench.outputs import dumps
+
+    plan = {"protocol": planned.protocol.name, "parameters": planned.protocol.parameters(),
+            "settings": settings_dict(planned.settings), "model_sha256": _model_sha256(planned, cache)}
+    return json.loads(dumps(plan))  # as it reads back from index.json (tuples as lists, NaN as null)
+
+
+def plan_changes(entry: dict, plan: dict) -> list[str]:
+    """The parts of ``plan`` a stored index ``entry`` differs in (empty: the same plan). With the model's
+    SHA-256 on both sides the model's path is not compared (the folder may have moved); an entry of an older
+    index without it is compared on parameters and settings."""
+    changed = []
+    old, new = dict(entry.get("parameters") or {}), dict(plan["parameters"])
+    if entry.get("model_sha256") and plan["model_sha256"]:
+        old.pop("model", None)
+        new.pop("model", None)
+        if entry["model_sha256"] != plan["model_sha256"]:
+            changed.append("model file content")
+    if entry.get("protocol") != plan["protocol"]:
+        changed.append("protocol")
+    diff = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
+    if diff:
+        changed.append("parameters " + ", ".join(diff))
+    old_s, new_s = entry.get("settings") or {}, plan["settings"]
+    diff = sorted(k for k in set(old_s) | set(new_s) if old_s.get(k) != new_s.get(k))
+    if diff:
+        changed.append("settings " + ", ".join(diff))
+    return changed
 
 
 def read_index(out_dir: Path) -> dict[str, dict]:
@@ -236,8 +304,10 @@ def read_index(out_dir: Path) -> dict[str, dict]:
 def _write_index(out_dir: Path, campaign: Campaign, entries: dict[str, dict]) -> None:
     doc = {"campaign": str(campaign.path), "schema": "hilbench-campaign-index", "version": 1,
            "runs": [entries[r.key] for r in campaign.runs if r.key in entries]}
+    from hilbench.bench.outputs import dumps
+
     tmp = out_dir / (INDEX_NAME + ".tmp")
-    tmp.write_text(json.dumps(doc, indent=2))
+    tmp.write_text(dumps(doc, indent=2))  # strict JSON
     os.replace(tmp, out_dir / INDEX_NAME)
 
 
@@ -306,19 +376,29 @@ def _play(campaign: Campaign, out_dir: Path, resume: bool, progress, control, be
     control = control or RunControl()
     own = bench is None
     bench = bench or Bench.open(campaign.device)
+    hashes: dict[str, str] = {}
     try:
         for i, planned in enumerate(campaign.runs):
             path = out_dir / f"{planned.key}.h5"
+            plan = _plan(planned, hashes)
             if path.exists():
                 if writer_alive(path):
                     raise CampaignError(f"{path}: a live process is still writing this run; not touching it")
                 status = _file_status(path)
+                aside = "failed"
                 if status == "completed" and planned.key in entries:
+                    changed = plan_changes(entries[planned.key], plan)
+                    if not changed:
+                        if progress:
+                            progress(CampaignProgress(i, len(campaign.runs), planned.key, "skipped"))
+                        continue
+                    aside = "replanned"  # a completed run of another plan: kept beside, never mixed in
+                    del entries[planned.key]
                     if progress:
-                        progress(CampaignProgress(i, len(campaign.runs), planned.key, "skipped"))
-                    continue
+                        progress(CampaignProgress(i, len(campaign.runs), planned.key,
+                                                  f"plan changed ({'; '.join(changed)}): redone"))
                 n = 1
-                while (failed := out_dir / f"{planned.key}.failed-{n}.h5").exists():
+                while (failed := out_dir / f"{planned.key}.{aside}-{n}.h5").exists():
                     n += 1
                 os.replace(path, failed)
             bench.settings = planned.settings
@@ -331,8 +411,8 @@ def _play(campaign: Campaign, out_dir: Path, resume: bool, progress, control, be
             entries[planned.key] = {
                 "key": planned.key, "name": planned.name, "repeat": planned.repeat,
                 "protocol": planned.protocol.name, "file": path.name, "status": result.status, "uid": result.uid,
-                "samples": result.samples, "parameters": planned.protocol.parameters(),
-                "settings": settings_dict(planned.settings),
+                "samples": result.samples, "parameters": plan["parameters"], "settings": plan["settings"],
+                "model_sha256": plan["model_sha256"],
             }
             _write_index(out_dir, campaign, entries)
             if progress:

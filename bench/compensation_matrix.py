@@ -263,10 +263,14 @@ def campaign_report(campaign, out_dir: Path, entries: dict[str, dict]) -> list[P
     for planned in campaign.runs:
         if isinstance(planned.protocol, CompensatedReference):
             steps.setdefault(planned.name.split(".")[0], []).append(planned)
-    written = []
+    from hilbench.bench.campaign import _plan, plan_changes
+
+    written, hashes = [], {}
     for step, runs in steps.items():
         if not all(entries.get(r.key, {}).get("status") == "completed" for r in runs):
             continue
+        if any(plan_changes(entries[r.key], _plan(r, hashes)) for r in runs):
+            continue  # a report combines runs of one plan only (resume redoes the others first)
         settings = runs[0].settings
         matrix = MatrixSettings(current_limit=settings.current_limit, torque_constant=settings.torque_constant,
                                 ratio=settings.ratio, **runs[0].report)
