@@ -191,7 +191,7 @@ def check_maxwell_slip(params, where: str) -> None:
     stiffnesses and Delta of different lengths, a non-finite or huge value."""
     if not isinstance(params, dict):
         raise AnalysisError(f"{where} must be an object, got {_short(params)}")
-    if params.get("axis") not in AXES:
+    if not isinstance(params.get("axis"), str) or params["axis"] not in AXES:
         raise AnalysisError(f"{where}.axis must be 'rotary' or 'linear', got {_short(params.get('axis'))}")
     for key in ("inertia", "ms_stiffness", "ms_delta"):
         if key not in params:
@@ -217,6 +217,9 @@ def check_maxwell_slip(params, where: str) -> None:
 _PLANT_INTEGERS = {"counts_per_rev", "delay_samples", "seed", "stack", "order"}
 #: plant fields written as the string "inf" for an infinite value (PlantParams.to_dict)
 _PLANT_INF = {"current_limit", "attraction"}
+#: plant fields that may be null (not present in the model)
+_PLANT_NULLABLE = {"viscous_neg", "coulomb_neg", "static", "restoring_table", "damping_table", "lugre", "gms",
+                   "hysteresis"}
 
 
 def check_plant(plant, where: str) -> None:
@@ -227,7 +230,7 @@ def check_plant(plant, where: str) -> None:
         raise AnalysisError(f"{where} must be an object, got {_short(plant)}")
     for key, value in plant.items():
         here = f"{where}.{key}"
-        if value is None or (key in _PLANT_INF and value == "inf"):
+        if (value is None and key in _PLANT_NULLABLE) or (key in _PLANT_INF and value == "inf"):
             continue
         if key in _PLANT_INTEGERS:
             if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2**63:
@@ -281,7 +284,7 @@ def read_family(path: str | Path) -> tuple[FamilyModel, dict]:
     se = params.pop("std_errors", {}) or {}
     units = params.pop("units", {}) or {}
     axis = params.pop("axis", "rotary")
-    if axis not in AXES:
+    if not isinstance(axis, str) or axis not in AXES:
         raise AnalysisError(f"{path}: parameters.axis must be 'rotary' or 'linear', got {_short(axis)}")
     if not isinstance(se, dict):
         raise AnalysisError(f"{path}: parameters.std_errors must be an object")
