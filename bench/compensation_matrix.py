@@ -151,7 +151,8 @@ def write_report(results: list[CaseResult], out: Path, settings: dict) -> list[P
               f" Source: {settings['source']}.\n\n")
     outputs.write_text(out / "compensation.md", header + table)
     outputs.write_json(out / "compensation.json", json_safe(document(results, settings)), indent=1, allow_nan=False)
-    return [out / "compensation.md", out / "compensation.json", *write_plots(results, out)]
+    plots = write_plots(results, out, save=lambda fig, path: outputs.save_figure(fig, path, dpi=110))
+    return [out / "compensation.md", out / "compensation.json", *plots]
 
 
 def run_cases(protocols: list[Case], play: Callable[[Case, int], CaseResult],

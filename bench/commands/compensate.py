@@ -107,8 +107,8 @@ def run(args: argparse.Namespace) -> int:
         if args.out is None:
             raise BenchError("--matrix needs -o/--output DIR (the runs and the report go there)")
         names = [n.strip() for n in args.feedforwards.split(",") if n.strip()] if args.feedforwards else None
-        outputs.refuse_inputs({"--output": args.out, **{f"--output {args.out / n}": args.out / n
-                                                         for n in ("compensation.md", "compensation.json")}},
+        reports = ("compensation.md", "compensation.json", *(f"compensation_{k}.png" for k in _references(args)))
+        outputs.refuse_inputs({"--output": args.out, **{f"--output {args.out / n}": args.out / n for n in reports}},
                               inputs)
         if not args.overwrite and (args.out / "compensation.md").exists():
             raise BenchError(f"{args.out / 'compensation.md'} exists; use --overwrite or another folder")

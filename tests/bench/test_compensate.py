@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -295,3 +296,17 @@ def test_a_family_file_predicts_on_its_own_plant(tmp_path, capsys, no_device):
                      "--references", "triangle", *SHORT]) == 0
     runs = json.loads((tmp_path / "p" / "compensation.json").read_text())["runs"]
     assert [r["feedforward"] for r in runs] == ["none", "gms"] and not no_device
+
+
+def test_a_report_plot_that_is_the_model_is_refused(tmp_path, capsys, no_device):
+    # an output is never an input: also the reversal plots of the report
+    out = tmp_path / "mx"
+    out.mkdir()
+    model = _model(tmp_path)
+    plot = out / "compensation_triangle.png"
+    os.link(model, plot)  # the model under the plot's name (a hard link: the same file)
+    before = model.read_bytes()
+    line = _refused(capsys, ["compensate", str(model), "--matrix", "--predict", "-o", str(out), "--overwrite",
+                             "--references", "triangle", *SHORT])
+    assert "compensation_triangle.png is an input of this command" in line
+    assert model.read_bytes() == before and sorted(p.name for p in out.iterdir()) == ["compensation_triangle.png"]
