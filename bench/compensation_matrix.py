@@ -11,6 +11,7 @@ not a measurement.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -187,7 +188,10 @@ def campaign_step(table: dict, defaults: dict, index: int, path: Path, text: str
         line = _line_of(text, key, None) if key not in table else _step_line(text, key, index)
         return CampaignError(f"{path}:{line}: compensate {index + 1}: {reason}")
 
-    name = str(merged.get("name", f"compensate{index + 1}"))
+    name = merged.get("name", f"compensate{index + 1}")
+    if not isinstance(name, str) or not re.match(r"^[A-Za-z0-9_][A-Za-z0-9_-]*$", name):
+        # the name is the report's folder OUT/<name>/ and the first part of every run's file name
+        raise fail("name", f"name {name!r} must use only letters, digits, '_' and '-' (not first), no '.' or '/'")
     if "model" not in merged or not isinstance(merged["model"], str):
         raise fail("model", "needs model = \"MODEL.json\" (hilbench identify or hilbench compare)")
     model = Path(merged["model"])

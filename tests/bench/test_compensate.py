@@ -310,3 +310,14 @@ def test_a_report_plot_that_is_the_model_is_refused(tmp_path, capsys, no_device)
                              "--references", "triangle", *SHORT])
     assert "compensation_triangle.png is an input of this command" in line
     assert model.read_bytes() == before and sorted(p.name for p in out.iterdir()) == ["compensation_triangle.png"]
+
+
+@pytest.mark.parametrize("name", ["..", "../up", "a.b", "a/b", "-x", 3])
+def test_a_compensate_step_name_is_a_plain_name(tmp_path, name):
+    # the step's name is its report folder OUT/<name>/: ".." wrote the report beside OUT, "a.b" split its runs
+    from hilbench.bench.campaign import CampaignError, load_campaign
+
+    model = _model(tmp_path)
+    (tmp_path / "c.toml").write_text(f'[[compensate]]\nname = {json.dumps(name)}\nmodel = "{model.name}"\n')
+    with pytest.raises(CampaignError, match=r"c.toml:2: compensate 1: name .* must use only letters"):
+        load_campaign(tmp_path / "c.toml")
