@@ -402,3 +402,15 @@ def test_mat_sizes_are_bounded_in_total_and_unused_ones_are_not_counted(tmp_path
     assert main(["import", "mat", str(src), "-o", str(tmp_path / "m.h5")]) == 0
     with open_run(tmp_path / "m.h5") as r:
         assert r.channel("t").size == 40
+
+
+def test_an_import_never_writes_over_its_source(tmp_path, capsys):
+    # an output is never an input: `import csv x.csv -o x.csv --overwrite` replaced the CSV with the run file
+    src = tmp_path / "x.csv"
+    src.write_text("t,position,torque\n0,0,1\n0.001,0.1,1\n0.002,0.2,1\n")
+    before = src.read_bytes()
+    _one_line_error(capsys, ["import", "csv", str(src), "-o", str(src), "--overwrite"], "is an input of this command")
+    (tmp_path / "servo.csv").write_text("x\n")
+    _one_line_error(capsys, ["import", "mnich", str(tmp_path / "servo.csv"), "-o", str(tmp_path / "a3NI.csv"),
+                             "--overwrite"], "is an input of this command")  # the default load-cell file beside it
+    assert src.read_bytes() == before
