@@ -195,3 +195,18 @@ def test_each_repeat_plays_its_own_seed_stored_in_its_run_file(tmp_path):
             assert run.protocol_params["seed"] == seed
     # a campaign without a seed: repeat 1 plays seed 0, as before
     assert load_campaign(_write(tmp_path, GOOD.format(duration=1), "d.toml")).runs[0].protocol.seed == 0
+
+
+def test_an_older_index_entry_without_a_model_hash_is_compared_on_parameters_and_settings(tmp_path):
+    from hilbench.bench.campaign import _plan, plan_changes
+
+    planned = load_campaign(_write(tmp_path, GOOD.format(duration=1))).runs[1]  # id-2: its own seed now
+    plan = _plan(planned, {})
+    assert plan["model_sha256"] is None and plan["parameters"]["seed"] == planned.protocol.seed != 0
+    old = {"protocol": plan["protocol"], "parameters": {**plan["parameters"], "seed": 0},
+           "settings": plan["settings"]}  # written before each repeat had its seed: repeat 2 played seed 0
+    assert plan_changes(old, plan) == ["parameters seed"]
+    old["parameters"]["seed"] = planned.protocol.seed
+    assert plan_changes(old, plan) == []
+    old["settings"] = {**plan["settings"], "current_limit": 4.0}
+    assert plan_changes(old, plan) == ["settings current_limit"]
