@@ -585,12 +585,26 @@ def _sniff_delimiter(header: str) -> str:
     return ","
 
 
+#: Longest line a CSV import reads, bytes: a lab's row of 200 columns is a few KB; a longer line (a file with no
+#: line breaks) would be read into memory whole by the header or row parser.
+MAX_LINE_BYTES = 1 << 20
+
+
 def _count_lines(path: str) -> int:
-    """Lines in a text file, counted in 1 MiB blocks (nothing the size of the file is allocated)."""
-    lines, last = 0, b"\n"
+    """Lines in a text file, counted in 1 MiB blocks (nothing the size of the file is allocated); refuses a
+    line longer than :data:`MAX_LINE_BYTES` before any row is parsed."""
+    lines, last, run = 0, b"\n", 0  # run: bytes of the current line so far
     with open(path, "rb") as fh:
         for block in iter(lambda: fh.read(1 << 20), b""):
-            lines += block.count(b"\n")
+            ends = np.flatnonzero(np.frombuffer(block, np.uint8) == 10)
+            first = run + (int(ends[0]) + 1 if ends.size else len(block))  # the line begun in an earlier block
+            lengths = np.diff(ends) if ends.size > 1 else np.zeros(1, np.int64)
+            if max(first, int(np.max(lengths))) > MAX_LINE_BYTES + 1:  # (+1: its line break)
+                line = lines + 1 if first > MAX_LINE_BYTES + 1 else lines + 2 + int(np.argmax(lengths))
+                raise ImportDataError(f"{path}: line {line} is longer than {MAX_LINE_BYTES} bytes (MAX_LINE_BYTES); "
+                                      "is this a CSV file?")
+            run = len(block) - 1 - ends[-1] if ends.size else run + len(block)
+            lines += ends.size
             last = block[-1:]
     return lines + (last != b"\n")
 
@@ -610,11 +624,14 @@ def load_csv(path: str | os.PathLike, options: TableOptions | None = None, *, de
         raise ImportDataError(f"{path}: no such file")
     try:
         with open(path, encoding="utf-8-sig") as fh:
-            header = fh.readline()
+            header = fh.readline(MAX_LINE_BYTES + 1)  # a file without line breaks is not read whole
     except (OSError, UnicodeDecodeError) as exc:
         raise ImportDataError(f"{path}: cannot read ({' '.join(str(exc).split())})") from None
     if not header.strip():
         raise ImportDataError(f"{path}: empty file (a header row is required)")
+    if len(header) > MAX_LINE_BYTES:
+        raise ImportDataError(f"{path}: the header is longer than {MAX_LINE_BYTES} characters (MAX_LINE_BYTES); "
+                              "is this a CSV file?")
     sep = delimiter or _sniff_delimiter(header)
     names = [h.strip().strip('"').strip("'") for h in header.rstrip("\r\n").split(sep)]
     if len(set(names)) != len(names):

@@ -414,3 +414,20 @@ def test_an_import_never_writes_over_its_source(tmp_path, capsys):
     _one_line_error(capsys, ["import", "mnich", str(tmp_path / "servo.csv"), "-o", str(tmp_path / "a3NI.csv"),
                              "--overwrite"], "is an input of this command")  # the default load-cell file beside it
     assert src.read_bytes() == before
+
+
+def test_csv_lines_are_bounded_before_they_are_parsed(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(importers, "MAX_LINE_BYTES", 64)
+    ok = tmp_path / "ok.csv"
+    ok.write_text("t,position,torque\n" + "".join(f"{k * 1e-3:.3f},0.{k},1\n" for k in range(100_000)) + "0,0,1")
+    assert ok.stat().st_size > 1 << 20  # two 1 MiB blocks: lines are counted and measured across their seams
+    assert importers._count_lines(str(ok)) == 100_002
+    long_row = tmp_path / "row.csv"
+    long_row.write_text("t,position,torque\n0,0,1\n0.001," + "1" * 100 + ",1\n0.002,0,1\n")
+    _one_line_error(capsys, ["import", "csv", str(long_row), "-o", str(tmp_path / "a.h5")],
+                    "line 3 is longer than 64 bytes")
+    header = tmp_path / "header.csv"
+    header.write_text("t," + "x" * 200 + ",position,torque\n0,0,0,1\n")  # a file without line breaks: the same
+    _one_line_error(capsys, ["import", "csv", str(header), "-o", str(tmp_path / "a.h5")],
+                    "the header is longer than 64 characters")
+    assert not (tmp_path / "a.h5").exists()
