@@ -91,6 +91,25 @@ def _loadmat(path: str, **kwargs: Any) -> dict[str, Any]:
         raise ImportDataError(f"{path}: not a readable MAT v5 file ({' '.join(str(exc).split())})") from None
 
 
+def _load_named(path: str, names: tuple[str, ...]) -> dict[str, Any]:
+    """The variables ``names`` of a MAT v5 file that has them, read after their sizes (each and together) were
+    checked against the import bound; the file's other variables are never read."""
+    v73, listing = _mat_listing(path)
+    if v73:
+        raise ImportDataError(f"{path}: a MAT v7.3 file; this format's files are MAT v5 (or use `import mat`)")
+    present = [n for n in names if n in listing]
+    bound = MAX_MAT_ELEMENTS_FACTOR * MAX_IMPORT_SAMPLES
+    sizes = {n: math.prod(listing[n][0]) for n in present}
+    for name, size in sizes.items():
+        if size > bound:
+            raise ImportDataError(f"{path}: variable {name!r} has {size} elements, above the import bound of "
+                                  f"{bound} ({MAX_MAT_ELEMENTS_FACTOR} x MAX_IMPORT_SAMPLES)")
+    if sum(sizes.values()) > bound:
+        raise ImportDataError(f"{path}: the variables used hold {sum(sizes.values())} elements together, above the "
+                              f"import bound of {bound} ({MAX_MAT_ELEMENTS_FACTOR} x MAX_IMPORT_SAMPLES)")
+    return _loadmat(path, variable_names=present) if present else {}
+
+
 def _column(mat: Mapping[str, Any], name: str, path: str, n: int | None = None) -> np.ndarray:
     if name not in mat:
         raise ImportDataError(f"{path}: variable {name!r} is missing")
@@ -145,7 +164,7 @@ def _sample_rate(t: np.ndarray, path: str) -> float:
 def load_emps(path: str | os.PathLike) -> ImportedRun:
     """Load ``DATA_EMPS.mat`` or ``DATA_EMPS_PULSES.mat`` (linear axis, m and N). See the module docstring."""
     path = os.fspath(path)
-    mat = _loadmat(path)
+    mat = _load_named(path, ("t", "qm", "qg", "vir", "gtau", "kp", "kv", "pulses_N"))
     t = _column(mat, "t", path)
     n = t.size
     qm, qg, vir = (_column(mat, v, path, n) for v in ("qm", "qg", "vir"))
@@ -210,7 +229,8 @@ def load_emps(path: str | os.PathLike) -> ImportedRun:
 def load_hsm150(path: str | os.PathLike) -> ImportedRun:
     """Load an HSM150 ``idf_*.mat`` identification run (rotary axis, rad and N*m)."""
     path = os.fspath(path)
-    mat = _loadmat(path)
+    mat = _load_named(path, ("data", "Iz1", "Iz", "Im1", "Im", "J", "B", "Cu", "Mn", "Mmax", "N", "KFI", "Tvz", "Tgm",
+                             "Tn", "Tsim"))
     if "data" not in mat:
         raise ImportDataError(f"{path}: variable 'data' is missing")
     _refuse_complex(np.asarray(mat["data"]), "data", path)

@@ -431,3 +431,23 @@ def test_csv_lines_are_bounded_before_they_are_parsed(tmp_path, capsys, monkeypa
     _one_line_error(capsys, ["import", "csv", str(header), "-o", str(tmp_path / "a.h5")],
                     "the header is longer than 64 characters")
     assert not (tmp_path / "a.h5").exists()
+
+
+def test_the_dedicated_mat_importers_read_only_their_variables_within_the_bound(tmp_path, capsys, monkeypatch):
+    n = 50
+    data = np.zeros((n, 7))
+    data[:, 0] = np.arange(n) * 1e-3
+    src = tmp_path / "idf.mat"
+    savemat(src, {"data": data, "unused": np.zeros((5000, 1)), "J": 1e-3})
+    monkeypatch.setattr(importers, "MAX_IMPORT_SAMPLES", 50)  # bound 800 elements: data 350 fits, unused 5000 not
+    assert main(["import", "hsm150", str(src), "-o", str(tmp_path / "h.h5")]) == 0
+    with open_run(tmp_path / "h.h5") as r:
+        assert r.channel("t").size == n and r.calibration["J"] == 1e-3
+    monkeypatch.setattr(importers, "MAX_MAT_ELEMENTS_FACTOR", 4)  # 200: data's 350 elements are refused unread
+    _one_line_error(capsys, ["import", "hsm150", str(src), "-o", str(tmp_path / "h2.h5")],
+                    "variable 'data' has 350 elements, above the import bound of 200")
+    emps = tmp_path / "emps.mat"
+    t = np.arange(n)[:, None] * 1e-3
+    savemat(emps, {"t": t, "qm": t, "qg": t, "vir": t, "gtau": 2.0, "kp": 1.0, "kv": 1.0, "junk": np.zeros((9, 9))})
+    _one_line_error(capsys, ["import", "emps", str(emps), "-o", str(tmp_path / "e.h5")],
+                    "the variables used hold 203 elements together, above the import bound of 200")
