@@ -451,3 +451,17 @@ def test_the_dedicated_mat_importers_read_only_their_variables_within_the_bound(
     savemat(emps, {"t": t, "qm": t, "qg": t, "vir": t, "gtau": 2.0, "kp": 1.0, "kv": 1.0, "junk": np.zeros((9, 9))})
     _one_line_error(capsys, ["import", "emps", str(emps), "-o", str(tmp_path / "e.h5")],
                     "the variables used hold 203 elements together, above the import bound of 200")
+
+
+def test_mnich_exports_are_bounded_before_they_are_parsed(tmp_path, capsys, monkeypatch):
+    servo = tmp_path / "a3MR.csv"
+    servo.write_text("h\n" * 5 + "".join(f"{k},{k},1,0\n" for k in range(40)))
+    (tmp_path / "a3NI.csv").write_text("h\n" * 4 + "".join(f"{k * 5e-4},1,0,0\n" for k in range(40)))
+    monkeypatch.setattr(importers, "MAX_IMPORT_SAMPLES", 30)
+    _one_line_error(capsys, ["import", "mnich", str(servo), "-o", str(tmp_path / "m.h5")],
+                    "a3MR.csv: 40 rows, above the import bound of 30 samples")
+    monkeypatch.setattr(importers, "MAX_IMPORT_SAMPLES", 1000)
+    monkeypatch.setattr(importers, "MAX_LINE_BYTES", 16)
+    (tmp_path / "a3NI.csv").write_text("h\n" * 4 + "0," + "1" * 40 + "\n")
+    _one_line_error(capsys, ["import", "mnich", str(servo), "-o", str(tmp_path / "m.h5")],
+                    "a3NI.csv: line 5 is longer than 16 bytes")
