@@ -41,6 +41,8 @@ from hilbench.bench.runner import Bench, DeviceSettings, Progress, RunControl, S
 from hilbench.drivers.device_url import check_device_url
 from hilbench.drivers.errors import DeviceURLError
 
+#: Largest campaign file read, bytes: a campaign of a thousand runs is ~100 KB.
+MAX_CAMPAIGN_BYTES = 4 << 20
 INDEX_NAME = "index.json"
 LOCK_NAME = ".campaign.lock"
 RUN_KEYS = {"name", "protocol", "repeats"}
@@ -134,13 +136,19 @@ def load_campaign(path: str | Path) -> Campaign:
     """Parse and validate a campaign file. Raises :class:`CampaignError` (file:line: reason)."""
     path = Path(path)
     try:
-        text = path.read_text()
+        with open(path, "rb") as fh:  # bounded: a campaign is a page of TOML, not a FIFO that never ends
+            raw = fh.read(MAX_CAMPAIGN_BYTES + 1)
     except OSError as exc:
         raise CampaignError(f"{path}: cannot read: {exc.strerror}") from None
+    if len(raw) > MAX_CAMPAIGN_BYTES:
+        raise CampaignError(f"{path}: longer than {MAX_CAMPAIGN_BYTES} bytes (MAX_CAMPAIGN_BYTES); is it a campaign?")
     try:
+        text = raw.decode("utf-8")
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise CampaignError(f"{path}: not valid TOML: {exc}") from None
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise CampaignError(f"{path}: not valid TOML: {' '.join(str(exc).split())}") from None
+    except RecursionError:
+        raise CampaignError(f"{path}: not valid TOML: nested too deep") from None
     unknown_top = sorted(set(data) - {"defaults", "run", "compensate"})
     if unknown_top:
         raise CampaignError(f"{path}:{_line_of(text, unknown_top[0], None)}: unknown table or key "

@@ -210,3 +210,16 @@ def test_an_older_index_entry_without_a_model_hash_is_compared_on_parameters_and
     assert plan_changes(old, plan) == []
     old["settings"] = {**plan["settings"], "current_limit": 4.0}
     assert plan_changes(old, plan) == ["settings current_limit"]
+
+
+@pytest.mark.parametrize(("text", "reason"), [
+    ("a = " + "[" * 100_000 + "]" * 100_000, "nested too deep"),  # was RecursionError
+    ("name = \"\\xff\"".encode("latin-1").decode("latin-1") + "\udcff", "not valid TOML"),
+    ("# " + "x" * (5 << 20), "longer than 4194304 bytes"),
+])
+def test_a_hostile_campaign_file_is_one_line(tmp_path, text, reason):
+    path = tmp_path / "c.toml"
+    path.write_bytes(text.encode("utf-8", "surrogateescape"))
+    cp = subprocess.run([sys.executable, "-m", "hilbench.bench.cli", "campaign", str(path), "--check"],
+                        capture_output=True, text=True, timeout=60)
+    assert cp.returncode == 2 and len(cp.stderr.strip().splitlines()) == 1 and reason in cp.stderr, cp.stderr
