@@ -679,6 +679,8 @@ _MATRIX_COLUMN = re.compile(r"^(?P<var>[A-Za-z]\w*)\(\s*:\s*,\s*(?P<col>\d+)\s*\
 #: whole in a v5 file, where scipy reads a variable at once; one column in a v7.3 file, read alone).
 MAX_MAT_ELEMENTS_FACTOR = 16
 _SKIPPED_CLASSES = ("struct", "cell", "char", "object", "function_handle", "opaque")
+#: Most variables a MAT file's listing may have (a lab file has tens): the listing itself is bounded too.
+MAX_MAT_VARIABLES = 10_000
 
 
 def _mat_listing(path: str) -> tuple[bool, dict[str, tuple[tuple[int, ...], str]]]:
@@ -699,6 +701,9 @@ def _mat_listing(path: str) -> tuple[bool, dict[str, tuple[tuple[int, ...], str]
         listing = matlab.whosmat(path)
     except Exception as exc:
         raise ImportDataError(f"{path}: not a readable MAT file ({' '.join(str(exc).split())})") from None
+    if len(listing) > MAX_MAT_VARIABLES:
+        raise ImportDataError(f"{path}: {len(listing)} variables, above the {MAX_MAT_VARIABLES} an import lists "
+                              "(MAX_MAT_VARIABLES)")
     return False, {name: (tuple(shape), cls) for name, shape, cls in listing if cls not in _SKIPPED_CLASSES}
 
 
@@ -711,6 +716,9 @@ def _mat73_listing(path: str) -> dict[str, tuple[tuple[int, ...], str]]:
         raise ImportDataError(f"{path}: not a readable MAT v7.3 (HDF5) file ({' '.join(str(exc).split())})") from None
     out = {}
     with f:
+        if len(f) > MAX_MAT_VARIABLES:
+            raise ImportDataError(f"{path}: {len(f)} variables, above the {MAX_MAT_VARIABLES} an import lists "
+                                  "(MAX_MAT_VARIABLES)")
         for name, obj in f.items():
             if not isinstance(obj, h5py.Dataset) or name.startswith("#"):
                 continue

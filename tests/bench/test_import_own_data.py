@@ -402,6 +402,9 @@ def test_mat_sizes_are_bounded_in_total_and_unused_ones_are_not_counted(tmp_path
     assert main(["import", "mat", str(src), "-o", str(tmp_path / "m.h5")]) == 0
     with open_run(tmp_path / "m.h5") as r:
         assert r.channel("t").size == 40
+    monkeypatch.setattr(importers, "MAX_MAT_VARIABLES", 3)  # the listing is bounded too
+    _one_line_error(capsys, ["import", "mat", str(src), "-o", str(tmp_path / "m2.h5")],
+                    "4 variables, above the 3 an import lists")
 
 
 def test_an_import_never_writes_over_its_source(tmp_path, capsys):
