@@ -15,7 +15,9 @@
 
 Output: one run file per run and repeat in the output folder (``<name>-<repeat>.h5``) plus
 ``index.json``, rewritten atomically after every run. ``--resume`` keeps the runs whose file says
-``completed`` and redoes the others (a crashed or aborted file is kept beside as ``*.failed-N.h5``).
+``completed`` and whose stored plan (protocol parameters, device settings, the model file's SHA-256) is the
+campaign file's, and redoes the others (a crashed or aborted file is kept beside as ``*.failed-N.h5``, a run
+of another plan as ``*.replanned-N.h5``). Every repeat plays its own seed (:func:`repeat_seed`).
 Everything is validated before anything moves: a bad key, unit or value is reported with file, line
 and reason.
 """
@@ -29,46 +31,30 @@ import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
 
 from hilbench.analysis.runfile import writer_alive
+from hilbench.bench.campaign_plan import (
+    GENERAL_KEYS,
+    SETTING_UNITS,
+    CampaignError,
+    PlannedRun,
+    line_of,
+    plan_changes,
+    repeat_seed,
+    run_plan,
+    value,
+)
 from hilbench.bench.errors import BenchError
 from hilbench.bench.protocols import PROTOCOLS, Protocol, ProtocolError
-from hilbench.bench.runner import Bench, DeviceSettings, Progress, RunControl, SettingsError, settings_dict
+from hilbench.bench.runner import Bench, DeviceSettings, Progress, RunControl, SettingsError
 from hilbench.drivers.device_url import check_device_url
 from hilbench.drivers.errors import DeviceURLError
 
+#: Largest campaign file read, bytes: a campaign of a thousand runs is ~100 KB.
+MAX_CAMPAIGN_BYTES = 4 << 20
 INDEX_NAME = "index.json"
 LOCK_NAME = ".campaign.lock"
 RUN_KEYS = {"name", "protocol", "repeats"}
-GENERAL_KEYS = {"device", "operator", "notes"}
-SETTING_UNITS = {"current_limit": "A", "velocity_limit": "rad/s", "position_min": "rad", "position_max": "rad",
-                 "watchdog_timeout": "s", "torque_constant": "N*m/A", "counts_per_rev": "counts", "ratio": "1",
-                 "position_kp": "A/rad", "position_ki": "A/(rad*s)", "position_kd": "A*s/rad", "position_i_limit": "A",
-                 "position_d_cutoff": "Hz"}
-_QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-z*/^0-9]+)?\s*$")
-
-
-class CampaignError(BenchError):
-    """A campaign file that cannot run; the message names the file, the line and the reason."""
-
-
-@dataclass
-class PlannedRun:
-    name: str
-    repeat: int
-    protocol: Protocol
-    settings: DeviceSettings
-    device: str
-    operator: str = ""
-    notes: str = ""
-    report: dict[str, float] = field(default_factory=dict)  # a [[compensate]] step's metric settings (SI)
-
-    @property
-    def key(self) -> str:
-        return f"{self.name}-{self.repeat}"
-
-
 @dataclass
 class Campaign:
     path: Path
@@ -79,70 +65,40 @@ class Campaign:
         return self.runs[0].device if self.runs else "sim://"
 
 
-def _line_of(text: str, key: str, section_index: int | None) -> int:
-    """Line (1-based) of ``key =`` in the n-th ``[[run]]`` table (or in [defaults] when None)."""
-    lines = text.splitlines()
-    start, seen = 0, -1
-    for i, line in enumerate(lines):
-        s = line.strip()
-        if section_index is None and s == "[defaults]":
-            start = i
-            break
-        if section_index is not None and s == "[[run]]":
-            seen += 1
-            if seen == section_index:
-                start = i
-                break
-    for i in range(start, len(lines)):
-        if re.match(rf"\s*{re.escape(key)}\s*=", lines[i]):
-            return i + 1
-    return start + 1
-
-
-def _value(raw: Any, unit: str | None, what: str) -> Any:
-    """A TOML value; a string ``"<number> <unit>"`` is checked against ``unit`` and becomes a number."""
-    if isinstance(raw, str) and unit is not None:
-        m = _QUANTITY.match(raw)
-        if not m:
-            raise ValueError(f"{what}: {raw!r} is not a number with a unit")
-        given = m.group(2) or unit
-        if given != unit:
-            raise ValueError(f"{what}: unit {given!r} is wrong, expected {unit!r}")
-        number = float(m.group(1))
-        return int(number) if number.is_integer() and unit in ("counts", "periods", "Hz") else number
-    if isinstance(raw, list):
-        return [_value(v, unit, what) for v in raw]
-    return raw
-
-
 def load_campaign(path: str | Path) -> Campaign:
     """Parse and validate a campaign file. Raises :class:`CampaignError` (file:line: reason)."""
     path = Path(path)
     try:
-        text = path.read_text()
+        with open(path, "rb") as fh:  # bounded: a campaign is a page of TOML, not a FIFO that never ends
+            raw = fh.read(MAX_CAMPAIGN_BYTES + 1)
     except OSError as exc:
         raise CampaignError(f"{path}: cannot read: {exc.strerror}") from None
+    if len(raw) > MAX_CAMPAIGN_BYTES:
+        raise CampaignError(f"{path}: longer than {MAX_CAMPAIGN_BYTES} bytes (MAX_CAMPAIGN_BYTES); is it a campaign?")
     try:
+        text = raw.decode("utf-8")
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise CampaignError(f"{path}: not valid TOML: {exc}") from None
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise CampaignError(f"{path}: not valid TOML: {' '.join(str(exc).split())}") from None
+    except RecursionError:
+        raise CampaignError(f"{path}: not valid TOML: nested too deep") from None
     unknown_top = sorted(set(data) - {"defaults", "run", "compensate"})
     if unknown_top:
-        raise CampaignError(f"{path}:{_line_of(text, unknown_top[0], None)}: unknown table or key "
+        raise CampaignError(f"{path}:{line_of(text, unknown_top[0], None)}: unknown table or key "
                             f"{unknown_top[0]!r} (expected [defaults], [[run]] and [[compensate]])")
     steps = data.get("compensate", [])
     if not isinstance(steps, list) or not all(isinstance(t, dict) for t in steps):
-        raise CampaignError(f"{path}:{_line_of(text, 'compensate', None)}: compensate must be an array of tables "
+        raise CampaignError(f"{path}:{line_of(text, 'compensate', None)}: compensate must be an array of tables "
                             f"([[compensate]])")
     defaults = data.get("defaults", {})
     runs = data.get("run", [])
     if not isinstance(defaults, dict):
-        raise CampaignError(f"{path}:{_line_of(text, 'defaults', None)}: defaults must be a table "
+        raise CampaignError(f"{path}:{line_of(text, 'defaults', None)}: defaults must be a table "
                             f"([defaults]), got {defaults!r}")
     if not isinstance(runs, list) or not (runs or steps):
         raise CampaignError(f"{path}: no [[run]] tables")
     if not all(isinstance(t, dict) for t in runs):
-        raise CampaignError(f"{path}:{_line_of(text, 'run', None)}: run must be an array of tables "
+        raise CampaignError(f"{path}:{line_of(text, 'run', None)}: run must be an array of tables "
                             f"([[run]]), got {runs!r}")
     campaign = Campaign(path)
     names: set[str] = set()
@@ -151,7 +107,7 @@ def load_campaign(path: str | Path) -> Campaign:
         where_table = {k: i for k in table}
 
         def fail(key: str, reason: str, i: int = i, where_table: dict = where_table) -> CampaignError:
-            line = _line_of(text, key, where_table.get(key))
+            line = line_of(text, key, where_table.get(key))
             return CampaignError(f"{path}:{line}: run {i + 1}: {reason}")
 
         proto_name = merged.get("protocol")
@@ -176,9 +132,9 @@ def load_campaign(path: str | Path) -> Campaign:
                     # (presliding's amplitudes and rate take the unit its `unit` names: plain numbers)
                     known_unit = mode in ("current", "velocity", "position") and specs[key].unit != "unit"
                     unit = specs[key].unit_for(mode) if known_unit else None
-                    params[key] = _value(raw, unit or None, key)
+                    params[key] = value(raw, unit or None, key)
                 elif key in SETTING_UNITS:
-                    setting_values[key] = _value(raw, SETTING_UNITS[key], key)
+                    setting_values[key] = value(raw, SETTING_UNITS[key], key)
                 else:
                     known = sorted(set(specs) | set(SETTING_UNITS) | RUN_KEYS | GENERAL_KEYS)
                     raise ValueError(f"unknown key {key!r} for protocol {proto_name} "
@@ -207,7 +163,10 @@ def load_campaign(path: str | Path) -> Campaign:
         except DeviceURLError as exc:
             raise fail("device", str(exc)) from None
         for r in range(1, repeats + 1):
-            campaign.runs.append(PlannedRun(name, r, protocol, settings, device,
+            played = protocol
+            if r > 1 and "seed" in specs:  # each repeat its own input (all repeats played seed 0 before)
+                played = cls.from_dict({**params, "seed": repeat_seed(protocol.seed, r)})  # type: ignore[attr-defined]
+            campaign.runs.append(PlannedRun(name, r, played, settings, device,
                                             str(merged.get("operator", "")), str(merged.get("notes", ""))))
     if steps:  # the compensation matrix: one planned run per case (docs/compensation.md)
         from hilbench.bench.compensation_matrix import campaign_step
@@ -236,8 +195,10 @@ def read_index(out_dir: Path) -> dict[str, dict]:
 def _write_index(out_dir: Path, campaign: Campaign, entries: dict[str, dict]) -> None:
     doc = {"campaign": str(campaign.path), "schema": "hilbench-campaign-index", "version": 1,
            "runs": [entries[r.key] for r in campaign.runs if r.key in entries]}
+    from hilbench.bench.outputs import dumps
+
     tmp = out_dir / (INDEX_NAME + ".tmp")
-    tmp.write_text(json.dumps(doc, indent=2))
+    tmp.write_text(dumps(doc, indent=2))  # strict JSON
     os.replace(tmp, out_dir / INDEX_NAME)
 
 
@@ -306,19 +267,29 @@ def _play(campaign: Campaign, out_dir: Path, resume: bool, progress, control, be
     control = control or RunControl()
     own = bench is None
     bench = bench or Bench.open(campaign.device)
+    hashes: dict[str, str] = {}
     try:
         for i, planned in enumerate(campaign.runs):
             path = out_dir / f"{planned.key}.h5"
+            plan = run_plan(planned, hashes)
             if path.exists():
                 if writer_alive(path):
                     raise CampaignError(f"{path}: a live process is still writing this run; not touching it")
                 status = _file_status(path)
+                aside = "failed"
                 if status == "completed" and planned.key in entries:
+                    changed = plan_changes(entries[planned.key], plan)
+                    if not changed:
+                        if progress:
+                            progress(CampaignProgress(i, len(campaign.runs), planned.key, "skipped"))
+                        continue
+                    aside = "replanned"  # a completed run of another plan: kept beside, never mixed in
+                    del entries[planned.key]
                     if progress:
-                        progress(CampaignProgress(i, len(campaign.runs), planned.key, "skipped"))
-                    continue
+                        progress(CampaignProgress(i, len(campaign.runs), planned.key,
+                                                  f"plan changed ({'; '.join(changed)}): redone"))
                 n = 1
-                while (failed := out_dir / f"{planned.key}.failed-{n}.h5").exists():
+                while (failed := out_dir / f"{planned.key}.{aside}-{n}.h5").exists():
                     n += 1
                 os.replace(path, failed)
             bench.settings = planned.settings
@@ -331,8 +302,8 @@ def _play(campaign: Campaign, out_dir: Path, resume: bool, progress, control, be
             entries[planned.key] = {
                 "key": planned.key, "name": planned.name, "repeat": planned.repeat,
                 "protocol": planned.protocol.name, "file": path.name, "status": result.status, "uid": result.uid,
-                "samples": result.samples, "parameters": planned.protocol.parameters(),
-                "settings": settings_dict(planned.settings),
+                "samples": result.samples, "parameters": plan["parameters"], "settings": plan["settings"],
+                "model_sha256": plan["model_sha256"],
             }
             _write_index(out_dir, campaign, entries)
             if progress:

@@ -10,6 +10,7 @@ import re
 import sys
 
 import hilbench.bench.commands as commands
+from hilbench.analysis import output_files
 from hilbench.bench import __version__, outputs
 from hilbench.bench.errors import BenchError
 
@@ -115,6 +116,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     args.traceback = "traceback" in flags
     previous, outputs.verbosity = outputs.verbosity, 0 if "quiet" in flags else 2 if "verbose" in flags else 1
+    output_files.verbosity = outputs.verbosity  # the analyses' writes say "wrote" at -v too
+    outputs.begin_command()
     if "quiet" in flags and hasattr(args, "quiet"):
         args.quiet = True
     show_tb = args.traceback or bool(os.environ.get("HILBENCH_TRACEBACK"))
@@ -139,7 +142,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"hilbench {args.command}: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2
     finally:
-        outputs.verbosity = previous
+        outputs.verbosity = output_files.verbosity = previous
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ not a measurement.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -46,18 +47,28 @@ class MatrixSettings:
     ratio: float = 1.0
 
 
+def named_runs(model_doc: dict) -> list[str]:
+    """The run files a model or comparison document names (its training and validation runs): inputs of a
+    command that reads the model, so never one of its outputs (compensate -o id.h5 replaced the training run)."""
+    data = model_doc.get("data")
+    if not isinstance(data, dict):
+        return []
+    found = [data.get("file")] + [part.get("file") for part in data.values() if isinstance(part, dict)]
+    return [f for f in found if isinstance(f, str) and f and "\0" not in f]
+
+
 def check_calibration(model_doc: dict, torque_constant: float, ratio: float) -> str:
     """Refuse a model identified under another calibration than the device's. The model file names its
     training run; when that run file is readable, its calibration must equal ``torque_constant`` (N*m/A) and
     ``ratio`` to 1e-9. Returns a note on what was checked."""
     from hilbench.analysis.runfile import open_run
 
-    data = model_doc.get("data") or {}
+    data = model_doc.get("data") if isinstance(model_doc.get("data"), dict) else {}
     train = data.get("train") if isinstance(data.get("train"), dict) else None
     if train is None and isinstance(data.get("file"), str):
         train = data
     path = train.get("file") if train else None
-    if not path or not Path(path).is_file():
+    if not isinstance(path, str) or not path or "\0" in path or not Path(path).is_file():
         return "calibration not checked: the model's training run file is not here"
     try:
         with open_run(path) as run:
@@ -88,6 +99,15 @@ def cases(model: str, references: dict[str, dict], names: list[str] | None, sett
     for case in out:  # every reference and feed-forward is built (and checked) before anything moves
         case.feedforward_result(settings.current_limit)
     return out
+
+
+def case_file(case: Case) -> str:
+    """File name of a case's run in the matrix folder; the feed-forward's name is a plain identifier (checked
+    when the model file is read), so the name never leaves the folder."""
+    name = f"{case.reference}-{case.compensation}.h5"
+    if "/" in name or "\0" in name or name.startswith("."):
+        raise BenchError(f"feed-forward {case.compensation!r}: not a plain name")
+    return name
 
 
 def predict_case(case: Case, plant, gains: PositionGains, settings: MatrixSettings,
@@ -133,7 +153,8 @@ def write_report(results: list[CaseResult], out: Path, settings: dict) -> list[P
               f" Source: {settings['source']}.\n\n")
     outputs.write_text(out / "compensation.md", header + table)
     outputs.write_json(out / "compensation.json", json_safe(document(results, settings)), indent=1, allow_nan=False)
-    return [out / "compensation.md", out / "compensation.json", *write_plots(results, out)]
+    plots = write_plots(results, out, save=lambda fig, path: outputs.save_figure(fig, path, dpi=110))
+    return [out / "compensation.md", out / "compensation.json", *plots]
 
 
 def run_cases(protocols: list[Case], play: Callable[[Case, int], CaseResult],
@@ -159,16 +180,19 @@ def campaign_step(table: dict, defaults: dict, index: int, path: Path, text: str
     """The planned runs of the ``index``-th ``[[compensate]]`` table of campaign ``path`` (docs/campaign.md):
     every feed-forward of ``model`` against every reference, named ``<name>.<reference>.<feed-forward>``.
     Raises :class:`CampaignError` naming file, line and reason."""
-    from hilbench.bench.campaign import GENERAL_KEYS, SETTING_UNITS, CampaignError, PlannedRun, _line_of, _value
+    from hilbench.bench.campaign_plan import GENERAL_KEYS, SETTING_UNITS, CampaignError, PlannedRun, line_of, value
     from hilbench.bench.runner import DeviceSettings, SettingsError
 
     merged = {**{k: v for k, v in defaults.items() if k in SETTING_UNITS or k in GENERAL_KEYS}, **table}
 
     def fail(key: str, reason: str) -> CampaignError:
-        line = _line_of(text, key, None) if key not in table else _step_line(text, key, index)
+        line = line_of(text, key, None) if key not in table else _step_line(text, key, index)
         return CampaignError(f"{path}:{line}: compensate {index + 1}: {reason}")
 
-    name = str(merged.get("name", f"compensate{index + 1}"))
+    name = merged.get("name", f"compensate{index + 1}")
+    if not isinstance(name, str) or not re.match(r"^[A-Za-z0-9_][A-Za-z0-9_-]*$", name):
+        # the name is the report's folder OUT/<name>/ and the first part of every run's file name
+        raise fail("name", f"name {name!r} must use only letters, digits, '_' and '-' (not first), no '.' or '/'")
     if "model" not in merged or not isinstance(merged["model"], str):
         raise fail("model", "needs model = \"MODEL.json\" (hilbench identify or hilbench compare)")
     model = Path(merged["model"])
@@ -184,13 +208,13 @@ def campaign_step(table: dict, defaults: dict, index: int, path: Path, text: str
     for key, raw in merged.items():
         try:
             if key in units:
-                values[key] = _value(raw, units[key], key)
+                values[key] = value(raw, units[key], key)
             elif key in metric_units:
-                metrics[key] = _value(raw, metric_units[key], key)
+                metrics[key] = value(raw, metric_units[key], key)
                 if not (isinstance(metrics[key], float | int) and math.isfinite(metrics[key]) and metrics[key] > 0):
                     raise ValueError(f"{key} must be > 0 {metric_units[key]}, got {raw!r}")
             elif key in SETTING_UNITS:
-                settings_values[key] = _value(raw, SETTING_UNITS[key], key)
+                settings_values[key] = value(raw, SETTING_UNITS[key], key)
             elif key not in STEP_KEYS and key not in GENERAL_KEYS:
                 raise ValueError(f"unknown key {key!r} (known: "
                                  f"{', '.join(sorted(STEP_KEYS | set(units) | set(metric_units)))} and "
@@ -245,10 +269,14 @@ def campaign_report(campaign, out_dir: Path, entries: dict[str, dict]) -> list[P
     for planned in campaign.runs:
         if isinstance(planned.protocol, CompensatedReference):
             steps.setdefault(planned.name.split(".")[0], []).append(planned)
-    written = []
+    from hilbench.bench.campaign_plan import plan_changes, run_plan
+
+    written, hashes = [], {}
     for step, runs in steps.items():
         if not all(entries.get(r.key, {}).get("status") == "completed" for r in runs):
             continue
+        if any(plan_changes(entries[r.key], run_plan(r, hashes)) for r in runs):
+            continue  # a report combines runs of one plan only (resume redoes the others first)
         settings = runs[0].settings
         matrix = MatrixSettings(current_limit=settings.current_limit, torque_constant=settings.torque_constant,
                                 ratio=settings.ratio, **runs[0].report)

@@ -22,22 +22,38 @@ import os
 import numpy as np
 from scipy.integrate import cumulative_trapezoid
 
-from hilbench.bench.importers import ImportDataError, ImportedRun, _check_finite, _sample_rate, _sha256
+from hilbench.bench import importers
+from hilbench.bench.importers import (
+    ImportDataError,
+    ImportedRun,
+    _check_finite,
+    _count_lines,
+    _sample_rate,
+    _sha256,
+)
 
 MNICH_MASS = 24.7  # kg, reduced mass (data set README)
 MNICH_SHIFT = -0.004  # s, NI clock relative to the servo clock (data set README)
 MNICH_FORCE_GAIN = 200.0  # N/V, load cell (data set README)
 
 
-def _read_table(path: str, skip: int, min_columns: int) -> np.ndarray:
+def _read_table(path: str, skip: int, columns: int) -> np.ndarray:
+    """The first ``columns`` columns of a CSV export after ``skip`` header lines; its rows and line lengths are
+    bounded (``MAX_IMPORT_SAMPLES``, ``MAX_LINE_BYTES``) before anything is parsed, and the other columns are
+    not kept."""
     if not os.path.isfile(path):
         raise ImportDataError(f"{path}: no such file")
+    rows = _count_lines(path) - skip
+    if rows > importers.MAX_IMPORT_SAMPLES:
+        raise ImportDataError(f"{path}: {rows} rows, above the import bound of {importers.MAX_IMPORT_SAMPLES} "
+                              "samples (MAX_IMPORT_SAMPLES)")
     try:
-        table = np.genfromtxt(path, delimiter=",", skip_header=skip, encoding="utf-8-sig", invalid_raise=True)
-    except ValueError as exc:
+        table = np.genfromtxt(path, delimiter=",", skip_header=skip, encoding="utf-8-sig", invalid_raise=True,
+                              usecols=tuple(range(columns)))
+    except (ValueError, IndexError) as exc:
         raise ImportDataError(f"{path}: not a readable CSV export ({str(exc).splitlines()[0]})") from None
-    if table.ndim != 2 or table.shape[1] < min_columns or table.shape[0] < 10:
-        raise ImportDataError(f"{path}: expected at least 10 rows of {min_columns} columns after {skip} header lines")
+    if table.ndim != 2 or table.shape[1] < columns or table.shape[0] < 10:
+        raise ImportDataError(f"{path}: expected at least 10 rows of {columns} columns after {skip} header lines")
     return table
 
 
@@ -52,8 +68,8 @@ def load_mnich(
     linear-axis run in m, m/s and N. See the module docstring for the conversions."""
     servo_csv = os.fspath(servo_csv)
     ni_csv = os.fspath(ni_csv) if ni_csv is not None else os.path.join(os.path.dirname(servo_csv), "a3NI.csv")
-    mr = _read_table(servo_csv, 5, 4)
-    ni = _read_table(ni_csv, 4, 2)
+    mr = _read_table(servo_csv, 5, 3)  # time, speed, torque (the droop pulses are not used)
+    ni = _read_table(ni_csv, 4, 2)  # time, load-cell voltage
     t_servo = mr[:, 0] / 1000.0
     speed = -mr[:, 1] * 20.0 / 1000.0 / 60.0
     torque_pct = mr[:, 2]

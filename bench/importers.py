@@ -91,6 +91,25 @@ def _loadmat(path: str, **kwargs: Any) -> dict[str, Any]:
         raise ImportDataError(f"{path}: not a readable MAT v5 file ({' '.join(str(exc).split())})") from None
 
 
+def _load_named(path: str, names: tuple[str, ...]) -> dict[str, Any]:
+    """The variables ``names`` of a MAT v5 file that has them, read after their sizes (each and together) were
+    checked against the import bound; the file's other variables are never read."""
+    v73, listing = _mat_listing(path)
+    if v73:
+        raise ImportDataError(f"{path}: a MAT v7.3 file; this format's files are MAT v5 (or use `import mat`)")
+    present = [n for n in names if n in listing]
+    bound = MAX_MAT_ELEMENTS_FACTOR * MAX_IMPORT_SAMPLES
+    sizes = {n: math.prod(listing[n][0]) for n in present}
+    for name, size in sizes.items():
+        if size > bound:
+            raise ImportDataError(f"{path}: variable {name!r} has {size} elements, above the import bound of "
+                                  f"{bound} ({MAX_MAT_ELEMENTS_FACTOR} x MAX_IMPORT_SAMPLES)")
+    if sum(sizes.values()) > bound:
+        raise ImportDataError(f"{path}: the variables used hold {sum(sizes.values())} elements together, above the "
+                              f"import bound of {bound} ({MAX_MAT_ELEMENTS_FACTOR} x MAX_IMPORT_SAMPLES)")
+    return _loadmat(path, variable_names=present) if present else {}
+
+
 def _column(mat: Mapping[str, Any], name: str, path: str, n: int | None = None) -> np.ndarray:
     if name not in mat:
         raise ImportDataError(f"{path}: variable {name!r} is missing")
@@ -145,7 +164,7 @@ def _sample_rate(t: np.ndarray, path: str) -> float:
 def load_emps(path: str | os.PathLike) -> ImportedRun:
     """Load ``DATA_EMPS.mat`` or ``DATA_EMPS_PULSES.mat`` (linear axis, m and N). See the module docstring."""
     path = os.fspath(path)
-    mat = _loadmat(path)
+    mat = _load_named(path, ("t", "qm", "qg", "vir", "gtau", "kp", "kv", "pulses_N"))
     t = _column(mat, "t", path)
     n = t.size
     qm, qg, vir = (_column(mat, v, path, n) for v in ("qm", "qg", "vir"))
@@ -210,7 +229,8 @@ def load_emps(path: str | os.PathLike) -> ImportedRun:
 def load_hsm150(path: str | os.PathLike) -> ImportedRun:
     """Load an HSM150 ``idf_*.mat`` identification run (rotary axis, rad and N*m)."""
     path = os.fspath(path)
-    mat = _loadmat(path)
+    mat = _load_named(path, ("data", "Iz1", "Iz", "Im1", "Im", "J", "B", "Cu", "Mn", "Mmax", "N", "KFI", "Tvz", "Tgm",
+                             "Tn", "Tsim"))
     if "data" not in mat:
         raise ImportDataError(f"{path}: variable 'data' is missing")
     _refuse_complex(np.asarray(mat["data"]), "data", path)
@@ -343,6 +363,11 @@ def _assign_channels(names: list[str], mapping: Mapping[str, str], path: str) ->
             raise ImportDataError(f"--map {channel}={column}: {channel!r} is not a run-file channel")
         if column not in names:
             raise ImportDataError(f"{path}: --map {channel}={column}: no column {column!r} (has: {', '.join(names)})")
+    twice = sorted({c for c in mapping.values() if list(mapping.values()).count(c) > 1})
+    if twice:  # --map torque=x --map position=x stored torque == position
+        channels = [ch for ch, c in mapping.items() if c == twice[0]]
+        raise ImportDataError(f"--map: column {twice[0]!r} is mapped to {' and '.join(channels)}; a column is one "
+                              "channel")
     mapped = set(mapping.values())
     column_of: dict[str, str] = {}
     for channel, columns in found.items():
@@ -367,6 +392,9 @@ def _units(column_of: Mapping[str, str], header_unit: Mapping[str, str], given: 
         if channel is None:
             raise ImportDataError(f"--unit {key}={unit}: no channel or column {key!r} in {path} "
                                   f"(channels: {', '.join(column_of)})")
+        if channel in stated:  # --unit x=deg --unit position=rad name one column: the last won, a 57x scale
+            raise ImportDataError(f"--unit: two units for channel {channel} (column {column_of[channel]!r}): "
+                                  f"{stated[channel]} and {unit}; give one")
         stated[channel] = unit
     for channel, column in column_of.items():
         head = header_unit.get(column)
@@ -577,12 +605,26 @@ def _sniff_delimiter(header: str) -> str:
     return ","
 
 
+#: Longest line a CSV import reads, bytes: a lab's row of 200 columns is a few KB; a longer line (a file with no
+#: line breaks) would be read into memory whole by the header or row parser.
+MAX_LINE_BYTES = 1 << 20
+
+
 def _count_lines(path: str) -> int:
-    """Lines in a text file, counted in 1 MiB blocks (nothing the size of the file is allocated)."""
-    lines, last = 0, b"\n"
+    """Lines in a text file, counted in 1 MiB blocks (nothing the size of the file is allocated); refuses a
+    line longer than :data:`MAX_LINE_BYTES` before any row is parsed."""
+    lines, last, run = 0, b"\n", 0  # run: bytes of the current line so far
     with open(path, "rb") as fh:
         for block in iter(lambda: fh.read(1 << 20), b""):
-            lines += block.count(b"\n")
+            ends = np.flatnonzero(np.frombuffer(block, np.uint8) == 10)
+            first = run + (int(ends[0]) + 1 if ends.size else len(block))  # the line begun in an earlier block
+            lengths = np.diff(ends) if ends.size > 1 else np.zeros(1, np.int64)
+            if max(first, int(np.max(lengths))) > MAX_LINE_BYTES + 1:  # (+1: its line break)
+                line = lines + 1 if first > MAX_LINE_BYTES + 1 else lines + 2 + int(np.argmax(lengths))
+                raise ImportDataError(f"{path}: line {line} is longer than {MAX_LINE_BYTES} bytes (MAX_LINE_BYTES); "
+                                      "is this a CSV file?")
+            run = len(block) - 1 - ends[-1] if ends.size else run + len(block)
+            lines += ends.size
             last = block[-1:]
     return lines + (last != b"\n")
 
@@ -602,11 +644,14 @@ def load_csv(path: str | os.PathLike, options: TableOptions | None = None, *, de
         raise ImportDataError(f"{path}: no such file")
     try:
         with open(path, encoding="utf-8-sig") as fh:
-            header = fh.readline()
+            header = fh.readline(MAX_LINE_BYTES + 1)  # a file without line breaks is not read whole
     except (OSError, UnicodeDecodeError) as exc:
         raise ImportDataError(f"{path}: cannot read ({' '.join(str(exc).split())})") from None
     if not header.strip():
         raise ImportDataError(f"{path}: empty file (a header row is required)")
+    if len(header) > MAX_LINE_BYTES:
+        raise ImportDataError(f"{path}: the header is longer than {MAX_LINE_BYTES} characters (MAX_LINE_BYTES); "
+                              "is this a CSV file?")
     sep = delimiter or _sniff_delimiter(header)
     names = [h.strip().strip('"').strip("'") for h in header.rstrip("\r\n").split(sep)]
     if len(set(names)) != len(names):
@@ -630,10 +675,17 @@ def load_csv(path: str | os.PathLike, options: TableOptions | None = None, *, de
 _MATRIX_COLUMN = re.compile(r"^(?P<var>[A-Za-z]\w*)\(\s*:\s*,\s*(?P<col>\d+)\s*\)$")
 
 
-def _mat_variables(path: str) -> dict[str, np.ndarray]:
-    """Numeric variables of a MAT file (v5/v7 with scipy, v7.3 with h5py), as MATLAB shows them (rows = samples
-    for a column vector). Sizes are checked against MAX_IMPORT_SAMPLES before any variable is read; complex
-    ones are refused; structs, cells and text are left out."""
+#: Most elements an import reads from a MAT file, over all the variables it uses together (a matrix counts
+#: whole in a v5 file, where scipy reads a variable at once; one column in a v7.3 file, read alone).
+MAX_MAT_ELEMENTS_FACTOR = 16
+_SKIPPED_CLASSES = ("struct", "cell", "char", "object", "function_handle", "opaque")
+#: Most variables a MAT file's listing may have (a lab file has tens): the listing itself is bounded too.
+MAX_MAT_VARIABLES = 10_000
+
+
+def _mat_listing(path: str) -> tuple[bool, dict[str, tuple[tuple[int, ...], str]]]:
+    """(is v7.3, name -> (shape as MATLAB shows it, class)) of a MAT file's numeric variables, from its headers
+    only: no variable's data is read here."""
     from scipy.io import matlab
 
     if not os.path.isfile(path):
@@ -644,29 +696,18 @@ def _mat_variables(path: str) -> dict[str, np.ndarray]:
     except Exception as exc:  # scipy raises ValueError / MatReadError for what is not a MAT file
         raise ImportDataError(f"{path}: not a MAT file ({' '.join(str(exc).split())})") from None
     if major == 2:
-        return _mat73_variables(path)
+        return True, _mat73_listing(path)
     try:
         listing = matlab.whosmat(path)
     except Exception as exc:
         raise ImportDataError(f"{path}: not a readable MAT file ({' '.join(str(exc).split())})") from None
-    numeric = []
-    for name, shape, cls in listing:
-        size = math.prod(shape)
-        if size > MAX_IMPORT_SAMPLES * 16:
-            raise ImportDataError(f"{path}: variable {name!r} has {size} elements, above the import bound of "
-                                  f"{MAX_IMPORT_SAMPLES * 16} (16 x MAX_IMPORT_SAMPLES)")
-        if cls not in ("struct", "cell", "char", "object", "function_handle", "opaque"):
-            numeric.append(name)
-    mat = _loadmat(path, variable_names=numeric) if numeric else {}
-    out = {}
-    for name in numeric:
-        a = np.asarray(mat[name])
-        _refuse_complex(a, name, path)
-        out[name] = a
-    return out
+    if len(listing) > MAX_MAT_VARIABLES:
+        raise ImportDataError(f"{path}: {len(listing)} variables, above the {MAX_MAT_VARIABLES} an import lists "
+                              "(MAX_MAT_VARIABLES)")
+    return False, {name: (tuple(shape), cls) for name, shape, cls in listing if cls not in _SKIPPED_CLASSES}
 
 
-def _mat73_variables(path: str) -> dict[str, np.ndarray]:
+def _mat73_listing(path: str) -> dict[str, tuple[tuple[int, ...], str]]:
     import h5py
 
     try:
@@ -675,20 +716,42 @@ def _mat73_variables(path: str) -> dict[str, np.ndarray]:
         raise ImportDataError(f"{path}: not a readable MAT v7.3 (HDF5) file ({' '.join(str(exc).split())})") from None
     out = {}
     with f:
+        if len(f) > MAX_MAT_VARIABLES:
+            raise ImportDataError(f"{path}: {len(f)} variables, above the {MAX_MAT_VARIABLES} an import lists "
+                                  "(MAX_MAT_VARIABLES)")
         for name, obj in f.items():
             if not isinstance(obj, h5py.Dataset) or name.startswith("#"):
                 continue
             cls = obj.attrs.get("MATLAB_class", b"")
             cls = cls.decode() if isinstance(cls, bytes) else str(cls)
-            if cls in ("char", "cell", "struct", "function_handle") or obj.attrs.get("MATLAB_empty", 0):
+            if cls in _SKIPPED_CLASSES or obj.attrs.get("MATLAB_empty", 0):
                 continue
-            if obj.size > MAX_IMPORT_SAMPLES * 16:
-                raise ImportDataError(f"{path}: variable {name!r} has {obj.size} elements, above the import bound "
-                                      f"of {MAX_IMPORT_SAMPLES * 16} (16 x MAX_IMPORT_SAMPLES)")
-            _refuse_complex(np.empty(0, obj.dtype), name, path)
-            if obj.dtype.kind not in "biuf":
+            complex_ = obj.dtype.names is not None and {"real", "imag"} <= set(obj.dtype.names)
+            if obj.dtype.kind not in "biuf" and not complex_:
                 continue
-            out[name] = np.asarray(obj[()]).T  # HDF5 stores MATLAB's column-major arrays transposed
+            out[name] = (tuple(reversed(obj.shape)), "complex" if complex_ else cls)  # HDF5 holds MATLAB's transpose
+    return out
+
+
+def _read_mat(path: str, v73: bool, wanted: set[tuple[str, int | None]]) -> dict[tuple[str, int | None], np.ndarray]:
+    """Read only ``wanted``: (variable, None) a whole variable, (variable, k) its 0-based column k, as MATLAB shows
+    them. scipy reads a v5 variable whole (the column is cut after); a v7.3 column is read alone. Complex
+    variables are refused."""
+    out = {}
+    if not v73:
+        mat = _loadmat(path, variable_names=sorted({var for var, _ in wanted}))
+        for var, col in wanted:
+            a = np.asarray(mat[var])
+            _refuse_complex(a, var, path)
+            out[var, col] = a if col is None else np.ascontiguousarray(a[:, col])
+        return out
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        for var, col in wanted:
+            obj = f[var]
+            _refuse_complex(np.empty(0, obj.dtype), var, path)
+            out[var, col] = np.asarray(obj[()]).T if col is None else np.asarray(obj[col, :])
     return out
 
 
@@ -700,33 +763,54 @@ def load_mat(path: str | os.PathLike, options: TableOptions | None = None, **kwa
     becomes that channel; ``options.mapping`` names other variables, and ``VAR(:,k)`` column k (1-based, as in
     MATLAB) of a matrix. All vectors used must have the same length. MAT files carry no units: give them with
     ``options.units``; unstated ones are taken as SI.
+
+    The channels are chosen from the file's headers; only the variables they use are read, after their sizes,
+    each and together, were checked against ``MAX_MAT_ELEMENTS_FACTOR * MAX_IMPORT_SAMPLES`` elements.
     """
     options = options or TableOptions(**kwargs)
     path = os.fspath(path)
-    variables = _mat_variables(path)
-    columns: dict[str, np.ndarray] = {}
-    for name, a in variables.items():
-        if a.ndim == 2 and 1 in a.shape and a.size > 1:
-            columns[name] = a.ravel()
+    v73, listing = _mat_listing(path)
+    # column name -> (variable, 0-based column or None for a vector, samples)
+    columns: dict[str, tuple[str, int | None, int]] = {}
+    for name, (shape, _) in listing.items():
+        if len(shape) == 2 and 1 in shape and math.prod(shape) > 1:
+            columns[name] = (name, None, math.prod(shape))
     for channel, ref in options.mapping.items():
         m = _MATRIX_COLUMN.match(ref)
         if ref in columns or not m:
             continue
         var, col = m.group("var"), int(m.group("col"))
-        if var not in variables:
-            raise ImportDataError(f"{path}: --map {channel}={ref}: no variable {var!r} (has: {', '.join(variables)})")
-        a = variables[var]
-        if a.ndim != 2 or not 1 <= col <= a.shape[1]:
-            raise ImportDataError(f"{path}: --map {channel}={ref}: {var!r} has shape {a.shape}, no column {col}")
-        columns[ref] = np.ascontiguousarray(a[:, col - 1])
-    lengths = {}
+        if var not in listing:
+            raise ImportDataError(f"{path}: --map {channel}={ref}: no variable {var!r} (has: {', '.join(listing)})")
+        shape = listing[var][0]
+        if len(shape) != 2 or not 1 <= col <= shape[1]:
+            raise ImportDataError(f"{path}: --map {channel}={ref}: {var!r} has shape {shape}, no column {col}")
+        columns[ref] = (var, col - 1, shape[0])
     column_of, _ = _assign_channels(list(columns), options.mapping, path)
+    used = set(column_of.values())
+    lengths: dict[int, list[str]] = {}
     for name in column_of.values():
-        lengths.setdefault(columns[name].size, []).append(name)
+        lengths.setdefault(columns[name][2], []).append(name)
     if len(lengths) > 1:
         detail = "; ".join(f"{', '.join(names)}: {n}" for n, names in sorted(lengths.items()))
         raise ImportDataError(f"{path}: the variables used have different lengths ({detail})")
-    return table_run(columns, path, "mat", options)
+    bound = MAX_MAT_ELEMENTS_FACTOR * MAX_IMPORT_SAMPLES
+    wanted = {columns[name][:2] for name in used}
+    # what is read: a v5 variable whole, once; a v7.3 vector whole or a matrix column alone
+    sizes = ({var: math.prod(listing[var][0]) for var, _ in wanted} if not v73 else
+             {f"{var}(:,{col + 1})" if col is not None else var:
+              listing[var][0][0] if col is not None else math.prod(listing[var][0]) for var, col in wanted})
+    for var, size in sizes.items():
+        if size > bound:
+            raise ImportDataError(f"{path}: variable {var!r} has {size} elements, above the import bound of "
+                                  f"{bound} ({MAX_MAT_ELEMENTS_FACTOR} x MAX_IMPORT_SAMPLES)")
+    if sum(sizes.values()) > bound:
+        raise ImportDataError(f"{path}: the variables used hold {sum(sizes.values())} elements together, above the "
+                              f"import bound of {bound} ({MAX_MAT_ELEMENTS_FACTOR} x MAX_IMPORT_SAMPLES)")
+    read = _read_mat(path, v73, wanted)
+    arrays = {name: read[columns[name][:2]].ravel() if name in used else np.empty(0)  # unused: never read
+              for name in columns}
+    return table_run(arrays, path, "mat", options)
 
 
 LOADERS = {"emps": load_emps, "hsm150": load_hsm150}

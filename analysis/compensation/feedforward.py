@@ -18,7 +18,6 @@ break-away sum(W_i) + Fc and the same J, b, c0 (the fair Coulomb comparison: sam
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,7 +29,7 @@ from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.models.families import substeps_for
 from hilbench.analysis.models.friction_model import AXES
 from hilbench.analysis.models.model_file import READABLE as MODEL_SCHEMAS
-from hilbench.analysis.models.model_file import read_family, read_model
+from hilbench.analysis.models.model_file import check_name, check_plant, load_document, read_family, read_model
 from hilbench.firmware_sim.plant import Plant, PlantParameterError, PlantParams
 
 COMPARE_SCHEMA = "hilbench.compare/1"
@@ -106,12 +105,7 @@ def load_compensators(path: str | Path, device_axis: str = "rotary") -> tuple[li
     ``hilbench compare``: none and that family) or a comparison
     (``hilbench compare``: none, coulomb from its Maxwell-slip row, and every family row). Refuses a model
     whose axis or units are not those of ``device_axis``. Returns the list and the document."""
-    try:
-        doc = json.loads(Path(path).read_text())
-    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise AnalysisError(f"cannot read model {path}: {exc}") from None
-    if not isinstance(doc, dict):
-        raise AnalysisError(f"{path}: not a hilbench model (a JSON object is expected)")
+    doc = load_document(path, "model or comparison file")
     schema = doc.get("schema")
     out = [Compensator("none", None, "no feed-forward")]
     if schema in MODEL_SCHEMAS and doc.get("family", "maxwell_slip") != "maxwell_slip":
@@ -131,13 +125,24 @@ def load_compensators(path: str | Path, device_axis: str = "rotary") -> tuple[li
         axis = doc.get("axis")
         if axis != device_axis:
             raise AnalysisError(f"{path}: the comparison is for a {axis} axis; the device is {device_axis}")
-        rows = {}
-        for row in doc.get("rows", []):
+        rows: dict[str, PlantParams] = {}
+        if not isinstance(doc.get("rows", []), list):
+            raise AnalysisError(f"{path}: rows must be a list")
+        for i, row in enumerate(doc.get("rows", [])):
+            if not isinstance(row, dict):
+                raise AnalysisError(f"{path}: rows[{i}] must be an object")
             if row.get("plant") is None or row.get("fit") is None:
                 continue
-            _check_units(row["fit"].get("units", {}), axis, f"{path} ({row.get('model')})")
+            # the row's name becomes part of run and plot file names: a plain identifier, once
+            name = check_name(row.get("model"), f"{path}: rows[{i}].model")
+            if name in rows:
+                raise AnalysisError(f"{path}: two rows are named {name!r}")
+            if not isinstance(row["fit"], dict) or not isinstance(row["fit"].get("units", {}), dict):
+                raise AnalysisError(f"{path}: rows[{i}].fit must be an object with a units object")
+            _check_units(row["fit"].get("units", {}), axis, f"{path} ({name})")
+            check_plant(row["plant"], f"{path}: rows[{i}].plant")
             try:
-                rows[row["model"]] = PlantParams.from_dict(row["plant"])
+                rows[name] = PlantParams.from_dict(row["plant"])
             except (PlantParameterError, TypeError, ValueError) as exc:
                 raise AnalysisError(f"{path}: row {row.get('model')!r}: {exc}") from None
         if "maxwell_slip" not in rows:

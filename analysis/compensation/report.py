@@ -88,9 +88,11 @@ def document(results: list[CaseResult], settings: dict) -> dict:
                       "glitch_mean_by_section_rad": section_glitch(r), **r.metrics.summary()} for r in results]}
 
 
-def write_plots(results: list[CaseResult], out: Path, *, before: float = 0.02) -> list[Path]:
+def write_plots(results: list[CaseResult], out: Path, *, before: float = 0.02, save=None) -> list[Path]:
     """``compensation_<reference>.png``: the error around every reversal, aligned at the reversal and signed
-    so that lagging behind the new direction is positive, one colour per feed-forward (mrad against ms)."""
+    so that lagging behind the new direction is positive, one colour per feed-forward (mrad against ms).
+    ``save(fig, path)`` writes a figure (default ``fig.savefig(path, dpi=110)``; the bench passes its atomic,
+    input-checked writer)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -121,7 +123,10 @@ def write_plots(results: list[CaseResult], out: Path, *, before: float = 0.02) -
         ax.grid(alpha=0.3)
         fig.tight_layout()
         path = out / f"compensation_{kind}.png"
-        fig.savefig(path, dpi=110)
+        if save is None:
+            fig.savefig(path, dpi=110)
+        else:
+            save(fig, path)
         plt.close(fig)
         paths.append(path)
     return paths

@@ -245,6 +245,9 @@ class RunWriter:
             _check_text(self.path, name, text)
         if os.path.lexists(self.path) and not overwrite:
             raise RunFileError(f"{self.path}: file exists (choose another name, or pass --overwrite to replace it)")
+        from hilbench.analysis.output_files import require_regular
+
+        require_regular(self.path, "a run file")  # never renamed over /dev/null or a FIFO (issue 30 item 17)
         if os.path.isdir(self.path):
             raise RunFileError(f"{self.path}: is a directory")
         self._take_lock()

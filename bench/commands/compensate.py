@@ -82,8 +82,10 @@ def run(args: argparse.Namespace) -> int:
     from hilbench.bench import outputs
     from hilbench.bench.compensation_matrix import (
         MatrixSettings,
+        case_file,
         cases,
         check_calibration,
+        named_runs,
         predict_case,
         run_cases,
         write_report,
@@ -97,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
         raise BenchError(f"--window ({args.window} s) and --tolerance ({args.tolerance} rad) must be > 0")
     settings = settings_from_args(args)  # limits, calibration and the position loop's gains
     comps, doc = load_compensators(args.model)
+    inputs = [args.model, *named_runs(doc)]  # the model and the runs it names (its training run) are inputs
     note = check_calibration(doc, settings.torque_constant, settings.ratio)
     matrix = MatrixSettings(window=args.window, tolerance=args.tolerance, current_limit=settings.current_limit,
                             torque_constant=settings.torque_constant, ratio=settings.ratio)
@@ -104,9 +107,9 @@ def run(args: argparse.Namespace) -> int:
         if args.out is None:
             raise BenchError("--matrix needs -o/--output DIR (the runs and the report go there)")
         names = [n.strip() for n in args.feedforwards.split(",") if n.strip()] if args.feedforwards else None
-        outputs.refuse_inputs({"--output": args.out, **{f"--output {args.out / n}": args.out / n
-                                                         for n in ("compensation.md", "compensation.json")}},
-                              [args.model])
+        reports = ("compensation.md", "compensation.json", *(f"compensation_{k}.png" for k in _references(args)))
+        outputs.refuse_inputs({"--output": args.out, **{f"--output {args.out / n}": args.out / n for n in reports}},
+                              inputs)
         if not args.overwrite and (args.out / "compensation.md").exists():
             raise BenchError(f"{args.out / 'compensation.md'} exists; use --overwrite or another folder")
     else:
@@ -114,13 +117,15 @@ def run(args: argparse.Namespace) -> int:
         if args.out is not None and args.predict:
             raise BenchError("--predict writes no run file; use --matrix -o DIR for a predicted report")
         if args.out is not None:
-            outputs.refuse_inputs({"--output": args.out}, [args.model])
+            outputs.refuse_inputs({"--output": args.out}, inputs)
     protocols = cases(args.model, _references(args), names, matrix, args.sample_rate)
+    if args.matrix and not args.predict:  # every run file of the matrix is an output too
+        outputs.refuse_inputs({f"--output {f}": f for f in (args.out / case_file(c) for c in protocols)}, inputs)
     outputs.say(note)
     source = "prediction on the model's Maxwell-slip plant (--predict)" if args.predict else \
         f"device {args.device or 'default'}"
     if args.predict:
-        ms = next(c for c in comps if c.name == "maxwell_slip").params
+        ms = predicted_plant(comps, args.model)
         plant = ms.replace(torque_constant=settings.torque_constant * settings.ratio)
         gains = PositionGains(settings.position_kp, settings.position_ki, settings.position_kd,
                               settings.position_i_limit, settings.position_d_cutoff)
@@ -138,9 +143,21 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def predicted_plant(comps: list, model: str):
+    """The plant --predict simulates: the model's Maxwell-slip plant, or the one family a family file holds."""
+    from hilbench.bench.errors import BenchError
+
+    found = {c.name: c.params for c in comps if c.params is not None and c.name != "coulomb"}
+    if "maxwell_slip" in found:
+        return found["maxwell_slip"]
+    if len(found) == 1:
+        return next(iter(found.values()))
+    raise BenchError(f"--predict simulates one model's plant; {model} offers {', '.join(found) or 'none'}")
+
+
 def _on_device(args, protocols, settings, matrix) -> list:
     from hilbench.bench.compensation import CompensatedReference
-    from hilbench.bench.compensation_matrix import measured_case, run_cases
+    from hilbench.bench.compensation_matrix import case_file, measured_case, run_cases
     from hilbench.bench.errors import BenchError
     from hilbench.bench.protocols import ProtocolError
 
@@ -154,7 +171,7 @@ def _on_device(args, protocols, settings, matrix) -> list:
     with signals_as_interrupt(), Bench.open(args.device, settings) as bench:
         def play(case, i):
             p = played[i]
-            path = (folder / f"{p.reference}-{p.compensation}.h5") if folder else args.out
+            path = (folder / case_file(case)) if folder else args.out
             if folder:
                 folder.mkdir(parents=True, exist_ok=True)
             result = bench.run(p, path, overwrite=args.overwrite,

@@ -145,13 +145,20 @@ def _parse_pairs(items: list[str], option: str, form: str) -> dict[str, str]:
         key, sep, value = item.partition("=")
         if not sep or not key.strip() or not value.strip():
             raise ImportDataError(f"{option} {item!r}: expected {form}")
-        pairs[key.strip()] = value.strip()
+        key, value = key.strip(), value.strip()
+        if key in pairs:  # the last one won silently: --unit position=deg --unit position=rad
+            raise ImportDataError(f"{option} {key}= is given twice ({pairs[key]} and {value}); give it once")
+        pairs[key] = value
     return pairs
 
 
 def run(args: argparse.Namespace) -> int:
-    from hilbench.bench import importers
+    from hilbench.bench import importers, outputs
 
+    out = args.output or os.path.splitext(os.path.basename(args.file))[0] + ".h5"
+    ni = getattr(args, "ni", None) or (os.path.join(os.path.dirname(args.file), "a3NI.csv")
+                                       if args.format == "mnich" else None)
+    outputs.refuse_inputs({"-o": out}, [args.file, ni])  # `import csv x.csv -o x.csv --overwrite` replaced x.csv
     if args.format == "csv":
         imported = importers.load_csv(args.file, _options(args), delimiter=args.delimiter)
     elif args.format == "mat":
@@ -163,7 +170,6 @@ def run(args: argparse.Namespace) -> int:
         imported = load_mnich(args.file, args.ni, **shift)
     else:
         imported = importers.LOADERS[args.format](args.file)
-    out = args.output or os.path.splitext(os.path.basename(args.file))[0] + ".h5"
     importers.write_run(imported, out, overwrite=args.force, operator=args.operator, notes=args.notes)
     units = {name: imported.custom_units.get(name) or _unit(name, imported.axis) for name in imported.samples}
     channels = ", ".join(f"{name} [{unit}]" for name, unit in units.items())

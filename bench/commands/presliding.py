@@ -9,6 +9,8 @@ import math
 from pathlib import Path
 
 OUTPUT_FILES = ("presliding.json", "summary.md", "reversals.csv", "loops.png", "virgin.png")
+#: run-file channels that hold no force: refused as --torque-channel
+NOT_FORCE = ("t", "sample_index", "position", "position_cmd", "velocity", "velocity_cmd", "counts")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -24,6 +26,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("run", metavar="RUN.h5", help="a displacement-driven run file (root attribute record)")
     parser.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the outputs")
+    parser.add_argument("--overwrite", action="store_true", help="replace outputs that exist in DIR")
     parser.add_argument("--fraction", type=float, default=0.9,
                         help="presliding distance: where the virgin curve reaches this fraction of its sliding "
                              "level (default 0.9)")
@@ -74,11 +77,16 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.output)
     targets = {name: out / name for name in OUTPUT_FILES}
     outputs.refuse_inputs({f"-o {p}": p for p in targets.values()}, [args.run])
+    present = [p.name for p in targets.values() if p.exists()]
+    if present and not args.overwrite:
+        raise BenchError(f"{out} holds {', '.join(present)} already; use --overwrite or another folder")
     rf = load(args.run, args)
     if rf.kind != "displacement-driven":
         raise BenchError(f"{args.run}: a {rf.kind} record; presliding needs a displacement-driven one "
                          "(hilbench import ... --record displacement-driven, or a presliding protocol run)")
     name, x, force = rf.torque_channel, rf.position, rf.torque
+    if name in NOT_FORCE:  # a position taken as the force overflowed the fit (issue 30 item 12)
+        raise BenchError(f"--torque-channel {args.torque_channel}: {name!r} is not a force or torque channel")
     cpr = args.counts_per_rev if args.counts_per_rev is not None else rf.calibration.get("counts_per_rev")
     inertia = args.inertia if args.inertia is not None else protocol_inertia(rf.protocol_params, args.run)
     settings = PreslidingSettings(inertia=inertia, viscous=not args.no_viscous, coulomb=args.coulomb,
@@ -88,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     doc = report(res, args.run, name)
     doc["incomplete"] = rf.incomplete
     out.mkdir(parents=True, exist_ok=True)
-    outputs.write_json(targets["presliding.json"], doc, indent=2, allow_nan=True)
+    outputs.write_json(targets["presliding.json"], doc, indent=2)  # strict JSON: a NaN is written as null
     outputs.write_text(targets["reversals.csv"], table_csv(res))
     outputs.write_text(targets["summary.md"], summary_markdown(doc, table_markdown(res)))
     for key, fig in figures(res).items():

@@ -111,6 +111,9 @@ def run(args: argparse.Namespace) -> int:
     if args.inertia is not None and not (math.isfinite(args.inertia) and args.inertia >= 0):
         raise BenchError(f"--inertia must be finite and >= 0, got {args.inertia}")
     train, channel, timing, record, source, incomplete = _load(args.run, args)
+    if args.inertia == 0 and record == "torque-driven":  # J = 0 left the loop nothing to fit (a numpy error)
+        raise BenchError(f"--inertia 0 is for a displacement-driven record; {args.run} is torque-driven: give "
+                         "J > 0 or leave --inertia out to estimate it")
     loaded = [_load(p, args) for p in args.validate]
     if any(v[3] != record for v in loaded):
         raise BenchError(f"{args.run} is {record}; every --validate run must be too")

@@ -7,6 +7,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 
 from hilbench.analysis.runfile import open_run
@@ -101,3 +102,124 @@ def test_killed_campaign_resumes_to_every_run_completed_once(tmp_path):
         with open_run(out / r["file"]) as run:
             assert run.status == "completed" and run.uid == r["uid"]
     assert (out / "id-2.failed-1.h5").exists()  # the crashed attempt is kept, not listed
+
+
+# ---- issue 30 item 6: --resume never mixes plans; each repeat its own seed ----
+
+STEP = """
+[defaults]
+device = "sim://?pacing=lockstep"
+current_limit = "10 A"
+
+[[compensate]]
+name = "m"
+model = "model.json"
+references = ["point_to_point"]
+feedforwards = ["none", "maxwell_slip"]
+targets = {targets}
+move_time = "0.2 s"
+rest = "0.1 s"
+sample_rate = 1000
+"""
+
+
+def test_resume_redoes_a_run_of_another_plan_and_the_report_combines_one_plan(tmp_path):
+    # stop a [[compensate]] campaign after one case, edit its targets, resume: the report scored the old run
+    # against the new reference ("reduction 5.49e+04")
+    from hilbench.analysis.compensation.references import point_to_point
+    from hilbench.analysis.record import load_record
+    from hilbench.bench.campaign import run_campaign
+    from tests.bench.test_compensate import _model
+
+    model = _model(tmp_path)
+    model.rename(tmp_path / "model.json")
+    path = _write(tmp_path, STEP.format(targets='["0.01 rad", "0 rad"]'))
+    out = tmp_path / "out"
+    states: list[tuple[str, str]] = []
+
+    def stop_after_one(ev):
+        states.append((ev.key, ev.state))
+        if ev.state == "completed":
+            raise KeyboardInterrupt("stopped after one case")
+
+    with pytest.raises(KeyboardInterrupt):
+        run_campaign(load_campaign(path), out, progress=stop_after_one)
+    assert [k for k, s in states if s == "completed"] == ["m.point_to_point.none-1"]
+    first = json.loads((out / "index.json").read_text())["runs"][0]["uid"]
+    path.write_text(STEP.format(targets='["0.03 rad", "0 rad"]'))  # the plan changes
+    states.clear()
+    entries = run_campaign(load_campaign(path), out, resume=True, progress=lambda ev: states.append((ev.key, ev.state)))
+    said = [(k, s) for k, s in states if s != "running"]
+    assert said == [("m.point_to_point.none-1", "plan changed (parameters targets): redone"),
+                    ("m.point_to_point.none-1", "completed"), ("m.point_to_point.maxwell_slip-1", "completed")]
+    assert (out / "m.point_to_point.none-1.replanned-1.h5").exists()
+    new = point_to_point(1000.0, targets=(0.03, 0.0), move_time=0.2, rest=0.1)
+    for entry in entries.values():
+        assert entry["status"] == "completed" and entry["parameters"]["targets"] == [0.03, 0.0]
+        rf = load_record(out / entry["file"], need_torque=False, channels=("position_cmd",))
+        np.testing.assert_allclose(rf.channel("position_cmd"), new.position, atol=1e-9)  # the new reference
+    with open_run(out / "m.point_to_point.none-1.h5") as run:
+        assert run.uid == entries["m.point_to_point.none-1"]["uid"] != first
+    report = json.loads((out / "m" / "compensation.json").read_text())
+    assert {r["feedforward"] for r in report["runs"]} == {"none", "maxwell_slip"}
+    # nothing changed: every run is kept
+    states.clear()
+    run_campaign(load_campaign(path), out, resume=True, progress=lambda ev: states.append((ev.key, ev.state)))
+    assert [s for _, s in states] == ["skipped", "skipped"]
+    # the model file's content changes at the same path: the runs with its feed-forward are redone
+    doc = json.loads((tmp_path / "model.json").read_text())
+    doc["parameters"]["viscous"] *= 2
+    (tmp_path / "model.json").write_text(json.dumps(doc))
+    states.clear()
+    run_campaign(load_campaign(path), out, resume=True, progress=lambda ev: states.append((ev.key, ev.state)))
+    said = [s for _, s in states if s != "running"]
+    assert said == ["plan changed (model file content): redone", "completed"] * 2
+
+
+def test_each_repeat_plays_its_own_seed_stored_in_its_run_file(tmp_path):
+    # all repeats of a campaign played seed 0: the identical input
+    from hilbench.bench.campaign import repeat_seed, run_campaign
+
+    text = GOOD.format(duration=0.2).replace("repeats = 2", "repeats = 3\nseed = 7")
+    campaign = load_campaign(_write(tmp_path, text))
+    ids = [r for r in campaign.runs if r.name == "id"]
+    expected = [7] + [int(np.random.SeedSequence([7, r]).generate_state(1, np.uint32)[0]) for r in (2, 3)]
+    assert [r.protocol.seed for r in ids] == expected == [repeat_seed(7, r) for r in (1, 2, 3)]
+    assert len(set(expected)) == 3
+    inputs = [r.protocol.setpoints(8.0) for r in ids]
+    assert not np.array_equal(inputs[0], inputs[1]) and not np.array_equal(inputs[1], inputs[2])
+    campaign.runs = ids  # play the identification repeats only
+    run_campaign(campaign, tmp_path / "out")
+    for r, seed in zip(ids, expected, strict=True):
+        with open_run(tmp_path / "out" / f"{r.key}.h5") as run:
+            assert run.protocol_params["seed"] == seed
+    # a campaign without a seed: repeat 1 plays seed 0, as before
+    assert load_campaign(_write(tmp_path, GOOD.format(duration=1), "d.toml")).runs[0].protocol.seed == 0
+
+
+def test_an_older_index_entry_without_a_model_hash_is_compared_on_parameters_and_settings(tmp_path):
+    from hilbench.bench.campaign_plan import plan_changes, run_plan
+
+    planned = load_campaign(_write(tmp_path, GOOD.format(duration=1))).runs[1]  # id-2: its own seed now
+    plan = run_plan(planned, {})
+    assert plan["model_sha256"] is None and plan["parameters"]["seed"] == planned.protocol.seed != 0
+    old = {"protocol": plan["protocol"], "parameters": {**plan["parameters"], "seed": 0},
+           "settings": plan["settings"]}  # written before each repeat had its seed: repeat 2 played seed 0
+    assert plan_changes(old, plan) == ["parameters seed"]
+    old["parameters"]["seed"] = planned.protocol.seed
+    assert plan_changes(old, plan) == []
+    old["settings"] = {**plan["settings"], "current_limit": 4.0}
+    assert plan_changes(old, plan) == ["settings current_limit"]
+
+
+@pytest.mark.parametrize(("text", "reason"), [
+    ("a = " + "[" * 100_000 + "]" * 100_000, "nested too deep"),  # was RecursionError
+    ("name = \"\\xff\"".encode("latin-1").decode("latin-1") + "\udcff", "not valid TOML"),
+    ("# " + "x" * (5 << 20), "longer than 4194304 bytes"),
+])
+def test_a_hostile_campaign_file_is_one_line(tmp_path, text, reason):
+    path = tmp_path / "c.toml"
+    path.write_bytes(text.encode("utf-8", "surrogateescape"))
+    cp = subprocess.run([sys.executable, "-m", "hilbench.bench.cli", "campaign", str(path), "--check"],
+                        capture_output=True, text=True, timeout=60)
+    assert cp.returncode == 2 and len(cp.stderr.strip().splitlines()) == 1 and reason in cp.stderr, cp.stderr

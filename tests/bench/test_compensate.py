@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -169,4 +170,155 @@ def test_a_compensate_step_with_a_bad_key_names_its_line(tmp_path):
         load_campaign(tmp_path / "c.toml")
     (tmp_path / "c.toml").write_text('[[compensate]]\nmodel = "missing.json"\n')
     with pytest.raises(CampaignError, match=r"c.toml:2: compensate 1: cannot read model"):
+        load_campaign(tmp_path / "c.toml")
+
+
+# ---- issue 30: hostile model files and outputs (items 7, 8, 12, 13) ----
+
+def _doc(tmp_path, name="m.json", **changes):
+    """_model's document with ``changes`` applied to its parameters (None deletes a key), written as ``name``."""
+    doc = json.loads(_model(tmp_path).read_text())
+    for key, value in changes.items():
+        if key in ("family", "schema", "plant"):
+            doc[key] = value
+        else:
+            doc["parameters"][key] = value
+    path = tmp_path / name
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def test_the_training_run_of_the_model_is_never_an_output(tmp_path, capsys, no_device):
+    # item 7: `compensate MODEL.json -o id.h5 --overwrite` replaced id.h5, the run compensate itself reads
+    run = tmp_path / "id.h5"
+    with RunWriter(run, sample_rate=1000.0, calibration={"torque_constant": 0.2, "ratio": 1.0}) as w:
+        w.finish("completed")
+    before = run.read_bytes()
+    model = _model(tmp_path, train_file=run)
+    line = _refused(capsys, ["compensate", str(model), "-o", str(run), "--overwrite"])
+    assert "is an input of this command" in line
+    # the matrix's run files are outputs too: a training run at the place of one of them is refused
+    (tmp_path / "mx").mkdir()
+    inside = tmp_path / "mx" / "sine-maxwell_slip.h5"
+    run.rename(inside)
+    model = _model(tmp_path, train_file=inside)
+    line = _refused(capsys, ["compensate", str(model), "--matrix", "-o", str(tmp_path / "mx"), "--overwrite", *SHORT])
+    assert "sine-maxwell_slip.h5 is an input of this command" in line
+    assert inside.read_bytes() == before and not no_device
+
+
+def _comparison(tmp_path, row_name):
+    from hilbench.firmware_sim.friction_models import dc_motor
+
+    units = {"inertia": "kg*m^2", "ms_stiffness": "N*m/rad"}
+    plant = dc_motor(8).replace(torque_constant=1.0).to_dict()
+    rows = [{"model": "maxwell_slip", "fit": {"units": units}, "plant": plant},
+            {"model": row_name, "fit": {"units": units}, "plant": plant}]
+    path = tmp_path / "compare.json"
+    path.write_text(json.dumps({"schema": "hilbench.compare/1", "axis": "rotary", "rows": rows}))
+    return path
+
+
+def test_a_planted_row_name_never_writes_outside_the_output_folder(tmp_path, capsys, no_device):
+    # item 8: a row named "../../../../precious" made `--matrix -o deep/a/mx4 --overwrite` replace deep/precious.h5
+    deep = tmp_path / "deep"
+    (deep / "a").mkdir(parents=True)
+    precious = deep / "precious.h5"
+    precious.write_bytes(b"precious")
+    model = _comparison(tmp_path, "../../../../precious")
+    line = _refused(capsys, ["compensate", str(model), "--matrix", "-o", str(deep / "a" / "mx4"), "--overwrite",
+                             *SHORT])
+    assert "rows[1].model must be a plain identifier" in line and "'../../../../precious'" in line
+    assert precious.read_bytes() == b"precious" and sorted(p.name for p in deep.rglob("*")) == ["a", "precious.h5"]
+    # a plain name is accepted: the same file with the row renamed predicts (no device)
+    model = _comparison(tmp_path, "lugre_twin")
+    assert cli.main(["compensate", str(model), "--matrix", "--predict", "-o", str(tmp_path / "p"), "-q",
+                     "--feedforwards", "none,lugre_twin", "--references", "triangle", *SHORT]) == 0
+    assert {r["feedforward"] for r in json.loads((tmp_path / "p" / "compensation.json").read_text())["runs"]} == {
+        "none", "lugre_twin"}
+    assert not no_device
+
+
+@pytest.mark.parametrize("changes, match", [
+    ({"inertia": [0.002]}, "parameters.inertia must be a number, got [0.002]"),             # was TypeError
+    ({"inertia": "0.002"}, "parameters.inertia must be a number, got '0.002'"),             # was taken as 0.002
+    ({"inertia": True}, "parameters.inertia must be a number, got True"),                   # was taken as 1.0
+    ({"inertia": 1e300}, "parameters.inertia must be finite and within +-1e+12"),           # was taken
+    ({"inertia": -1e-3}, "parameters.inertia must be > 0"),
+    ({"ms_stiffness": [-1.0, 2.0], "ms_delta": [1e-4, 2e-4]}, "ms_stiffness[0] must be >= 0, got -1.0"),  # dropped
+    ({"ms_stiffness": [1.0, 2.0], "ms_delta": [1e-4, -2e-4]}, "ms_delta[1] must be >= 0, got -0.0002"),   # dropped
+    ({"ms_stiffness": [1.0] * 13, "ms_delta": [1e-4] * 12}, "13 stiffnesses (ms_stiffness) but 12 slip"),  # truncated
+    ({"ms_stiffness": [1.0] * 1025, "ms_delta": [1e-4] * 1025}, "has 1025 values, above the limit of 1024"),
+    ({"viscous": "0"}, "parameters.viscous must be a number, got '0'"),
+    ({"coulomb": -0.1}, "parameters.coulomb must be >= 0"),
+    ({"std_errors": {"inertia": "x"}}, "std_errors.inertia must be a number"),
+    ({"inertia": None}, "parameters.inertia must be a number, got None"),
+    ({"family": "unicorn"}, "family must be one of coulomb_viscous"),                       # was StopIteration
+    ({"family": "lugre", "plant": {"inertia": "1e-4"}}, "plant.inertia must be a number, got '1e-4'"),
+    ({"family": "lugre", "plant": [1]}, "plant must be an object"),
+    ({"family": "lugre", "plant": {"inertia": 1e-4, "ms_stiffness": [1.0, 2.0], "ms_slip": [1e-3]}},
+     "2 values in ms_stiffness but 1 in ms_slip"),
+])
+def test_a_malformed_model_is_one_line_before_anything_moves(tmp_path, capsys, no_device, changes, match):
+    # items 12 and 13: no value is silently changed; a malformed one is one line and exit 2
+    model = _doc(tmp_path, **changes)
+    for extra in ([], ["--matrix", "--predict", "-o", str(tmp_path / "p")]):
+        line = _refused(capsys, ["compensate", str(model), *extra, *SHORT])
+        assert match in line, line
+    assert not no_device and not (tmp_path / "p").exists()
+
+
+def test_deeply_nested_or_huge_model_files_are_one_line(tmp_path, capsys, no_device):
+    import time
+
+    nested = tmp_path / "nested.json"
+    nested.write_text("[" * 100_000 + "]" * 100_000)  # was RecursionError
+    assert "nested too deep" in _refused(capsys, ["compensate", str(nested)])
+    huge = tmp_path / "huge.json"
+    with open(huge, "wb") as fh:  # 74 MB (sparse): refused from its size, before it is read (was 1.4 GB, 10.8 s)
+        fh.truncate(74_000_000)
+    t0 = time.perf_counter()
+    line = _refused(capsys, ["compensate", str(huge)])
+    assert "74000000 bytes, above the 8388608 bytes" in line and time.perf_counter() - t0 < 2.0
+    assert not no_device
+
+
+def test_a_family_file_predicts_on_its_own_plant(tmp_path, capsys, no_device):
+    # --predict took the Maxwell-slip plant with next(...): a family file without one ended in StopIteration
+    from hilbench.firmware_sim.friction_models import dc_motor
+
+    plant = dc_motor(8).replace(torque_constant=1.0).to_dict()
+    model = _doc(tmp_path, family="maxwell_slip", plant=plant, schema="hilbench.friction-model/2")
+    doc = json.loads(model.read_text())
+    doc["family"] = "gms"  # a family file of hilbench compare: its plant is what --predict simulates
+    doc["parameters"]["units"] = {"inertia": "kg*m^2"}
+    model.write_text(json.dumps(doc))
+    assert cli.main(["compensate", str(model), "--matrix", "--predict", "-o", str(tmp_path / "p"), "-q",
+                     "--references", "triangle", *SHORT]) == 0
+    runs = json.loads((tmp_path / "p" / "compensation.json").read_text())["runs"]
+    assert [r["feedforward"] for r in runs] == ["none", "gms"] and not no_device
+
+
+def test_a_report_plot_that_is_the_model_is_refused(tmp_path, capsys, no_device):
+    # an output is never an input: also the reversal plots of the report
+    out = tmp_path / "mx"
+    out.mkdir()
+    model = _model(tmp_path)
+    plot = out / "compensation_triangle.png"
+    os.link(model, plot)  # the model under the plot's name (a hard link: the same file)
+    before = model.read_bytes()
+    line = _refused(capsys, ["compensate", str(model), "--matrix", "--predict", "-o", str(out), "--overwrite",
+                             "--references", "triangle", *SHORT])
+    assert "compensation_triangle.png is an input of this command" in line
+    assert model.read_bytes() == before and sorted(p.name for p in out.iterdir()) == ["compensation_triangle.png"]
+
+
+@pytest.mark.parametrize("name", ["..", "../up", "a.b", "a/b", "-x", 3])
+def test_a_compensate_step_name_is_a_plain_name(tmp_path, name):
+    # the step's name is its report folder OUT/<name>/: ".." wrote the report beside OUT, "a.b" split its runs
+    from hilbench.bench.campaign import CampaignError, load_campaign
+
+    model = _model(tmp_path)
+    (tmp_path / "c.toml").write_text(f'[[compensate]]\nname = {json.dumps(name)}\nmodel = "{model.name}"\n')
+    with pytest.raises(CampaignError, match=r"c.toml:2: compensate 1: name .* must use only letters"):
         load_campaign(tmp_path / "c.toml")

@@ -1,4 +1,4 @@
-"""``hilbench identify`` end to end on run files written with bench.runfile (bench uses analysis)."""
+"""``hilbench identify`` end to end on run files written with analysis.runfile (bench uses analysis)."""
 
 import json
 

@@ -341,3 +341,130 @@ def test_nanosecond_step_is_refused_naming_the_bound(tmp_path, capsys, monkeypat
     spread.write_text("t,position,torque\n0,0,1\n1e-6,0,1\n2e-6,0,1\n1000,1,1\n")
     _one_line_error(capsys, ["import", "csv", str(spread), "--resample", "linear", "--unit", "t=s"],
                     "would make 1000000001 samples", "(MAX_IMPORT_SAMPLES)")
+
+
+# ---- issue 30 items 14 and 15: one column, one unit; MAT sizes bounded in total, unused data never read ----
+
+
+def test_two_units_or_two_channels_for_one_column_are_one_line(tmp_path, capsys):
+    src = tmp_path / "x.csv"
+    src.write_text("t,x,torque\n0,0,1\n0.001,0.1,1\n0.002,0.2,1\n")
+    # the last --unit won silently: degrees then radians on the same column is a 57x scale
+    _one_line_error(capsys, ["import", "csv", str(src), "--map", "position=x", "--unit", "x=deg", "--unit",
+                             "position=rad", "-o", str(tmp_path / "a.h5")], "two units for channel position",
+                    "deg and rad")
+    _one_line_error(capsys, ["import", "csv", str(src), "--map", "position=x", "--unit", "position=deg", "--unit",
+                             "position=deg", "-o", str(tmp_path / "a.h5")], "--unit position= is given twice")
+    # torque == position was stored
+    _one_line_error(capsys, ["import", "csv", str(src), "--map", "torque=x", "--map", "position=x", "-o",
+                             str(tmp_path / "a.h5")], "column 'x' is mapped to torque and position")
+    _one_line_error(capsys, ["import", "csv", str(src), "--map", "position=x", "--map", "position=torque", "-o",
+                             str(tmp_path / "a.h5")], "--map position= is given twice")
+    assert not (tmp_path / "a.h5").exists()
+    assert main(["import", "csv", str(src), "--map", "position=x", "--unit", "x=deg", "-o",
+                 str(tmp_path / "a.h5")]) == 0
+    with open_run(tmp_path / "a.h5") as r:
+        np.testing.assert_allclose(r.channel("position"), np.radians([0, 0.1, 0.2]), rtol=1e-15)
+
+
+def test_unused_mat_variables_are_never_read(tmp_path, capsys):
+    # a 27 KB v7.3 file with four unused chunked variables of 7.9e8 elements each was read whole (23.6 GiB)
+    src = tmp_path / "bomb.mat"
+    t = np.arange(100)[:, None] * 1e-3
+    _mat73(src, {"t": t, "position": np.sin(t), "torque": np.cos(t)})
+    with h5py.File(src, "a") as f:
+        for k in range(4):
+            ds = f.create_dataset(f"junk{k}", shape=(1, 790_000_000), dtype="f8", chunks=(1, 1 << 20),
+                                  compression="gzip")
+            ds.attrs["MATLAB_class"] = np.bytes_("double")
+    assert src.stat().st_size < 64_000
+    import time
+
+    t0 = time.perf_counter()
+    assert main(["import", "mat", str(src), "-o", str(tmp_path / "b.h5")]) == 0
+    assert time.perf_counter() - t0 < 10.0  # reading one 7.9e8-element variable alone takes minutes and 6.3 GB
+    with open_run(tmp_path / "b.h5") as r:
+        np.testing.assert_allclose(r.channel("torque"), np.cos(t).ravel(), rtol=0, atol=0)
+    assert "ignored columns: junk0, junk1, junk2, junk3" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("version", ["v5", "v7.3"])
+def test_mat_sizes_are_bounded_in_total_and_unused_ones_are_not_counted(tmp_path, capsys, monkeypatch, version):
+    t = np.arange(40)[:, None] * 1e-3
+    variables = {"t": t, "position": t, "torque": t, "unused": np.zeros((1000, 1))}
+    src = tmp_path / "m.mat"
+    savemat(src, variables) if version == "v5" else _mat73(src, variables)
+    monkeypatch.setattr(importers, "MAX_IMPORT_SAMPLES", 40)
+    monkeypatch.setattr(importers, "MAX_MAT_ELEMENTS_FACTOR", 2)  # 80 elements: each used one fits, 120 do not
+    _one_line_error(capsys, ["import", "mat", str(src), "-o", str(tmp_path / "m.h5")],
+                    "the variables used hold 120 elements together, above the import bound of 80")
+    monkeypatch.setattr(importers, "MAX_MAT_ELEMENTS_FACTOR", 3)  # 120: the 1000 unused elements are not read
+    assert main(["import", "mat", str(src), "-o", str(tmp_path / "m.h5")]) == 0
+    with open_run(tmp_path / "m.h5") as r:
+        assert r.channel("t").size == 40
+    monkeypatch.setattr(importers, "MAX_MAT_VARIABLES", 3)  # the listing is bounded too
+    _one_line_error(capsys, ["import", "mat", str(src), "-o", str(tmp_path / "m2.h5")],
+                    "4 variables, above the 3 an import lists")
+
+
+def test_an_import_never_writes_over_its_source(tmp_path, capsys):
+    # an output is never an input: `import csv x.csv -o x.csv --overwrite` replaced the CSV with the run file
+    src = tmp_path / "x.csv"
+    src.write_text("t,position,torque\n0,0,1\n0.001,0.1,1\n0.002,0.2,1\n")
+    before = src.read_bytes()
+    _one_line_error(capsys, ["import", "csv", str(src), "-o", str(src), "--overwrite"], "is an input of this command")
+    (tmp_path / "servo.csv").write_text("x\n")
+    _one_line_error(capsys, ["import", "mnich", str(tmp_path / "servo.csv"), "-o", str(tmp_path / "a3NI.csv"),
+                             "--overwrite"], "is an input of this command")  # the default load-cell file beside it
+    assert src.read_bytes() == before
+
+
+def test_csv_lines_are_bounded_before_they_are_parsed(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(importers, "MAX_LINE_BYTES", 64)
+    ok = tmp_path / "ok.csv"
+    ok.write_text("t,position,torque\n" + "".join(f"{k * 1e-3:.3f},0.{k},1\n" for k in range(100_000)) + "0,0,1")
+    assert ok.stat().st_size > 1 << 20  # two 1 MiB blocks: lines are counted and measured across their seams
+    assert importers._count_lines(str(ok)) == 100_002
+    long_row = tmp_path / "row.csv"
+    long_row.write_text("t,position,torque\n0,0,1\n0.001," + "1" * 100 + ",1\n0.002,0,1\n")
+    _one_line_error(capsys, ["import", "csv", str(long_row), "-o", str(tmp_path / "a.h5")],
+                    "line 3 is longer than 64 bytes")
+    header = tmp_path / "header.csv"
+    header.write_text("t," + "x" * 200 + ",position,torque\n0,0,0,1\n")  # a file without line breaks: the same
+    _one_line_error(capsys, ["import", "csv", str(header), "-o", str(tmp_path / "a.h5")],
+                    "the header is longer than 64 characters")
+    assert not (tmp_path / "a.h5").exists()
+
+
+def test_the_dedicated_mat_importers_read_only_their_variables_within_the_bound(tmp_path, capsys, monkeypatch):
+    n = 50
+    data = np.zeros((n, 7))
+    data[:, 0] = np.arange(n) * 1e-3
+    src = tmp_path / "idf.mat"
+    savemat(src, {"data": data, "unused": np.zeros((5000, 1)), "J": 1e-3})
+    monkeypatch.setattr(importers, "MAX_IMPORT_SAMPLES", 50)  # bound 800 elements: data 350 fits, unused 5000 not
+    assert main(["import", "hsm150", str(src), "-o", str(tmp_path / "h.h5")]) == 0
+    with open_run(tmp_path / "h.h5") as r:
+        assert r.channel("t").size == n and r.calibration["J"] == 1e-3
+    monkeypatch.setattr(importers, "MAX_MAT_ELEMENTS_FACTOR", 4)  # 200: data's 350 elements are refused unread
+    _one_line_error(capsys, ["import", "hsm150", str(src), "-o", str(tmp_path / "h2.h5")],
+                    "variable 'data' has 350 elements, above the import bound of 200")
+    emps = tmp_path / "emps.mat"
+    t = np.arange(n)[:, None] * 1e-3
+    savemat(emps, {"t": t, "qm": t, "qg": t, "vir": t, "gtau": 2.0, "kp": 1.0, "kv": 1.0, "junk": np.zeros((9, 9))})
+    _one_line_error(capsys, ["import", "emps", str(emps), "-o", str(tmp_path / "e.h5")],
+                    "the variables used hold 203 elements together, above the import bound of 200")
+
+
+def test_mnich_exports_are_bounded_before_they_are_parsed(tmp_path, capsys, monkeypatch):
+    servo = tmp_path / "a3MR.csv"
+    servo.write_text("h\n" * 5 + "".join(f"{k},{k},1,0\n" for k in range(40)))
+    (tmp_path / "a3NI.csv").write_text("h\n" * 4 + "".join(f"{k * 5e-4},1,0,0\n" for k in range(40)))
+    monkeypatch.setattr(importers, "MAX_IMPORT_SAMPLES", 30)
+    _one_line_error(capsys, ["import", "mnich", str(servo), "-o", str(tmp_path / "m.h5")],
+                    "a3MR.csv: 40 rows, above the import bound of 30 samples")
+    monkeypatch.setattr(importers, "MAX_IMPORT_SAMPLES", 1000)
+    monkeypatch.setattr(importers, "MAX_LINE_BYTES", 16)
+    (tmp_path / "a3NI.csv").write_text("h\n" * 4 + "0," + "1" * 40 + "\n")
+    _one_line_error(capsys, ["import", "mnich", str(servo), "-o", str(tmp_path / "m.h5")],
+                    "a3NI.csv: line 5 is longer than 16 bytes")

@@ -1,4 +1,4 @@
-"""``hilbench skeleton`` on run files of the paper's system under chirps (written with bench.runfile)."""
+"""``hilbench skeleton`` on run files of the paper's system under chirps (written with analysis.runfile)."""
 
 import json
 

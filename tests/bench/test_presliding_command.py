@@ -163,3 +163,35 @@ def test_at_2_14_counts_the_sample_based_fit_carries_its_assumed_origin_and_is_n
     assert k0["std_uncertainty"] > 0.1 * k0["value"]
     assert not doc["resolution"]["resolved"]["parametric"]
     assert "NEITHER resolves sum(k)" in doc["resolution"]["lines"][-1]
+
+
+def test_presliding_json_is_strict_json_with_null_for_nan(tribometer):
+    # issue 30 item 16: the file held bare NaN ("force_rules": NaN), which standard JSON parsers reject
+    _, _, out, _, _ = tribometer
+    text = (out / "presliding.json").read_text()
+
+    def refuse(token):
+        raise ValueError(f"non-standard JSON token {token}")
+
+    rows = json.loads(text, parse_constant=refuse)["reversals"]
+    assert "NaN" not in text and any(r["force_rules"] is None for r in rows)  # the first reversal has no rule value
+
+
+def test_existing_outputs_need_overwrite(tribometer, tmp_path, capsys):
+    d, h5, _, _, _ = tribometer
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "summary.md").write_text("mine\n")
+    _one_line_exit_2(["presliding", str(h5), "-o", str(out), "--replicates", "2"], capsys,
+                     "holds summary.md already; use --overwrite")
+    assert (out / "summary.md").read_text() == "mine\n" and sorted(p.name for p in out.iterdir()) == ["summary.md"]
+    assert main(["presliding", str(h5), "-o", str(out), "--replicates", "2", "--overwrite", "-q"]) == 0
+    assert "| n | sample |" in (out / "summary.md").read_text()
+
+
+def test_a_position_taken_as_the_force_is_one_line(tribometer, tmp_path, capsys):
+    # issue 30 item 12: --torque-channel position ended in an OverflowError
+    _, h5, _, _, _ = tribometer
+    _one_line_exit_2(["presliding", str(h5), "-o", str(tmp_path / "o"), "--torque-channel", "position"], capsys,
+                     "'position' is not a force or torque channel")
+    assert not (tmp_path / "o").exists()
