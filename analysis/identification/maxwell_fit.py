@@ -27,7 +27,6 @@ from hilbench.analysis.identification.regressors import (
     effective_sample_count,
     filtered_data,
     reversal_travels,
-    stop_columns,
     threshold_grid,
 )
 from hilbench.analysis.models.friction_model import FrictionModel, check_axis
@@ -398,12 +397,40 @@ def predict_filtered(
     order: int = 4,
     decimation: int = 1,
     timing: str = "hold_next",
+    block: int = BLOCK,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Equation-error prediction on any run: (L[tau], model's L[tau], row indices) at the kept rows."""
     x = np.asarray(position, float)
-    data = filtered_data(x, torque, fs, cutoff, order=order, decimation=decimation, timing=timing)
-    pred = model.inertia * data.acceleration + model.viscous * data.velocity + model.coulomb * data.sign
-    pred = pred + model.spring * data.position + model.offset
-    if model.ms_delta.size:
-        pred = pred + stop_columns(x, model.ms_delta, data) @ model.ms_stiffness
-    return data.torque, pred, data.rows
+    tau = np.asarray(torque, float)
+    edge = edge_samples(fs, cutoff)
+    if len(range(edge, x.size - edge, max(1, int(decimation)))) < 10:
+        filtered_data(x, tau, fs, cutoff, order=order, decimation=decimation, timing=timing)  # its message
+    return predict_chunks(model, array_chunks(x, tau), fs, cutoff, order=order, decimation=decimation,
+                          timing=timing, block=block)
+
+
+def predict_chunks(
+    model: FrictionModel,
+    source: ChunkSource,
+    fs: float,
+    cutoff: float,
+    *,
+    order: int = 4,
+    decimation: int = 1,
+    timing: str = "hold_next",
+    block: int = BLOCK,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`predict_filtered` on a record read chunk by chunk (``chunked``)."""
+    measured, predicted, rows = [], [], []
+    for blk in blocks(source, fs, cutoff, order=order, decimation=decimation, timing=timing,
+                      deltas=model.ms_delta if model.ms_delta.size else None, block=block):
+        pred = model.inertia * blk.acceleration + model.viscous * blk.velocity + model.coulomb * blk.sign
+        pred = pred + model.spring * blk.position + model.offset
+        if model.ms_delta.size:
+            pred = pred + blk.stop @ model.ms_stiffness
+        measured.append(blk.torque)
+        predicted.append(pred)
+        rows.append(blk.rows)
+    if not rows:
+        raise AnalysisError("run too short: no regression rows after dropping the filter start-up samples")
+    return np.concatenate(measured), np.concatenate(predicted), np.concatenate(rows)

@@ -22,6 +22,8 @@ from hilbench.analysis.models.friction_model import FrictionModel
 
 #: Stop-operator values held at once by segmented_simulation_error (16 MiB of float64).
 CHUNK_VALUES = 1 << 21
+#: Samples per call of the C plant in simulate_position.
+SIM_BLOCK = 1 << 16
 #: More sub-steps per sample than this means a broken model, not a stiff plant (the C engine takes an int).
 MAX_SUBSTEPS = 100_000
 
@@ -63,16 +65,21 @@ def simulate_position(
     substeps: int | None = None,
 ) -> np.ndarray:
     """Simulated position theta_sim[k] (rad or m), shape (n,), of the model under the torque record."""
-    from hilbench.firmware_sim.plant import PlantParameterError, simulate
+    from hilbench.firmware_sim.plant import Plant, PlantParameterError
 
     dt = 1.0 / fs
     u = held_torque(torque, timing)
+    theta = np.empty(u.size)
     try:
         sub = substeps or stable_substeps(model, dt)
-        out = simulate(model.plant_params(), u, dt, substeps=sub, theta0=theta0, omega0=omega0)
+        plant = Plant(model.plant_params(), dt, sub, theta0=theta0, omega0=omega0)
+        # in blocks, keeping the angle only: one call would hold all eight output channels (64 bytes per
+        # sample); consecutive runs continue from the plant's state, bit for bit the same as one call
+        for k0 in range(0, u.size, SIM_BLOCK):
+            theta[k0 : k0 + SIM_BLOCK] = plant.run(u[k0 : k0 + SIM_BLOCK]).theta
     except (PlantParameterError, FloatingPointError) as exc:
         raise AnalysisError(f"model cannot be simulated: {exc}") from None
-    return out.theta
+    return theta
 
 
 def simulation_error(

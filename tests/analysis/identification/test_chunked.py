@@ -1,0 +1,113 @@
+"""The NNLS fit over a record read chunk by chunk (analysis/identification/chunked.py, maxwell_fit.fit_lip_chunks)
+against the same fit on the whole record, and against the whole-record regressors it replaces."""
+
+import numpy as np
+import pytest
+
+from hilbench.analysis.errors import AnalysisError
+from hilbench.analysis.identification.chunked import array_chunks, blocks, default_margin, scan
+from hilbench.analysis.identification.maxwell_fit import LipSettings, fit_lip, fit_lip_chunks, grid_from_scan
+from hilbench.analysis.identification.regressors import (
+    filtered_data,
+    position_resolution,
+    stop_columns,
+    threshold_grid,
+)
+from tests.analysis.identification.test_identification import _dc_run
+
+FS = 4000.0
+
+
+@pytest.fixture(scope="module")
+def run():
+    return _dc_run(3, fs=FS, n=24_000)[1]
+
+
+def test_blocks_match_the_whole_record_regressors(run):
+    # every regressor column of the whole-record code (zero-phase filter of the entire record), against the
+    # blocks of 700 samples with their 40-time-constant margins: equal to rounding (the margin leaves exp(-40)
+    # of a start-up transient). Rounding: 1e-12 of each column's scale; the acceleration, a second difference
+    # /T^2 of a position of some rad, carries eps*max|x|/T^2 = 2e-8 rad/s^2 of it, so 1e-9 of its scale
+    x, tau = run.position, run.torque
+    deltas = np.geomspace(1e-5, 1e-2, 7)
+    whole = filtered_data(x, tau, FS, FS / 20, decimation=8, timing="hold_previous")
+    stop = stop_columns(x, deltas, whole)
+    got = list(blocks(array_chunks(x, tau, 333), FS, FS / 20, decimation=8, timing="hold_previous",
+                      deltas=deltas, block=700))
+    rows = np.concatenate([b.rows for b in got])
+    np.testing.assert_array_equal(rows, whole.rows)
+    for name in ("torque", "acceleration", "velocity", "position", "sign"):
+        ref = getattr(whole, name)
+        err = np.max(np.abs(np.concatenate([getattr(b, name) for b in got]) - ref))
+        assert err <= (1e-9 if name == "acceleration" else 1e-12) * np.max(np.abs(ref)), name
+    err = np.max(np.abs(np.vstack([b.stop for b in got]) - stop))
+    assert err <= 1e-12 * np.max(np.abs(stop))
+
+
+def test_chunking_of_the_source_does_not_change_a_bit(run):
+    # blocks are cut on the global sample index, so how the source slices the record is invisible
+    x, tau = run.position, run.torque
+    s = LipSettings(timing="hold_previous")
+    a = fit_lip_chunks(array_chunks(x, tau, 97), FS, settings=s, block=3000)
+    b = fit_lip_chunks(array_chunks(x, tau, 10_000), FS, settings=s, block=3000)
+    np.testing.assert_array_equal(a.model.ms_stiffness, b.model.ms_stiffness)
+    np.testing.assert_array_equal(a.predicted, b.predicted)
+    assert a.model.inertia == b.model.inertia
+
+
+@pytest.mark.parametrize("settings", [LipSettings(timing="hold_previous"),
+                                      LipSettings(timing="hold_previous", coulomb=True, offset=True),
+                                      LipSettings(timing="hold_previous", fixed_inertia=0.0022)])
+def test_streamed_with_tiny_chunks_equals_the_whole_record(run, settings):
+    # streamed: chunks of 97 samples, blocks of 2 margins (672 samples); whole: one block holding the record.
+    # Same elements; every parameter and standard error to 1e-7 relative, the prediction to 1e-9 of std(L tau)
+    # (measured: 4e-11 and 1e-11; the rest is rounding through NNLS on the QR factor)
+    x, tau = run.position, run.torque
+    margin = default_margin(FS, FS / 20)
+    whole = fit_lip(x, tau, FS, settings=settings, block=x.size)
+    grid = whole.candidate_deltas
+    tiny = fit_lip_chunks(array_chunks(x, tau, 97), FS, settings=settings, grid=grid, block=2 * margin)
+    assert tiny.model.ms_stiffness.size == whole.model.ms_stiffness.size > 3
+    np.testing.assert_allclose(tiny.model.ms_delta, whole.model.ms_delta, rtol=1e-7)
+    np.testing.assert_allclose(tiny.model.ms_stiffness, whole.model.ms_stiffness, rtol=1e-7)
+    for name in ("inertia", "viscous", "coulomb", "offset"):
+        assert getattr(tiny.model, name) == pytest.approx(getattr(whole.model, name), rel=1e-7, abs=1e-12), name
+    for name, se in whole.model.std_errors.items():
+        np.testing.assert_allclose(tiny.model.std_errors[name], se, rtol=1e-6, err_msg=name)
+    np.testing.assert_array_equal(tiny.rows, whole.rows)
+    assert np.max(np.abs(tiny.predicted - whole.predicted)) <= 1e-9 * np.std(whole.measured)
+    assert tiny.n_eff == pytest.approx(whole.n_eff, rel=1e-6)
+
+
+def test_scan_gives_the_whole_record_grid(run):
+    # a record of one noise block and at most 2x20000 points: the scan's resolution and thinned path are the
+    # whole array's, so the grid is threshold_grid's to rounding
+    x = run.position[:20_000]
+    sc = scan(array_chunks(x, run.torque[:20_000], 1234))
+    assert sc.n == x.size
+    assert sc.resolution == pytest.approx(position_resolution(x), rel=1e-12)
+    np.testing.assert_allclose(grid_from_scan(sc, 64), threshold_grid(x, 64), rtol=1e-12)
+
+
+def test_a_streamed_fit_without_a_grid_scans_the_record(run):
+    # the grid from the scan (median of block noise levels, power-of-2 thinning) against the whole array's:
+    # the same fit to 1 % (measured: the grid differs by the thinning of the reversal travels only)
+    x, tau = run.position, run.torque
+    s = LipSettings(timing="hold_previous")
+    whole = fit_lip(x, tau, FS, settings=s)
+    streamed = fit_lip_chunks(array_chunks(x, tau, 5000), FS, settings=s)
+    assert streamed.model.inertia == pytest.approx(whole.model.inertia, rel=0.01)
+    assert streamed.model.breakaway == pytest.approx(whole.model.breakaway, rel=0.01)
+
+
+def test_bad_chunks_are_refused_with_the_sample_index(run):
+    x = run.position.copy()
+    x[5003] = np.nan
+    with pytest.raises(AnalysisError, match="position contains NaN or inf .first at sample 5003"):
+        fit_lip_chunks(array_chunks(x, run.torque, 1000), FS)
+
+    def uneven():
+        yield run.position[:100], run.torque[:99]
+
+    with pytest.raises(AnalysisError, match="lengths differ"):
+        fit_lip_chunks(uneven, FS)
