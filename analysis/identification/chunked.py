@@ -161,6 +161,71 @@ def scan(source: ChunkSource) -> RecordScan:
 
 
 @dataclass
+class Window:
+    """Samples [wa, wa + x.size) of the record around the block [a, b); ``n`` is the record length once the
+    source is exhausted (the last blocks), else None."""
+
+    a: int
+    b: int
+    wa: int
+    x: np.ndarray
+    tau: np.ndarray
+    n: int | None
+
+
+def windows(source: ChunkSource, block: int, margin: int) -> Iterator[Window]:
+    """The record in blocks of ``block`` samples on the global index, each with ``margin`` samples on either
+    side (clipped at the record's ends). ``block`` is raised to 2*``margin`` so that the next window starts
+    inside this one. Holds one window and one source chunk at a time."""
+    block = max(int(block), 2 * int(margin), 1)
+    m = int(margin)
+    buf_x = np.empty(0)
+    buf_t = np.empty(0)
+    buf0 = 0  # global index of buf[0]
+    a = 0  # start of the next block
+
+    def ready(n_total: int | None) -> Iterator[Window]:
+        nonlocal buf_x, buf_t, buf0, a
+        while True:
+            end = buf0 + buf_x.size
+            if (n_total is None and end < a + block + m) or (n_total is not None and a >= n_total):
+                return
+            b = min(a + block, end)
+            wa, wb = max(0, a - m), min(end, b + m)
+            yield Window(a, b, wa, buf_x[wa - buf0 : wb - buf0], buf_t[wa - buf0 : wb - buf0], n_total)
+            keep_from = b - m  # the next window's start
+            if keep_from > buf0:
+                buf_x, buf_t = buf_x[keep_from - buf0 :], buf_t[keep_from - buf0 :]
+                buf0 = keep_from
+            a = b
+
+    for x, tau, _ in _checked(source()):
+        buf_x = np.concatenate([buf_x, x])
+        buf_t = np.concatenate([buf_t, tau])
+        yield from ready(None)
+    yield from ready(buf0 + buf_x.size)
+
+
+class StopCarry:
+    """Stop-operator deflections of the path from relaxed elements, window by window, the state carried
+    exactly from one window to the next (which starts ``margin`` before the block's end)."""
+
+    def __init__(self, deltas: np.ndarray, margin: int):
+        self.deltas = np.asarray(deltas, float)
+        self.margin = int(margin)
+        self.state = np.zeros(self.deltas.size)
+
+    def window(self, w: Window) -> np.ndarray:
+        """Deflections at every sample of the window, (w.x.size, m)."""
+        from hilbench.firmware_sim.plant import stop_operator
+
+        s = stop_operator(w.x, self.deltas, initial=self.state)
+        if w.n is None or w.b < w.n:
+            self.state = s[w.b - self.margin - w.wa].copy()
+        return s
+
+
+@dataclass
 class Block:
     """Regression rows of one block: filtered signals at the rows (as ``regressors.FilteredData``), shape (r,),
     the stop-operator columns (r, m), and the rows' global indices."""
@@ -179,8 +244,6 @@ def blocks(source: ChunkSource, fs: float, cutoff: float, *, order: int = 4, dec
            margin: int | None = None) -> Iterator[Block]:
     """The regression rows of the record, block by block (module docstring). Rows are those of
     ``regressors.filtered_data``: every ``decimation``-th sample from ``edge`` to ``n - edge``."""
-    from hilbench.firmware_sim.plant import stop_operator
-
     if not 0 < cutoff < fs / 2:
         raise AnalysisError(f"filter cutoff {cutoff} Hz must be in (0, {fs / 2}) Hz (Nyquist)")
     d = np.empty(0) if deltas is None else np.asarray(deltas, float)
@@ -188,61 +251,28 @@ def blocks(source: ChunkSource, fs: float, cutoff: float, *, order: int = 4, dec
     m = default_margin(fs, cutoff) if margin is None else int(margin)
     if m < edge:
         raise AnalysisError(f"window margin {m} is below the filter start-up length {edge}")
-    block = max(int(block), 2 * m)  # the next window starts inside this one (stop-operator state carried)
     dec = max(1, int(decimation))
     dt = 1.0 / fs
-    buf_x = np.empty(0)
-    buf_t = np.empty(0)
-    buf0 = 0  # global index of buf[0]
-    a = 0  # start of the next block
-    state = np.zeros(d.size)  # stop-operator deflections at buf0 (relaxed at the record start)
-
-    def process(n_total: int | None) -> Iterator[Block]:
-        nonlocal buf_x, buf_t, buf0, a, state
-        while True:
-            end = buf0 + buf_x.size
-            b = a + block
-            if n_total is None and end < b + m:
-                return
-            if n_total is not None and a >= n_total:
-                return
-            b = min(b, end)
-            wa, wb = max(0, a - m), min(end, b + m)
-            xw, tw = buf_x[wa - buf0 : wb - buf0], buf_t[wa - buf0 : wb - buf0]
-            both = zero_phase_lowpass(np.vstack([xw, torque_at_samples(tw, timing)]), fs, cutoff, order)
-            xf, tauf = both[0], both[1]
-            v = np.gradient(xf, dt) if xf.size > 1 else np.zeros_like(xf)
-            acc = np.zeros_like(xf)
-            acc[1:-1] = (xf[2:] - 2.0 * xf[1:-1] + xf[:-2]) / dt**2
-            sgn = zero_phase_lowpass(np.sign(v), fs, cutoff, order)
-            hi = b if n_total is None else min(b, n_total - edge)
-            first = max(edge, a)
-            first += (-(first - edge)) % dec
-            rows = np.arange(first, hi, dec)
-            local = rows - wa
-            if d.size:
-                s = stop_operator(xw, d, initial=state)
-                nxt = b - m  # the next window's start, inside this window
-                state = s[nxt - wa].copy() if n_total is None or b < n_total else state
-                sf = zero_phase_lowpass(np.ascontiguousarray(s.T), fs, cutoff, order)
-                stop = np.ascontiguousarray(triangle_average(sf, local).T) if rows.size else np.empty((0, d.size))
-            else:
-                stop = np.empty((rows.size, 0))
-            if rows.size:
-                yield Block(tauf[local], acc[local], v[local], triangle_average(xf, local),
-                            triangle_average(sgn, local), stop, rows)
-            # drop what the next window no longer needs
-            keep_from = b - m
-            if keep_from > buf0:
-                buf_x, buf_t = buf_x[keep_from - buf0 :], buf_t[keep_from - buf0 :]
-                buf0 = keep_from
-            a = b
-
-    for x, tau, _ in _checked(source()):
-        buf_x = np.concatenate([buf_x, x])
-        buf_t = np.concatenate([buf_t, tau])
-        yield from process(None)
-    n_total = buf0 + buf_x.size
-    if n_total - 2 * edge <= 0:
-        return
-    yield from process(n_total)
+    stop_carry = StopCarry(d, m)
+    for w in windows(source, block, m):
+        both = zero_phase_lowpass(np.vstack([w.x, torque_at_samples(w.tau, timing)]), fs, cutoff, order)
+        xf, tauf = both[0], both[1]
+        v = np.gradient(xf, dt) if xf.size > 1 else np.zeros_like(xf)
+        acc = np.zeros_like(xf)
+        acc[1:-1] = (xf[2:] - 2.0 * xf[1:-1] + xf[:-2]) / dt**2
+        sgn = zero_phase_lowpass(np.sign(v), fs, cutoff, order)
+        # rows below b: inside the record's n - edge unless this is one of the last blocks (n known)
+        hi = w.b if w.n is None else min(w.b, w.n - edge)
+        first = max(edge, w.a)
+        first += (-(first - edge)) % dec
+        rows = np.arange(first, hi, dec)
+        local = rows - w.wa
+        if d.size:
+            s = stop_carry.window(w)
+            sf = zero_phase_lowpass(np.ascontiguousarray(s.T), fs, cutoff, order)
+            stop = np.ascontiguousarray(triangle_average(sf, local).T) if rows.size else np.empty((0, d.size))
+        else:
+            stop = np.empty((rows.size, 0))
+        if rows.size:
+            yield Block(tauf[local], acc[local], v[local], triangle_average(xf, local),
+                        triangle_average(sgn, local), stop, rows)
