@@ -276,3 +276,92 @@ def refine_output_error(
         refined.std_errors["offset"] = float(pk.scale_c0 * se_v[i])
     after = float(np.sqrt(np.mean(r**2)) * scale / np.std(x))
     return refined, {"position_nrmse_before": before, "position_nrmse_after": after, "nfev": int(sol.nfev)}
+
+
+class _Spread:
+    """Running sums for rms(x - sim) and std(x) over a record read in blocks (x shifted by its first value, so
+    a large constant offset does not cost precision)."""
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.err2 = 0.0
+        self.s1 = 0.0
+        self.s2 = 0.0
+        self.ref: float | None = None
+
+    def add(self, x: np.ndarray, sim: np.ndarray) -> None:
+        if self.ref is None and x.size:
+            self.ref = float(x[0])
+        d = x - (self.ref or 0.0)
+        e = x - sim
+        self.n += x.size
+        self.err2 += float(e @ e)
+        self.s1 += float(np.sum(d))
+        self.s2 += float(d @ d)
+
+    def nrmse(self) -> float:
+        var = self.s2 / self.n - (self.s1 / self.n) ** 2 if self.n else 0.0
+        if not var > 0:
+            raise AnalysisError("cannot normalise the error: the reference signal is constant")
+        return float(np.sqrt(self.err2 / self.n / var))
+
+
+def simulation_error_chunks(model: FrictionModel, source, fs: float, *, timing: str = "hold_next") -> float:
+    """:func:`simulation_error` (the NRMSE) on a record read chunk by chunk (``chunked``): the plant runs block by
+    block from its own state, so the simulation is the one-call simulation bit for bit; nothing of the record's
+    length is kept."""
+    from hilbench.analysis.identification.chunked import BLOCK, windows
+    from hilbench.firmware_sim.plant import Plant, PlantParameterError
+
+    dt = 1.0 / fs
+    spread = _Spread()
+    plant = None
+    try:
+        sub = stable_substeps(model, dt)
+        for w in windows(source, BLOCK, 2):  # one sample ahead: a held torque may be the next sample's
+            if plant is None:
+                plant = Plant(model.plant_params(), dt, sub, theta0=float(w.x[0]),
+                              omega0=initial_velocity(w.x, fs))
+            u = held_torque(w.tau, timing)[w.a - w.wa : w.b - w.wa]
+            spread.add(w.x[w.a - w.wa : w.b - w.wa], plant.run(u).theta)
+    except (PlantParameterError, FloatingPointError) as exc:
+        raise AnalysisError(f"model cannot be simulated: {exc}") from None
+    return spread.nrmse()
+
+
+def segmented_simulation_error_chunks(model: FrictionModel, source, fs: float, *, timing: str = "hold_next",
+                                      segment: float = 1.0) -> float:
+    """:func:`segmented_simulation_error` (the NRMSE) on a record read chunk by chunk. Blocks are whole segments;
+    each window reaches the filter's margin beyond its block, so the restart velocity is the whole-record
+    low-pass's to e^-40 of its start-up transient, and the deflections are the stop operator carried exactly."""
+    from hilbench.analysis.identification.chunked import BLOCK, StopCarry, default_margin, windows
+    from hilbench.firmware_sim.plant import Plant, PlantParameterError
+
+    if not segment > 0:
+        raise AnalysisError(f"segment must be positive, got {segment} s")
+    dt = 1.0 / fs
+    n_seg = max(2, int(round(segment * fs)))
+    cutoff = min(fs / 20.0, 0.45 * fs)
+    margin = default_margin(fs, cutoff)
+    block = max(1, -(-max(BLOCK, 2 * margin) // n_seg)) * n_seg  # whole segments, at least 2 margins
+    params = model.plant_params()
+    carry = StopCarry(params.ms_delta, margin) if params.n_elements else None
+    spread = _Spread()
+    try:
+        sub = stable_substeps(model, dt)
+        for w in windows(source, block, margin):
+            lo, hi = w.a - w.wa, w.b - w.wa
+            xf = zero_phase_lowpass(w.x, fs, cutoff)
+            v = np.gradient(xf, dt) if xf.size > 1 else np.zeros_like(xf)
+            u = held_torque(w.tau, timing) / params.torque_constant
+            s = carry.window(w) if carry is not None else None
+            sim = np.empty(hi - lo)
+            for k0 in range(lo, hi, n_seg):
+                plant = Plant(params, dt, sub, theta0=float(w.x[k0]), omega0=float(v[k0]))
+                if s is not None:
+                    plant.set_deflections(s[k0])
+                sim[k0 - lo : k0 - lo + n_seg] = plant.run(u[k0 : min(k0 + n_seg, hi)]).theta
+            spread.add(w.x[lo:hi], sim)
+    except (PlantParameterError, FloatingPointError) as exc:
+        raise AnalysisError(f"model cannot be simulated: {exc}") from None
+    return spread.nrmse()
