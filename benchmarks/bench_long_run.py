@@ -2,10 +2,14 @@
 
 A record of the bench's default identification protocol on the DC motor at 10 kHz (the C plant directly, as the
 simulated device records it: torque from the measured current, a 2^20-count encoder) is written to a raw file.
-Each measurement runs in a fresh child process, so its peak RSS (``resource.getrusage``) is its own:
+Each measurement runs in a fresh child process. Its peak RSS is ``VmHWM`` of /proc/self/status, the high-water
+mark of the child's own address space: ``resource.getrusage(RUSAGE_SELF).ru_maxrss`` of a child started by
+``subprocess`` (vfork + exec) also holds the parent's high-water mark, which here is the record's generation.
+Elsewhere than on Linux the benchmark falls back to ``ru_maxrss``.
 
-- ``stream``: ``fit_lip_chunks`` reading the file chunk by chunk (the loader's path);
-- ``arrays``: ``fit_lip`` on the whole record loaded as arrays (the array API).
+- ``stream``: ``identify_chunks`` (the NNLS fit and its figures: equation error, open-loop and segmented
+  simulation) reading the file chunk by chunk (the loader's path);
+- ``arrays``: ``identify`` on the whole record loaded as arrays (the array API).
 
 Cost per sample is compared with a 1-minute run measured in the same benchmark (``quick``: 2 s and 6 s).
 docs/long-runs.md gives the figures and the method.
@@ -25,10 +29,18 @@ CHUNK = 1 << 16  # samples per read
 _CHILD = r"""
 import json, resource, sys, time
 import numpy as np
-from hilbench.analysis.identification.maxwell_fit import LipSettings, fit_lip, fit_lip_chunks
+from hilbench.analysis.identification.identify import RunArrays, identify, identify_chunks
+from hilbench.analysis.identification.maxwell_fit import LipSettings
 
 path, n, fs, mode, chunk = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), sys.argv[4], int(sys.argv[5])
-base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+def peak_kib():
+    try:
+        with open("/proc/self/status") as fh:
+            return next(int(line.split()[1]) for line in fh if line.startswith("VmHWM:"))
+    except (OSError, StopIteration):
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+
+base = peak_kib()
 
 def source():
     with open(path, "rb") as fh:  # interleaved (position, torque) float64 pairs
@@ -41,15 +53,17 @@ def source():
 settings = LipSettings(timing="hold_previous")
 t0 = time.perf_counter()
 if mode == "stream":
-    fit = fit_lip_chunks(source, fs, settings=settings, n_samples=n)
+    res = identify_chunks(source, fs, settings=settings)
 else:
     raw = np.fromfile(path, dtype=np.float64)
-    fit = fit_lip(raw[0::2].copy(), raw[1::2].copy(), fs, settings=settings)
+    x, tau = raw[0::2].copy(), raw[1::2].copy()
     del raw
+    res = identify(RunArrays(np.arange(x.size) / fs, tau, x), settings=settings)
 wall = time.perf_counter() - t0
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+peak = peak_kib()
 print(json.dumps({"wall_s": wall, "peak_rss_mib": peak / 1024, "import_rss_mib": base / 1024,
-                  "inertia": fit.model.inertia, "elements": int(fit.model.ms_stiffness.size)}))
+                  "inertia": res.model.inertia, "elements": int(res.model.ms_stiffness.size),
+                  "position_nrmse": res.figures["train_position_nrmse"]}))
 """
 
 

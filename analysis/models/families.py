@@ -331,16 +331,15 @@ def _starts(run: RunData, ms) -> dict[str, dict[str, float]]:
     }
 
 
-def _sliding_starts(run: RunData, ms) -> dict[str, dict[str, float]]:
+def _sliding_starts(run: RunData, ms, base: dict[str, dict[str, float]]) -> dict[str, dict[str, float]]:
     """Second starts, from the Maxwell-slip fit's gross-sliding limit: F_c = sum(W_i), its b, J and c0 (the
     Stribeck shape of the least-squares start). The least-squares starts fit the filtered torque; where the
     filter passes the presliding oscillation (10 kHz: fs/20 = 500 Hz, above sqrt(sum(k)/J)/2pi = 186 Hz on
     the DC motor) they take its elastic torque for viscous friction (b = 1.09 against 0.004, F_c = 0.03 against
-    0.76 N*m), a start the refinement does not recover from in its budget."""
+    0.76 N*m), a start the refinement does not recover from in its budget. ``base``: the ``_starts``."""
     w_sum = float(np.sum(ms.ms_slip))
     if not (w_sum > 0 and ms.inertia > 0):
         return {}
-    base = _starts(run, ms)
     sliding = {"inertia": float(ms.inertia), "offset": float(ms.offset), "coulomb": w_sum,
                "viscous": _pos(ms.viscous, 1e-9 * (float(np.std(run.data.torque)) or 1.0))}
     return {name: {**base[name], **sliding} for name in ("coulomb_viscous", "stribeck", "dahl", "lugre")}
@@ -418,9 +417,10 @@ def fit_family(family: str, run: RunData, *, timing: str, position: np.ndarray, 
         return FamilyFit(family, run.axis, params, se, units, ms.plant_params(), 3 + 2 * int(keep.sum()),
                          time.perf_counter() - t0, notes="NNLS (lip) fit of hilbench identify; not refined")
     fam = _build_families(ms)[family]
-    start = _starts(run, ms)[family]
+    starts = _starts(run, ms)
+    start = starts[family]
     origin = "least squares"
-    second = _sliding_starts(run, ms).get(family)
+    second = _sliding_starts(run, ms, starts).get(family)
     if second is not None and _start_cost(fam, second, run, segment) < _start_cost(fam, start, run, segment):
         start, origin = second, "sliding limit of the Maxwell-slip fit"
     p, se, nfev = _refine(fam, start, run, segment, max_nfev)

@@ -52,7 +52,7 @@ def test_every_start_is_physical_at_10_khz(runs):
     ms = maxwell_slip_start(train, "hold_previous", train.x, tau).model
     fams = _build_families(ms)
     starts = _starts(train, ms)
-    for name, start in [*starts.items(), *(("sliding " + k, v) for k, v in _sliding_starts(train, ms).items())]:
+    for name, start in [*starts.items(), *(("sliding " + k, v) for k, v in _sliding_starts(train, ms, starts).items())]:
         family = name.removeprefix("sliding ")
         assert start["inertia"] == pytest.approx(DC_MOTOR_INERTIA, rel=0.03), name
         assert substeps_for(fams[family].plant(start), FS) <= 4, name
