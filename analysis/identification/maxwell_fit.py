@@ -4,11 +4,12 @@
 
 with the Delta_i on a log-spaced candidate grid ranged from the data (hilbench.analysis.identification.regressors), all
 coefficients >= 0 except the offset c0 (split into two non-negative columns). Solved with
-scipy.optimize.nnls on unit-norm columns. Then adjacent active thresholds are merged, tiny elements
-pruned, and (optionally) the thresholds refined by variable projection (NNLS inside a
-Levenberg-Marquardt on log Delta).
+scipy.optimize.nnls on unit-norm columns, on the triangular factor R of the regression rows, which are
+accumulated block by block (``chunked``; docs/long-runs.md), so memory does not grow with the record.
+Then adjacent active thresholds are merged, tiny elements pruned, and (optionally) the thresholds refined
+by variable projection (NNLS inside a Levenberg-Marquardt on log Delta).
 
-Standard errors: sigma^2 (A_a^T A_a)^-1 on the active columns A_a, sigma^2 = |r|^2/(n - p_a). The
+Standard errors: sigma^2 (A_a^T A_a)^-1 on the active columns A_a (= R_a^T R_a), sigma^2 = |r|^2/(n - p_a). The
 filtered residuals are coloured even after thinning, so the covariance is inflated by n/n_eff with
 n_eff from the residual autocorrelation (regressors.effective_sample_count). Parameters at their
 bound (zero) get no standard error (NaN): the linearised covariance does not apply there.
