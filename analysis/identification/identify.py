@@ -222,21 +222,30 @@ def identify_chunks(
     settings: LipSettings | None = None,
     segment: float = 1.0,
     record: str = "torque-driven",
+    method: str = "lip",
+    oe_max_iterations: int = 20,
 ) -> Identification:
-    """:func:`identify` with the ``lip`` method on records read chunk by chunk, in memory bounded by the block
-    size (docs/long-runs.md). ``source`` and ``validate`` are chunk sources (``chunked``: callables returning a
-    fresh iterator of ``(position, torque)`` pairs, in order) sampled uniformly at ``fs`` Hz; the caller checks
-    the time stamps. The figures are :func:`identify`'s; no curves are kept (``curves`` is empty)."""
+    """:func:`identify` with the ``lip`` or ``oe`` method on records read chunk by chunk, in memory bounded by
+    the block size (docs/long-runs.md; ``oe``: output_error.refine_output_error_chunks). ``source`` and
+    ``validate`` are chunk sources (``chunked``: callables returning a fresh iterator of ``(position, torque)``
+    pairs, in order) sampled uniformly at ``fs`` Hz; the caller checks the time stamps. The figures are
+    :func:`identify`'s; no curves are kept (``curves`` is empty)."""
     from hilbench.analysis.identification.chunked import scan
     from hilbench.analysis.identification.maxwell_fit import fit_lip_chunks, grid_from_scan, nrmse, predict_chunks
     from hilbench.analysis.identification.output_error import (
+        refine_output_error_chunks,
         segmented_simulation_error_chunks,
         simulation_error_chunks,
     )
 
     check_axis(axis)
+    if method not in ("lip", "oe"):
+        raise AnalysisError(f"method must be lip or oe for a record read chunk by chunk, got {method!r}")
     s = settings or LipSettings()
     force_mode = record == "displacement-driven" or s.fixed_inertia == 0
+    if force_mode and method != "lip":
+        raise AnalysisError(f"method {method!r} refines a simulated position; a force-against-displacement "
+                            "fit (displacement-driven record or inertia 0) uses method 'lip'")
     t0 = time.perf_counter()
     sc = scan(source)
     if sc.n < 200:
@@ -248,9 +257,13 @@ def identify_chunks(
     grid = grid_from_scan(sc, s.n_thresholds, s.delta_range) if s.n_thresholds > 0 else np.empty(0)
     lip = fit_lip_chunks(source, fs, axis, s, grid=grid, n_samples=sc.n)
     model = lip.model
+    extra: dict = {}
+    if method == "oe":
+        model, extra = refine_output_error_chunks(model, source, fs, timing=s.timing,
+                                                  max_iterations=oe_max_iterations)
     wall = time.perf_counter() - t0
     figures = {"wall_time_s": wall, "cutoff_hz": lip.cutoff, "decimation": lip.decimation, "n_eff": lip.n_eff,
-               "condition_number": lip.condition_number}
+               "condition_number": lip.condition_number, **extra}
 
     def score(prefix: str, src, n: int, meas: np.ndarray, pred: np.ndarray) -> None:
         if force_mode:
@@ -266,11 +279,16 @@ def identify_chunks(
             f"{prefix}_samples": n,
         })
 
-    score("train", source, sc.n, lip.measured, lip.predicted)
+    if method == "lip":
+        score("train", source, sc.n, lip.measured, lip.predicted)
+    else:  # the refined model's equation error
+        meas, pred, _ = predict_chunks(model, source, fs, lip.cutoff, order=s.order, decimation=lip.decimation,
+                                       timing=s.timing)
+        score("train", source, sc.n, meas, pred)
     if validate is not None:
         meas, pred, _ = predict_chunks(model, validate, fs, lip.cutoff, order=s.order, decimation=lip.decimation,
                                        timing=s.timing)
         score("validation", validate, scan(validate).n, meas, pred)
-    settings_dict = {"method": "lip", **s.to_dict(), "segment_s": float(segment), "record": record,
+    settings_dict = {"method": method, **s.to_dict(), "segment_s": float(segment), "record": record,
                      "candidate_deltas": lip.candidate_deltas.tolist()}
-    return Identification(model, "lip", settings_dict, figures, wall, lip, {})
+    return Identification(model, method, settings_dict, figures, wall, lip, {})
