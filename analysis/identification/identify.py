@@ -211,3 +211,84 @@ def identify(
     if method == "paper":
         settings_dict["paper_options"] = dict(paper_options or {})
     return Identification(model, method, settings_dict, figures, wall, lip, curves)
+
+
+def identify_chunks(
+    source,
+    fs: float,
+    *,
+    axis: str = "rotary",
+    validate=None,
+    settings: LipSettings | None = None,
+    segment: float = 1.0,
+    record: str = "torque-driven",
+    method: str = "lip",
+    oe_max_iterations: int = 20,
+) -> Identification:
+    """:func:`identify` with the ``lip`` or ``oe`` method on records read chunk by chunk, in memory bounded by
+    the block size (docs/long-runs.md; ``oe``: output_error.refine_output_error_chunks). ``source`` and
+    ``validate`` are chunk sources (``chunked``: callables returning a fresh iterator of ``(position, torque)``
+    pairs, in order) sampled uniformly at ``fs`` Hz; the caller checks the time stamps. The figures are
+    :func:`identify`'s; no curves are kept (``curves`` is empty)."""
+    from hilbench.analysis.identification.chunked import scan
+    from hilbench.analysis.identification.maxwell_fit import fit_lip_chunks, grid_from_scan, nrmse, predict_chunks
+    from hilbench.analysis.identification.output_error import (
+        refine_output_error_chunks,
+        segmented_simulation_error_chunks,
+        simulation_error_chunks,
+    )
+
+    check_axis(axis)
+    if method not in ("lip", "oe"):
+        raise AnalysisError(f"method must be lip or oe for a record read chunk by chunk, got {method!r}")
+    s = settings or LipSettings()
+    force_mode = record == "displacement-driven" or s.fixed_inertia == 0
+    if force_mode and method != "lip":
+        raise AnalysisError(f"method {method!r} refines a simulated position; a force-against-displacement "
+                            "fit (displacement-driven record or inertia 0) uses method 'lip'")
+    t0 = time.perf_counter()
+    sc = scan(source)
+    if sc.n < 200:
+        raise AnalysisError(f"run too short to identify ({sc.n} samples, need >= 200)")
+    if sc.position_range == 0:
+        raise AnalysisError("the position never changes; nothing is identifiable (no motion)")
+    if sc.torque_range == 0:
+        raise AnalysisError("the torque is constant; J and the friction are unidentifiable")
+    grid = grid_from_scan(sc, s.n_thresholds, s.delta_range) if s.n_thresholds > 0 else np.empty(0)
+    lip = fit_lip_chunks(source, fs, axis, s, grid=grid, n_samples=sc.n)
+    model = lip.model
+    extra: dict = {}
+    if method == "oe":
+        model, extra = refine_output_error_chunks(model, source, fs, timing=s.timing,
+                                                  max_iterations=oe_max_iterations)
+    wall = time.perf_counter() - t0
+    figures = {"wall_time_s": wall, "cutoff_hz": lip.cutoff, "decimation": lip.decimation, "n_eff": lip.n_eff,
+               "condition_number": lip.condition_number, **extra}
+
+    def score(prefix: str, src, n: int, meas: np.ndarray, pred: np.ndarray) -> None:
+        if force_mode:
+            rel = 100.0 * float(np.linalg.norm(meas - pred) / np.linalg.norm(meas))
+            figures.update({f"{prefix}_force_nrmse": nrmse(meas, pred), f"{prefix}_force_rel_pct": rel,
+                            f"{prefix}_samples": n})
+            return
+        figures.update({
+            f"{prefix}_torque_nrmse": nrmse(meas, pred),
+            f"{prefix}_position_nrmse": simulation_error_chunks(model, src, fs, timing=s.timing),
+            f"{prefix}_position_nrmse_segmented": segmented_simulation_error_chunks(
+                model, src, fs, timing=s.timing, segment=segment),
+            f"{prefix}_samples": n,
+        })
+
+    if method == "lip":
+        score("train", source, sc.n, lip.measured, lip.predicted)
+    else:  # the refined model's equation error
+        meas, pred, _ = predict_chunks(model, source, fs, lip.cutoff, order=s.order, decimation=lip.decimation,
+                                       timing=s.timing)
+        score("train", source, sc.n, meas, pred)
+    if validate is not None:
+        meas, pred, _ = predict_chunks(model, validate, fs, lip.cutoff, order=s.order, decimation=lip.decimation,
+                                       timing=s.timing)
+        score("validation", validate, scan(validate).n, meas, pred)
+    settings_dict = {"method": method, **s.to_dict(), "segment_s": float(segment), "record": record,
+                     "candidate_deltas": lip.candidate_deltas.tolist()}
+    return Identification(model, method, settings_dict, figures, wall, lip, {})

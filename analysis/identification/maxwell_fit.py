@@ -4,11 +4,12 @@
 
 with the Delta_i on a log-spaced candidate grid ranged from the data (hilbench.analysis.identification.regressors), all
 coefficients >= 0 except the offset c0 (split into two non-negative columns). Solved with
-scipy.optimize.nnls on unit-norm columns. Then adjacent active thresholds are merged, tiny elements
-pruned, and (optionally) the thresholds refined by variable projection (NNLS inside a
-Levenberg-Marquardt on log Delta).
+scipy.optimize.nnls on unit-norm columns, on the triangular factor R of the regression rows, which are
+accumulated block by block (``chunked``; docs/long-runs.md), so memory does not grow with the record.
+Then adjacent active thresholds are merged, tiny elements pruned, and (optionally) the thresholds refined
+by variable projection (NNLS inside a Levenberg-Marquardt on log Delta).
 
-Standard errors: sigma^2 (A_a^T A_a)^-1 on the active columns A_a, sigma^2 = |r|^2/(n - p_a). The
+Standard errors: sigma^2 (A_a^T A_a)^-1 on the active columns A_a (= R_a^T R_a), sigma^2 = |r|^2/(n - p_a). The
 filtered residuals are coloured even after thinning, so the covariance is inflated by n/n_eff with
 n_eff from the residual autocorrelation (regressors.effective_sample_count). Parameters at their
 bound (zero) get no standard error (NaN): the linearised covariance does not apply there.
@@ -21,11 +22,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
+from hilbench.analysis.identification.chunked import BLOCK, ChunkSource, RecordScan, array_chunks, blocks, scan
 from hilbench.analysis.identification.regressors import (
-    FilteredData,
+    edge_samples,
     effective_sample_count,
     filtered_data,
-    stop_columns,
+    reversal_travels,
     threshold_grid,
 )
 from hilbench.analysis.models.friction_model import FrictionModel, check_axis
@@ -92,53 +94,88 @@ def nrmse(y: np.ndarray, y_hat: np.ndarray) -> float:
     return float(np.sqrt(np.mean((y - np.asarray(y_hat, float)) ** 2)) / s)
 
 
-class _Design:
-    """The linear columns (all but the stop operator) and their parameter names."""
-
-    def __init__(self, data: FilteredData, s: LipSettings):
-        cols, names = ([data.acceleration], ["inertia"]) if s.fixed_inertia is None else ([], [])
-        if s.viscous:
-            cols.append(data.velocity)
-            names.append("viscous")
-        if s.coulomb:
-            cols.append(data.sign)
-            names.append("coulomb")
-        if s.spring:
-            cols.append(data.position)
-            names.append("spring")
-        if s.offset:
-            one = np.ones_like(data.torque)
-            cols += [one, -one]
-            names += ["offset+", "offset-"]
-        self.columns = np.column_stack(cols) if cols else np.zeros((data.torque.size, 0))
-        self.names = names
+def _lin_columns(blk, s: LipSettings) -> tuple[list[np.ndarray], list[str]]:
+    """The linear columns (all but the stop operator) of a block of rows, and their parameter names."""
+    cols, names = ([blk.acceleration], ["inertia"]) if s.fixed_inertia is None else ([], [])
+    if s.viscous:
+        cols.append(blk.velocity)
+        names.append("viscous")
+    if s.coulomb:
+        cols.append(blk.sign)
+        names.append("coulomb")
+    if s.spring:
+        cols.append(blk.position)
+        names.append("spring")
+    if s.offset:
+        one = np.ones_like(blk.torque)
+        cols += [one, -one]
+        names += ["offset+", "offset-"]
+    return cols, names
 
 
-def _solve(a: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
-    """NNLS on unit-norm columns; returns coefficients in the original scaling and |r|^2."""
-    from scipy.optimize import nnls
-
-    norms = np.linalg.norm(a, axis=0)
-    norms[norms == 0] = 1.0
-    coef, rnorm = nnls(a / norms, y, maxiter=50 * a.shape[1])
-    return coef / norms, float(rnorm) ** 2
+def _block_system(blk, s: LipSettings) -> tuple[np.ndarray, np.ndarray]:
+    """(A, y) of a block: A = [linear columns, stop columns], y = L[tau] (minus J*L[theta''] for a known J)."""
+    cols, _ = _lin_columns(blk, s)
+    a = np.column_stack([*cols, blk.stop]) if cols else blk.stop
+    y = blk.torque if s.fixed_inertia is None else blk.torque - s.fixed_inertia * blk.acceleration
+    return a, y
 
 
-def _covariance(a: np.ndarray, residual: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, float, float]:
-    """Covariance of the active coefficients (inflated by n/n_eff), n_eff and cond of the active set."""
-    n = a.shape[0]
-    aa = a[:, active]
-    p = aa.shape[1]
+@dataclass
+class _Triangular:
+    """R of the QR decomposition of [A | y] over every row so far, (p+1, p+1): A = Q R_11, Q^T y = r_12 and
+    r_22^2 the residual sum of squares of the unconstrained least squares. Updated block by block."""
+
+    r: np.ndarray
+    rows: int = 0
+
+    def add(self, a: np.ndarray, y: np.ndarray) -> None:
+        stacked = np.vstack([self.r, np.column_stack([a, y])])
+        self.r = np.linalg.qr(stacked, mode="r")[: self.r.shape[1]]
+        self.rows += a.shape[0]
+
+    def solve(self) -> tuple[np.ndarray, float]:
+        """NNLS on unit-norm columns: coefficients in the original scaling and |A c - y|^2."""
+        from scipy.optimize import nnls
+
+        p = self.r.shape[1] - 1
+        r11, r12, r22 = self.r[:p, :p], self.r[:p, p], self.r[p, p]
+        norms = np.linalg.norm(r11, axis=0)  # = the column norms of A (Q has orthonormal columns)
+        norms[norms == 0] = 1.0
+        coef, rnorm = nnls(r11 / norms, r12, maxiter=50 * max(p, 1))
+        return coef / norms, float(rnorm) ** 2 + float(r22) ** 2
+
+
+def _regression(source: ChunkSource, fs: float, s: LipSettings, cutoff: float, dec: int, deltas: np.ndarray,
+                block: int) -> _Triangular:
+    """One pass over the record: the triangular factor of the regression with the thresholds ``deltas``."""
+    tri: _Triangular | None = None
+    for blk in blocks(source, fs, cutoff, order=s.order, decimation=dec, timing=s.timing, deltas=deltas,
+                      block=block):
+        a, y = _block_system(blk, s)
+        if tri is None:
+            tri = _Triangular(np.zeros((0, a.shape[1] + 1)))
+        tri.add(a, y)
+    if tri is None:
+        raise AnalysisError("run too short: no regression rows after dropping the filter start-up samples")
+    return tri
+
+
+def _covariance(r11: np.ndarray, n: int, residual: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """Covariance of the active coefficients (inflated by n/n_eff), n_eff and cond of the active set, from R
+    (A_a = Q R_a, so A_a^T A_a = R_a^T R_a and cond(A_a) = cond(R_a))."""
+    ra = r11[:, active]
+    p = ra.shape[1]
     if n <= p:
         raise AnalysisError(f"run too short: {n} rows for {p} active parameters")
-    norms = np.linalg.norm(aa, axis=0)
-    an = aa / norms
+    norms = np.linalg.norm(ra, axis=0)
+    rn = ra / norms
     s2 = float(residual @ residual) / (n - p)
     n_eff = effective_sample_count(residual)
     inflate = max(1.0, n / n_eff)
-    gram_inv = np.linalg.pinv(an.T @ an)
+    gram_inv = np.linalg.pinv(rn.T @ rn)
     cov = s2 * inflate * gram_inv / np.outer(norms, norms)
-    return cov, n_eff, float(np.linalg.cond(an))
+    return cov, n_eff, float(np.linalg.cond(rn))
 
 
 def _merge_adjacent(deltas: np.ndarray, k: np.ndarray) -> np.ndarray:
@@ -151,12 +188,30 @@ def _merge_adjacent(deltas: np.ndarray, k: np.ndarray) -> np.ndarray:
     return np.array([np.sum(k[g] * deltas[g]) / np.sum(k[g]) for g in groups])
 
 
+def grid_from_scan(sc: RecordScan, n: int, delta_range: tuple[float, float] | None = None) -> np.ndarray:
+    """``regressors.threshold_grid`` from a record scan (its resolution and thinned path)."""
+    if delta_range is not None or n < 1:
+        return threshold_grid(np.zeros(2), n, delta_range)
+    res = sc.resolution
+    travels = reversal_travels(sc.thinned, hysteresis=max(4 * res, 1e-15))
+    hi = 0.5 * float(travels.max()) if travels.size else 0.0
+    lo = max(2.0 * res, hi * 1e-5)
+    if not hi > lo:
+        raise AnalysisError(
+            f"the position hardly moves (largest travel {2 * hi:.3g}, resolution {res:.3g}): "
+            "the friction thresholds are unidentifiable; excite a larger displacement"
+        )
+    return np.geomspace(lo, hi, n)
+
+
 def fit_lip(
     position: np.ndarray,
     torque: np.ndarray,
     fs: float,
     axis: str = "rotary",
     settings: LipSettings | None = None,
+    *,
+    block: int = BLOCK,
 ) -> LipFit:
     """Identify J, k_i (on a Delta grid), b (and optionally Fc, c0, K) by NNLS.
 
@@ -165,54 +220,100 @@ def fit_lip(
         torque: motor torque or force, shape (n,), N*m or N, with sample timing ``settings.timing``.
         fs: sampling rate, Hz.
         axis: "rotary" or "linear" (units only).
+        block: samples per processing block (``chunked``); the result does not depend on it beyond rounding.
     Returns:
         :class:`LipFit`. Raises :class:`AnalysisError` for unusable input.
     """
     s = settings or LipSettings()
+    x = np.asarray(position, float)
+    tau = np.asarray(torque, float)
+    if x.shape != tau.shape or x.ndim != 1:
+        raise AnalysisError(f"position and torque must be 1-D of equal length, got {x.shape} and {tau.shape}")
+    # the exact grid of the whole array (the chunk API estimates the noise level over blocks)
+    grid = threshold_grid(x, s.n_thresholds, s.delta_range) if s.n_thresholds > 0 else np.empty(0)
+    return fit_lip_chunks(array_chunks(x, tau), fs, axis, s, grid=grid, block=block, n_samples=x.size)
+
+
+def fit_lip_chunks(
+    source: ChunkSource,
+    fs: float,
+    axis: str = "rotary",
+    settings: LipSettings | None = None,
+    *,
+    grid: np.ndarray | None = None,
+    block: int = BLOCK,
+    n_samples: int | None = None,
+) -> LipFit:
+    """:func:`fit_lip` on a record read chunk by chunk (``chunked``: a callable returning a fresh iterator of
+    ``(position, torque)`` pairs). Memory is bounded by ``block`` and the thresholds, plus 24 bytes per
+    regression row for the returned prediction. ``grid``: the candidate thresholds (default from one scan of
+    the record); ``n_samples``: the record length if known (saves the scan when a grid is given)."""
+    s = settings or LipSettings()
     check_axis(axis)
     cutoff, dec = s.resolved(fs)
-    x = np.asarray(position, float)
-    data = filtered_data(x, torque, fs, cutoff, order=s.order, decimation=dec, timing=s.timing)
-    design = _Design(data, s)
-    # n_thresholds 0: no Maxwell-slip elements (e.g. the EMPS reference model J, Fc, b, offset)
-    grid = threshold_grid(x, s.n_thresholds, s.delta_range) if s.n_thresholds > 0 else np.empty(0)
     if s.fixed_inertia is not None and not (np.isfinite(s.fixed_inertia) and s.fixed_inertia >= 0):
         raise AnalysisError(f"a fixed inertia must be finite and >= 0, got {s.fixed_inertia}")
-    y = data.torque if s.fixed_inertia is None else data.torque - s.fixed_inertia * data.acceleration
-    lin = design.columns
-    nl = lin.shape[1]
+    if grid is None or n_samples is None:
+        sc = scan(source)
+        n_samples = sc.n
+        if grid is None:
+            # n_thresholds 0: no Maxwell-slip elements (e.g. the EMPS reference model J, Fc, b, offset)
+            grid = grid_from_scan(sc, s.n_thresholds, s.delta_range) if s.n_thresholds > 0 else np.empty(0)
+    grid = np.asarray(grid, float)
+    edge = edge_samples(fs, cutoff)
+    n_rows = len(range(edge, n_samples - edge, dec))
+    if n_rows < 10:
+        raise AnalysisError(
+            f"run too short: {n_samples} samples leave {n_rows} rows after dropping {edge} filter start-up "
+            f"samples at each end (cutoff {cutoff:g} Hz); record longer or raise the cutoff"
+        )
+    _, names = _lin_columns(_EmptyRows(), s)
+    nl = len(names)
 
-    def solve_with(deltas: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-        a = np.column_stack([lin, stop_columns(x, deltas, data)])
-        coef, rss = _solve(a, y)
-        return a, coef, rss
+    def solve_with(deltas: np.ndarray) -> tuple[_Triangular, np.ndarray, float]:
+        tri = _regression(source, fs, s, cutoff, dec, deltas, block)
+        coef, rss = tri.solve()
+        return tri, coef, rss
 
-    a, coef, rss = solve_with(grid)
+    tri, coef, rss = solve_with(grid)
     deltas = grid
     if s.merge and np.count_nonzero(coef[nl:]) > 0:
         merged = _merge_adjacent(grid, coef[nl:])
-        a2, coef2, rss2 = solve_with(merged)
+        tri2, coef2, rss2 = solve_with(merged)
         if rss2 <= rss * 1.02:
-            a, coef, rss, deltas = a2, coef2, rss2, merged
+            tri, coef, rss, deltas = tri2, coef2, rss2, merged
     k = coef[nl:]
     w = k * deltas
     if s.prune_fraction > 0 and w.sum() > 0:
         keep = w >= s.prune_fraction * w.sum()
         if not np.all(keep):
             deltas = deltas[keep]
-            a, coef, rss = solve_with(deltas)
+            tri, coef, rss = solve_with(deltas)
     if s.refine and np.count_nonzero(coef[nl:]) > 0:
-        deltas = _refine_thresholds(x, y, lin, data, deltas[coef[nl:] > 0], (grid[0], grid[-1]))
-        a, coef, rss = solve_with(deltas)
+        deltas = _refine_thresholds(source, fs, s, cutoff, dec, block, deltas[coef[nl:] > 0], (grid[0], grid[-1]))
+        tri, coef, rss = solve_with(deltas)
 
-    residual = y - a @ coef
+    # last pass: the prediction at every row (the plots' curves, the residual's colour)
+    measured, predicted, rows = [], [], []
+    acc_sum = acc_sq = 0.0
+    for blk in blocks(source, fs, cutoff, order=s.order, decimation=dec, timing=s.timing, deltas=deltas,
+                      block=block):
+        a, y = _block_system(blk, s)
+        measured.append(blk.torque)
+        predicted.append(a @ coef + (blk.torque - y))  # plus the known J*acceleration, if any
+        rows.append(blk.rows)
+        acc_sum += float(np.sum(blk.acceleration))
+        acc_sq += float(blk.acceleration @ blk.acceleration)
+    measured_a, predicted_a, rows_a = np.concatenate(measured), np.concatenate(predicted), np.concatenate(rows)
+    residual = measured_a - predicted_a
     active = coef > 0
-    cov, n_eff, cond = _covariance(a, residual, active)
+    p = coef.size
+    cov, n_eff, cond = _covariance(tri.r[:p, :p], tri.rows, residual, active)
     se_all = np.full(coef.size, np.nan)
     se_all[active] = np.sqrt(np.clip(np.diag(cov), 0, None))
 
-    values = dict(zip(design.names, coef[:nl], strict=True))
-    ses = dict(zip(design.names, se_all[:nl], strict=True))
+    values = dict(zip(names, coef[:nl], strict=True))
+    ses = dict(zip(names, se_all[:nl], strict=True))
     if s.fixed_inertia is not None:
         values["inertia"], ses["inertia"] = float(s.fixed_inertia), 0.0  # known, not estimated
     offset = values.pop("offset+", 0.0) - values.pop("offset-", 0.0)
@@ -233,12 +334,18 @@ def fit_lip(
         spring=values.get("spring", 0.0),
         std_errors=std_errors,
     )
-    warnings = _identifiability(model, data, s)
-    predicted = a @ coef + (data.torque - y)  # plus the known J*acceleration, if any
-    return LipFit(model, s, cutoff, dec, grid, data.torque, predicted, data.rows, n_eff, cond, warnings)
+    acc_std = float(np.sqrt(max(acc_sq / tri.rows - (acc_sum / tri.rows) ** 2, 0.0)))
+    warnings = _identifiability(model, acc_std, s)
+    return LipFit(model, s, cutoff, dec, grid, measured_a, predicted_a, rows_a, n_eff, cond, warnings)
 
 
-def _identifiability(model: FrictionModel, data: FilteredData, s: LipSettings) -> list[str]:
+class _EmptyRows:
+    """Zero rows, for the column names alone."""
+
+    torque = acceleration = velocity = position = sign = np.empty(0)
+
+
+def _identifiability(model: FrictionModel, acc_std: float, s: LipSettings) -> list[str]:
     """Raise for an unidentifiable inertia; return warnings for the other parameters."""
     j, se_j = model.inertia, model.std_errors.get("inertia", np.nan)
     known = s.fixed_inertia is not None
@@ -246,7 +353,7 @@ def _identifiability(model: FrictionModel, data: FilteredData, s: LipSettings) -
         rse = "inf" if not (j > 0 and np.isfinite(se_j)) else f"{100 * se_j / j:.0f} %"
         raise AnalysisError(
             f"inertia J is unidentifiable from this run (estimate {j:.4g}, relative standard error {rse}): "
-            f"the filtered acceleration (rms {np.std(data.acceleration):.3g}) does not stand out from the "
+            f"the filtered acceleration (rms {acc_std:.3g}) does not stand out from the "
             "friction and noise; excite faster torque changes or record longer"
         )
     warnings = []
@@ -261,17 +368,19 @@ def _identifiability(model: FrictionModel, data: FilteredData, s: LipSettings) -
     return warnings
 
 
-def _refine_thresholds(x, y, lin, data, deltas, bounds: tuple[float, float]) -> np.ndarray:
+def _refine_thresholds(source: ChunkSource, fs: float, s: LipSettings, cutoff: float, dec: int, block: int,
+                       deltas: np.ndarray, bounds: tuple[float, float]) -> np.ndarray:
     """Variable projection: minimise the NNLS residual over log Delta (scipy least_squares), each Delta kept
     inside the candidate grid's range (below it the data cannot resolve a threshold, and an unbounded step
-    can make an element so stiff that no simulation is stable)."""
+    can make an element so stiff that no simulation is stable). The residual vector is the triangular form's,
+    [R_11 c - r_12, r_22], whose squared norm is the regression's |A c - y|^2; each evaluation is one pass."""
     from scipy.optimize import least_squares
 
     def residual(logd: np.ndarray) -> np.ndarray:
-        d = np.sort(np.exp(logd))
-        a = np.column_stack([lin, stop_columns(x, d, data)])
-        coef, _ = _solve(a, y)
-        return y - a @ coef
+        tri = _regression(source, fs, s, cutoff, dec, np.sort(np.exp(logd)), block)
+        coef, _ = tri.solve()
+        p = coef.size
+        return np.append(tri.r[:p, :p] @ coef - tri.r[:p, p], tri.r[p, p])
 
     lo, hi = np.log(bounds[0]), np.log(bounds[1])
     start = np.clip(np.log(deltas), lo + 1e-9, hi - 1e-9)
@@ -289,12 +398,40 @@ def predict_filtered(
     order: int = 4,
     decimation: int = 1,
     timing: str = "hold_next",
+    block: int = BLOCK,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Equation-error prediction on any run: (L[tau], model's L[tau], row indices) at the kept rows."""
     x = np.asarray(position, float)
-    data = filtered_data(x, torque, fs, cutoff, order=order, decimation=decimation, timing=timing)
-    pred = model.inertia * data.acceleration + model.viscous * data.velocity + model.coulomb * data.sign
-    pred = pred + model.spring * data.position + model.offset
-    if model.ms_delta.size:
-        pred = pred + stop_columns(x, model.ms_delta, data) @ model.ms_stiffness
-    return data.torque, pred, data.rows
+    tau = np.asarray(torque, float)
+    edge = edge_samples(fs, cutoff)
+    if len(range(edge, x.size - edge, max(1, int(decimation)))) < 10:
+        filtered_data(x, tau, fs, cutoff, order=order, decimation=decimation, timing=timing)  # its message
+    return predict_chunks(model, array_chunks(x, tau), fs, cutoff, order=order, decimation=decimation,
+                          timing=timing, block=block)
+
+
+def predict_chunks(
+    model: FrictionModel,
+    source: ChunkSource,
+    fs: float,
+    cutoff: float,
+    *,
+    order: int = 4,
+    decimation: int = 1,
+    timing: str = "hold_next",
+    block: int = BLOCK,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`predict_filtered` on a record read chunk by chunk (``chunked``)."""
+    measured, predicted, rows = [], [], []
+    for blk in blocks(source, fs, cutoff, order=order, decimation=decimation, timing=timing,
+                      deltas=model.ms_delta if model.ms_delta.size else None, block=block):
+        pred = model.inertia * blk.acceleration + model.viscous * blk.velocity + model.coulomb * blk.sign
+        pred = pred + model.spring * blk.position + model.offset
+        if model.ms_delta.size:
+            pred = pred + blk.stop @ model.ms_stiffness
+        measured.append(blk.torque)
+        predicted.append(pred)
+        rows.append(blk.rows)
+    if not rows:
+        raise AnalysisError("run too short: no regression rows after dropping the filter start-up samples")
+    return np.concatenate(measured), np.concatenate(predicted), np.concatenate(rows)

@@ -22,6 +22,8 @@ from hilbench.analysis.models.friction_model import FrictionModel
 
 #: Stop-operator values held at once by segmented_simulation_error (16 MiB of float64).
 CHUNK_VALUES = 1 << 21
+#: Samples per call of the C plant in simulate_position.
+SIM_BLOCK = 1 << 16
 #: More sub-steps per sample than this means a broken model, not a stiff plant (the C engine takes an int).
 MAX_SUBSTEPS = 100_000
 
@@ -63,16 +65,21 @@ def simulate_position(
     substeps: int | None = None,
 ) -> np.ndarray:
     """Simulated position theta_sim[k] (rad or m), shape (n,), of the model under the torque record."""
-    from hilbench.firmware_sim.plant import PlantParameterError, simulate
+    from hilbench.firmware_sim.plant import Plant, PlantParameterError
 
     dt = 1.0 / fs
     u = held_torque(torque, timing)
+    theta = np.empty(u.size)
     try:
         sub = substeps or stable_substeps(model, dt)
-        out = simulate(model.plant_params(), u, dt, substeps=sub, theta0=theta0, omega0=omega0)
+        plant = Plant(model.plant_params(), dt, sub, theta0=theta0, omega0=omega0)
+        # in blocks, keeping the angle only: one call would hold all eight output channels (64 bytes per
+        # sample); consecutive runs continue from the plant's state, bit for bit the same as one call
+        for k0 in range(0, u.size, SIM_BLOCK):
+            theta[k0 : k0 + SIM_BLOCK] = plant.run(u[k0 : k0 + SIM_BLOCK]).theta
     except (PlantParameterError, FloatingPointError) as exc:
         raise AnalysisError(f"model cannot be simulated: {exc}") from None
-    return out.theta
+    return theta
 
 
 def simulation_error(
@@ -269,3 +276,249 @@ def refine_output_error(
         refined.std_errors["offset"] = float(pk.scale_c0 * se_v[i])
     after = float(np.sqrt(np.mean(r**2)) * scale / np.std(x))
     return refined, {"position_nrmse_before": before, "position_nrmse_after": after, "nfev": int(sol.nfev)}
+
+
+class _Spread:
+    """Running sums for rms(x - sim) and std(x) over a record read in blocks (x shifted by its first value, so
+    a large constant offset does not cost precision)."""
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.err2 = 0.0
+        self.s1 = 0.0
+        self.s2 = 0.0
+        self.ref: float | None = None
+
+    def add(self, x: np.ndarray, sim: np.ndarray) -> None:
+        if self.ref is None and x.size:
+            self.ref = float(x[0])
+        d = x - (self.ref or 0.0)
+        e = x - sim
+        self.n += x.size
+        self.err2 += float(e @ e)
+        self.s1 += float(np.sum(d))
+        self.s2 += float(d @ d)
+
+    def nrmse(self) -> float:
+        var = self.s2 / self.n - (self.s1 / self.n) ** 2 if self.n else 0.0
+        if not var > 0:
+            raise AnalysisError("cannot normalise the error: the reference signal is constant")
+        return float(np.sqrt(self.err2 / self.n / var))
+
+
+def simulation_error_chunks(model: FrictionModel, source, fs: float, *, timing: str = "hold_next") -> float:
+    """:func:`simulation_error` (the NRMSE) on a record read chunk by chunk (``chunked``): the plant runs block by
+    block from its own state, so the simulation is the one-call simulation bit for bit; nothing of the record's
+    length is kept."""
+    from hilbench.analysis.identification.chunked import BLOCK, windows
+    from hilbench.firmware_sim.plant import Plant, PlantParameterError
+
+    dt = 1.0 / fs
+    spread = _Spread()
+    plant = None
+    try:
+        sub = stable_substeps(model, dt)
+        for w in windows(source, BLOCK, 2):  # one sample ahead: a held torque may be the next sample's
+            if plant is None:
+                plant = Plant(model.plant_params(), dt, sub, theta0=float(w.x[0]),
+                              omega0=initial_velocity(w.x, fs))
+            u = held_torque(w.tau, timing)[w.a - w.wa : w.b - w.wa]
+            spread.add(w.x[w.a - w.wa : w.b - w.wa], plant.run(u).theta)
+    except (PlantParameterError, FloatingPointError) as exc:
+        raise AnalysisError(f"model cannot be simulated: {exc}") from None
+    return spread.nrmse()
+
+
+def segmented_simulation_error_chunks(model: FrictionModel, source, fs: float, *, timing: str = "hold_next",
+                                      segment: float = 1.0) -> float:
+    """:func:`segmented_simulation_error` (the NRMSE) on a record read chunk by chunk. Blocks are whole segments;
+    each window reaches the filter's margin beyond its block, so the restart velocity is the whole-record
+    low-pass's to e^-40 of its start-up transient, and the deflections are the stop operator carried exactly."""
+    from hilbench.analysis.identification.chunked import BLOCK, StopCarry, default_margin, windows
+    from hilbench.firmware_sim.plant import Plant, PlantParameterError
+
+    if not segment > 0:
+        raise AnalysisError(f"segment must be positive, got {segment} s")
+    dt = 1.0 / fs
+    n_seg = max(2, int(round(segment * fs)))
+    cutoff = min(fs / 20.0, 0.45 * fs)
+    margin = default_margin(fs, cutoff)
+    block = max(1, -(-max(BLOCK, 2 * margin) // n_seg)) * n_seg  # whole segments, at least 2 margins
+    params = model.plant_params()
+    carry = StopCarry(params.ms_delta, margin) if params.n_elements else None
+    spread = _Spread()
+    try:
+        sub = stable_substeps(model, dt)
+        for w in windows(source, block, margin):
+            lo, hi = w.a - w.wa, w.b - w.wa
+            xf = zero_phase_lowpass(w.x, fs, cutoff)
+            v = np.gradient(xf, dt) if xf.size > 1 else np.zeros_like(xf)
+            u = held_torque(w.tau, timing) / params.torque_constant
+            s = carry.window(w) if carry is not None else None
+            sim = np.empty(hi - lo)
+            for k0 in range(lo, hi, n_seg):
+                plant = Plant(params, dt, sub, theta0=float(w.x[k0]), omega0=float(v[k0]))
+                if s is not None:
+                    plant.set_deflections(s[k0])
+                sim[k0 - lo : k0 - lo + n_seg] = plant.run(u[k0 : min(k0 + n_seg, hi)]).theta
+            spread.add(w.x[lo:hi], sim)
+    except (PlantParameterError, FloatingPointError) as exc:
+        raise AnalysisError(f"model cannot be simulated: {exc}") from None
+    return spread.nrmse()
+
+
+class _Autocorrelation:
+    """Residual sums for ``regressors.effective_sample_count`` over a record read in blocks: sum r, the lagged
+    products sum r_i*r_(i+k) for k < max_lag, and the first and last max_lag values (for the mean's terms)."""
+
+    def __init__(self, max_lag: int = 200):
+        self.max_lag = max_lag
+        self.n = 0
+        self.total = 0.0
+        self.lagged = np.zeros(max_lag)
+        self.head = np.empty(0)
+        self.tail = np.empty(0)
+
+    def add(self, r: np.ndarray) -> None:
+        joined = np.concatenate([self.tail, r])
+        t = self.tail.size
+        for k in range(min(self.max_lag, joined.size)):
+            # products whose later factor is in this block: i + k >= t
+            lo = max(t - k, 0)
+            self.lagged[k] += float(joined[lo : joined.size - k] @ joined[lo + k :])
+        self.n += r.size
+        self.total += float(np.sum(r))
+        if self.head.size < self.max_lag:
+            self.head = np.concatenate([self.head, r[: self.max_lag - self.head.size]])
+        self.tail = joined[-self.max_lag :]
+
+    def n_eff(self) -> float:
+        """n / (1 + 2*sum rho_k), summed up to the first lag with rho_k <= 0 (as effective_sample_count)."""
+        n = self.n
+        m = self.total / n if n else 0.0
+        denom = self.lagged[0] - n * m * m
+        if n < 3 or denom <= 0:
+            return float(n)
+        acc = 0.0
+        for k in range(1, min(self.max_lag, n - 1)):
+            a = self.total - float(np.sum(self.tail[self.tail.size - k :])) if k else self.total
+            b = self.total - float(np.sum(self.head[:k]))
+            rho = (self.lagged[k] - m * (a + b) + (n - k) * m * m) / denom
+            if rho <= 0:
+                break
+            acc += rho
+        return float(n / (1.0 + 2.0 * acc))
+
+
+def refine_output_error_chunks(model: FrictionModel, source, fs: float, *, timing: str = "hold_next",
+                               max_iterations: int = 20, tolerance: float = 1e-8) -> tuple[FrictionModel, dict]:
+    """:func:`refine_output_error` on a record read chunk by chunk (``chunked``), in memory bounded by the block.
+
+    Levenberg-Marquardt on the same parameters (``_Packing``) and the same residual, (theta_sim - theta)/std(theta)
+    of the open-loop simulation from the first sample. Each pass runs the plant of the current parameters and
+    one per parameter step (forward differences, step 1e-4 in the packed values) through the record block by
+    block, every plant from its own state, and accumulates J^T J, J^T r and r^T r; a trial step is one more pass.
+    Standard errors are sigma^2 (J^T J)^-1, inflated by n/n_eff as in the array version (the residual's
+    autocorrelation accumulated block by block)."""
+    from hilbench.analysis.identification.chunked import BLOCK, windows
+    from hilbench.firmware_sim.plant import Plant, PlantParameterError
+
+    dt = 1.0 / fs
+    pk = _Packing(model)
+    base_sub = stable_substeps(model, dt) * 2  # room for stiffer elements during the search
+    first = next(iter(windows(source, BLOCK, 2)), None)
+    if first is None:
+        raise AnalysisError("the record is empty")
+    theta0, omega0 = float(first.x[0]), initial_velocity(first.x, fs)
+    spread = _Spread()
+    for w in windows(source, BLOCK, 2):
+        xs = w.x[w.a - w.wa : w.b - w.wa]
+        spread.add(xs, xs)
+    scale = float(np.sqrt(spread.s2 / spread.n - (spread.s1 / spread.n) ** 2)) or 1.0
+
+    def sweep(vectors: list[np.ndarray], steps: np.ndarray | None = None, corr: _Autocorrelation | None = None):
+        """r^T r of vectors[0]; with ``steps``, also J^T J and J^T r from the others (vectors[0] + step_i e_i)."""
+        try:
+            plants = []
+            for v in vectors:
+                m = pk.unpack(v)
+                plants.append(Plant(m.plant_params(), dt, max(base_sub, stable_substeps(m, dt)), theta0=theta0,
+                                    omega0=omega0))
+        except (AnalysisError, PlantParameterError, FloatingPointError):
+            return math.inf, None, None
+        p = len(vectors) - 1
+        jtj, jtr, rtr = np.zeros((p, p)), np.zeros(p), 0.0
+        try:
+            for w in windows(source, BLOCK, 2):
+                u = held_torque(w.tau, timing)[w.a - w.wa : w.b - w.wa]
+                xs = w.x[w.a - w.wa : w.b - w.wa]
+                sims = [pl.run(u).theta for pl in plants]
+                r = (sims[0] - xs) / scale
+                if not np.all(np.isfinite(r)):
+                    return math.inf, None, None
+                rtr += float(r @ r)
+                if corr is not None:
+                    corr.add(r)
+                if p:
+                    jac = np.column_stack([(s - sims[0]) / (scale * h) for s, h in zip(sims[1:], steps, strict=True)])
+                    jtj += jac.T @ jac
+                    jtr += jac.T @ r
+        except (PlantParameterError, FloatingPointError):
+            return math.inf, None, None
+        return rtr, jtj, jtr
+
+    def linearise(v: np.ndarray, corr: _Autocorrelation | None = None):
+        steps = 1e-4 * np.maximum(1.0, np.abs(v))
+        return sweep([v, *(v + h * e for h, e in zip(steps, np.eye(v.size), strict=True))], steps, corr)
+
+    v = pk.pack(model)
+    cost, jtj, jtr = linearise(v)
+    if not math.isfinite(cost):
+        raise AnalysisError("model cannot be simulated from its start")
+    before = cost
+    lam = 1e-3
+    passes = v.size + 1
+    for _ in range(max_iterations):
+        d = np.diag(jtj).copy()
+        d[d == 0] = 1.0
+        improved = False
+        while lam < 1e12:
+            step = np.linalg.solve(jtj + lam * np.diag(d), -jtr)
+            trial, _, _ = sweep([v + step])
+            passes += 1
+            if trial < cost:
+                improved = True
+                break
+            lam *= 4.0
+        if not improved:
+            break
+        v = v + step
+        lam = max(lam / 3.0, 1e-12)
+        done = cost - trial <= tolerance * cost
+        cost, jtj, jtr = linearise(v)
+        passes += v.size + 1
+        if done:
+            break
+    corr = _Autocorrelation()
+    cost, jtj, jtr = linearise(v, corr)
+    refined = pk.unpack(v)
+    n, p = corr.n, v.size
+    s2 = cost / max(1, n - p)
+    infl = max(1.0, n / corr.n_eff())
+    se_v = np.sqrt(np.clip(np.diag(np.linalg.pinv(jtj) * s2 * infl), 0, None))
+    nn = pk.n
+    refined.std_errors = {"inertia": float(refined.inertia * se_v[0]),
+                          "ms_stiffness": refined.ms_stiffness * se_v[1 : 1 + nn],
+                          "ms_delta": refined.ms_delta * se_v[1 + nn : 1 + 2 * nn]}
+    i = 1 + 2 * nn
+    if pk.use_b:
+        refined.std_errors["viscous"] = float(refined.viscous * se_v[i])
+        i += 1
+    if pk.use_fc:
+        refined.std_errors["coulomb"] = float(refined.coulomb * se_v[i])
+        i += 1
+    if pk.use_c0:
+        refined.std_errors["offset"] = float(pk.scale_c0 * se_v[i])
+    norm = float(np.sqrt(n)) if n else 1.0
+    return refined, {"position_nrmse_before": float(np.sqrt(before)) / norm,
+                     "position_nrmse_after": float(np.sqrt(cost)) / norm, "passes": passes}

@@ -8,6 +8,9 @@ Figures on the validation run (docs/compare.md):
   (``families.segmented_position``).
 - ``n_parameters`` is the parameter count. ``fit_time_s`` is the wall time of the identification on the
   training run (the Maxwell-slip NNLS fit that several families start from is timed once, in its own row).
+
+A family whose fit or evaluation fails keeps its row, named, with ``error`` holding the reason and no figures;
+the other families complete.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.models.families import (
     FAMILIES,
     FamilyFit,
@@ -28,7 +32,7 @@ from hilbench.analysis.models.families import (
     fit_family,
     maxwell_slip_start,
 )
-from hilbench.firmware_sim.plant import PlantParams
+from hilbench.firmware_sim.plant import PlantParameterError, PlantParams
 
 SCHEMA = "hilbench.compare/1"
 
@@ -43,6 +47,7 @@ class Row:
     fit: FamilyFit | None = None
     plant: PlantParams | None = None
     curves: dict = field(default_factory=dict)
+    error: str | None = None  # why the family could not be fitted or evaluated (then no figures)
 
 
 @dataclass
@@ -62,14 +67,24 @@ def compare(train: RunData, validation: RunData, *, timing: str, train_position:
     ms = maxwell_slip_start(train, timing, train_position, train_torque)
     ms_time = time.perf_counter() - t0
     for family in families:
-        fit = fit_family(family, train, timing=timing, position=train_position, torque=train_torque,
-                         segment=segment, max_nfev=max_nfev, ms_fit=ms)
-        if family == "maxwell_slip":
-            fit.fit_time_s = ms_time
-        rows.append(_row(family, fit.n_parameters, fit.fit_time_s, fit.plant, train, validation, segment, fit))
+        t1 = time.perf_counter()
+        try:
+            fit = fit_family(family, train, timing=timing, position=train_position, torque=train_torque,
+                             segment=segment, max_nfev=max_nfev, ms_fit=ms)
+            if family == "maxwell_slip":
+                fit.fit_time_s = ms_time
+            rows.append(_row(family, fit.n_parameters, fit.fit_time_s, fit.plant, train, validation, segment, fit))
+        except (AnalysisError, PlantParameterError, FloatingPointError, np.linalg.LinAlgError) as exc:
+            rows.append(failed_row(family, f"{type(exc).__name__}: {exc}", time.perf_counter() - t1))
     for name, plant in (published or {}).items():
         rows.append(_row(name, 4, math.nan, plant, train, validation, segment, None))
     return Comparison(train, validation, rows, segment)
+
+
+def failed_row(name: str, reason: str, fit_time: float) -> Row:
+    """The row of a family that could not be fitted or evaluated: named, with its reason, no figures."""
+    blank = {"torque_nrmse": math.nan, "position_nrmse_segmented": math.nan, "position_rms_segmented": math.nan}
+    return Row(name, 0, fit_time, dict(blank), dict(blank), error=reason)
 
 
 def _row(name: str, n_par: int, fit_time: float, plant: PlantParams, train: RunData, validation: RunData,
@@ -106,6 +121,9 @@ def markdown_table(result: Comparison) -> str:
         return f(None if v is None else 100.0 * v)
 
     for r in result.rows:
+        if r.error is not None:
+            lines.append(f"| {r.name} | – | {f(r.fit_time_s)} | FAILED: {r.error.replace('|', '/')} | | | | |")
+            continue
         lines.append(f"| {r.name} | {r.n_parameters} | {f(r.fit_time_s)} | {pct(r.validation['torque_nrmse'])} | "
                      f"{pct(r.validation['position_nrmse_segmented'])} | {f(r.validation['position_rms_segmented'])} "
                      f"| {pct(r.train['torque_nrmse'])} | "
@@ -132,9 +150,11 @@ def document(result: Comparison, data: dict) -> dict:
         "axis": result.train.axis,
         "segment_s": result.segment_s,
         "data": data,
-        "rows": [{"model": r.name, "n_parameters": r.n_parameters, "fit_time_s": r.fit_time_s, "train": r.train,
+        "rows": [{"model": r.name, "n_parameters": None if r.error else r.n_parameters,
+                  "fit_time_s": r.fit_time_s, "train": r.train,
                   "validation": r.validation, "fit": None if r.fit is None else r.fit.to_dict(),
-                  "plant": None if r.plant is None else r.plant.to_dict()} for r in result.rows],
+                  "plant": None if r.plant is None else r.plant.to_dict(), "error": r.error}
+                 for r in result.rows],
     })
 
 

@@ -23,6 +23,9 @@ def write_plots(result: Comparison, outdir: str | Path, window_s: float = 2.0, l
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     val = result.validation
+    fitted = [r for r in result.rows if r.error is None]  # a failed family has no curves
+    if not fitted:
+        return []
     u = {"rotary": ("rad", "N*m", "torque"), "linear": ("m", "N", "force")}[val.axis]
     rows_idx = val.data.rows
     n_win = max(2, int(window_s * val.fs))
@@ -37,13 +40,13 @@ def write_plots(result: Comparison, outdir: str | Path, window_s: float = 2.0, l
     t = np.arange(val.x.size) / val.fs
 
     # friction loops around the busiest reversal: measured friction is L[tau] - J*L[theta''] - c0 with the J and
-    # c0 of the first row; each model's is its own friction along the measured path
+    # c0 of the first fitted row; each model's is its own friction along the measured path
     flip = int(np.argmax(flips[n_loop:] - flips[:-n_loop])) if val.x.size > n_loop else 0
     near = (rows_idx >= flip) & (rows_idx < flip + n_loop)
     fig, ax = plt.subplots(figsize=(7, 5))
-    ax.plot(val.data.position[near], result.rows[0].curves["friction_measured"][near], "k", lw=2,
-            label=f"measured (J, c0 of {result.rows[0].name})")
-    for r in result.rows:
+    ax.plot(val.data.position[near], fitted[0].curves["friction_measured"][near], "k", lw=2,
+            label=f"measured (J, c0 of {fitted[0].name})")
+    for r in fitted:
         ax.plot(val.data.position[near], r.curves["friction_predicted"][near], lw=1, label=r.name)
     ax.set_xlabel(f"filtered position ({u[0]})")
     ax.set_ylabel(f"filtered friction {u[2]} ({u[1]})")
@@ -59,7 +62,7 @@ def write_plots(result: Comparison, outdir: str | Path, window_s: float = 2.0, l
     w = slice(start, start + n_win)
     a1.plot(t[w], val.x[w], "k", lw=2, label="measured")
     a2.plot(t[rows_idx[sel]], val.data.torque[sel], "k", lw=2, label="measured")
-    for r in result.rows:
+    for r in fitted:
         a1.plot(t[w], r.curves["position_simulated"][w], lw=1, label=r.name)
         a2.plot(t[rows_idx[sel]], r.curves["torque_predicted"][sel], lw=1, label=r.name)
     a1.set_ylabel(f"position ({u[0]})")
