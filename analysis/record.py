@@ -91,6 +91,11 @@ class Record:
     device: dict[str, Any] = field(default_factory=dict)
     events: list[tuple[str, str]] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    n_samples: int = 0  # samples of the record (set also when the arrays are not loaded: stream_record)
+
+    def __post_init__(self) -> None:
+        if not self.n_samples and self.t is not None:
+            self.n_samples = int(np.asarray(self.t).size)
 
     @property
     def name(self) -> str:
@@ -254,6 +259,58 @@ def load_record(path: str | Path, *, torque_channel: str | None = None, timing: 
             calibration=run.calibration, device=run.device, events=events, notes=notes)
 
 
+
+
+#: samples per chunk read from a file by :func:`stream_record` (two float64 channels: 2 MiB)
+STREAM_CHUNK = 1 << 17
+
+
+def stream_record(path: str | Path, *, torque_channel: str | None = None, timing: str = "auto",
+                  allow_incomplete: bool = False, chunk: int = STREAM_CHUNK):
+    """A record read chunk by chunk (docs/long-runs.md): ``(record, source)`` where ``record`` is the
+    :class:`Record` of :func:`load_record` without its arrays (``t``, ``position``, ``torque`` empty;
+    ``n_samples`` set) and ``source`` is a chunk source, a callable that returns a fresh iterator of
+    ``(position, torque)`` pairs of at most ``chunk`` samples read from the file, each checked as
+    :func:`numeric` does (the sample index in a message is the record's). The same checks as
+    :func:`load_record` run first (completeness, channels, torque timing). A host-clocked run (resampled onto a
+    uniform grid by a spline over the whole record) cannot stream: ``source`` is None and ``record`` is the
+    whole :func:`load_record`."""
+    path = Path(path)
+    if not path.exists():
+        raise AnalysisError(f"{path}: no such run file")
+    if chunk < 1:
+        raise AnalysisError(f"chunk size must be >= 1, got {chunk}")
+    with open_run(path) as run:
+        if host_sampled(run.device, run.channels):
+            return load_record(path, torque_channel=torque_channel, timing=timing,
+                               allow_incomplete=allow_incomplete), None
+        reason = completeness(run)
+        if reason is not None and not allow_incomplete:
+            raise IncompleteRecordError(f"{path}: refusing an incomplete record: {reason}; pass {ALLOW_OPTION} to "
+                                        "analyse it anyway (every report then says so)")
+        if "position" not in run.channels:
+            raise AnalysisError(f"{path}: no position channel (has: {', '.join(run.channels)})")
+        name = choose_torque_channel(run.channels, torque_channel, path, run.axis)
+        resolved, origin = run_torque_timing(run.meta, timing, name)
+        n = run.n_samples
+        empty = np.empty(0)
+        record = Record(
+            path=path, axis=run.axis, sample_rate=run.sample_rate, t=empty, position=None, torque=None,
+            torque_channel=name, timing=resolved, timing_origin=origin,
+            kind=record_kind(run.meta.get("record"), path), source=str(run.meta.get("source", "device")),
+            status=run.status, incomplete=reason, units=run.units, protocol_name=run.protocol_name,
+            protocol_params=run.protocol_params, calibration=run.calibration, device=run.device,
+            events=[(str(e["kind"]), str(e["message"])) for e in run.events], n_samples=n)
+
+    def chunks():
+        with open_run(path) as r:
+            for start in range(0, n, chunk):
+                stop = min(start + chunk, n)
+                x = numeric(r.channel("position", start, stop), "position", f"{path} (samples from {start})")
+                tau = numeric(r.channel(name, start, stop), name, f"{path} (samples from {start})")
+                yield x, tau
+
+    return record, chunks
 
 
 def on_host_time(host_time: np.ndarray, rate: float, position: np.ndarray, torque: np.ndarray, timing: str

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 from typing import TYPE_CHECKING, Any
 
@@ -54,6 +55,47 @@ def load(path: str, args: argparse.Namespace, **options: Any) -> Record:
     if line:
         print(f"warning: {line}", file=sys.stderr)
     return rec
+
+
+#: the memory budget's bounds, bytes: below the floor no analysis of a real record fits; the cap keeps a shared
+#: machine (a Dask worker, a lab PC running the GUI) usable whatever it has free
+MEMORY_FLOOR = 256 << 20
+MEMORY_CAP = 16 << 30
+_UNITS = {"": 1, "b": 1, "k": 1 << 10, "kb": 1 << 10, "kib": 1 << 10, "m": 1 << 20, "mb": 1 << 20, "mib": 1 << 20,
+          "g": 1 << 30, "gb": 1 << 30, "gib": 1 << 30}
+
+
+def add_memory_option(parser: argparse.ArgumentParser) -> None:
+    """``--memory``: the peak memory an analysis may use (docs/long-runs.md)."""
+    parser.add_argument("--memory", default="auto", metavar="SIZE",
+                        help="memory budget of the analysis, e.g. 2G or 512M (default auto: half the memory "
+                        "available now, at least 256 MiB, at most 16 GiB); a record whose whole arrays would not "
+                        "fit is read chunk by chunk, and an analysis that cannot fit says so before reading")
+
+
+def available_memory() -> int:
+    """Bytes the kernel says are available now (``MemAvailable``), or 4 GiB where it does not say."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 4 << 30
+
+
+def memory_budget(text: str) -> int:
+    """The budget in bytes from ``--memory`` (``auto`` or a size with an optional unit)."""
+    if text.strip().lower() == "auto":
+        return int(min(max(available_memory() // 2, MEMORY_FLOOR), MEMORY_CAP))
+    m = re.fullmatch(r"\s*([0-9]+(?:\.[0-9]*)?)\s*([a-zA-Z]*)\s*", text)
+    if not m or m.group(2).lower() not in _UNITS:
+        raise BenchError(f"--memory {text!r}: give a size such as 2G, 512M or 1.5GiB, or auto")
+    value = int(float(m.group(1)) * _UNITS[m.group(2).lower()])
+    if value < MEMORY_FLOOR:
+        raise BenchError(f"--memory {text}: below the floor of {MEMORY_FLOOR >> 20} MiB that an analysis needs")
+    return value
 
 
 def check_cutoff(cutoff: float | None, sample_rate: float, option: str = "--cutoff") -> None:

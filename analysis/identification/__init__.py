@@ -40,6 +40,48 @@ def analyse(record: Record, settings: LipSettings | None = None, *, method: str 
                     settings=settings, record=record.kind)
 
 
+#: bytes per sample of the array path (loader copies, regressors of the kept rows, figures) and its fixed part,
+#: from the peaks measured at 10 kHz (0.6 M samples: 184 MiB, 1.8 M: 280 MiB; docs/long-runs.md), with margin
+ARRAY_BYTES_PER_SAMPLE = 150
+ARRAY_BYTES_FIXED = 160 << 20
+#: the streamed path: blocks of 16 384 samples, the thinned path and the filters (268 MiB at 18 M samples)
+STREAM_BYTES_PER_SAMPLE = 8
+STREAM_BYTES_FIXED = 220 << 20
+
+
+def array_cost(samples: int) -> int:
+    """Estimated peak bytes of :func:`analyse` on whole arrays of ``samples`` (training plus validation)."""
+    return ARRAY_BYTES_FIXED + ARRAY_BYTES_PER_SAMPLE * int(samples)
+
+
+def stream_cost(samples: int) -> int:
+    """Estimated peak bytes of :func:`analyse_stream` over ``samples`` (training plus validation)."""
+    return STREAM_BYTES_FIXED + STREAM_BYTES_PER_SAMPLE * int(samples)
+
+
+def analyse_stream(record: Record, source, settings: LipSettings | None = None, *, method: str = "lip",
+                   validation: tuple[Record, object] | None = None) -> Identification:
+    """:func:`analyse` on records read chunk by chunk (``hilbench.analysis.record.stream_record``): the same model
+    and figures to 1e-9 (tests/analysis/identification/test_chunked.py), in memory bounded by the block size
+    whatever the record's length; no curves for the figures (docs/long-runs.md)."""
+    from hilbench.analysis.errors import AnalysisError
+    from hilbench.analysis.identification.identify import identify_chunks
+    from hilbench.analysis.identification.maxwell_fit import LipSettings
+
+    settings = replace(settings or LipSettings(), timing=record.timing)
+    if record.kind == "displacement-driven" and settings.fixed_inertia is None:
+        settings = replace(settings, fixed_inertia=0.0)
+    val_source = None
+    if validation is not None:
+        val, val_source = validation
+        if (val.axis, val.kind, val.timing) != (record.axis, record.kind, record.timing):
+            raise AnalysisError(f"{val.path}: axis, record kind or torque timing differ from {record.path}'s")
+        if abs(val.sample_rate - record.sample_rate) > 1e-9 * record.sample_rate:
+            raise AnalysisError(f"{val.path}: {val.sample_rate:g} Hz; {record.path}: {record.sample_rate:g} Hz")
+    return identify_chunks(source, record.sample_rate, axis=record.axis, validate=val_source, settings=settings,
+                           record=record.kind, method=method)
+
+
 def report(result: Identification, out_dir: str | Path, save: Callable | None = None) -> list[Path]:
     """The identification's figures (virgin curve, fit, residuals, hysteresis per run) as PNGs in ``out_dir``."""
     from hilbench.analysis.identification.plots import write_plots

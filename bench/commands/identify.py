@@ -12,7 +12,7 @@ METHOD_NAMES = {"lip": "Maxwell-slip (NNLS)", "oe": "Maxwell-slip (NNLS + output
 
 
 def register(subparsers) -> None:
-    from hilbench.bench.analysis_input import MAX_THRESHOLDS, add_record_options, whole_number
+    from hilbench.bench.analysis_input import MAX_THRESHOLDS, add_memory_option, add_record_options, whole_number
 
     parser = subparsers.add_parser(
         "identify",
@@ -56,6 +56,7 @@ def register(subparsers) -> None:
         "Default: estimated, or 0 for a displacement-driven record (run-file attribute record)",
     )
     add_record_options(parser)
+    add_memory_option(parser)
     parser.set_defaults(func=run)
 
 
@@ -67,13 +68,43 @@ def _arrays(path: str, args):
     return rec.arrays(), rec
 
 
+def _streamed(args, budget: int):
+    """None when the runs' whole arrays fit ``budget`` (bytes), else the chunk sources to read them by
+    (``((record, source), (val_record, val_source) or None)``); a one-line BenchError when neither fits."""
+    from hilbench.analysis.identification import array_cost, stream_cost
+    from hilbench.analysis.record import stream_record
+    from hilbench.bench.errors import BenchError
+
+    opts = {"torque_channel": args.torque_channel, "timing": args.torque_timing or "auto",
+            "allow_incomplete": args.allow_incomplete}
+    train = stream_record(args.run, **opts)
+    val = stream_record(args.validate, **opts) if args.validate else None
+    samples = train[0].n_samples + (val[0].n_samples if val else 0)
+    if array_cost(samples) <= budget:
+        return None
+    mib = lambda b: f"{b / (1 << 20):.0f} MiB"  # noqa: E731
+    if train[1] is None or (val is not None and val[1] is None):
+        raise BenchError(f"{samples} samples need about {mib(array_cost(samples))} read whole, over --memory "
+                         f"{mib(budget)}; a host-clocked run is resampled whole: raise --memory")
+    if args.method not in ("lip", "oe"):
+        raise BenchError(f"--method {args.method} reads the record whole ({mib(array_cost(samples))} for "
+                         f"{samples} samples, over --memory {mib(budget)}): use --method lip or oe, or raise --memory")
+    if stream_cost(samples) > budget:
+        raise BenchError(f"{samples} samples need about {mib(stream_cost(samples))} even read chunk by chunk, over "
+                         f"--memory {mib(budget)}")
+    if args.plots:
+        raise BenchError(f"--plots draws the whole record, which does not fit --memory {mib(budget)} "
+                         f"({mib(array_cost(samples))} needed): leave --plots out, or raise --memory")
+    return train, val
+
+
 def run(args) -> int:
-    from hilbench.analysis.identification import analyse, report
+    from hilbench.analysis.identification import analyse, analyse_stream, report
     from hilbench.analysis.identification.maxwell_fit import LipSettings
     from hilbench.analysis.models.friction_model import AXES
     from hilbench.analysis.models.model_file import model_document
     from hilbench.bench import outputs
-    from hilbench.bench.analysis_input import MAX_THRESHOLDS, check_count, check_cutoff
+    from hilbench.bench.analysis_input import MAX_THRESHOLDS, check_count, check_cutoff, memory_budget
     from hilbench.bench.errors import BenchError
     from hilbench.bench.verdict import judge
 
@@ -82,12 +113,19 @@ def run(args) -> int:
                 "candidate thresholds; a model must fit the plant's element limit")
     if args.inertia is not None and not (math.isfinite(args.inertia) and args.inertia >= 0):
         raise BenchError(f"--inertia must be finite and >= 0, got {args.inertia}")
-    train, rec = _arrays(args.run, args)
+    budget = memory_budget(args.memory)
+    stream = _streamed(args, budget)
+    if stream is None:
+        train, rec = _arrays(args.run, args)
+        val_rec = _arrays(args.validate, args)[1] if args.validate else None
+        val = val_rec.arrays() if val_rec is not None else None
+    else:
+        (rec, source), val_stream = stream
+        train = val = None
+        val_rec = val_stream[0] if val_stream else None
     channel, timing, record = rec.torque_channel, rec.timing, rec.kind
     outputs.say(f"torque timing: {timing} ({rec.timing_origin})", args.json, level=2)
-    val_rec = _arrays(args.validate, args)[1] if args.validate else None
-    val = val_rec.arrays() if val_rec is not None else None
-    check_cutoff(args.cutoff, train.fs)
+    check_cutoff(args.cutoff, rec.sample_rate)
     for text in [n for n in rec.notes if n.startswith("host-clocked timing")]:
         if "UNFIT" in text:
             print(f"{args.run}: {text}", file=sys.stderr)
@@ -102,23 +140,27 @@ def run(args) -> int:
         refine=args.refine,
         fixed_inertia=args.inertia,
     )
-    res = analyse(rec, settings, method=args.method, validation=val_rec)
+    if stream is None:
+        res = analyse(rec, settings, method=args.method, validation=val_rec)
+    else:
+        res = analyse_stream(rec, source, settings, method=args.method, validation=val_stream)
     data = {
         "train": {
             "file": str(Path(args.run).resolve()),
-            "samples": int(train.t.size),
-            "sample_rate_hz": train.fs,
-            "axis": train.axis,
+            "samples": rec.n_samples,
+            "sample_rate_hz": train.fs if train is not None else rec.sample_rate,
+            "axis": rec.axis,
+            "read": "whole" if stream is None else "chunk by chunk (--memory)",
             "torque_channel": channel,
             "torque_timing": timing,
             "incomplete": rec.incomplete,
         }
     }
-    if val is not None:
+    if val_rec is not None:
         data["validation"] = {
             "file": str(Path(args.validate).resolve()),
-            "samples": int(val.t.size),
-            "sample_rate_hz": val.fs,
+            "samples": val_rec.n_samples,
+            "sample_rate_hz": val.fs if val is not None else val_rec.sample_rate,
             "incomplete": val_rec.incomplete,
         }
     doc = model_document(res.model, method=res.method, settings=res.settings, figures=res.figures, data=data)
@@ -131,16 +173,16 @@ def run(args) -> int:
         line = (f"{name} on {channel} ({record}, J fixed at {m.inertia:.6g} {u['inertia']}): "
                 f"{m.ms_stiffness.size} elements, break-away {m.breakaway:.4g} {trq}, "
                 f"b = {m.viscous:.4g} {trq}*s/{u['position']}; force simulated from the measured displacement: "
-                f"train NRMSE {f['train_force_nrmse']:.4f} ({f['train_force_rel_pct']:.3g} % relative)")
-        if val is not None:
-            line += (f"; validation NRMSE {f['validation_force_nrmse']:.4f} "
+                f"train force NRMSE {100 * f['train_force_nrmse']:.3g} % ({f['train_force_rel_pct']:.3g} % relative)")
+        if val_rec is not None:
+            line += (f"; validation force NRMSE {100 * f['validation_force_nrmse']:.3g} % "
                      f"({f['validation_force_rel_pct']:.3g} % relative)")
         say(line + f" ({res.wall_time:.2f} s) -> {args.json}")
         if args.plots:
             say("plots: not drawn for a displacement-driven record (use hilbench residual --report for its figures)")
         return 0
     say(summary_line(res, u, channel, timing) + f" ({res.wall_time:.2f} s) -> {args.json}")
-    where = "validation" if val is not None else "train"
+    where = "validation" if val_rec is not None else "train"
     say(judge(100 * f[f"{where}_torque_nrmse"], 100 * f[f"{where}_position_nrmse"],
               100 * f[f"{where}_position_nrmse_segmented"], where))
     if args.plots:

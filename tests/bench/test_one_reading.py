@@ -57,3 +57,30 @@ def test_compare_scores_the_identified_model_as_identify_does(runs, capsys):
     cmp = rows["maxwell_slip"]["validation"]["torque_nrmse"]
     assert cmp == pytest.approx(ident, rel=1e-3)
     assert "validation torque NRMSE (%)" in table and f"{100 * cmp:.4g}" in table
+
+
+def test_a_record_over_the_memory_budget_is_read_chunk_by_chunk_with_the_same_result(runs, capsys, monkeypatch):
+    """--memory below what the whole arrays need makes identify read both runs chunk by chunk (the record
+    loader's stream_record feeding identify_chunks): the same model and figures as the whole-array path."""
+    import hilbench.analysis.identification as ident
+    import hilbench.analysis.record as record
+
+    assert main(["identify", str(runs / "a.h5"), "--validate", str(runs / "b.h5"), "--json",
+                 str(runs / "whole.json")]) == 0
+    monkeypatch.setattr(ident, "ARRAY_BYTES_PER_SAMPLE", 1 << 20)  # as if the record were 40 000 times longer
+    monkeypatch.setattr(record, "STREAM_CHUNK", 4099)  # many chunks, cut at odd places
+    assert main(["identify", str(runs / "a.h5"), "--validate", str(runs / "b.h5"), "--json",
+                 str(runs / "streamed.json"), "--memory", "2G"]) == 0
+    whole = json.loads((runs / "whole.json").read_text())
+    streamed = json.loads((runs / "streamed.json").read_text())
+    assert whole["data"]["train"]["read"] == "whole"
+    assert streamed["data"]["train"]["read"] == "chunk by chunk (--memory)"
+    assert streamed["parameters"]["inertia"] == pytest.approx(whole["parameters"]["inertia"], rel=1e-7)
+    for key in ("train_torque_nrmse", "validation_torque_nrmse", "validation_position_nrmse_segmented"):
+        assert streamed["figures"][key] == pytest.approx(whole["figures"][key], rel=1e-6), key
+    # and --plots, which draws the whole record, is refused in one line instead of outgrowing the budget
+    capsys.readouterr()
+    assert main(["identify", str(runs / "a.h5"), "--json", str(runs / "p.json"), "--memory", "2G",
+                 "--plots", str(runs / "plots")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--plots draws the whole record" in err
