@@ -33,6 +33,7 @@ import numpy as np
 
 from hilbench.drivers import cia402 as c
 from hilbench.firmware_sim.bus_buffer import widen_device_buffer
+from hilbench.firmware_sim.bus_frames import drop_malformed
 from hilbench.firmware_sim.plant import Plant
 from hilbench.firmware_sim.sim_config import SimConfig, substeps_for
 from hilbench.firmware_sim.stall_grace import StallGrace
@@ -41,6 +42,9 @@ EDS_PATH = Path(__file__).with_name("hb_cia402.eds")
 SYNC_TIMEOUT = 0.1  # s without SYNC (while operation is enabled) that count as a lost host
 EMCY_HEARTBEAT = 0x8130
 EMCY_SYNC_LOST = 0x8250  # the synchronous RPDOs stop with the SYNC
+EMCY_POSITION_LIMIT = 0x8612  # software position limit 0x607D passed
+EMCY_OVER_SPEED = 0x8400      # max motor speed 0x6080 passed
+HISTORY_LENGTH = 8            # entries of the error history 0x1003 (the EDS's sub-indices)
 CLOCKS = ("sync", "real")
 
 
@@ -90,6 +94,7 @@ class SimCia402Drive:
         self._tpdos: list = []
         self._stop = threading.Event()
         self.emcy_sent: list[int] = []
+        self.history: list[int] = []  # error history 0x1003, newest first
         self.node.add_write_callback(self._on_write)
         self.node.add_read_callback(self._on_read)
         network.add_node(self.node)
@@ -116,6 +121,9 @@ class SimCia402Drive:
                   c.ERROR_REGISTER: self.error_register, c.POSITION_ACTUAL: self.meas[0],
                   c.VELOCITY_ACTUAL: self.meas[1], c.TORQUE_ACTUAL: self.meas[2], 0x6078: self.meas[3],
                   0x6074: self.target_pm if self.state is c.State.OPERATION_ENABLED else 0}
+        if index == c.ERROR_HISTORY:
+            return len(self.history) if subindex == 0 else (self.history[subindex - 1]
+                                                             if subindex <= len(self.history) else 0)
         return values.get(index)
 
     def _on_write(self, index: int, subindex: int, od, data: bytes) -> None:
@@ -123,12 +131,16 @@ class SimCia402Drive:
         with self._lock:
             if index in (c.COMM_CYCLE_PERIOD, c.MAX_TORQUE, c.RATED_TORQUE, c.RATED_CURRENT, c.ENCODER_RESOLUTION):
                 self._settings = None
-            if index == c.CONTROLWORD:
+            if index == c.ERROR_HISTORY and subindex == 0 and int(value) == 0:
+                self.history.clear()  # CiA 301: writing 0 to sub 0 clears the history
+            elif index == c.CONTROLWORD:
                 self._command(int(value))
             elif index == c.MODES_OF_OPERATION:
                 self.mode_display = int(value) if self._supports(int(value)) else self.mode_display
             elif index == c.CONSUMER_HEARTBEAT and subindex == 1:
                 node, ms = (int(value) >> 16) & 0x7F, int(value) & 0xFFFF
+                if node == self.node.id:  # its own heartbeat would feed it: a drive never counts its own frames
+                    node = 0
                 if self._host_hb is not None:
                     self.network.unsubscribe(0x700 + self._host_hb[0], self._on_host_heartbeat)
                 self._host_hb = (node, ms / 1000.0) if ms and node else None
@@ -164,6 +176,7 @@ class SimCia402Drive:
             self.state = c.State.FAULT
             self.error_code = code
             self.error_register = register | 0x01
+            self.history = [code, *self.history][:HISTORY_LENGTH]
             self.emcy_sent.append(code)
             self.node.emcy.send(code, self.error_register)
 
@@ -277,7 +290,21 @@ class SimCia402Drive:
             torque_pm = round(out.current_meas[-1] * kt / self._rated * 1000.0)
             self.meas = (wrap, int(round(velocity)), int(np.clip(torque_pm, -32768, 32767)),
                          int(np.clip(round(out.current_meas[-1] / (self._rated / kt) * 1000.0), -32768, 32767)))
+            if enabled:
+                self._check_limits(int(out.counts[-1]), float(out.omega[-1]))
             self._answer()
+
+    def _check_limits(self, counts: int, omega: float) -> None:
+        """The drive's own limits: software position limit 0x607D (increments) and max motor speed 0x6080 (rpm),
+        checked on the sample just taken; either faults the drive (torque off at once)."""
+        od = self.node.object_dictionary
+        if c.SOFTWARE_POSITION_LIMIT in od:
+            low, high = self._raw(c.SOFTWARE_POSITION_LIMIT, 1), self._raw(c.SOFTWARE_POSITION_LIMIT, 2)
+            if not low <= counts <= high:
+                self.fault(EMCY_POSITION_LIMIT)
+                return
+        if c.MAX_MOTOR_SPEED in od and abs(omega) * 60 / (2 * math.pi) > self._raw(c.MAX_MOTOR_SPEED):
+            self.fault(EMCY_OVER_SPEED)
 
     def _answer(self) -> None:
         """Count the SYNC and send the TPDOs it triggers (with the lock held)."""
@@ -306,12 +333,16 @@ def serve(interface: str, channel: str, node_id: int, sim: SimConfig, clock: str
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(20))
     except (AttributeError, OSError):
         pass
-    network = canopen.Network()
     kwargs: dict = {"hop_limit": 0} if interface == "udp_multicast" else {}  # udp_multicast: this host only
     if port is not None:
         kwargs["port"] = port
-    network.connect(interface=interface, channel=channel, **kwargs)
-    widen_device_buffer(network.bus)
+    import can
+
+    bus = can.Bus(interface=interface, channel=channel, **kwargs)
+    widen_device_buffer(bus)
+    drop_malformed(bus)  # a stray datagram must not end the notifier thread (the drive would go deaf)
+    network = canopen.Network(bus)
+    network.connect()
     drive = SimCia402Drive(network, node_id, sim, clock=clock, supported_modes=supported_modes)
     print(f"canopen://{interface}/{channel}?node={node_id}&eds={EDS_PATH}" + (f"&port={port}" if port else ""),
           flush=True)
