@@ -147,7 +147,10 @@ def _open_odrive(url: str, timeout: float):
     node = _int(params, "node", 0, url)
     if not 0 <= node <= 63:
         raise DeviceURLError(f"{url}: node must be 0..63, got {node}")
-    return OdriveDrive(interface, channel, node, _int(params, "tvl_endpoint", 0, url), timeout=timeout, **kwargs)
+    endpoint = _int(params, "tvl_endpoint", 0, url)
+    if not 0 <= endpoint <= 0xFFFF:
+        raise DeviceURLError(f"{url}: tvl_endpoint must be 0..65535 (a CAN Simple endpoint id), got {endpoint}")
+    return OdriveDrive(interface, channel, node, endpoint, timeout=timeout, **kwargs)
 
 
 def _open_canopen(url: str, timeout: float):
@@ -159,8 +162,8 @@ def _open_canopen(url: str, timeout: float):
     if not os.path.isfile(params["eds"]):
         raise DeviceURLError(f"{url}: EDS file {params['eds']} does not exist")
     node = _int(params, "node", 1, url)
-    if not 1 <= node <= 127:
-        raise DeviceURLError(f"{url}: node must be 1..127, got {node}")
+    if not 1 <= node <= 126:
+        raise DeviceURLError(f"{url}: node must be 1..126 (127 is the host's own heartbeat id), got {node}")
     return CanopenDrive(interface, channel, node, params["eds"], timeout=timeout, **kwargs)
 
 

@@ -21,8 +21,9 @@ def describe(amp) -> list[str]:
     from hilbench.drivers import protocol as p
 
     if amp.clock == "host":  # an off-the-shelf drive: what it reports about itself, and what it can run
+        faults = amp.faults()
         return [f"{k}: {v}" for k, v in amp.info().items()] + [
-            f"state: {amp.state().value if amp.state() else 'unknown'}",
+            f"state: {amp.state()}", f"faults: {'; '.join(faults) if faults else 'none'}", *amp.history(),
             f"clock: host-clocked; runs {amp.capabilities.describe()}"]
     ident = amp.identity
     status = amp.status()
