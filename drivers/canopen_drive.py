@@ -482,6 +482,8 @@ class CanopenDrive(HostClockedDevice):
                 sent = cycle.sent
                 self._progress = sent
                 ready = min(cycle.received(0), cycle.received(1))
+                if cycle.limit is not None:  # the sample that tripped a limit is the last one
+                    ready = min(ready, cycle.limit[1] + 1)
                 if ready > done:
                     t1 = arrays["rx"][0, done:ready, :4].copy().view(dt1).ravel()
                     t2 = arrays["rx"][1, done:ready, :8].copy().view(dt2).ravel()

@@ -260,6 +260,8 @@ class OdriveDrive(HostClockedDevice):
                     cycle.join()
                 self._progress = cycle.sent
                 ready = min(cycle.received(0), cycle.received(1))
+                if cycle.limit is not None:  # the sample that tripped a limit is the last one
+                    ready = min(ready, cycle.limit[1] + 1)
                 if ready > done:
                     yield self._block(done, ready, a)
                     done, heard = ready, time.monotonic()
