@@ -259,6 +259,9 @@ class OdriveDrive(HostClockedDevice):
                 if ended:
                     cycle.join()
                 self._progress = cycle.sent
+                if (cycle.sent >= n or cycle.limit is not None) and not fault and not self._closed:
+                    # the cycle's last command is out: zero torque keeps the watchdog fed while it collects the tail
+                    self._start_feed()
                 ready = min(cycle.received(0), cycle.received(1))
                 if cycle.limit is not None:  # the sample that tripped a limit is the last one
                     ready = min(ready, cycle.limit[1] + 1)
