@@ -453,7 +453,7 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
     quiet = max(1.0, 20 * period)
     end, last_call = clock() + quiet, clock() + TAIL_LIMIT
     answered = min(counts or [0])
-    while answered < ctl[_SENT] and (left := min(end, last_call) - clock()) > 0:
+    while not ctl[_STOP] and answered < ctl[_SENT] and (left := min(end, last_call) - clock()) > 0:  # host gave up
         msg = bus.recv(timeout=left)
         if msg is not None:
             take(msg)
