@@ -346,7 +346,7 @@ class Bench:
                 k += n
                 writer.append({"sample_index": blk.index, "t": t, "current_cmd": blk.current_cmd,
                                "current": blk.current_meas, "torque": torque, "position": measured,
-                               "counts": blk.counts, **reference, **(blk.extra() if hasattr(blk, "extra") else {})})
+                               "counts": blk.counts, **reference, **blk.extra()})
                 done += n
                 if progress is not None:
                     prev = measured[:1] if last_pos is None else np.array([last_pos])

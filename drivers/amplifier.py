@@ -26,7 +26,7 @@ import numpy as np
 
 from hilbench.drivers import protocol as p
 from hilbench.drivers.calibration import Calibration, CountUnwrapper
-from hilbench.drivers.device import Capabilities, Device
+from hilbench.drivers.device import Capabilities, Device, SampleBlock
 from hilbench.drivers.errors import (
     CommandRefusedError,
     ConfigError,
@@ -43,7 +43,7 @@ _CLOSED = object()  # wakes waiters when the receiver stops
 
 
 @dataclass
-class Samples:
+class Samples(SampleBlock):
     """One block of device samples, host side: counts unwrapped, SI conversions via the calibration.
 
     Attributes:

@@ -54,8 +54,22 @@ def refusal(name: str, capabilities: Capabilities, mode: str, sample_rate: int) 
     return None
 
 
+class SampleBlock:
+    """What every device's ``stream`` yields, one block at a time: the one sample-block type the runner reads.
+
+    Every block has (1-D arrays of equal length, SI units at the load): ``index`` (sample index, int64),
+    ``time`` (device time, s), ``counts`` (encoder counts, unwrapped), ``current_cmd`` and ``current_meas``
+    (A), ``torque`` (N*m), ``position`` (rad), ``status`` (the device's status per sample) and ``sample_rate``
+    (Hz); :meth:`extra` gives the channels a device adds beyond that set ({} when none).
+    """
+
+    def extra(self) -> dict[str, np.ndarray]:
+        """Channels beyond the device-clocked set, for the run file (name: array)."""
+        return {}
+
+
 @dataclass
-class CycleSamples:
+class CycleSamples(SampleBlock):
     """One block of samples of a host-clocked device, in SI units at the load.
 
     Attributes (1-D arrays of equal length):
@@ -135,7 +149,7 @@ class Device(abc.ABC):
         """Emergency stop (quick stop on a drive); safe from any thread."""
 
     @abc.abstractmethod
-    def stream(self, setpoints) -> Iterator:
+    def stream(self, setpoints) -> Iterator[SampleBlock]:
         """Play ``setpoints`` (A in current mode, rad/s in velocity mode), one per sample; yield sample blocks."""
 
     @abc.abstractmethod

@@ -6,6 +6,8 @@ import argparse
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from hilbench.drivers.device_url import describe_schemes
+
     parser = subparsers.add_parser(
         "fault", help="show or clear a device's latched faults",
         description="Faults (watchdog, limits, e-stop, buffer underrun) stay latched in the device until "
@@ -13,9 +15,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     for name, text in (("show", "print the latched faults"), ("clear", "clear every latched fault")):
         q = actions.add_parser(name, help=text, description=text)
-        q.add_argument("--device", required=True,
-                       help="device URL: serial:///dev/ttyUSB0, can://socketcan/can0?node=1, canopen://..., "
-                            "odrive://..., sim://")
+        q.add_argument("--device", required=True, help=f"device URL: {describe_schemes()}")
         q.set_defaults(func=run)
 
 
