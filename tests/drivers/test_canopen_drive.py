@@ -255,7 +255,7 @@ def test_configuration_reaches_the_object_dictionary(bus):
 @pytest.mark.parametrize("url, words", [
     ("canopen://virtual/x?node=3", "eds=FILE is required"),
     ("canopen://virtual/x?node=3&eds=/no/such.eds", "does not exist"),
-    (f"canopen://virtual/x?node=300&eds={EDS_PATH}", "node must be 1..127"),
+    (f"canopen://virtual/x?node=300&eds={EDS_PATH}", "node must be 1..126"),
     (f"canopen://virtual?node=3&eds={EDS_PATH}", "INTERFACE/CHANNEL"),
     (f"canopen://virtual/x?node=3&eds={EDS_PATH}&speed=1", "unknown option"),
 ])
