@@ -53,6 +53,9 @@ HOST_NODE_ID = 127          # the host's node id for its heartbeat (0x700 + 127)
 DRIVE_HEARTBEAT_MS = 100    # producer heartbeat the host asks of the drive
 RATES = (1000, 2000)        # Hz; 2 kHz is near a 1 Mbit/s bus's limit for SYNC + 1 RPDO + 2 TPDOs
 BLOCK_PERIOD = 0.02         # s between sample blocks handed to the caller
+#: SYNCs a stream allows the drive before its TPDO must report "operation enabled" (CiA 301 lets a drive apply
+#: the controlword after sampling, and a drive may take cycles to close its loops): configurable, bounded.
+ENABLE_CYCLES = 4  # an enable latency of 3 SYNCs, reported one SYNC late by a sample-then-apply drive
 OWNER_LISTEN = 0.3          # s the host listens, sending nothing, for another host's traffic before its first SDO
 
 #: The objects the host maps into PDOs and their CiA 402 data types (canopen.objectdictionary codes): an EDS
@@ -74,7 +77,7 @@ class CanopenDrive(HostClockedDevice):
     capabilities = Capabilities({"current": RATES})
 
     def __init__(self, interface: str, channel: str, node_id: int, eds: str, timeout: float = 2.0,
-                 **bus_kwargs) -> None:
+                 enable_cycles: int = ENABLE_CYCLES, **bus_kwargs) -> None:
         import canopen  # imported here: only CANopen users need it loaded
 
         self.name = f"canopen://{interface}/{channel}?node={node_id}"
@@ -91,6 +94,8 @@ class CanopenDrive(HostClockedDevice):
         self._sdo_lock = threading.RLock()  # canopen's SDO client serves one transfer at a time
         self._cycle: CanCycle | None = None
         self._malformed_cycle = 0   # malformed frames the cycles' buses dropped
+        self._notes: list[str] = []  # one-line remarks on the streams, for the run events
+        self.enable_cycles = enable_cycles
         self.interface, self.channel, self.bus_kwargs = interface, channel, dict(bus_kwargs)
         self._skipped: list[str] = []  # optional objects the drive lacks, said once in the run events
         self._restore: dict[tuple[int, int | None], int] = {}  # objects to put back on close
@@ -468,6 +473,7 @@ class CanopenDrive(HostClockedDevice):
         self._cycle, self._progress = cycle, 0
         unwrap = CountUnwrapper()
         done = 0
+        enabled_at: int | None = None  # the first cycle whose TPDO reported operation enabled
         finished = False
         self._timing = None
         arrays = cycle.arrays
@@ -487,7 +493,22 @@ class CanopenDrive(HostClockedDevice):
                 if ready > done:
                     t1 = arrays["rx"][0, done:ready, :4].copy().view(dt1).ravel()
                     t2 = arrays["rx"][1, done:ready, :8].copy().view(dt2).ravel()
-                    enabled = np.array([c.state_of(int(w)) is c.State.OPERATION_ENABLED for w in t1["status"]])
+                    states = [c.state_of(int(w)) for w in t1["status"]]
+                    enabled = np.array([s is c.State.OPERATION_ENABLED for s in states])
+                    if enabled_at is None:  # the enable handshake: a drive may report "enabled" a few SYNCs late
+                        lead = int(np.argmax(enabled)) if enabled.any() else len(enabled)
+                        if all(s in (c.State.SWITCHED_ON, c.State.READY) for s in states[:lead]):
+                            if done + lead > self.enable_cycles:
+                                cycle.stop()
+                                cycle.join()
+                                raise CommandRefusedError(
+                                    f"CANopen node {self.node_id} did not report operation enabled within "
+                                    f"{self.enable_cycles} cycles of the stream (statusword "
+                                    f"0x{int(t1['status'][0]):04X}: {states[0].value if states[0] else '?'}); "
+                                    f"give it longer with &enable_cycles=N in the device URL")
+                            enabled[:lead] = True  # samples before the drive enabled: kept, their status says so
+                        if lead < len(enabled):
+                            enabled_at = done + lead
                     if not enabled.all():  # the drive left operation enabled: keep the sample that says so
                         first = int(np.argmin(enabled))
                         # ...unless it is switched on: only the end-of-stream SWITCH_ON gets there, so this TPDO
@@ -513,6 +534,9 @@ class CanopenDrive(HostClockedDevice):
                     break
             finished = True
             sent = cycle.sent
+            if enabled_at:
+                self._notes.append(f"CANopen node {self.node_id} reported operation enabled from cycle {enabled_at} "
+                                   f"of a stream on (the samples before it are kept; their drive_status says so)")
             if cycle.error:
                 raise DriverError(f"{self.name}: the cycle process could not open the CAN bus")
             if cycle.limit is not None:
@@ -635,6 +659,8 @@ class CanopenDrive(HostClockedDevice):
     def run_events(self) -> list[tuple[str, str]]:
         out = super().run_events()
         out += [("info", f"CANopen node {self.node_id}: {line}") for line in self._skipped]
+        out += [("info", line) for line in dict.fromkeys(self._notes)]
+        self._notes.clear()
         dropped = self.malformed.count + self._malformed_cycle
         if dropped:
             out.append(("info", f"{dropped} malformed frame(s) on the bus were counted and dropped"))

@@ -165,13 +165,16 @@ def _canopen_parts(url: str) -> tuple[str, str, int, str, dict]:
     node = _int(params, "node", 1, url)
     if not 1 <= node <= 126:
         raise DeviceURLError(f"{url}: node must be 1..126 (127 is the host's own heartbeat id), got {node}")
-    return interface, channel, node, params["eds"], kwargs
+    cycles = _int(params, "enable_cycles", 4, url)
+    if not 0 <= cycles <= 1000:
+        raise DeviceURLError(f"{url}: enable_cycles must be 0..1000, got {cycles}")
+    return interface, channel, node, params["eds"], {**kwargs, "enable_cycles": cycles}
 
 
 def _open_canopen(url: str, timeout: float):
     from hilbench.drivers.canopen_drive import CanopenDrive
 
-    interface, channel, node, eds, kwargs = _canopen_parts(url)
+    interface, channel, node, eds, kwargs = _canopen_parts(url)  # kwargs: the bus's, and enable_cycles
     if not os.path.isfile(eds):
         raise DeviceURLError(f"{url}: EDS file {eds} does not exist")
     return CanopenDrive(interface, channel, node, eds, timeout=timeout, **kwargs)
@@ -181,8 +184,8 @@ SCHEMES: dict[str, Scheme] = {s.name: s for s in (
     Scheme("serial", "serial:///dev/ttyUSB0?baud=2000000", frozenset({"baud"}), _serial_parts, _open_serial),
     Scheme("can", "can://INTERFACE/CHANNEL?node=1&fd=1&bitrate=1000000", frozenset({"node", "fd", "bitrate"}),
            _can_parts, _open_can),
-    Scheme("canopen", "canopen://INTERFACE/CHANNEL?node=N&eds=FILE", frozenset({"node", "eds", "bitrate", "port"}),
-           _canopen_parts, _open_canopen),
+    Scheme("canopen", "canopen://INTERFACE/CHANNEL?node=N&eds=FILE",
+           frozenset({"node", "eds", "bitrate", "port", "enable_cycles"}), _canopen_parts, _open_canopen),
     Scheme("odrive", "odrive://INTERFACE/CHANNEL?node=N&tvl_endpoint=ID",
            frozenset({"node", "tvl_endpoint", "bitrate", "port"}), _odrive_parts, _open_odrive),
     Scheme("sim", "sim://?pacing=lockstep&config=sim.toml&seed=3&tick=0.004",

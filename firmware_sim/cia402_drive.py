@@ -13,6 +13,11 @@ What it implements, as a real drive on the bus would:
 - loss of the host (no heartbeat within 0x1016, or no SYNC for ``sync_timeout`` s once SYNCs have started
   while operation is enabled, ``sync_timeout``, default 0.1 s) triggers the reaction 0x6007 selects.
 
+Two behaviours CiA 301/402 allow and real drives show, selectable: ``order="apply-then-sample"`` (default)
+applies the controlword received before a SYNC and then reports the state in that SYNC's TPDO;
+``"sample-then-apply"`` reports the state from before it. ``enable_latency`` (0..3 SYNCs) delays "operation
+enabled" after an enable operation received by RPDO, as a drive that closes its current loop first.
+
 The plant: at each SYNC the drive samples the plant (position 0x6064, velocity 0x606C, torque 0x6077) and then
 applies the target torque received before that SYNC, held until the next SYNC. Internally the plant runs at
 ``oversample`` times the SYNC rate. With ``clock="sync"`` each SYNC advances the plant by exactly one
@@ -46,6 +51,7 @@ EMCY_POSITION_LIMIT = 0x8612  # software position limit 0x607D passed
 EMCY_OVER_SPEED = 0x8400      # max motor speed 0x6080 passed
 HISTORY_LENGTH = 8            # entries of the error history 0x1003 (the EDS's sub-indices)
 CLOCKS = ("sync", "real")
+ORDERS = ("apply-then-sample", "sample-then-apply")
 
 
 class SimCia402Drive:
@@ -58,13 +64,23 @@ class SimCia402Drive:
         eds: the object dictionary; ``supported_modes`` overrides 0x6502 (e.g. a drive without CST).
         clock: ``"sync"`` or ``"real"`` (see the module doc); ``oversample``: plant steps per cycle.
         sync_timeout: s without SYNC, once started, before the drive reacts as 0x6007 says.
+        order: whether a SYNC's TPDO reports the state after (``apply-then-sample``) or before
+            (``sample-then-apply``) the controlword received with that SYNC.
+        enable_latency: SYNCs between an enable operation received by RPDO and "operation enabled" (0..3).
     """
 
     def __init__(self, network: canopen.Network, node_id: int, sim: SimConfig, eds: str | Path = EDS_PATH,
                  clock: str = "real", oversample: int = 10, supported_modes: int | None = None,
-                 sync_timeout: float = SYNC_TIMEOUT) -> None:
+                 sync_timeout: float = SYNC_TIMEOUT, order: str = "apply-then-sample", enable_latency: int = 0) -> None:
         if clock not in CLOCKS:
             raise ValueError(f"clock must be one of {CLOCKS}, got {clock!r}")
+        if order not in ORDERS:
+            raise ValueError(f"order must be one of {ORDERS}, got {order!r}")
+        if not 0 <= enable_latency <= 3:
+            raise ValueError(f"enable_latency must be 0..3 SYNCs, got {enable_latency}")
+        self.order, self.enable_latency = order, int(enable_latency)
+        self._enable_in = 0          # SYNCs until a pending enable takes effect
+        self._reported: int | None = None  # the statusword this SYNC's TPDO reports (sample-then-apply)
         self.network = network
         self.sim = sim
         self.clock = clock
@@ -152,9 +168,11 @@ class SimCia402Drive:
         return 1 <= mode <= 32 and bool(self._raw(c.SUPPORTED_MODES) & (1 << (mode - 1)))
 
     # ------------------------------------------------------------------ state machine, faults
-    def _command(self, controlword: int) -> None:
+    def _command(self, controlword: int, by_rpdo: bool = False) -> None:
         command = c.command_of(controlword)
         before = self.state
+        if self._enable_in and command is not c.Command.ENABLE_OPERATION:
+            self._enable_in = 0  # a pending enable is cancelled by any other command
         if self.state is c.State.FAULT and command is c.Command.FAULT_RESET:
             self.error_code = 0
             self.error_register = 0
@@ -165,8 +183,17 @@ class SimCia402Drive:
         if self.state is c.State.QUICK_STOP:
             self.state = c.next_state(self.state, c.Command.DISABLE_VOLTAGE)  # torque zero at once
         if self.state is c.State.OPERATION_ENABLED and before is not c.State.OPERATION_ENABLED:
-            self.last_sync = math.inf  # SYNC monitoring starts with the first SYNC in operation enabled
-            self._arrival, self._lag = math.inf, 0.0
+            if by_rpdo and self.enable_latency:
+                if not self._enable_in:
+                    self._enable_in = self.enable_latency
+                self.state = c.State.SWITCHED_ON  # the power stage takes its time: enabled after the latency
+                return
+            self._enabled()
+
+    def _enabled(self) -> None:
+        self.state = c.State.OPERATION_ENABLED
+        self.last_sync = math.inf  # SYNC monitoring starts with the first SYNC in operation enabled
+        self._arrival, self._lag = math.inf, 0.0
 
     def fault(self, code: int, register: int = 0x01) -> None:
         """Latch a fault: torque off, state fault, 0x603F/0x1001 set, EMCY sent (thread-safe)."""
@@ -248,13 +275,18 @@ class SimCia402Drive:
         with self._lock:
             if self.node.nmt.state != "OPERATIONAL":
                 return
+            self._reported = self.statusword() if self.order == "sample-then-apply" else None
+            if self._enable_in:
+                self._enable_in -= 1
+                if not self._enable_in and self.state is c.State.SWITCHED_ON:
+                    self._enabled()
             for m in self._rpdos:  # synchronous RPDOs: what arrived before this SYNC applies now
                 if not m.is_received:
                     continue
                 m.is_received = False
                 for var in m.map:
                     if var.index == c.CONTROLWORD:
-                        self._command(int(var.raw))
+                        self._command(int(var.raw), by_rpdo=True)
                     elif var.index == c.TARGET_TORQUE:
                         self.target_pm = int(var.raw)
             plant = self._ensure_plant()
@@ -313,6 +345,8 @@ class SimCia402Drive:
             if self.cycle % m.trans_type == 0:
                 for var in m.map:
                     value = self._on_read(var.index, var.subindex, var.od)
+                    if var.index == c.STATUSWORD and self._reported is not None:
+                        value = self._reported  # sampled before this SYNC's controlword applied
                     if value is not None:
                         var.raw = value
                 m.transmit()
