@@ -55,6 +55,11 @@ def build_parser(prog: str = "python -m hilbench.firmware_sim") -> argparse.Argu
                             "odrive:// URL")
     parser.add_argument("--clock", choices=("real", "sync"), default="real",
                         help="--canopen: plant time follows real time between SYNCs (default) or the SYNC count")
+    parser.add_argument("--order", choices=("apply-then-sample", "sample-then-apply"), default="apply-then-sample",
+                        help="--canopen: whether a SYNC's TPDO reports the state after (default) or before the "
+                             "controlword received with that SYNC")
+    parser.add_argument("--enable-latency", type=int, choices=range(4), default=0, metavar="{0..3}",
+                        help="--canopen: SYNCs between an enable received by RPDO and operation enabled")
     parser.add_argument("--udp-port", type=int, default=None,
                         help="--canopen on udp_multicast: UDP port (default 43113; buses on one port hear each other)")
     parser.add_argument("--interface", default="socketcan",
@@ -105,7 +110,8 @@ def _serve_drive(args, sim) -> int:
         threading.Thread(target=watch_parent, args=(args.parent_pid, stop), daemon=True).start()
     if args.odrive:
         return odrive_sim.serve(args.interface, args.odrive, args.node, sim, stop, port=args.udp_port)
-    return cia402_drive.serve(args.interface, args.canopen, args.node, sim, args.clock, stop=stop, port=args.udp_port)
+    return cia402_drive.serve(args.interface, args.canopen, args.node, sim, args.clock, stop=stop, port=args.udp_port,
+                              order=args.order, enable_latency=args.enable_latency)
 
 
 def main(argv: list[str] | None = None, prog: str = "python -m hilbench.firmware_sim") -> int:

@@ -360,7 +360,8 @@ class SimCia402Drive:
 
 
 def serve(interface: str, channel: str, node_id: int, sim: SimConfig, clock: str = "real",
-          supported_modes: int | None = None, stop: threading.Event | None = None, port: int | None = None) -> int:
+          supported_modes: int | None = None, stop: threading.Event | None = None, port: int | None = None,
+          order: str = "apply-then-sample", enable_latency: int = 0) -> int:
     """Run one simulated drive on a python-can bus until ``stop`` is set (or Ctrl-C). Prints the device
     URL to connect to as its first line."""
     try:  # a drive's control loop is real-time: ask the OS for SCHED_FIFO (runs without it when refused)
@@ -377,7 +378,8 @@ def serve(interface: str, channel: str, node_id: int, sim: SimConfig, clock: str
     drop_malformed(bus)  # a stray datagram must not end the notifier thread (the drive would go deaf)
     network = canopen.Network(bus)
     network.connect()
-    drive = SimCia402Drive(network, node_id, sim, clock=clock, supported_modes=supported_modes)
+    drive = SimCia402Drive(network, node_id, sim, clock=clock, supported_modes=supported_modes, order=order,
+                           enable_latency=enable_latency)
     print(f"canopen://{interface}/{channel}?node={node_id}&eds={EDS_PATH}" + (f"&port={port}" if port else ""),
           flush=True)
     stop = stop or threading.Event()

@@ -222,3 +222,16 @@ def test_bad_sim_arguments_are_one_line_exit_2(args, words):
     direct = subprocess.run([sys.executable, "-m", "hilbench.firmware_sim", *args], capture_output=True, text=True,
                             timeout=60)
     assert direct.returncode == 2 and words in direct.stderr and "Traceback" not in direct.stderr, direct.stderr
+
+
+def test_sim_passes_the_drive_behaviours_to_the_simulated_drive():
+    from hilbench.bench.cli import build_parser
+    from hilbench.bench.commands.sim import firmware_argv
+    from hilbench.firmware_sim.__main__ import build_parser as firmware_parser
+
+    args = build_parser().parse_args(["sim", "--canopen", "239.1.2.3", "--interface", "udp_multicast",
+                                      "--order", "sample-then-apply", "--enable-latency", "2"])
+    argv = firmware_argv(args)
+    assert "--order=sample-then-apply" in argv and "--enable-latency=2" in argv
+    parsed = firmware_parser().parse_args(argv[3:])  # after python -m hilbench.firmware_sim
+    assert parsed.order == "sample-then-apply" and parsed.enable_latency == 2 and parsed.canopen == "239.1.2.3"
