@@ -136,8 +136,8 @@ def check_drive_file(path: Path, kind: str, killed: bool, drive_killed: bool) ->
     else:  # the drive's own torque target: a setpoint it received (float32 on the wire) or 0 before the first
         sent = np.concatenate([[0.0], (setpoints * KT).astype(np.float32).astype(np.float64)])
         out["invented"] = int(np.sum(~np.isin((cmd * KT).astype(np.float32).astype(np.float64), sent)))
-    if killed and status != "crashed":
-        out["unreadable"] += 1  # a killed run must say so
+    if killed and status != "crashed" and not (status == "completed" and n == setpoints.size):
+        out["unreadable"] += 1  # a killed run must say so (unless the kill came after it had finished)
     if drive_killed and not killed and status == "completed":
         out["short_completed"] += 1
     return out

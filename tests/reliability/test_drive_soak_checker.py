@@ -44,3 +44,15 @@ def test_odrive_files_accept_only_targets_the_drive_was_sent(tmp_path):
     bad = tmp_path / "bad.h5"
     _write(bad, np.arange(100), made_up, sp)
     assert check_drive_file(bad, "odrive", False, False)["invented"] == 1
+
+
+def test_a_killed_host_must_leave_a_crashed_run_unless_it_had_finished(tmp_path):
+    sp = np.linspace(-1, 1, 100)
+    q = np.rint(sp * KT / RATED * 1000) * RATED / 1000 / KT
+    done = tmp_path / "done.h5"  # the host finished the file, then was killed while closing the drive
+    _write(done, np.arange(100), q, sp)
+    assert check_drive_file(done, "canopen", killed=True, drive_killed=False)["unreadable"] == 0
+    partial = tmp_path / "partial.h5"  # "completed" with 60 of 100 samples after a kill: not what happened
+    _write(partial, np.arange(60), q[:60], sp)
+    got = check_drive_file(partial, "canopen", killed=True, drive_killed=False)
+    assert got["unreadable"] == 1 and got["short_completed"] == 1
