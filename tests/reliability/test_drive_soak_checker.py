@@ -21,7 +21,7 @@ def test_cia402_files_quantised_commands_gaps_and_short_runs(tmp_path):
     good = tmp_path / "good.h5"
     _write(good, np.arange(200), quantised, sp)
     assert check_drive_file(good, "canopen", killed=False, drive_killed=False) == {
-        "lost": 0, "invented": 0, "unreadable": 0, "samples": 200, "absent": 0, "short_completed": 0}
+        "lost": 0, "invented": 0, "unreadable": 0, "samples": 200, "absent": 0, "short_completed": 0, "drive_ended": 0}
     raw = tmp_path / "raw.h5"  # the setpoints as they are: not what a per-mille drive was sent
     _write(raw, np.arange(200), sp, sp)
     assert check_drive_file(raw, "canopen", False, False)["invented"] == int(np.sum(sp != quantised)) > 100
@@ -29,7 +29,7 @@ def test_cia402_files_quantised_commands_gaps_and_short_runs(tmp_path):
     index = np.concatenate([np.arange(100), np.arange(110, 160)])  # and a gap of 10
     _write(short, index, quantised[index], sp)
     got = check_drive_file(short, "canopen", False, drive_killed=True)
-    assert got["short_completed"] == 2 and got["lost"] == 50 + 50  # 50 indices moved, 50 missing at the end
+    assert got["short_completed"] == 1 and got["lost"] == 50 + 50  # 50 indices moved, 50 missing at the end
 
 
 def test_odrive_files_accept_only_targets_the_drive_was_sent(tmp_path):
