@@ -149,10 +149,12 @@ class CanopenDrive(HostClockedDevice):
         operational = (nmt[-1] == 5) if nmt else None  # None: the drive sends no heartbeat
         cycling = [what for what in ("its RPDO1", "its TPDO1") if what in seen]
         host = "a host heartbeat (0x77F)" in seen
-        if cycling or (host and operational is not False) or (operational and "SYNC" in seen):
+        # a drive that sends no heartbeat was never configured by a host (configure asks for one): only a
+        # stream's own frames tell then; another drive's host heartbeat on a shared bus must not
+        if cycling or (operational and (host or "SYNC" in seen)):
             evidence = ", ".join(cycling + [w for w in ("SYNC", "a host heartbeat (0x77F)") if w in seen])
             raise PortBusyError(f"{self.name} is in use by another host ({evidence} on the bus; the drive is "
-                                f"{'NMT operational' if operational else 'in an unknown NMT state'}); nothing "
+                                f"{'NMT operational' if operational else 'not NMT operational'}); nothing "
                                 f"was sent to it: stop that host's run first")
 
     # ------------------------------------------------------------------ SDO helpers
