@@ -235,3 +235,33 @@ def test_sim_passes_the_drive_behaviours_to_the_simulated_drive():
     assert "--order=sample-then-apply" in argv and "--enable-latency=2" in argv
     parsed = firmware_parser().parse_args(argv[3:])  # after python -m hilbench.firmware_sim
     assert parsed.order == "sample-then-apply" and parsed.enable_latency == 2 and parsed.canopen == "239.1.2.3"
+
+
+# ---------------------------------------------------------------- item 3, between streams and on a shared bus
+def test_an_owner_between_streams_keeps_its_drive_and_another_hosts_heartbeat_does_not_claim_a_fresh_one():
+    from hilbench.drivers.errors import PortBusyError
+
+    channel = f"o-{uuid.uuid4().hex[:8]}"
+    network = canopen.Network()
+    network.connect(interface="virtual", channel=channel)
+    owned = SimCia402Drive(network, 3, load_sim_config(), clock="sync", sync_timeout=1.0)
+    fresh = SimCia402Drive(network, 4, load_sim_config(), clock="sync", sync_timeout=1.0)
+    try:
+        owner = CanopenDrive("virtual", channel, 3, str(EDS_PATH), timeout=1.0)
+        try:
+            owner.configure(p.Config(sample_rate=1000, current_limit=20.0, torque_constant=0.2,
+                                     counts_per_rev=1 << 20, watchdog_timeout=1.0))
+            owner.arm()  # armed, between streams: no SYNC, no PDO, only heartbeats
+            with pytest.raises(PortBusyError, match=r"a host heartbeat \(0x77F\) on the bus; the drive is NMT "
+                                                    r"operational"):
+                CanopenDrive("virtual", channel, 3, str(EDS_PATH), timeout=1.0)
+            assert owned.state is c.State.OPERATION_ENABLED  # the refused host disturbed nothing
+            other = CanopenDrive("virtual", channel, 4, str(EDS_PATH), timeout=1.0)  # same bus, its own drive
+            other.close()
+        finally:
+            owner.close()
+        CanopenDrive("virtual", channel, 3, str(EDS_PATH), timeout=1.0).close()  # free once the owner closed
+    finally:
+        owned.close()
+        fresh.close()
+        network.disconnect()
