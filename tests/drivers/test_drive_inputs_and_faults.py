@@ -265,3 +265,27 @@ def test_an_owner_between_streams_keeps_its_drive_and_another_hosts_heartbeat_do
         owned.close()
         fresh.close()
         network.disconnect()
+
+
+def test_an_armed_odrive_between_streams_is_refused_to_a_second_host():
+    from hilbench.drivers.errors import PortBusyError
+
+    channel = uuid.uuid4().hex[:8]
+    bus = can.Bus(interface="virtual", channel=channel)
+    sim = SimOdrive(bus, 2, load_sim_config(), watchdog_timeout=1.0)
+    try:
+        owner = OdriveDrive("virtual", channel, 2, TVL_ENDPOINT, timeout=1.0)
+        try:
+            owner.configure(p.Config(sample_rate=1000, current_limit=20.0, torque_constant=0.2,
+                                     counts_per_rev=1 << 20, watchdog_timeout=1.0))
+            owner.arm()  # closed loop, the watchdog fed with zero torque every 20 ms
+            with pytest.raises(PortBusyError, match=r"the axis is in closed loop control and another host sends it "
+                                                    r"SET_INPUT_TORQUE\); nothing was sent to it"):
+                OdriveDrive("virtual", channel, 2, TVL_ENDPOINT, timeout=1.0)
+            assert sim.state == 8 and sim.error == 0  # undisturbed
+        finally:
+            owner.close()
+        OdriveDrive("virtual", channel, 2, TVL_ENDPOINT, timeout=1.0).close()  # idle again: free
+    finally:
+        sim.close()
+        bus.shutdown()
