@@ -26,9 +26,10 @@ DEVICE_OPTIONS = {
 
 def add_device_options(parser: argparse.ArgumentParser) -> None:
     from hilbench.bench.runner import DeviceSettings
+    from hilbench.drivers.device_url import describe_schemes
 
-    parser.add_argument("--device", default=None, help="device URL (default $HILBENCH_DEVICE, the config file's "
-                        "'device', else sim://: the simulated bench; docs/cli.md)")
+    parser.add_argument("--device", default=None, help=f"device URL: {describe_schemes()} (default "
+                        "$HILBENCH_DEVICE, the config file's 'device', else sim://: the simulated bench; docs/cli.md)")
     defaults = DeviceSettings()
     for name, (unit, text) in DEVICE_OPTIONS.items():
         parser.add_argument("--" + name.replace("_", "-"), dest=name, default=None,

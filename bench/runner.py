@@ -29,7 +29,7 @@ from hilbench.drivers import protocol as wire
 from hilbench.drivers.amplifier import Amplifier
 from hilbench.drivers.device import HOST_CLOCKED_CHANNELS, HOST_CLOCKED_CUSTOM, Device, refusal
 from hilbench.drivers.device_url import open_device
-from hilbench.drivers.errors import ConfigError, DeviceFaultError, DriverError
+from hilbench.drivers.errors import ConfigError, DeviceFaultError, DriverError, SampleLossError
 
 #: Default device settings: the simulated DC motor's catalogue values (firmware_sim default_sim.toml).
 DEFAULT_TORQUE_CONSTANT = 0.2  # N*m/A
@@ -346,7 +346,7 @@ class Bench:
                 k += n
                 writer.append({"sample_index": blk.index, "t": t, "current_cmd": blk.current_cmd,
                                "current": blk.current_meas, "torque": torque, "position": measured,
-                               "counts": blk.counts, **reference, **(blk.extra() if hasattr(blk, "extra") else {})})
+                               "counts": blk.counts, **reference, **blk.extra()})
                 done += n
                 if progress is not None:
                     prev = measured[:1] if last_pos is None else np.array([last_pos])
@@ -359,6 +359,9 @@ class Bench:
                     last_pos = float(measured[-1])
                 if control.aborted:
                     raise AbortRun(f"{control.reason} after {done} of {total} samples")
+            if k != b:  # a run that ends short is never completed, whatever the driver said
+                raise SampleLossError(f"the device returned {k - a} of the {b - a} samples of step {seg} "
+                                      f"({done} of {total} in all): the run is incomplete")
         return done
 
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from hilbench.drivers import protocol as p
 from hilbench.drivers.calibration import Calibration, CountUnwrapper
-from hilbench.drivers.device import Capabilities, Device
+from hilbench.drivers.device import Capabilities, Device, SampleBlock
 from hilbench.drivers.errors import (
     CommandRefusedError,
     ConfigError,
@@ -43,7 +43,7 @@ _CLOSED = object()  # wakes waiters when the receiver stops
 
 
 @dataclass
-class Samples:
+class Samples(SampleBlock):
     """One block of device samples, host side: counts unwrapped, SI conversions via the calibration.
 
     Attributes:
@@ -297,9 +297,9 @@ class Amplifier(Device):
         name = msg.TYPE.name
         if reply.result == p.Result.FAULT_LATCHED:
             raise DeviceFaultError(f"{name} refused: faults latched ({p.describe_faults(reply.faults)}); "
-                                   f"call clear_faults() first", reply.faults)
+                                   f"clear them with `hilbench fault clear --device URL` first", reply.faults)
         if reply.result == p.Result.NOT_CONFIGURED:
-            raise CommandRefusedError(f"{name} refused: the device is not configured; call configure()")
+            raise CommandRefusedError(f"{name} refused: the device is not configured (a run configures it)")
         if reply.result == p.Result.INVALID_CONFIG:
             raise ConfigError(f"{name} refused by the device: invalid configuration")
         if reply.result != p.Result.OK:
@@ -341,6 +341,15 @@ class Amplifier(Device):
     def info(self) -> dict:
         return {k: getattr(self.identity, k) for k in self.identity.__slots__}
 
+    def state(self) -> str:
+        return p.State(self.status().state).name
+
+    def faults(self) -> list[str]:
+        status = self.status()
+        if not status.faults:
+            return []
+        return [f"{p.describe_faults(status.faults)} (first at sample {status.fault_index})"]
+
     def status(self) -> p.Status:
         """A fresh :class:`drivers.protocol.Status` (state, faults, counters) from the device."""
         token = next(self._tokens) & 0xFFFFFFFF or 1
@@ -379,7 +388,7 @@ class Amplifier(Device):
                                    status.faults)
         if status.state != p.State.ARMED:
             state = p.State(status.state).name
-            raise CommandRefusedError(f"cannot stream: device is {state}, call arm() first")
+            raise CommandRefusedError(f"cannot stream: device is {state}, not armed")
         block = min(block or self.identity.max_block, self.identity.max_block)
         return self._stream(values, block, status, allow_loss)
 

@@ -36,6 +36,7 @@ from hilbench.drivers import protocol as p
 from hilbench.drivers.amplifier import check_setpoints
 from hilbench.drivers.calibration import Calibration, CountUnwrapper
 from hilbench.drivers.can_buffer import enlarge_receive_buffer
+from hilbench.drivers.can_frames import drop_malformed_frames
 from hilbench.drivers.device import Capabilities, CycleSamples
 from hilbench.drivers.errors import (
     CommandRefusedError,
@@ -43,14 +44,31 @@ from hilbench.drivers.errors import (
     DeviceFaultError,
     DeviceTimeoutError,
     DriverError,
+    PortBusyError,
     SampleLossError,
 )
-from hilbench.drivers.host_cycle import CanCycle, CanCycleSpec, HostClockedDevice, timing_summary
+from hilbench.drivers.host_cycle import CanCycle, CanCycleSpec, Guard, HostClockedDevice, timing_summary
 
 HOST_NODE_ID = 127          # the host's node id for its heartbeat (0x700 + 127)
 DRIVE_HEARTBEAT_MS = 100    # producer heartbeat the host asks of the drive
 RATES = (1000, 2000)        # Hz; 2 kHz is near a 1 Mbit/s bus's limit for SYNC + 1 RPDO + 2 TPDOs
 BLOCK_PERIOD = 0.02         # s between sample blocks handed to the caller
+#: SYNCs a stream allows the drive before its TPDO must report "operation enabled" (CiA 301 lets a drive apply
+#: the controlword after sampling, and a drive may take cycles to close its loops): configurable, bounded.
+ENABLE_CYCLES = 4  # an enable latency of 3 SYNCs, reported one SYNC late by a sample-then-apply drive
+OWNER_LISTEN = 0.3          # s the host listens, sending nothing, for another host's traffic before its first SDO
+
+#: The objects the host maps into PDOs and their CiA 402 data types (canopen.objectdictionary codes): an EDS
+#: that declares another type is refused before anything is sent (the PDO layout is fixed by these).
+PDO_TYPES = {c.CONTROLWORD: (0x6, "UNSIGNED16"), c.TARGET_TORQUE: (0x3, "INTEGER16"),
+             c.STATUSWORD: (0x6, "UNSIGNED16"), c.TORQUE_ACTUAL: (0x3, "INTEGER16"),
+             c.POSITION_ACTUAL: (0x4, "INTEGER32"), c.VELOCITY_ACTUAL: (0x4, "INTEGER32")}
+#: Objects the host reads or writes and cannot run without (beyond the PDO-mapped ones).
+REQUIRED = (c.DEVICE_TYPE, c.SUPPORTED_MODES, c.RATED_TORQUE, c.ENCODER_RESOLUTION, c.MODES_OF_OPERATION,
+            c.MODES_DISPLAY, c.COMM_CYCLE_PERIOD, c.MAX_TORQUE, c.PRODUCER_HEARTBEAT)
+DATA_TYPE_NAMES = {0x1: "BOOLEAN", 0x2: "INTEGER8", 0x3: "INTEGER16", 0x4: "INTEGER32", 0x5: "UNSIGNED8",
+                   0x6: "UNSIGNED16", 0x7: "UNSIGNED32", 0x8: "REAL32", 0x9: "VISIBLE_STRING", 0x11: "REAL64",
+                   0x15: "INTEGER64", 0x1B: "UNSIGNED64"}
 
 
 class CanopenDrive(HostClockedDevice):
@@ -59,7 +77,7 @@ class CanopenDrive(HostClockedDevice):
     capabilities = Capabilities({"current": RATES})
 
     def __init__(self, interface: str, channel: str, node_id: int, eds: str, timeout: float = 2.0,
-                 **bus_kwargs) -> None:
+                 enable_cycles: int = ENABLE_CYCLES, **bus_kwargs) -> None:
         import canopen  # imported here: only CANopen users need it loaded
 
         self.name = f"canopen://{interface}/{channel}?node={node_id}"
@@ -75,15 +93,26 @@ class CanopenDrive(HostClockedDevice):
         self._progress = 0          # cycles sent in the current (or last) stream
         self._sdo_lock = threading.RLock()  # canopen's SDO client serves one transfer at a time
         self._cycle: CanCycle | None = None
+        self._malformed_cycle = 0   # malformed frames the cycles' buses dropped
+        self._notes: list[str] = []  # one-line remarks on the streams, for the run events
+        self.enable_cycles = enable_cycles
         self.interface, self.channel, self.bus_kwargs = interface, channel, dict(bus_kwargs)
-        self.network = canopen.Network()
+        self._skipped: list[str] = []  # optional objects the drive lacks, said once in the run events
+        self._restore: dict[tuple[int, int | None], int] = {}  # objects to put back on close
+        od = _check_eds(eds, node_id)  # before the bus is even opened
+        import can
+
         try:
-            self.network.connect(interface=interface, channel=channel, **bus_kwargs)
+            bus = can.Bus(interface=interface, channel=channel, **bus_kwargs)
         except Exception as exc:  # python-can raises many types for a missing interface
             raise DriverError(f"{self.name}: cannot open the CAN bus: {' '.join(str(exc).split())}") from exc
-        enlarge_receive_buffer(self.network.bus)
+        enlarge_receive_buffer(bus)
+        self.malformed = drop_malformed_frames(bus)  # a stray datagram is counted, never fatal
+        self.network = canopen.Network(bus)
+        self.network.connect()
         try:
-            self.node = self.network.add_node(node_id, eds)
+            self._refuse_if_owned()  # listens only: nothing is sent to a drive another host runs
+            self.node = self.network.add_node(node_id, od)
             self.node.sdo.RESPONSE_TIMEOUT = timeout
             self.node.sdo.MAX_RETRIES = 1  # tries in all: the timeout is the whole wait
             self.node.emcy.add_callback(self._on_emcy)
@@ -91,6 +120,42 @@ class CanopenDrive(HostClockedDevice):
         except BaseException:
             self.close()
             raise
+
+    def _refuse_if_owned(self) -> None:
+        """Refuse, having sent nothing, a drive another host is running (one owner per drive).
+
+        The owner's traffic tells: while it streams, the drive's RPDO1 and TPDO1 are on the bus at every
+        SYNC; between streams, the drive stays NMT operational (its heartbeat) and the owner's heartbeat
+        (node 127) goes on until it closes, which puts the drive back to pre-operational."""
+        node = self.node_id
+        seen: dict[str, float] = {}
+        nmt: list[int] = []
+
+        def heard(can_id, data, timestamp) -> None:
+            if can_id == 0x700 + node and data:
+                nmt.append(data[0] & 0x7F)
+            else:
+                seen.setdefault({0x80: "SYNC", 0x200 + node: "its RPDO1", 0x180 + node: "its TPDO1",
+                                 0x700 + HOST_NODE_ID: "a host heartbeat (0x77F)"}[can_id], time.monotonic())
+
+        ids = (0x80, 0x200 + node, 0x180 + node, 0x700 + HOST_NODE_ID, 0x700 + node)
+        for cob in ids:
+            self.network.subscribe(cob, heard)
+        try:
+            time.sleep(OWNER_LISTEN)
+        finally:
+            for cob in ids:
+                self.network.unsubscribe(cob, heard)
+        operational = (nmt[-1] == 5) if nmt else None  # None: the drive sends no heartbeat
+        cycling = [what for what in ("its RPDO1", "its TPDO1") if what in seen]
+        host = "a host heartbeat (0x77F)" in seen
+        # a drive that sends no heartbeat was never configured by a host (configure asks for one): only a
+        # stream's own frames tell then; another drive's host heartbeat on a shared bus must not
+        if cycling or (operational and (host or "SYNC" in seen)):
+            evidence = ", ".join(cycling + [w for w in ("SYNC", "a host heartbeat (0x77F)") if w in seen])
+            raise PortBusyError(f"{self.name} is in use by another host ({evidence} on the bus; the drive is "
+                                f"{'NMT operational' if operational else 'not NMT operational'}); nothing "
+                                f"was sent to it: stop that host's run first")
 
     # ------------------------------------------------------------------ SDO helpers
     def _read(self, index: int, sub: int | None = None, what: str = ""):
@@ -107,6 +172,9 @@ class CanopenDrive(HostClockedDevice):
         except canopen.SdoAbortedError as exc:
             raise CommandRefusedError(f"CANopen node {self.node_id} refused reading 0x{index:04X} "
                                       f"({what or 'object'}): {exc}") from exc
+        except KeyError:
+            raise ConfigError(f"CANopen node {self.node_id}: the EDS has no object 0x{index:04X}"
+                              f"{'' if sub is None else f':{sub}'} ({what or 'object'})") from None
 
     def _write(self, index: int, value, sub: int | None = None, what: str = "") -> None:
         import canopen
@@ -121,6 +189,41 @@ class CanopenDrive(HostClockedDevice):
         except canopen.SdoAbortedError as exc:
             raise CommandRefusedError(f"CANopen node {self.node_id} refused 0x{index:04X} ({what or 'object'}) "
                                       f"= {value}: {exc}") from exc
+        except KeyError:
+            raise ConfigError(f"CANopen node {self.node_id}: the EDS has no object 0x{index:04X}"
+                              f"{'' if sub is None else f':{sub}'} ({what or 'object'})") from None
+
+    def _has(self, index: int, sub: int | None = None) -> bool:
+        od = self.node.object_dictionary
+        if index not in od:
+            return False
+        return sub is None or sub in od[index]
+
+    def _write_optional(self, index: int, value, sub: int | None = None, what: str = "",
+                        restore: bool = False) -> None:
+        """Write an optional object where the EDS and the drive have it; say so once where they do not.
+        ``restore``: read its value first and put it back on close."""
+        import canopen
+
+        name = f"0x{index:04X}{'' if sub is None else f':{sub}'} ({what})"
+        if not self._has(index, sub):
+            self._skip(f"{name} is not in the EDS: not written")
+            return
+        try:
+            if restore and (index, sub) not in self._restore:
+                self._restore[(index, sub)] = int(self._read(index, sub, what))
+            self._write(index, value, sub, what)
+        except CommandRefusedError as exc:
+            if isinstance(exc.__cause__, canopen.SdoAbortedError) and exc.__cause__.code in (0x06020000,
+                                                                                              0x06090011):
+                self._skip(f"{name} is not in the drive (SDO abort 0x{exc.__cause__.code:08X}): not written")
+                self._restore.pop((index, sub), None)
+                return
+            raise
+
+    def _skip(self, line: str) -> None:
+        if line not in self._skipped:
+            self._skipped.append(line)
 
     def _identify(self) -> None:
         device_type = int(self._read(c.DEVICE_TYPE, what="device type"))
@@ -174,7 +277,8 @@ class CanopenDrive(HostClockedDevice):
         """The statusword (a keepalive for callers that poll a device while a run is paused)."""
         return self.statusword()
 
-    def state(self) -> c.State | None:
+    def power_state(self) -> c.State | None:
+        """The CiA 402 power state the statusword reports (read by SDO)."""
         return c.state_of(self.statusword())
 
     def live_state(self) -> dict:
@@ -198,10 +302,16 @@ class CanopenDrive(HostClockedDevice):
         self._write(c.COMM_CYCLE_PERIOD, round(1e6 / config.sample_rate), what="communication cycle period")
         max_pm = c.max_torque_permille(config.current_limit, config.torque_constant, self.rated_torque)
         self._write(c.MAX_TORQUE, max_pm, what="max torque")
+        # the drive's own limits, where it has the objects; the host also watches them every cycle
+        low, high = c.position_limit_increments(config.position_min, config.position_max, self.counts_per_rev)
+        self._write_optional(c.SOFTWARE_POSITION_LIMIT, low, 1, "software position limit, min")
+        self._write_optional(c.SOFTWARE_POSITION_LIMIT, high, 2, "software position limit, max")
+        self._write_optional(c.MAX_MOTOR_SPEED, c.max_motor_speed_rpm(config.velocity_limit), what="max motor speed")
         self._write(c.PRODUCER_HEARTBEAT, DRIVE_HEARTBEAT_MS, what="producer heartbeat")
         hb_ms = min(round(config.watchdog_timeout * 1000), 0xFFFF)
-        self._write(c.CONSUMER_HEARTBEAT, (HOST_NODE_ID << 16) | hb_ms, 1, "consumer heartbeat")
-        self._write(c.ABORT_CONNECTION, 1, what="abort connection option (1 = fault)")
+        self._write_optional(c.CONSUMER_HEARTBEAT, (HOST_NODE_ID << 16) | hb_ms, 1, "consumer heartbeat",
+                             restore=True)
+        self._write_optional(c.ABORT_CONNECTION, 1, what="abort connection option (1 = fault)", restore=True)
         self._map_pdos()
         self._start_heartbeat(config.watchdog_timeout)
         node.nmt.state = "OPERATIONAL"
@@ -281,10 +391,13 @@ class CanopenDrive(HostClockedDevice):
     def arm(self) -> None:
         if self.config is None:
             raise CommandRefusedError("configure() the drive before arming")
-        if self.state() in (c.State.FAULT, c.State.FAULT_REACTION):
-            raise DeviceFaultError(f"CANopen node {self.node_id} is in fault ({self.emcy_line() or 'no EMCY seen'}); "
-                                   f"call clear_faults() first")
+        if self.power_state() in (c.State.FAULT, c.State.FAULT_REACTION):
+            raise DeviceFaultError(f"CANopen node {self.node_id} is in fault ({self.fault_text()}); "
+                                   f"clear it with `hilbench fault clear --device URL` first")
         self._estop_requested = False
+        # zero torque before the enable transition, every time: a CST drive applies 0x6071 as soon as operation
+        # is enabled, and a killed run may have left a torque there
+        self._write(c.TARGET_TORQUE, 0, what="target torque")
         self._walk_to(c.State.OPERATION_ENABLED, (c.Command.SHUTDOWN, c.Command.SWITCH_ON,
                                                   c.Command.ENABLE_OPERATION))
         display = int(self._read(c.MODES_DISPLAY, what="modes of operation display"))
@@ -303,7 +416,7 @@ class CanopenDrive(HostClockedDevice):
         """Shutdown (power stage off, torque zero): ready to switch on. A drive in fault stays there."""
         if self._cycle is not None:
             self._cycle.stop()
-        if self.state() in (c.State.FAULT, c.State.FAULT_REACTION, c.State.SWITCH_ON_DISABLED):
+        if self.power_state() in (c.State.FAULT, c.State.FAULT_REACTION, c.State.SWITCH_ON_DISABLED):
             return
         self._controlword(int(c.Command.SHUTDOWN))
 
@@ -330,9 +443,9 @@ class CanopenDrive(HostClockedDevice):
         values = check_setpoints(setpoints, cfg)
         if self._emcy:
             raise DeviceFaultError(f"cannot stream: {self.emcy_line()}")
-        if self.state() not in (c.State.OPERATION_ENABLED, c.State.SWITCHED_ON):
-            raise CommandRefusedError(f"cannot stream: CANopen node {self.node_id} is not switched on; "
-                                      f"call arm() first")
+        if self.power_state() not in (c.State.OPERATION_ENABLED, c.State.SWITCHED_ON):
+            raise CommandRefusedError(f"cannot stream: CANopen node {self.node_id} is not switched on "
+                                      f"(arm it first)")
         torque_cmd = values * cfg.torque_constant
         pm = c.torque_to_permille(torque_cmd, self.rated_torque)
         return self._stream(values, pm, allow_loss)
@@ -353,7 +466,8 @@ class CanopenDrive(HostClockedDevice):
                             (self._tpdo1.cob_id, self._tpdo2.cob_id),
                             (rpdo_fmt.pack(int(c.Command.QUICK_STOP), 0), b""),
                             (rpdo_fmt.pack(int(c.Command.SWITCH_ON), 0), b""),  # zero torque, operation disabled
-                            echo_id=0x80)  # host_time: when SYNC k was on the bus
+                            echo_id=0x80,  # host_time: when SYNC k was on the bus
+                            guards=self._guards(cfg))
         dt1 = np.dtype([("status", "<u2"), ("torque", "<i2")])
         dt2 = np.dtype([("position", "<i4"), ("velocity", "<i4")])
         assert fmt1.size == dt1.itemsize and fmt2.size == dt2.itemsize
@@ -361,6 +475,7 @@ class CanopenDrive(HostClockedDevice):
         self._cycle, self._progress = cycle, 0
         unwrap = CountUnwrapper()
         done = 0
+        enabled_at: int | None = None  # the first cycle whose TPDO reported operation enabled
         finished = False
         self._timing = None
         arrays = cycle.arrays
@@ -375,10 +490,27 @@ class CanopenDrive(HostClockedDevice):
                 sent = cycle.sent
                 self._progress = sent
                 ready = min(cycle.received(0), cycle.received(1))
+                if cycle.limit is not None:  # the sample that tripped a limit is the last one
+                    ready = min(ready, cycle.limit[1] + 1)
                 if ready > done:
                     t1 = arrays["rx"][0, done:ready, :4].copy().view(dt1).ravel()
                     t2 = arrays["rx"][1, done:ready, :8].copy().view(dt2).ravel()
-                    enabled = np.array([c.state_of(int(w)) is c.State.OPERATION_ENABLED for w in t1["status"]])
+                    states = [c.state_of(int(w)) for w in t1["status"]]
+                    enabled = np.array([s is c.State.OPERATION_ENABLED for s in states])
+                    if enabled_at is None:  # the enable handshake: a drive may report "enabled" a few SYNCs late
+                        lead = int(np.argmax(enabled)) if enabled.any() else len(enabled)
+                        if all(s in (c.State.SWITCHED_ON, c.State.READY) for s in states[:lead]):
+                            if done + lead > self.enable_cycles:
+                                cycle.stop()
+                                cycle.join()
+                                raise CommandRefusedError(
+                                    f"CANopen node {self.node_id} did not report operation enabled within "
+                                    f"{self.enable_cycles} cycles of the stream (statusword "
+                                    f"0x{int(t1['status'][0]):04X}: {states[0].value if states[0] else '?'}); "
+                                    f"give it longer with &enable_cycles=N in the device URL")
+                            enabled[:lead] = True  # samples before the drive enabled: kept, their status says so
+                        if lead < len(enabled):
+                            enabled_at = done + lead
                     if not enabled.all():  # the drive left operation enabled: keep the sample that says so
                         first = int(np.argmin(enabled))
                         # ...unless it is switched on: only the end-of-stream SWITCH_ON gets there, so this TPDO
@@ -404,8 +536,14 @@ class CanopenDrive(HostClockedDevice):
                     break
             finished = True
             sent = cycle.sent
+            if enabled_at:
+                self._notes.append(f"CANopen node {self.node_id} reported operation enabled from cycle {enabled_at} "
+                                   f"of a stream on (the samples before it are kept; their drive_status says so)")
             if cycle.error:
                 raise DriverError(f"{self.name}: the cycle process could not open the CAN bus")
+            if cycle.limit is not None:
+                guard, row = cycle.limit
+                raise DeviceFaultError(self._limit_line(guard, row, arrays), int(p.Fault[guard.name]))
             self._timing = timing_summary(arrays["host_time"][:sent], arrays["scheduled"][:sent], rate, cycle.echoed)
             if done < n:
                 word = int(arrays["rx"][0, done - 1, :2].view("<u2")[0]) if done else 0
@@ -431,6 +569,7 @@ class CanopenDrive(HostClockedDevice):
                 self._timing = timing_summary(arrays["host_time"][:sent], arrays["scheduled"][:sent], rate,
                                               cycle.echoed)
             self._cycle = None
+            self._malformed_cycle += cycle.malformed
             cycle.close()
             if not finished and not self._closed:
                 try:
@@ -450,10 +589,100 @@ class CanopenDrive(HostClockedDevice):
                             cal.current(torque_cmd), cal.current(torque), torque_cmd, torque,
                             cal.position(counts), velocity, self.config.sample_rate, t1["status"].copy())
 
+    def _guards(self, cfg: p.Config) -> tuple[Guard, ...]:
+        """The host's own check of the position window and the velocity limit on every TPDO2 (position and
+        velocity actual, increments and increments/s at the motor shaft, as the hilbench device checks them)."""
+        scale = self.counts_per_rev / (2 * math.pi)  # increments per rad at the motor
+        out = []
+        if math.isfinite(cfg.position_min) or math.isfinite(cfg.position_max):
+            out.append(Guard("POSITION_WINDOW", 1, 0, "<i", cfg.position_min * scale, cfg.position_max * scale))
+        out.append(Guard("OVER_SPEED", 1, 4, "<i", -cfg.velocity_limit * scale, cfg.velocity_limit * scale))
+        return tuple(out)
+
+    def _limit_line(self, guard: Guard, row: int, arrays: dict) -> str:
+        raw = int(arrays["rx"][1, row, guard.offset:guard.offset + 4].view("<i4")[0])
+        rad = raw * 2 * math.pi / self.counts_per_rev
+        cfg = self.config
+        if guard.name == "POSITION_WINDOW":
+            what = (f"position {rad:.6g} rad outside the window [{cfg.position_min:.6g}, {cfg.position_max:.6g}] "
+                    f"rad")
+        else:
+            what = f"speed {abs(rad):.6g} rad/s above the velocity limit {cfg.velocity_limit:.6g} rad/s"
+        return (f"stream stopped by the host at cycle {row}: {guard.name} ({what}, at the motor shaft); "
+                f"zero torque sent, operation disabled")
+
     def fault_line(self) -> str:
         return self.emcy_line()
 
+    def fault_text(self) -> str:
+        """The drive's fault in words: the latched EMCY, else its error code 0x603F."""
+        if self._emcy:
+            return self.emcy_line()
+        try:
+            code = int(self._read(c.ERROR_CODE, what="error code"))
+        except DriverError:
+            return "error code unreadable"
+        return f"error code 0x{code:04X} {c.emcy_text(code)}" if code else "no error code"
+
+    def state(self) -> str:
+        word = self.statusword()
+        now = c.state_of(word)
+        return f"{now.value if now else 'unknown'} (statusword 0x{word:04X})"
+
+    def faults(self) -> list[str]:
+        """The drive's active fault: error code 0x603F and error register 0x1001 by name, and the EMCY this
+        host saw ([] when the drive is not in fault and reports no error)."""
+        out = []
+        code = int(self._read(c.ERROR_CODE, what="error code")) if self._has(c.ERROR_CODE) else 0
+        register = int(self._read(c.ERROR_REGISTER, what="error register")) if self._has(c.ERROR_REGISTER) else 0
+        if code:
+            out.append(f"0x603F error code 0x{code:04X} {c.emcy_text(code)} (error register 0x{register:02X})")
+        elif self.power_state() in (c.State.FAULT, c.State.FAULT_REACTION):
+            out.append(f"in fault, error code 0x603F = 0 (error register 0x{register:02X})")
+        if self._emcy and not (code and self._emcy[-1][0] == code):
+            out.append(self.emcy_line())
+        return out
+
+    def history(self) -> list[str]:
+        """The drive's error history 0x1003, newest first, decoded (EMCY codes by name)."""
+        if not self._has(c.ERROR_HISTORY, 0):
+            return ["0x1003 error history: not in the EDS"]
+        count = int(self._read(c.ERROR_HISTORY, 0, "number of errors"))
+        entries = []
+        for sub in range(1, min(count, 254) + 1):
+            if not self._has(c.ERROR_HISTORY, sub):
+                break
+            value = int(self._read(c.ERROR_HISTORY, sub, "standard error field"))
+            code = value & 0xFFFF
+            info = f" (info 0x{value >> 16:04X})" if value >> 16 else ""
+            entries.append(f"0x{code:04X} {c.emcy_text(code)}{info}")
+        return [f"0x1003 error history ({count}, newest first): " + ("; ".join(entries) if entries else "empty")]
+
+    def run_events(self) -> list[tuple[str, str]]:
+        out = super().run_events()
+        out += [("info", f"CANopen node {self.node_id}: {line}") for line in self._skipped]
+        out += [("info", line) for line in dict.fromkeys(self._notes)]
+        self._notes.clear()
+        dropped = self.malformed.count + self._malformed_cycle
+        if dropped:
+            out.append(("info", f"{dropped} malformed frame(s) on the bus were counted and dropped"))
+        return out
+
     def _release(self) -> None:
+        node = getattr(self, "node", None)
+        if node is not None and (self._restore or self.config is not None):
+            # leave the drive as found: heartbeat consumer and loss reaction back (a drive that applies 0x6007
+            # in every state would otherwise fault once this host's heartbeat stops), and NMT pre-operational,
+            # which also tells the next host that nobody owns it any more
+            for (index, sub), value in self._restore.items():
+                try:
+                    self._write(index, value, sub, "restored on close")
+                except DriverError:
+                    pass
+            try:
+                node.nmt.state = "PRE-OPERATIONAL"
+            except Exception:  # closing must release the bus whatever the bus says
+                pass
         if self._heartbeat_task is not None:
             self._heartbeat_task.stop()
         self.network.disconnect()
@@ -469,3 +698,24 @@ def _pdo_format(pdo_map) -> struct.Struct:
         code = _STRUCT[var.length]
         fmt += code.upper() if var.od.data_type in (5, 6, 7) else code  # UNSIGNED8/16/32
     return struct.Struct(fmt)
+
+
+def _check_eds(eds: str, node_id: int):
+    """Load the EDS and check, before anything is sent, that it has the objects the host uses with the types
+    it maps them as; one line naming the object otherwise. Returns the object dictionary."""
+    import canopen
+
+    try:
+        od = canopen.import_od(eds, node_id)
+    except Exception as exc:  # the parser raises many types for a broken file
+        raise ConfigError(f"EDS {eds} cannot be read: {' '.join(str(exc).split())}") from exc
+    missing = [f"0x{i:04X}" for i in (*PDO_TYPES, *REQUIRED) if i not in od]
+    if missing:
+        raise ConfigError(f"EDS {eds} lacks object(s) {', '.join(missing)} that the host needs (CiA 402)")
+    for index, (code, name) in PDO_TYPES.items():
+        declared = od[index].data_type
+        if declared != code:
+            raise ConfigError(f"EDS {eds} declares 0x{index:04X} ({od[index].name}) as "
+                              f"{DATA_TYPE_NAMES.get(declared, hex(declared))}; CiA 402 and this host's PDO "
+                              f"mapping take it as {name}")
+    return od

@@ -15,6 +15,7 @@ import numpy as np
 # Object indices (CiA 301 communication, CiA 402 profile)
 DEVICE_TYPE = 0x1000
 ERROR_REGISTER = 0x1001
+ERROR_HISTORY = 0x1003        # pre-defined error field: sub 0 count, sub 1.. newest first (code | info << 16)
 COMM_CYCLE_PERIOD = 0x1006    # us
 DEVICE_NAME = 0x1008
 CONSUMER_HEARTBEAT = 0x1016   # sub 1: (node << 16) | time_ms
@@ -34,6 +35,8 @@ MAX_TORQUE = 0x6072           # per mille of rated torque
 RATED_CURRENT = 0x6075        # mA
 RATED_TORQUE = 0x6076         # mN*m
 TORQUE_ACTUAL = 0x6077        # per mille of rated torque
+SOFTWARE_POSITION_LIMIT = 0x607D  # sub 1 min, sub 2 max, INTEGER32 increments
+MAX_MOTOR_SPEED = 0x6080      # UNSIGNED32, rpm
 ENCODER_RESOLUTION = 0x608F   # sub 1 increments per sub 2 motor revolutions
 SUPPORTED_MODES = 0x6502
 
@@ -164,6 +167,24 @@ def max_torque_permille(current_limit: float, torque_constant: float, rated_torq
     return int(min(max(value, 0), 65535))
 
 
+INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
+
+
+def position_limit_increments(position_min: float, position_max: float, counts_per_rev: int) -> tuple[int, int]:
+    """0x607D sub 1 and 2 (INTEGER32 increments) from a position window in rad at the motor shaft: rounded
+    outwards (the drive's limit is never tighter than the host's, which checks the exact window), an
+    infinite end or one beyond INTEGER32 is the type's end (no limit there)."""
+    scale = counts_per_rev / (2 * math.pi)
+    low = math.floor(position_min * scale) if math.isfinite(position_min) else INT32_MIN
+    high = math.ceil(position_max * scale) if math.isfinite(position_max) else INT32_MAX
+    return max(low, INT32_MIN), min(high, INT32_MAX)
+
+
+def max_motor_speed_rpm(velocity_limit: float) -> int:
+    """0x6080 (UNSIGNED32, rpm) from a velocity limit in rad/s at the motor shaft, rounded up."""
+    return int(min(math.ceil(velocity_limit * 60.0 / (2 * math.pi)), 2**32 - 1))
+
+
 #: Error codes (CiA 301 table and CiA 402 annex): code -> text
 EMCY_TEXT = {
     0x0000: "error reset or no error",
@@ -185,6 +206,7 @@ EMCY_TEXT = {
     0x8250: "RPDO timeout",
     0x8400: "velocity speed controller (over-speed)",
     0x8611: "following error",
+    0x8612: "reference limit (software position limit)",
     0xFF00: "device specific",
 }
 _CLASS_TEXT = {0x1: "generic", 0x2: "current", 0x3: "voltage", 0x4: "temperature", 0x5: "device hardware",

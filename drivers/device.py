@@ -10,7 +10,9 @@ Two kinds of device exist:
 
 The runner only uses :meth:`Device.configure`, :meth:`Device.arm`, :meth:`Device.disarm`,
 :meth:`Device.estop`, :meth:`Device.stream` and :meth:`Device.close`, and asks :func:`refusal` before
-anything moves whether a protocol can run at all.
+anything moves whether a protocol can run at all. ``hilbench info`` and ``hilbench fault`` use
+:meth:`Device.info`, :meth:`Device.state`, :meth:`Device.faults`, :meth:`Device.history` and
+:meth:`Device.clear_faults`, which every device kind answers.
 """
 
 from __future__ import annotations
@@ -52,8 +54,22 @@ def refusal(name: str, capabilities: Capabilities, mode: str, sample_rate: int) 
     return None
 
 
+class SampleBlock:
+    """What every device's ``stream`` yields, one block at a time: the one sample-block type the runner reads.
+
+    Every block has (1-D arrays of equal length, SI units at the load): ``index`` (sample index, int64),
+    ``time`` (device time, s), ``counts`` (encoder counts, unwrapped), ``current_cmd`` and ``current_meas``
+    (A), ``torque`` (N*m), ``position`` (rad), ``status`` (the device's status per sample) and ``sample_rate``
+    (Hz); :meth:`extra` gives the channels a device adds beyond that set ({} when none).
+    """
+
+    def extra(self) -> dict[str, np.ndarray]:
+        """Channels beyond the device-clocked set, for the run file (name: array)."""
+        return {}
+
+
 @dataclass
-class CycleSamples:
+class CycleSamples(SampleBlock):
     """One block of samples of a host-clocked device, in SI units at the load.
 
     Attributes (1-D arrays of equal length):
@@ -133,7 +149,7 @@ class Device(abc.ABC):
         """Emergency stop (quick stop on a drive); safe from any thread."""
 
     @abc.abstractmethod
-    def stream(self, setpoints) -> Iterator:
+    def stream(self, setpoints) -> Iterator[SampleBlock]:
         """Play ``setpoints`` (A in current mode, rad/s in velocity mode), one per sample; yield sample blocks."""
 
     @abc.abstractmethod
@@ -143,6 +159,25 @@ class Device(abc.ABC):
     def run_events(self) -> list[tuple[str, str]]:
         """(kind, one-line message) events for the run file once a stream has ended (timing, faults)."""
         return []
+
+    # What ``hilbench info`` and ``hilbench fault show|clear`` use, on every device kind.
+    def state(self) -> str:
+        """The device's own state in words (asked of the device)."""
+        return "unknown"
+
+    def faults(self) -> list[str]:
+        """The faults the device has latched, one line each, each with its code and name; [] when none.
+        A device that latches no fault has none."""
+        return []
+
+    def history(self) -> list[str]:
+        """Lines on past faults the device keeps (a CiA 402 drive's error history 0x1003); [] when it keeps none."""
+        return []
+
+    def clear_faults(self) -> None:
+        """Clear the latched faults, so that the device can be armed again. A device that latches no fault
+        has nothing to clear."""
+        return None
 
     def __enter__(self) -> Device:
         return self

@@ -1,4 +1,4 @@
-"""``open_device(url)``: an :class:`Amplifier` from a device URL.
+"""``open_device(url)``: a device from a device URL, through one table of schemes (:data:`SCHEMES`).
 
 - ``serial:///dev/ttyUSB0?baud=2000000`` -- any local pyserial port or URL after ``serial://``
   (``serial://loop://``), opened exclusively; network ports (``socket://``, ``rfc2217://``) are refused;
@@ -21,6 +21,8 @@ import select
 import subprocess
 import sys
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from urllib.parse import parse_qsl, urlsplit
 
 from hilbench.drivers.amplifier import Amplifier
@@ -52,71 +54,69 @@ def _int(params: dict[str, str], key: str, default: int, url: str) -> int:
 NETWORK_SERIAL_SCHEMES = ("socket", "rfc2217")
 
 
-def check_device_url(url: str) -> None:
-    """Raise :class:`DeviceURLError` for a URL :func:`open_device` would refuse, without opening anything."""
-    scheme, sep, rest = url.partition("://")
-    if not sep:
-        raise DeviceURLError(f"{url!r} is not a device URL (serial://..., can://..., sim://...)")
-    if scheme == "serial":
-        port, _, query = rest.rpartition("?") if "?" in rest else (rest, "", "")
-        _int(_query(query, {"baud"}, url), "baud", 2_000_000, url)
-        if not port:
-            raise DeviceURLError(f"{url}: no serial port given")
-        inner = port.partition("://")[0].lower() if "://" in port else ""
-        if inner in NETWORK_SERIAL_SCHEMES:
-            raise DeviceURLError(f"{url}: network serial ports ({', '.join(s + '://' for s in NETWORK_SERIAL_SCHEMES)}"
-                                 f") are refused: they cannot be owned exclusively and their latency is "
-                                 f"unbounded against the watchdog; use a local port")
-    elif scheme == "can":
-        parts = urlsplit(url)
-        params = _query(parts.query, {"node", "fd", "bitrate"}, url)
-        _int(params, "node", 1, url)
-        _int(params, "bitrate", 0, url)
-        if not parts.netloc or not parts.path.lstrip("/"):
-            raise DeviceURLError(f"{url}: expected can://INTERFACE/CHANNEL")
-    elif scheme == "sim":
-        _query(urlsplit(url).query, {"pacing", "config", "seed", "tick"}, url)
-    elif scheme == "canopen":
-        _bus_location(url, {"node", "eds", "bitrate", "port"})
-    elif scheme == "odrive":
-        _bus_location(url, {"node", "tvl_endpoint", "bitrate", "port"})
-    else:
-        raise DeviceURLError(f"{url}: unknown scheme {scheme!r} (serial, can, canopen, odrive or sim)")
+@dataclass(frozen=True)
+class Scheme:
+    """One kind of device URL: its form (for help texts), its options, how to check it without opening
+    anything, and how to open it. :data:`SCHEMES` is the one table ``open_device``, ``check_device_url`` and
+    the CLI's help texts read (as python-can's interface table)."""
+
+    name: str
+    form: str
+    options: frozenset[str]
+    check: Callable[[str], object]
+    open: Callable[[str, float], Device]
 
 
-def open_device(url: str, timeout: float = 2.0) -> Amplifier | Device:
-    """Connect to the device at ``url`` (see the module doc): an :class:`Amplifier` for the hilbench protocol,
-    a host-clocked :class:`Device` for a CANopen or ODrive drive."""
-    check_device_url(url)
-    scheme, sep, rest = url.partition("://")
-    if scheme == "serial":
-        port, _, query = rest.rpartition("?") if "?" in rest else (rest, "", "")
-        params = _query(query, {"baud"}, url)
-        return Amplifier(SerialLink(port, _int(params, "baud", 2_000_000, url)), timeout=timeout)
-    if scheme == "can":
-        parts = urlsplit(url)
-        params = _query(parts.query, {"node", "fd", "bitrate"}, url)
-        channel = parts.path.lstrip("/")
-        if not parts.netloc or not channel:
-            raise DeviceURLError(f"{url}: expected can://INTERFACE/CHANNEL")
-        kwargs = {"bitrate": _int(params, "bitrate", 0, url)} if "bitrate" in params else {}
-        fd = params.get("fd", "0") in ("1", "true")
-        link = CanLink(parts.netloc, channel, _int(params, "node", 1, url), fd, **kwargs)
-        return Amplifier(link, timeout=timeout)
-    if scheme == "sim":
-        params = _query(urlsplit(url).query, {"pacing", "config", "seed", "tick"}, url)
-        proc, path = start_simulator(params)
-        try:
-            link = SerialLink(path)
-        except DriverError:
-            stop_simulator(proc)
-            raise
-        return Amplifier(link, timeout=timeout, on_close=lambda: stop_simulator(proc))
-    if scheme == "canopen":
-        return _open_canopen(url, timeout)
-    if scheme == "odrive":
-        return _open_odrive(url, timeout)
-    raise DeviceURLError(f"{url}: unknown scheme {scheme!r} (serial, can, canopen, odrive or sim)")
+def _serial_parts(url: str) -> tuple[str, dict[str, str]]:
+    rest = url.partition("://")[2]
+    port, _, query = rest.rpartition("?") if "?" in rest else (rest, "", "")
+    params = _query(query, set(SCHEMES["serial"].options), url)
+    _int(params, "baud", 2_000_000, url)
+    if not port:
+        raise DeviceURLError(f"{url}: no serial port given")
+    inner = port.partition("://")[0].lower() if "://" in port else ""
+    if inner in NETWORK_SERIAL_SCHEMES:
+        raise DeviceURLError(f"{url}: network serial ports ({', '.join(s + '://' for s in NETWORK_SERIAL_SCHEMES)}"
+                             f") are refused: they cannot be owned exclusively and their latency is "
+                             f"unbounded against the watchdog; use a local port")
+    return port, params
+
+
+def _open_serial(url: str, timeout: float) -> Amplifier:
+    port, params = _serial_parts(url)
+    return Amplifier(SerialLink(port, _int(params, "baud", 2_000_000, url)), timeout=timeout)
+
+
+def _can_parts(url: str) -> tuple[str, str, dict[str, str]]:
+    parts = urlsplit(url)
+    params = _query(parts.query, set(SCHEMES["can"].options), url)
+    _int(params, "node", 1, url)
+    _int(params, "bitrate", 0, url)
+    channel = parts.path.lstrip("/")
+    if not parts.netloc or not channel:
+        raise DeviceURLError(f"{url}: expected can://INTERFACE/CHANNEL")
+    return parts.netloc, channel, params
+
+
+def _open_can(url: str, timeout: float) -> Amplifier:
+    interface, channel, params = _can_parts(url)
+    kwargs = {"bitrate": _int(params, "bitrate", 0, url)} if "bitrate" in params else {}
+    fd = params.get("fd", "0") in ("1", "true")
+    return Amplifier(CanLink(interface, channel, _int(params, "node", 1, url), fd, **kwargs), timeout=timeout)
+
+
+def _sim_params(url: str) -> dict[str, str]:
+    return _query(urlsplit(url).query, set(SCHEMES["sim"].options), url)
+
+
+def _open_sim(url: str, timeout: float) -> Amplifier:
+    proc, path = start_simulator(_sim_params(url))
+    try:
+        link = SerialLink(path)
+    except DriverError:
+        stop_simulator(proc)
+        raise
+    return Amplifier(link, timeout=timeout, on_close=lambda: stop_simulator(proc))
 
 
 def _bus_location(url: str, allowed: set[str]) -> tuple[str, str, dict[str, str], dict]:
@@ -136,10 +136,8 @@ def _bus_location(url: str, allowed: set[str]) -> tuple[str, str, dict[str, str]
     return parts.netloc, channel, params, kwargs
 
 
-def _open_odrive(url: str, timeout: float):
-    from hilbench.drivers.odrive_drive import OdriveDrive
-
-    interface, channel, params, kwargs = _bus_location(url, {"node", "tvl_endpoint", "bitrate", "port"})
+def _odrive_parts(url: str) -> tuple[str, str, int, int, dict]:
+    interface, channel, params, kwargs = _bus_location(url, set(SCHEMES["odrive"].options))
     if "tvl_endpoint" not in params:
         raise DeviceURLError(f"{url}: tvl_endpoint=ID is required (the endpoint id of "
                              f"axis0.controller.config.enable_torque_mode_vel_limit in your firmware's "
@@ -147,21 +145,79 @@ def _open_odrive(url: str, timeout: float):
     node = _int(params, "node", 0, url)
     if not 0 <= node <= 63:
         raise DeviceURLError(f"{url}: node must be 0..63, got {node}")
-    return OdriveDrive(interface, channel, node, _int(params, "tvl_endpoint", 0, url), timeout=timeout, **kwargs)
+    endpoint = _int(params, "tvl_endpoint", 0, url)
+    if not 0 <= endpoint <= 0xFFFF:
+        raise DeviceURLError(f"{url}: tvl_endpoint must be 0..65535 (a CAN Simple endpoint id), got {endpoint}")
+    return interface, channel, node, endpoint, kwargs
+
+
+def _open_odrive(url: str, timeout: float):
+    from hilbench.drivers.odrive_drive import OdriveDrive
+
+    interface, channel, node, endpoint, kwargs = _odrive_parts(url)
+    return OdriveDrive(interface, channel, node, endpoint, timeout=timeout, **kwargs)
+
+
+def _canopen_parts(url: str) -> tuple[str, str, int, str, dict]:
+    interface, channel, params, kwargs = _bus_location(url, set(SCHEMES["canopen"].options))
+    if "eds" not in params:
+        raise DeviceURLError(f"{url}: eds=FILE is required (the drive's EDS or DCF)")
+    node = _int(params, "node", 1, url)
+    if not 1 <= node <= 126:
+        raise DeviceURLError(f"{url}: node must be 1..126 (127 is the host's own heartbeat id), got {node}")
+    cycles = _int(params, "enable_cycles", 4, url)
+    if not 0 <= cycles <= 1000:
+        raise DeviceURLError(f"{url}: enable_cycles must be 0..1000, got {cycles}")
+    return interface, channel, node, params["eds"], {**kwargs, "enable_cycles": cycles}
 
 
 def _open_canopen(url: str, timeout: float):
     from hilbench.drivers.canopen_drive import CanopenDrive
 
-    interface, channel, params, kwargs = _bus_location(url, {"node", "eds", "bitrate", "port"})
-    if "eds" not in params:
-        raise DeviceURLError(f"{url}: eds=FILE is required (the drive's EDS or DCF)")
-    if not os.path.isfile(params["eds"]):
-        raise DeviceURLError(f"{url}: EDS file {params['eds']} does not exist")
-    node = _int(params, "node", 1, url)
-    if not 1 <= node <= 127:
-        raise DeviceURLError(f"{url}: node must be 1..127, got {node}")
-    return CanopenDrive(interface, channel, node, params["eds"], timeout=timeout, **kwargs)
+    interface, channel, node, eds, kwargs = _canopen_parts(url)  # kwargs: the bus's, and enable_cycles
+    if not os.path.isfile(eds):
+        raise DeviceURLError(f"{url}: EDS file {eds} does not exist")
+    return CanopenDrive(interface, channel, node, eds, timeout=timeout, **kwargs)
+
+
+SCHEMES: dict[str, Scheme] = {s.name: s for s in (
+    Scheme("serial", "serial:///dev/ttyUSB0?baud=2000000", frozenset({"baud"}), _serial_parts, _open_serial),
+    Scheme("can", "can://INTERFACE/CHANNEL?node=1&fd=1&bitrate=1000000", frozenset({"node", "fd", "bitrate"}),
+           _can_parts, _open_can),
+    Scheme("canopen", "canopen://INTERFACE/CHANNEL?node=N&eds=FILE",
+           frozenset({"node", "eds", "bitrate", "port", "enable_cycles"}), _canopen_parts, _open_canopen),
+    Scheme("odrive", "odrive://INTERFACE/CHANNEL?node=N&tvl_endpoint=ID",
+           frozenset({"node", "tvl_endpoint", "bitrate", "port"}), _odrive_parts, _open_odrive),
+    Scheme("sim", "sim://?pacing=lockstep&config=sim.toml&seed=3&tick=0.004",
+           frozenset({"pacing", "config", "seed", "tick"}), _sim_params, _open_sim),
+)}
+
+
+def describe_schemes() -> str:
+    """The device URL forms, for help texts."""
+    return ", ".join(s.form for s in SCHEMES.values())
+
+
+def _scheme(url: str) -> Scheme:
+    name, sep, _ = url.partition("://")
+    if not sep:
+        raise DeviceURLError(f"{url!r} is not a device URL ({', '.join(n + '://...' for n in SCHEMES)})")
+    if name not in SCHEMES:
+        raise DeviceURLError(f"{url}: unknown scheme {name!r} ({', '.join(SCHEMES)})")
+    return SCHEMES[name]
+
+
+def check_device_url(url: str) -> None:
+    """Raise :class:`DeviceURLError` for a URL :func:`open_device` would refuse, without opening anything."""
+    _scheme(url).check(url)
+
+
+def open_device(url: str, timeout: float = 2.0) -> Device:
+    """Connect to the device at ``url`` (see the module doc): an :class:`Amplifier` for the hilbench protocol,
+    a host-clocked :class:`Device` for a CANopen or ODrive drive."""
+    scheme = _scheme(url)
+    scheme.check(url)
+    return scheme.open(url, timeout)
 
 
 def start_simulator(options: dict[str, str]) -> tuple[subprocess.Popen, str]:

@@ -18,12 +18,14 @@ Definitions (``d_k = host_time[k+1] - host_time[k]``, the cycle time the drive s
 from __future__ import annotations
 
 import abc
+import struct
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from hilbench.drivers.can_buffer import enlarge_receive_buffer
+from hilbench.drivers.can_frames import drop_malformed_frames
 from hilbench.drivers.device import Device, refusal
 from hilbench.drivers.errors import ConfigError
 
@@ -157,6 +159,20 @@ class HostClockedDevice(Device):
 
 
 @dataclass(frozen=True)
+class Guard:
+    """A limit the cycle checks on every frame it receives: the value at byte ``offset`` of the frames of rx
+    slot ``slot``, decoded with the struct format ``fmt``, must lie in [``low``, ``high``] (NaN trips).
+    ``name`` is the fault name the host reports (POSITION_WINDOW, OVER_SPEED, as the hilbench device's)."""
+
+    name: str
+    slot: int
+    offset: int
+    fmt: str
+    low: float
+    high: float
+
+
+@dataclass(frozen=True)
 class CanCycleSpec:
     """What a host-clocked CAN cycle sends and collects.
 
@@ -171,6 +187,10 @@ class CanCycleSpec:
     ``receive_own_messages``), ``host_time[k]`` is that timestamp of trigger k: when it was on the bus, as
     the drive saw it, rather than when ``send`` returned. Under load the two differ by milliseconds
     (loopback delivery is deferred to a kernel thread; a SocketCAN frame waits in the transmit queue).
+
+    ``guards``: limits checked on every received frame, in the cycle itself (:class:`Guard`). The first
+    value out of its range ends the cycle at once: no further setpoint is sent, ``end_data`` (zero torque,
+    operation disabled) goes out, and :attr:`CanCycle.limit` says which guard tripped on which frame.
     """
 
     interface: str
@@ -183,11 +203,13 @@ class CanCycleSpec:
     stop_data: tuple[bytes, ...]
     end_data: tuple[bytes, ...]
     echo_id: int | None = None
+    guards: tuple[Guard, ...] = ()
 
 
 OWN_FRAMES_OPTION = ("virtual", "socketcan")  # interfaces that return own frames only when asked to
 _SENT, _STOP, _ESTOP, _ERROR, _REALTIME, _ECHOED = 0, 1, 2, 3, 4, 5  # control slots; rx counters from _RX
-_RX = 6
+_MALFORMED, _LIMIT, _LIMIT_AT = 6, 7, 8  # frames dropped undecoded; limit tripped (guard index + 1), at rx row
+_RX = 9
 RT_PRIORITY = 20  # SCHED_FIFO priority of the cycle process, where the OS allows it
 TAIL_LIMIT = 60.0  # s: the longest wait, after the last trigger, for a lagging drive's remaining answers
 
@@ -266,6 +288,17 @@ class CanCycle:
         return int(self.arrays["ctl"][_ECHOED])
 
     @property
+    def malformed(self) -> int:
+        """Frames the cycle's bus dropped because they did not decode (known once the cycle has ended)."""
+        return int(self.arrays["ctl"][_MALFORMED])
+
+    @property
+    def limit(self) -> tuple[Guard, int] | None:
+        """The guard that tripped and the row (in its rx slot) of the frame that tripped it, or None."""
+        which = int(self.arrays["ctl"][_LIMIT])
+        return (self.spec.guards[which - 1], int(self.arrays["ctl"][_LIMIT_AT])) if which else None
+
+    @property
     def error(self) -> int:
         return int(self.arrays["ctl"][_ERROR])
 
@@ -322,9 +355,11 @@ def _cycle_main(spec: CanCycleSpec, shm_name: str, n: int, start_delay: float, p
             ctl[_STOP] = 1
             return
         enlarge_receive_buffer(bus)
+        malformed = drop_malformed_frames(bus)
         try:
             _cycle_loop(bus, spec, n, start_delay, ctl, host_time, scheduled, (rx, rx_time), tx, parent)
         finally:
+            ctl[_MALFORMED] = malformed.count
             bus.shutdown()
         del a, ctl, host_time, scheduled, rx, rx_time, tx
     finally:
@@ -350,6 +385,7 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
     echoes = 0
 
     rx, rx_time = received
+    guards = [(g.slot, g.offset, g.fmt, g.low, g.high) for g in spec.guards]
 
     def take(msg) -> None:
         nonlocal echoes
@@ -368,11 +404,19 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
             rx_time[j, k] = clock()
         counts[j] = k + 1
         ctl[_RX + j] = k + 1
+        if not ctl[_LIMIT]:
+            for g, (where, offset, fmt, low, high) in enumerate(guards):
+                if where == j and len(msg.data) >= offset + struct.calcsize(fmt):
+                    value = struct.unpack_from(fmt, msg.data, offset)[0]
+                    if not low <= value <= high:
+                        ctl[_LIMIT_AT] = k
+                        ctl[_LIMIT] = g + 1
+                        return
 
     def wait_until(deadline: float) -> None:
         while True:
             left = deadline - clock()
-            if left <= 0:
+            if left <= 0 or ctl[_LIMIT]:
                 return
             msg = bus.recv(timeout=left)
             if msg is not None:
@@ -381,13 +425,15 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
     t0 = clock() + start_delay
     orphaned = False
     for k in range(n):
-        if ctl[_STOP]:
+        if ctl[_STOP] or ctl[_LIMIT]:
             break
         if parent and os.getppid() != parent:
             orphaned = True
             break
         due = t0 + k * period
         wait_until(due)
+        if ctl[_LIMIT]:  # a limit tripped while waiting: this cycle's setpoint is not sent
+            break
         if ctl[_ESTOP]:
             for msg in stop_msgs:
                 bus.send(msg)
@@ -407,7 +453,7 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
     quiet = max(1.0, 20 * period)
     end, last_call = clock() + quiet, clock() + TAIL_LIMIT
     answered = min(counts or [0])
-    while answered < ctl[_SENT] and (left := min(end, last_call) - clock()) > 0:
+    while not ctl[_STOP] and answered < ctl[_SENT] and (left := min(end, last_call) - clock()) > 0:  # host gave up
         msg = bus.recv(timeout=left)
         if msg is not None:
             take(msg)

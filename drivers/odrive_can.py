@@ -24,6 +24,13 @@ class Cmd(enum.IntEnum):
     GET_TORQUES = 0x1C          # axis -> host, cyclic: torque target f32, torque estimate f32 (N*m)
 
 
+#: Commands only a host sends to an axis: what feeds the axis's watchdog, and what tells another host is there.
+#: The rest (heartbeat, TxSdo, the cyclic estimates) are the axis's own frames, which a bus that hands a sender
+#: its frames back (udp_multicast, SocketCAN with loopback) also delivers to the axis itself.
+HOST_COMMANDS = frozenset({Cmd.ESTOP, Cmd.RX_SDO, Cmd.SET_AXIS_STATE, Cmd.SET_CONTROLLER_MODE, Cmd.SET_INPUT_TORQUE,
+                           Cmd.SET_LIMITS, Cmd.CLEAR_ERRORS})
+
+
 class AxisState(enum.IntEnum):
     IDLE = 1
     CLOSED_LOOP_CONTROL = 8
@@ -37,7 +44,7 @@ AXIS_ERRORS = {
     0x00000001: "invalid state",
     0x00000040: "motor failed",
     0x00000100: "encoder failed",
-    0x00000200: "controller failed",
+    0x00000200: "controller failed (over-speed: |vel| above vel_limit x vel_limit_tolerance)",
     0x00000800: "watchdog timer expired",
     0x00004000: "e-stop requested",
     0x00040000: "over temperature",

@@ -11,6 +11,33 @@ import sys
 from hilbench.firmware_sim.bus_buffer import widen_device_buffer
 
 PACINGS = ("realtime", "lockstep")
+#: Node ids each kind of simulated device can take: the hilbench protocol's 4-bit node; CiA 402 1..126 (127 is
+#: the host's own heartbeat id, which the drive would otherwise hear as the host); ODrive's 6-bit node (its
+#: 11-bit ids are node << 5 | command).
+NODE_RANGES = {"can": (1, 15), "canopen": (1, 126), "odrive": (0, 63)}
+
+
+def check_bus_args(kind: str, interface: str, channel: str, node: int) -> None:
+    """Raise ValueError (one line) for a bus, channel or node the simulated device of ``kind`` (can, canopen,
+    odrive) cannot serve on, before any bus is opened."""
+    import ipaddress
+
+    import can
+
+    if interface not in can.VALID_INTERFACES:
+        raise ValueError(f"--interface {interface!r} is not a python-can interface (known: "
+                         f"{', '.join(sorted(can.VALID_INTERFACES))})")
+    low, high = NODE_RANGES[kind]
+    if not low <= node <= high:
+        raise ValueError(f"--node must be {low}..{high} for --{kind}, got {node}")
+    if interface == "udp_multicast":
+        try:
+            multicast = ipaddress.ip_address(channel).is_multicast
+        except ValueError:
+            multicast = False
+        if not multicast:
+            raise ValueError(f"udp_multicast needs a multicast group address as its channel (e.g. 239.74.163.2), "
+                             f"got {channel!r}")
 
 
 def build_parser(prog: str = "python -m hilbench.firmware_sim") -> argparse.ArgumentParser:
@@ -28,12 +55,18 @@ def build_parser(prog: str = "python -m hilbench.firmware_sim") -> argparse.Argu
                             "odrive:// URL")
     parser.add_argument("--clock", choices=("real", "sync"), default="real",
                         help="--canopen: plant time follows real time between SYNCs (default) or the SYNC count")
+    parser.add_argument("--order", choices=("apply-then-sample", "sample-then-apply"), default="apply-then-sample",
+                        help="--canopen: whether a SYNC's TPDO reports the state after (default) or before the "
+                             "controlword received with that SYNC")
+    parser.add_argument("--enable-latency", type=int, choices=range(4), default=0, metavar="{0..3}",
+                        help="--canopen: SYNCs between an enable received by RPDO and operation enabled")
     parser.add_argument("--udp-port", type=int, default=None,
                         help="--canopen on udp_multicast: UDP port (default 43113; buses on one port hear each other)")
     parser.add_argument("--interface", default="socketcan",
                         help="python-can interface for --can (socketcan, udp_multicast, pcan...; "
                              "default socketcan)")
-    parser.add_argument("--node", type=int, default=1, help="CAN node id, 1..15 (default 1)")
+    parser.add_argument("--node", type=int, default=1,
+                        help="CAN node id (default 1): 1..15 with --can, 1..126 with --canopen, 0..63 with --odrive")
     parser.add_argument("--fd", action="store_true", help="use CAN FD frames")
     parser.add_argument("--config",
                         help="simulator TOML (plant and injected effects); default: the packaged one")
@@ -77,11 +110,14 @@ def _serve_drive(args, sim) -> int:
         threading.Thread(target=watch_parent, args=(args.parent_pid, stop), daemon=True).start()
     if args.odrive:
         return odrive_sim.serve(args.interface, args.odrive, args.node, sim, stop, port=args.udp_port)
-    return cia402_drive.serve(args.interface, args.canopen, args.node, sim, args.clock, stop=stop, port=args.udp_port)
+    return cia402_drive.serve(args.interface, args.canopen, args.node, sim, args.clock, stop=stop, port=args.udp_port,
+                              order=args.order, enable_latency=args.enable_latency)
 
 
 def main(argv: list[str] | None = None, prog: str = "python -m hilbench.firmware_sim") -> int:
     args = build_parser(prog).parse_args(argv)
+    import can
+
     from hilbench.firmware_sim.core_c import CoreDevice
     from hilbench.firmware_sim.device import CanTransport, PtyTransport, serve
     from hilbench.firmware_sim.sim_config import load_sim_config
@@ -89,24 +125,20 @@ def main(argv: list[str] | None = None, prog: str = "python -m hilbench.firmware
     try:
         sim = load_sim_config(args.config, seed=args.seed)
         if args.canopen or args.odrive:
+            kind = "canopen" if args.canopen else "odrive"
+            check_bus_args(kind, args.interface, args.canopen or args.odrive, args.node)
             return _serve_drive(args, sim)
         if not 0.0005 <= args.tick <= 0.1:
             raise ValueError(f"--tick must be within 0.0005..0.1 s, got {args.tick}")
         if args.serial:
             transport = PtyTransport()
         else:
-            import can
-
-            if args.interface not in can.VALID_INTERFACES:
-                raise ValueError(f"--interface {args.interface!r} is not a python-can interface (known: "
-                                 f"{', '.join(sorted(can.VALID_INTERFACES))})")
-            if not 1 <= args.node <= 15:
-                raise ValueError(f"--node must be 1..15, got {args.node}")
+            check_bus_args("can", args.interface, args.can, args.node)
 
             bus = can.Bus(interface=args.interface, channel=args.can, fd=args.fd)
             widen_device_buffer(bus)
             transport = CanTransport(bus, args.node, args.fd)
-    except (ValueError, OSError, ImportError, RuntimeError) as exc:  # RuntimeError: python-can's CanError
+    except (ValueError, OSError, ImportError, RuntimeError, can.CanError) as exc:
         print(f"{prog}: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2
     link = "serial" if args.serial else "can-fd" if args.fd else "can"

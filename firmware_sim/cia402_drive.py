@@ -13,6 +13,11 @@ What it implements, as a real drive on the bus would:
 - loss of the host (no heartbeat within 0x1016, or no SYNC for ``sync_timeout`` s once SYNCs have started
   while operation is enabled, ``sync_timeout``, default 0.1 s) triggers the reaction 0x6007 selects.
 
+Two behaviours CiA 301/402 allow and real drives show, selectable: ``order="apply-then-sample"`` (default)
+applies the controlword received before a SYNC and then reports the state in that SYNC's TPDO;
+``"sample-then-apply"`` reports the state from before it. ``enable_latency`` (0..3 SYNCs) delays "operation
+enabled" after an enable operation received by RPDO, as a drive that closes its current loop first.
+
 The plant: at each SYNC the drive samples the plant (position 0x6064, velocity 0x606C, torque 0x6077) and then
 applies the target torque received before that SYNC, held until the next SYNC. Internally the plant runs at
 ``oversample`` times the SYNC rate. With ``clock="sync"`` each SYNC advances the plant by exactly one
@@ -33,6 +38,7 @@ import numpy as np
 
 from hilbench.drivers import cia402 as c
 from hilbench.firmware_sim.bus_buffer import widen_device_buffer
+from hilbench.firmware_sim.bus_frames import drop_malformed
 from hilbench.firmware_sim.plant import Plant
 from hilbench.firmware_sim.sim_config import SimConfig, substeps_for
 from hilbench.firmware_sim.stall_grace import StallGrace
@@ -41,7 +47,11 @@ EDS_PATH = Path(__file__).with_name("hb_cia402.eds")
 SYNC_TIMEOUT = 0.1  # s without SYNC (while operation is enabled) that count as a lost host
 EMCY_HEARTBEAT = 0x8130
 EMCY_SYNC_LOST = 0x8250  # the synchronous RPDOs stop with the SYNC
+EMCY_POSITION_LIMIT = 0x8612  # software position limit 0x607D passed
+EMCY_OVER_SPEED = 0x8400      # max motor speed 0x6080 passed
+HISTORY_LENGTH = 8            # entries of the error history 0x1003 (the EDS's sub-indices)
 CLOCKS = ("sync", "real")
+ORDERS = ("apply-then-sample", "sample-then-apply")
 
 
 class SimCia402Drive:
@@ -54,13 +64,23 @@ class SimCia402Drive:
         eds: the object dictionary; ``supported_modes`` overrides 0x6502 (e.g. a drive without CST).
         clock: ``"sync"`` or ``"real"`` (see the module doc); ``oversample``: plant steps per cycle.
         sync_timeout: s without SYNC, once started, before the drive reacts as 0x6007 says.
+        order: whether a SYNC's TPDO reports the state after (``apply-then-sample``) or before
+            (``sample-then-apply``) the controlword received with that SYNC.
+        enable_latency: SYNCs between an enable operation received by RPDO and "operation enabled" (0..3).
     """
 
     def __init__(self, network: canopen.Network, node_id: int, sim: SimConfig, eds: str | Path = EDS_PATH,
                  clock: str = "real", oversample: int = 10, supported_modes: int | None = None,
-                 sync_timeout: float = SYNC_TIMEOUT) -> None:
+                 sync_timeout: float = SYNC_TIMEOUT, order: str = "apply-then-sample", enable_latency: int = 0) -> None:
         if clock not in CLOCKS:
             raise ValueError(f"clock must be one of {CLOCKS}, got {clock!r}")
+        if order not in ORDERS:
+            raise ValueError(f"order must be one of {ORDERS}, got {order!r}")
+        if not 0 <= enable_latency <= 3:
+            raise ValueError(f"enable_latency must be 0..3 SYNCs, got {enable_latency}")
+        self.order, self.enable_latency = order, int(enable_latency)
+        self._enable_in = 0          # SYNCs until a pending enable takes effect
+        self._reported: int | None = None  # the statusword this SYNC's TPDO reports (sample-then-apply)
         self.network = network
         self.sim = sim
         self.clock = clock
@@ -90,6 +110,7 @@ class SimCia402Drive:
         self._tpdos: list = []
         self._stop = threading.Event()
         self.emcy_sent: list[int] = []
+        self.history: list[int] = []  # error history 0x1003, newest first
         self.node.add_write_callback(self._on_write)
         self.node.add_read_callback(self._on_read)
         network.add_node(self.node)
@@ -116,6 +137,9 @@ class SimCia402Drive:
                   c.ERROR_REGISTER: self.error_register, c.POSITION_ACTUAL: self.meas[0],
                   c.VELOCITY_ACTUAL: self.meas[1], c.TORQUE_ACTUAL: self.meas[2], 0x6078: self.meas[3],
                   0x6074: self.target_pm if self.state is c.State.OPERATION_ENABLED else 0}
+        if index == c.ERROR_HISTORY:
+            return len(self.history) if subindex == 0 else (self.history[subindex - 1]
+                                                             if subindex <= len(self.history) else 0)
         return values.get(index)
 
     def _on_write(self, index: int, subindex: int, od, data: bytes) -> None:
@@ -123,12 +147,16 @@ class SimCia402Drive:
         with self._lock:
             if index in (c.COMM_CYCLE_PERIOD, c.MAX_TORQUE, c.RATED_TORQUE, c.RATED_CURRENT, c.ENCODER_RESOLUTION):
                 self._settings = None
-            if index == c.CONTROLWORD:
+            if index == c.ERROR_HISTORY and subindex == 0 and int(value) == 0:
+                self.history.clear()  # CiA 301: writing 0 to sub 0 clears the history
+            elif index == c.CONTROLWORD:
                 self._command(int(value))
             elif index == c.MODES_OF_OPERATION:
                 self.mode_display = int(value) if self._supports(int(value)) else self.mode_display
             elif index == c.CONSUMER_HEARTBEAT and subindex == 1:
                 node, ms = (int(value) >> 16) & 0x7F, int(value) & 0xFFFF
+                if node == self.node.id:  # its own heartbeat would feed it: a drive never counts its own frames
+                    node = 0
                 if self._host_hb is not None:
                     self.network.unsubscribe(0x700 + self._host_hb[0], self._on_host_heartbeat)
                 self._host_hb = (node, ms / 1000.0) if ms and node else None
@@ -140,9 +168,11 @@ class SimCia402Drive:
         return 1 <= mode <= 32 and bool(self._raw(c.SUPPORTED_MODES) & (1 << (mode - 1)))
 
     # ------------------------------------------------------------------ state machine, faults
-    def _command(self, controlword: int) -> None:
+    def _command(self, controlword: int, by_rpdo: bool = False) -> None:
         command = c.command_of(controlword)
         before = self.state
+        if self._enable_in and command is not c.Command.ENABLE_OPERATION:
+            self._enable_in = 0  # a pending enable is cancelled by any other command
         if self.state is c.State.FAULT and command is c.Command.FAULT_RESET:
             self.error_code = 0
             self.error_register = 0
@@ -153,8 +183,17 @@ class SimCia402Drive:
         if self.state is c.State.QUICK_STOP:
             self.state = c.next_state(self.state, c.Command.DISABLE_VOLTAGE)  # torque zero at once
         if self.state is c.State.OPERATION_ENABLED and before is not c.State.OPERATION_ENABLED:
-            self.last_sync = math.inf  # SYNC monitoring starts with the first SYNC in operation enabled
-            self._arrival, self._lag = math.inf, 0.0
+            if by_rpdo and self.enable_latency:
+                if not self._enable_in:
+                    self._enable_in = self.enable_latency
+                self.state = c.State.SWITCHED_ON  # the power stage takes its time: enabled after the latency
+                return
+            self._enabled()
+
+    def _enabled(self) -> None:
+        self.state = c.State.OPERATION_ENABLED
+        self.last_sync = math.inf  # SYNC monitoring starts with the first SYNC in operation enabled
+        self._arrival, self._lag = math.inf, 0.0
 
     def fault(self, code: int, register: int = 0x01) -> None:
         """Latch a fault: torque off, state fault, 0x603F/0x1001 set, EMCY sent (thread-safe)."""
@@ -164,6 +203,7 @@ class SimCia402Drive:
             self.state = c.State.FAULT
             self.error_code = code
             self.error_register = register | 0x01
+            self.history = [code, *self.history][:HISTORY_LENGTH]
             self.emcy_sent.append(code)
             self.node.emcy.send(code, self.error_register)
 
@@ -235,13 +275,18 @@ class SimCia402Drive:
         with self._lock:
             if self.node.nmt.state != "OPERATIONAL":
                 return
+            self._reported = self.statusword() if self.order == "sample-then-apply" else None
+            if self._enable_in:
+                self._enable_in -= 1
+                if not self._enable_in and self.state is c.State.SWITCHED_ON:
+                    self._enabled()
             for m in self._rpdos:  # synchronous RPDOs: what arrived before this SYNC applies now
                 if not m.is_received:
                     continue
                 m.is_received = False
                 for var in m.map:
                     if var.index == c.CONTROLWORD:
-                        self._command(int(var.raw))
+                        self._command(int(var.raw), by_rpdo=True)
                     elif var.index == c.TARGET_TORQUE:
                         self.target_pm = int(var.raw)
             plant = self._ensure_plant()
@@ -277,7 +322,21 @@ class SimCia402Drive:
             torque_pm = round(out.current_meas[-1] * kt / self._rated * 1000.0)
             self.meas = (wrap, int(round(velocity)), int(np.clip(torque_pm, -32768, 32767)),
                          int(np.clip(round(out.current_meas[-1] / (self._rated / kt) * 1000.0), -32768, 32767)))
+            if enabled:
+                self._check_limits(int(out.counts[-1]), float(out.omega[-1]))
             self._answer()
+
+    def _check_limits(self, counts: int, omega: float) -> None:
+        """The drive's own limits: software position limit 0x607D (increments) and max motor speed 0x6080 (rpm),
+        checked on the sample just taken; either faults the drive (torque off at once)."""
+        od = self.node.object_dictionary
+        if c.SOFTWARE_POSITION_LIMIT in od:
+            low, high = self._raw(c.SOFTWARE_POSITION_LIMIT, 1), self._raw(c.SOFTWARE_POSITION_LIMIT, 2)
+            if not low <= counts <= high:
+                self.fault(EMCY_POSITION_LIMIT)
+                return
+        if c.MAX_MOTOR_SPEED in od and abs(omega) * 60 / (2 * math.pi) > self._raw(c.MAX_MOTOR_SPEED):
+            self.fault(EMCY_OVER_SPEED)
 
     def _answer(self) -> None:
         """Count the SYNC and send the TPDOs it triggers (with the lock held)."""
@@ -286,6 +345,8 @@ class SimCia402Drive:
             if self.cycle % m.trans_type == 0:
                 for var in m.map:
                     value = self._on_read(var.index, var.subindex, var.od)
+                    if var.index == c.STATUSWORD and self._reported is not None:
+                        value = self._reported  # sampled before this SYNC's controlword applied
                     if value is not None:
                         var.raw = value
                 m.transmit()
@@ -299,20 +360,26 @@ class SimCia402Drive:
 
 
 def serve(interface: str, channel: str, node_id: int, sim: SimConfig, clock: str = "real",
-          supported_modes: int | None = None, stop: threading.Event | None = None, port: int | None = None) -> int:
+          supported_modes: int | None = None, stop: threading.Event | None = None, port: int | None = None,
+          order: str = "apply-then-sample", enable_latency: int = 0) -> int:
     """Run one simulated drive on a python-can bus until ``stop`` is set (or Ctrl-C). Prints the device
     URL to connect to as its first line."""
     try:  # a drive's control loop is real-time: ask the OS for SCHED_FIFO (runs without it when refused)
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(20))
     except (AttributeError, OSError):
         pass
-    network = canopen.Network()
     kwargs: dict = {"hop_limit": 0} if interface == "udp_multicast" else {}  # udp_multicast: this host only
     if port is not None:
         kwargs["port"] = port
-    network.connect(interface=interface, channel=channel, **kwargs)
-    widen_device_buffer(network.bus)
-    drive = SimCia402Drive(network, node_id, sim, clock=clock, supported_modes=supported_modes)
+    import can
+
+    bus = can.Bus(interface=interface, channel=channel, **kwargs)
+    widen_device_buffer(bus)
+    drop_malformed(bus)  # a stray datagram must not end the notifier thread (the drive would go deaf)
+    network = canopen.Network(bus)
+    network.connect()
+    drive = SimCia402Drive(network, node_id, sim, clock=clock, supported_modes=supported_modes, order=order,
+                           enable_latency=enable_latency)
     print(f"canopen://{interface}/{channel}?node={node_id}&eds={EDS_PATH}" + (f"&port={port}" if port else ""),
           flush=True)
     stop = stop or threading.Event()

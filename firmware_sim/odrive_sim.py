@@ -7,8 +7,12 @@ otherwise), held until the next tick. The plant runs at ``oversample`` times the
 tick per tick: an ODrive's control loop and its cyclic messages run on a hardware timer, so the samples are
 uniform in the drive's time whatever this process's scheduling does to when the frames go out.
 Heartbeat every 100 ms (axis error, axis state). Watchdog: in closed loop control, no
-message for the axis within ``watchdog_timeout`` latches WATCHDOG_TIMER_EXPIRED and drops to idle; so does
-Estop (ESTOP_REQUESTED). Errors latch until Clear_Errors. RxSdo serves one endpoint:
+host command for the axis within ``watchdog_timeout`` latches WATCHDOG_TIMER_EXPIRED and drops to idle; so
+does Estop (ESTOP_REQUESTED). Only host commands feed it: a bus that hands a sender its own frames back
+(udp_multicast always) also delivers the axis's heartbeat and cyclic messages to the axis, and those never
+count as the host. Over-speed, as ODrive's ``enable_overspeed_error``: in closed loop, a speed above
+``vel_limit`` x ``VEL_LIMIT_TOLERANCE`` latches CONTROLLER_FAILED and drops to idle.
+Errors latch until Clear_Errors. RxSdo serves one endpoint:
 ``enable_torque_mode_vel_limit`` (id ``TVL_ENDPOINT``); with it true the simulated controller does what
 ODrive's does, scaling the torque down to zero over the last 10 % below ``vel_limit``.
 """
@@ -25,12 +29,15 @@ import numpy as np
 
 from hilbench.drivers import odrive_can as o
 from hilbench.firmware_sim.bus_buffer import widen_device_buffer
+from hilbench.firmware_sim.bus_frames import drop_malformed
 from hilbench.firmware_sim.plant import Plant
 from hilbench.firmware_sim.sim_config import SimConfig, substeps_for
 from hilbench.firmware_sim.stall_grace import StallGrace
 
 TVL_ENDPOINT = 394
 HEARTBEAT_PERIOD = 0.1
+VEL_LIMIT_TOLERANCE = 1.2  # ODrive's controller.config.vel_limit_tolerance default
+CONTROLLER_FAILED = 0x00000200
 
 
 class SimOdrive:
@@ -62,8 +69,10 @@ class SimOdrive:
         node, cmd = o.split_id(msg.arbitration_id)
         if node != self.node or msg.is_remote_frame:
             return
+        if cmd not in o.HOST_COMMANDS:  # the axis's own frames, handed back by the bus: never the host
+            return
         with self._lock:
-            self.last_rx = time.monotonic()  # every message for the axis feeds the watchdog
+            self.last_rx = time.monotonic()  # every host command for the axis feeds the watchdog
             data = bytes(msg.data)
             if cmd == o.Cmd.SET_INPUT_TORQUE:
                 self.input_torque = o.FLOAT.unpack(data[:4])[0]
@@ -128,8 +137,10 @@ class SimOdrive:
                 u[-1] = u_new
                 out = self.plant.run(u)  # the last row is measured now, before u_new acts
                 u_held = u_new
+                position, velocity = out.counts[-1] / self.cpr, out.omega[-1] / (2 * math.pi)
+                if closed and abs(velocity) > self.vel_limit * VEL_LIMIT_TOLERANCE:
+                    self._trip(CONTROLLER_FAILED)
                 state, error = self.state, self.error
-            position, velocity = out.counts[-1] / self.cpr, out.omega[-1] / (2 * math.pi)
             self._send(o.Cmd.GET_ENCODER_ESTIMATES, o.FLOAT2.pack(position, velocity))
             self._send(o.Cmd.GET_TORQUES, o.FLOAT2.pack(u_new * self.kt, out.current_meas[-1] * self.kt))
             if now >= next_heartbeat:
@@ -154,6 +165,7 @@ def serve(interface: str, channel: str, node_id: int, sim: SimConfig, stop: thre
         kwargs["port"] = port
     bus = can.Bus(interface=interface, channel=channel, **kwargs)
     widen_device_buffer(bus)
+    drop_malformed(bus)  # a stray datagram must not end the notifier thread (the axis would go deaf)
     drive = SimOdrive(bus, node_id, sim)
     print(f"odrive://{interface}/{channel}?node={node_id}&tvl_endpoint={TVL_ENDPOINT}"
           + (f"&port={port}" if port else ""), flush=True)

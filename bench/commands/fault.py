@@ -6,6 +6,8 @@ import argparse
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from hilbench.drivers.device_url import describe_schemes
+
     parser = subparsers.add_parser(
         "fault", help="show or clear a device's latched faults",
         description="Faults (watchdog, limits, e-stop, buffer underrun) stay latched in the device until "
@@ -13,20 +15,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     for name, text in (("show", "print the latched faults"), ("clear", "clear every latched fault")):
         q = actions.add_parser(name, help=text, description=text)
-        q.add_argument("--device", required=True,
-                       help="device URL: serial:///dev/ttyUSB0, can://socketcan/can0?node=1, sim://")
+        q.add_argument("--device", required=True, help=f"device URL: {describe_schemes()}")
         q.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from hilbench.drivers import protocol as p
     from hilbench.drivers.device_url import open_device
 
-    with open_device(args.device) as amp:
-        status = amp.status()
-        where = f" (first at sample {status.fault_index})" if status.faults else ""
-        print(f"faults: {p.describe_faults(status.faults)}{where}")
+    with open_device(args.device) as device:  # every device kind answers faults(), history(), clear_faults()
+        faults = device.faults()
+        print(f"faults: {'; '.join(faults) if faults else 'none'}")
+        for line in device.history():
+            print(line)
         if args.action == "clear":
-            amp.clear_faults()
-            print(f"cleared; faults now: {p.describe_faults(amp.status().faults)}")
+            device.clear_faults()  # CiA 402: the fault-reset edge; ODrive: Clear_Errors; hilbench: CLEAR_FAULTS
+            now = device.faults()
+            print(f"cleared; faults now: {'; '.join(now) if now else 'none'}")
     return 0

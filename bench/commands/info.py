@@ -10,9 +10,11 @@ def register(subparsers) -> None:
                                    help="show a device's identity, configuration, faults and counters",
                                    description="Connect to a device, print what it reports, disconnect "
                                                "(closing disarms it).")
+    from hilbench.drivers.device_url import describe_schemes
+
     parser.add_argument("--device", default=None,
-                        help="device URL: serial:///dev/ttyUSB0?baud=2000000, can://socketcan/can0?node=1, "
-                             "sim:// (default $HILBENCH_DEVICE, the config file's 'device', else sim://)")
+                        help=f"device URL: {describe_schemes()} (default $HILBENCH_DEVICE, the config file's "
+                             "'device', else sim://)")
     parser.set_defaults(func=run)
 
 
@@ -21,8 +23,9 @@ def describe(amp) -> list[str]:
     from hilbench.drivers import protocol as p
 
     if amp.clock == "host":  # an off-the-shelf drive: what it reports about itself, and what it can run
+        faults = amp.faults()
         return [f"{k}: {v}" for k, v in amp.info().items()] + [
-            f"state: {amp.state().value if amp.state() else 'unknown'}",
+            f"state: {amp.state()}", f"faults: {'; '.join(faults) if faults else 'none'}", *amp.history(),
             f"clock: host-clocked; runs {amp.capabilities.describe()}"]
     ident = amp.identity
     status = amp.status()

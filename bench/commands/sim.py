@@ -21,8 +21,13 @@ def register(subparsers) -> None:
     parser.add_argument("--clock", choices=("real", "sync"), default="real",
                         help="--canopen: the plant follows real time between SYNCs (default) or the SYNC count")
     parser.add_argument("--udp-port", type=int, default=None, help="--canopen on udp_multicast: UDP port")
+    parser.add_argument("--order", choices=("apply-then-sample", "sample-then-apply"), default="apply-then-sample",
+                        help="--canopen: a SYNC's TPDO reports the state after (default) or before its controlword")
+    parser.add_argument("--enable-latency", type=int, choices=range(4), default=0, metavar="{0..3}",
+                        help="--canopen: SYNCs between an enable received by RPDO and operation enabled")
     parser.add_argument("--interface", default="socketcan", help="python-can interface for --can")
-    parser.add_argument("--node", type=int, default=1, help="CAN node id, 1..15")
+    parser.add_argument("--node", type=int, default=1,
+                        help="CAN node id: 1..15 with --can, 1..126 with --canopen, 0..63 with --odrive")
     parser.add_argument("--fd", action="store_true", help="use CAN FD frames")
     parser.add_argument("--config", help="simulator TOML (plant and injected effects)")
     parser.add_argument("--seed", type=int, help="override the plant's random seed")
@@ -39,7 +44,8 @@ def firmware_argv(args) -> list[str]:
         kind = ["--canopen", args.canopen] if args.canopen else ["--odrive", args.odrive]
         return argv + kind + ["--interface", args.interface, "--node", str(args.node), "--clock", args.clock] \
             + [f"--{k}={getattr(args, k)}" for k in ("config", "seed") if getattr(args, k) is not None] \
-            + ([f"--udp-port={args.udp_port}"] if args.udp_port else [])
+            + ([f"--udp-port={args.udp_port}"] if args.udp_port else []) \
+            + ([f"--order={args.order}", f"--enable-latency={args.enable_latency}"] if args.canopen else [])
     argv += ["--serial"] if args.serial else ["--can", args.can, "--interface", args.interface,
                                               "--node", str(args.node)]
     if args.fd:
@@ -57,14 +63,11 @@ def run(args) -> int:
         from hilbench.firmware_sim.sim_config import load_sim_config
 
         load_sim_config(args.config, seed=args.seed)
-    if args.can is not None:
-        import can
+    if not args.serial:  # bus, channel and node refused in one line here, not as a traceback in the simulator
+        from hilbench.firmware_sim.__main__ import check_bus_args
 
-        if args.interface not in can.VALID_INTERFACES:
-            raise ValueError(f"--interface {args.interface!r} is not a python-can interface (known: "
-                             f"{', '.join(sorted(can.VALID_INTERFACES))})")
-        if not 1 <= args.node <= 15:
-            raise ValueError(f"--node must be 1..15, got {args.node}")
+        kind = "can" if args.can is not None else "canopen" if args.canopen else "odrive"
+        check_bus_args(kind, args.interface, args.can or args.canopen or args.odrive, args.node)
     sys.stdout.flush()
     os.execv(sys.executable, firmware_argv(args))
     return 0  # not reached

@@ -73,7 +73,7 @@ def test_stream_matches_the_plant_sample_for_sample(bus):
     try:
         host.configure(config())
         host.arm()
-        assert host.state() is c.State.OPERATION_ENABLED
+        assert host.power_state() is c.State.OPERATION_ENABLED
         n = 600
         u = 6.0 * np.sin(2 * np.pi * 3 * np.arange(n) / 1000) + 2.0  # A: presliding and sliding
         t_before = time.monotonic()
@@ -227,7 +227,7 @@ def test_heartbeat_loss_trips_the_drive_within_its_timeout(bus):
         host._emcy_event.wait(1.0)
         assert "0x8130" in host.emcy_line()
         host.clear_faults()
-        assert host.state() is c.State.SWITCH_ON_DISABLED and not host.emcy_line()
+        assert host.power_state() is c.State.SWITCH_ON_DISABLED and not host.emcy_line()
     finally:
         host.close()
 
@@ -255,7 +255,7 @@ def test_configuration_reaches_the_object_dictionary(bus):
 @pytest.mark.parametrize("url, words", [
     ("canopen://virtual/x?node=3", "eds=FILE is required"),
     ("canopen://virtual/x?node=3&eds=/no/such.eds", "does not exist"),
-    (f"canopen://virtual/x?node=300&eds={EDS_PATH}", "node must be 1..127"),
+    (f"canopen://virtual/x?node=300&eds={EDS_PATH}", "node must be 1..126"),
     (f"canopen://virtual?node=3&eds={EDS_PATH}", "INTERFACE/CHANNEL"),
     (f"canopen://virtual/x?node=3&eds={EDS_PATH}&speed=1", "unknown option"),
 ])
