@@ -23,6 +23,7 @@ pattern is always "significant", so the effect size keeps the verdict physical.
 | input_xcorr | max_l corr(e, tau(t - l)), Fisher z, Bonferroni over lags | delay |
 | angle_spectrum | sin/cos(k*theta) per wavenumber k, Bonferroni over k | position_periodic |
 | angle_spectrum_direction | sign(v)*sin/cos(k*theta) | position_dependent_friction |
+| position_level | sign(v)*(sin, cos)(theta); linear: sign(v)*P_1,2(travel) (1, sign v) | preload_variation |
 | time_spectrum | multitaper harmonic F-test per run (a line coherent over the record), Bonferroni | (none: reported) |
 """
 
@@ -425,6 +426,13 @@ def run_diagnostics(s: Signals, alpha: float = ALPHA, min_effect: float = MIN_EF
     reg("acceleration", s.acceleration, one, ("torque_gain",), lambda: "residual proportional to the acceleration")
     reg("command", s.command, one, ("torque_gain",), lambda: "residual proportional to the command")
     reg("input_rate", s.command_rate, one, ("delay",), lambda: "residual largest where the torque changes fast")
+    if s.axis == "rotary":
+        slow = np.column_stack([np.sin(s.position), np.cos(s.position)])
+    else:
+        xi = (s.position - 0.5 * (s.position.max() + s.position.min())) / max(0.5 * float(np.ptp(s.position)), 1e-300)
+        slow = np.column_stack([xi, 1.5 * xi**2 - 0.5])
+    reg("position_level", sgn[:, None] * slow, np.column_stack([one, sgn]), ("preload_variation",),
+        lambda: "direction-odd residual that changes slowly along the travel (a friction level following position)")
     out["input_xcorr"] = _xcorr_diag(s, n_eff, alpha, min_effect)
     out["angle_spectrum"] = _spectrum_diag("angle_spectrum", s, n_eff, alpha, min_effect, None,
                                            ("position_periodic",), "residual")

@@ -457,7 +457,7 @@ def residual_loop(
             if n in in_model or n in replaced:
                 continue
             att = Attempt(n, _score(term, diags))
-            why = term.applicable(cur, list(in_model))
+            why = term.applicable(cur, list(in_model)) or term.unfit_reason(train)
             settings = term.settings(train, diags) if why is None else []
             if term.needs_fit:
                 settings = [term.bind(nl, model, fit) for nl in settings]
