@@ -8,10 +8,10 @@ scipy.optimize.nnls on unit-norm columns. Then adjacent active thresholds are me
 pruned, and (optionally) the thresholds refined by variable projection (NNLS inside a
 Levenberg-Marquardt on log Delta).
 
-Standard errors: sigma^2 (A_a^T A_a)^-1 on the active columns A_a, sigma^2 = |r|^2/(n - p_a). The
-filtered residuals are coloured even after thinning, so the covariance is inflated by n/n_eff with
-n_eff from the residual autocorrelation (regressors.effective_sample_count). Parameters at their
-bound (zero) get no standard error (NaN): the linearised covariance does not apply there.
+Standard errors: a HAC (Newey-West) sandwich covariance on the active columns A_a
+(analysis.identification.uncertainty): the filtered residuals and regressors are autocorrelated even after
+thinning. Parameters at their bound (zero) get no standard error (NaN): the linearised covariance does not
+apply there. The break-away sum k_i*Delta_i + Fc gets its standard error from the same covariance.
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ from hilbench.analysis.identification.regressors import (
     stop_columns,
     threshold_grid,
 )
+from hilbench.analysis.identification.uncertainty import bootstrap_standard_errors, hac_covariance
 from hilbench.analysis.models.friction_model import FrictionModel, check_axis
 
 
@@ -133,11 +134,8 @@ def _covariance(a: np.ndarray, residual: np.ndarray, active: np.ndarray) -> tupl
         raise AnalysisError(f"run too short: {n} rows for {p} active parameters")
     norms = np.linalg.norm(aa, axis=0)
     an = aa / norms
-    s2 = float(residual @ residual) / (n - p)
     n_eff = effective_sample_count(residual)
-    inflate = max(1.0, n / n_eff)
-    gram_inv = np.linalg.pinv(an.T @ an)
-    cov = s2 * inflate * gram_inv / np.outer(norms, norms)
+    cov, _ = hac_covariance(aa, residual)  # the scores' own autocorrelation (analysis.identification.uncertainty)
     return cov, n_eff, float(np.linalg.cond(an))
 
 
@@ -188,7 +186,7 @@ def fit_lip(
         return a, coef, rss
 
     a, coef, rss = solve_with(grid)
-    deltas = grid
+    a_grid, deltas = a, grid
     if s.merge and np.count_nonzero(coef[nl:]) > 0:
         merged = _merge_adjacent(grid, coef[nl:])
         a2, coef2, rss2 = solve_with(merged)
@@ -222,6 +220,10 @@ def fit_lip(
     keep = coef[nl:] > 0
     std_errors = {name: float(v) for name, v in ses.items()}
     std_errors["ms_stiffness"] = se_all[nl:][keep]
+    # break-away sum_i k_i*Delta_i (+ Fc): its gradient over the active coefficients
+    grad = np.concatenate([[1.0 if n == "coulomb" else 0.0 for n in design.names], deltas])[active]
+    std_errors["breakaway"] = float(np.sqrt(max(grad @ cov @ grad, 0.0)))
+    bootstrap_standard_errors(std_errors, a_grid, y, residual, design.names, grid)  # the larger of the two
     model = FrictionModel(
         axis=axis,
         inertia=values["inertia"],
