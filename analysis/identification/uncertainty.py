@@ -95,28 +95,44 @@ def block_length(x: np.ndarray) -> int:
     return int(min(max(np.ceil((2 * g * g / d) ** (1 / 3) * n ** (1 / 3)), 1), n // 4))
 
 
+MAX_BLOCKS = 1000
+
+
 def block_bootstrap(a: np.ndarray, y: np.ndarray, statistics, block: int, n_boot: int = 100,
                     seed: int = 0) -> np.ndarray:
-    """Moving-block (pairs) bootstrap of a non-negative least-squares fit: rows of (a, y) resampled in blocks of
-    ``block`` rows, scipy.optimize.nnls re-solved on unit-norm columns each time (so the active set may change, which
-    the linearised covariance cannot see), ``statistics(coef)`` -> values evaluated on each replicate. Returns the
-    replicates, shape (n_boot, number of statistics)."""
+    """Block (pairs) bootstrap of a non-negative least-squares fit: the rows of (a, y), cut into consecutive blocks of
+    ``block`` rows, are resampled block-wise with replacement (Carlstein's non-overlapping blocks), the NNLS re-solved
+    each time (so the active set may change, which the linearised covariance cannot see), and ``statistics(coef)``
+    evaluated on each replicate. Returns the replicates, shape (n_boot, number of statistics).
+
+    A replicate is the least squares over the drawn blocks, solved as scipy.optimize.nnls on the Cholesky factor R of
+    sum_b A_b^T A_b (min |y - A c| over the drawn rows = min |R c - R^-T sum_b A_b^T y_b| + const) from the blocks'
+    Gram matrices computed once: O(blocks x p^2) per replicate instead of an NNLS on every row (a 10 kHz, 20 s
+    record has 25000 rows; 100 row-wise NNLS took minutes)."""
+    from scipy.linalg import cho_factor, solve_triangular
     from scipy.optimize import nnls
 
     a = np.asarray(a, float)
     y = np.asarray(y, float)
-    n = y.size
+    n, p = a.shape
     norms = np.linalg.norm(a, axis=0)
     norms[norms == 0] = 1.0
     an = a / norms
+    # at most MAX_BLOCKS blocks: the Gram stack stays small (a longer block is still valid for a short memory)
+    block = int(min(max(block, 1, int(np.ceil(n / MAX_BLOCKS))), n))
+    edges = np.arange(0, n, block)
+    grams = np.stack([an[i: i + block].T @ an[i: i + block] for i in edges])  # (blocks, p, p)
+    moments = np.stack([an[i: i + block].T @ y[i: i + block] for i in edges])  # (blocks, p)
+    nb = edges.size
     rng = np.random.default_rng(seed)
-    block = int(min(max(block, 1), n))
-    nb = int(np.ceil(n / block))
+    ridge = 1e-12 * n  # keeps R defined when a column is all zero in a replicate (unit-norm columns)
     out = []
     for _ in range(n_boot):
-        starts = rng.integers(0, n - block + 1, nb)
-        idx = (starts[:, None] + np.arange(block)).ravel()[:n]
-        coef = nnls(an[idx], y[idx], maxiter=50 * a.shape[1])[0] / norms
+        counts = np.bincount(rng.integers(0, nb, nb), minlength=nb).astype(float)
+        r, _ = cho_factor(np.tensordot(counts, grams, axes=1) + ridge * np.eye(p), lower=False)
+        r = np.triu(r)
+        rhs = solve_triangular(r, counts @ moments, trans="T", lower=False)
+        coef = nnls(r, rhs, maxiter=50 * p)[0] / norms
         out.append(np.asarray(statistics(coef), float))
     return np.array(out)
 
@@ -127,14 +143,15 @@ BOOTSTRAP_REPLICATES = 100
 def bootstrap_standard_errors(std_errors: dict, a_grid: np.ndarray, y: np.ndarray, residual: np.ndarray,
                               names: list[str], grid: np.ndarray, n_boot: int = BOOTSTRAP_REPLICATES) -> None:
     """Raise the scalar standard errors of a Maxwell-slip NNLS fit (inertia, viscous, coulomb, offset, breakaway) in
-    ``std_errors`` to their moving-block bootstrap value where that is larger (in place).
+    ``std_errors`` to their block-bootstrap value where that is larger (in place).
 
     The HAC covariance is conditional on the active set of the final fit; which thresholds are active (and how the
     friction level splits between the Coulomb element, the elements and the viscous term) changes from record to
-    record. The bootstrap re-solves the NNLS on the whole candidate grid ``a_grid`` (columns: ``names`` then one
-    per threshold of ``grid``), blocks of :func:`block_length` of the final residual. Measured on 50 simulated
-    DC-motor records (tests/analysis/identification/test_uncertainty.py): HAC alone gave the viscous coefficient
-    0.60 of its spread and the bootstrap alone the inertia 0.75; the larger of the two is within 0.8-1.25 for all."""
+    record. The bootstrap (:func:`block_bootstrap`) re-solves the NNLS on the whole candidate grid ``a_grid``
+    (columns: ``names`` then one per threshold of ``grid``), blocks of :func:`block_length` of the final residual.
+    Measured on 50 simulated DC-motor records (tests/analysis/identification/test_uncertainty.py): HAC alone gave
+    the viscous coefficient 0.60 of its spread and a block bootstrap alone the inertia 0.75; the larger of the
+    two is within 0.8-1.25 for all five parameters."""
     idx = {n: i for i, n in enumerate(names)}
     k0 = len(names)
 

@@ -85,6 +85,7 @@ class Term:
         return None
 
     needs_fit: bool = False  # settings depend on the current model's fit (``bind``)
+    local_presliding: bool = False  # fitted with the Maxwell-slip thresholds limited to a fraction of the travel
 
     def bind(self, nl: dict, model: list, fit: Fit) -> dict:
         """A setting completed from the current model and its fit (for ``needs_fit`` terms)."""
@@ -526,6 +527,7 @@ class PreloadVariation(Term):
                "F_level*(1 + a*b_1 + c*b_2), b = (sin theta, cos theta) rotary, Legendre P_1, P_2 of the travel linear")
     diagnostics = ("position_level",)
     needs_fit = True
+    local_presliding = True  # long elements would mimic the level's variation (selection._local_thresholds)
 
     def bind(self, nl, model, fit):
         return _bind_level(nl, model, fit)

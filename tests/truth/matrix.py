@@ -97,7 +97,8 @@ _ENC = 2**18
 _case("eccentric-stroke0.5", _t("maxwell", angle_level=(1.0, 0.25, 0.3), stroke=0.5, counts_per_rev=_ENC), "preload")
 _case("eccentric-stroke2", _t("lugre", angle_level=(1.0, 0.25, 1.2), stroke=2.0, counts_per_rev=_ENC), "preload")
 _case("eccentric-stroke5", _t("maxwell", angle_level=(1.0, 0.25, 2.0), stroke=5.0, counts_per_rev=_ENC), "preload")
-_case("preload-linear", _t("gms", level_slope=0.2, stroke=2.0, axis="linear", counts_per_rev=_ENC), "preload")
+_case("preload-linear", _t("maxwell", level_slope=0.2, stroke=2.0, axis="linear", counts_per_rev=_ENC), "preload")
+_case("preload-linear-gms", _t("gms", level_slope=0.2, stroke=2.0, axis="linear", counts_per_rev=_ENC), "preload")
 _case("clean-stroke1", _t("maxwell", stroke=1.0, counts_per_rev=_ENC))
 _case("clean-stroke4-dahl", _t("dahl", stroke=4.0, counts_per_rev=_ENC))
 
