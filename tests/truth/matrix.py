@@ -170,6 +170,8 @@ class Outcome:
             return False
         extra = [a for a in self.added if a not in self.expected]
         missed = set(self.expected) - set(self.added)
+        if not extra:  # nothing wrongly added (a clean run wrong only by its unexplained verdict): nothing declared
+            return False
         alts = self.alternatives or {}
         named = {m for a in extra for m in alts.get(a, ()) if m in missed}
         return len(extra) == len(missed) and named == missed and all(
