@@ -9,10 +9,14 @@ accumulated block by block (``chunked``; docs/long-runs.md), so memory does not 
 Then adjacent active thresholds are merged, tiny elements pruned, and (optionally) the thresholds refined
 by variable projection (NNLS inside a Levenberg-Marquardt on log Delta).
 
-Standard errors: sigma^2 (A_a^T A_a)^-1 on the active columns A_a (= R_a^T R_a), sigma^2 = |r|^2/(n - p_a). The
-filtered residuals are coloured even after thinning, so the covariance is inflated by n/n_eff with
-n_eff from the residual autocorrelation (regressors.effective_sample_count). Parameters at their
-bound (zero) get no standard error (NaN): the linearised covariance does not apply there.
+Standard errors. On whole arrays (:func:`fit_lip`): a HAC (Newey-West) sandwich covariance on the active
+columns (analysis.identification.uncertainty), raised to a moving-block bootstrap of the NNLS on the whole
+threshold grid where that is larger: the filtered residuals and regressors are autocorrelated even after
+thinning, and the active set changes from record to record. The break-away sum k_i*Delta_i + Fc gets its
+standard error from the same covariance. On a record read chunk by chunk (:func:`fit_lip_chunks`, a long
+record over the memory budget): sigma^2 (A_a^T A_a)^-1 from the triangular factor, inflated by n/n_eff of the
+residual (regressors.effective_sample_count), which is smaller than the spread (docs/model-file.md).
+Parameters at their bound (zero) get no standard error (NaN): the linearised covariance does not apply there.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from hilbench.analysis.identification.regressors import (
     reversal_travels,
     threshold_grid,
 )
+from hilbench.analysis.identification.uncertainty import bootstrap_standard_errors, hac_covariance
 from hilbench.analysis.models.friction_model import FrictionModel, check_axis
 
 
@@ -178,6 +183,26 @@ def _covariance(r11: np.ndarray, n: int, residual: np.ndarray, active: np.ndarra
     return cov, n_eff, float(np.linalg.cond(rn))
 
 
+def _hac_covariance(a: np.ndarray, residual: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """As :func:`_covariance`, from the rows of the active columns: the HAC sandwich (uncertainty.hac_covariance)."""
+    aa = a[:, active]
+    if aa.shape[0] <= aa.shape[1]:
+        raise AnalysisError(f"run too short: {aa.shape[0]} rows for {aa.shape[1]} active parameters")
+    norms = np.linalg.norm(aa, axis=0)
+    norms[norms == 0] = 1.0
+    cov, _ = hac_covariance(aa, residual)  # the scores' own autocorrelation
+    return cov, effective_sample_count(residual), float(np.linalg.cond(aa / norms))
+
+
+def _rows(source: ChunkSource, fs: float, s: LipSettings, cutoff: float, dec: int, deltas: np.ndarray,
+          block: int) -> tuple[np.ndarray, np.ndarray]:
+    """The whole regression (A, y) at every row for the thresholds ``deltas`` (rows x columns x 8 bytes: for the
+    uncertainty of a fit on whole arrays only)."""
+    parts = [_block_system(blk, s) for blk in blocks(source, fs, cutoff, order=s.order, decimation=dec,
+                                                      timing=s.timing, deltas=deltas, block=block)]
+    return np.concatenate([a for a, _ in parts]), np.concatenate([y for _, y in parts])
+
+
 def _merge_adjacent(deltas: np.ndarray, k: np.ndarray) -> np.ndarray:
     """Thresholds of merged elements: each run of adjacent active grid points becomes one element
     at the k-weighted mean Delta (the virgin curves agree below the first and above the last Delta)."""
@@ -231,7 +256,8 @@ def fit_lip(
         raise AnalysisError(f"position and torque must be 1-D of equal length, got {x.shape} and {tau.shape}")
     # the exact grid of the whole array (the chunk API estimates the noise level over blocks)
     grid = threshold_grid(x, s.n_thresholds, s.delta_range) if s.n_thresholds > 0 else np.empty(0)
-    return fit_lip_chunks(array_chunks(x, tau), fs, axis, s, grid=grid, block=block, n_samples=x.size)
+    return fit_lip_chunks(array_chunks(x, tau), fs, axis, s, grid=grid, block=block, n_samples=x.size,
+                          calibrated=True)
 
 
 def fit_lip_chunks(
@@ -243,11 +269,14 @@ def fit_lip_chunks(
     grid: np.ndarray | None = None,
     block: int = BLOCK,
     n_samples: int | None = None,
+    calibrated: bool = False,
 ) -> LipFit:
     """:func:`fit_lip` on a record read chunk by chunk (``chunked``: a callable returning a fresh iterator of
     ``(position, torque)`` pairs). Memory is bounded by ``block`` and the thresholds, plus 24 bytes per
     regression row for the returned prediction. ``grid``: the candidate thresholds (default from one scan of
-    the record); ``n_samples``: the record length if known (saves the scan when a grid is given)."""
+    the record); ``n_samples``: the record length if known (saves the scan when a grid is given).
+    ``calibrated``: the HAC and bootstrap standard errors (module docstring), which hold the regression rows
+    (rows x columns x 8 bytes); :func:`fit_lip` on whole arrays sets it."""
     s = settings or LipSettings()
     check_axis(axis)
     cutoff, dec = s.resolved(fs)
@@ -294,11 +323,13 @@ def fit_lip_chunks(
         tri, coef, rss = solve_with(deltas)
 
     # last pass: the prediction at every row (the plots' curves, the residual's colour)
-    measured, predicted, rows = [], [], []
+    measured, predicted, rows, a_rows = [], [], [], []
     acc_sum = acc_sq = 0.0
     for blk in blocks(source, fs, cutoff, order=s.order, decimation=dec, timing=s.timing, deltas=deltas,
                       block=block):
         a, y = _block_system(blk, s)
+        if calibrated:
+            a_rows.append(a)
         measured.append(blk.torque)
         predicted.append(a @ coef + (blk.torque - y))  # plus the known J*acceleration, if any
         rows.append(blk.rows)
@@ -308,7 +339,11 @@ def fit_lip_chunks(
     residual = measured_a - predicted_a
     active = coef > 0
     p = coef.size
-    cov, n_eff, cond = _covariance(tri.r[:p, :p], tri.rows, residual, active)
+    if calibrated:
+        cov, n_eff, cond = _hac_covariance(np.concatenate(a_rows), residual, active)
+        del a_rows
+    else:
+        cov, n_eff, cond = _covariance(tri.r[:p, :p], tri.rows, residual, active)
     se_all = np.full(coef.size, np.nan)
     se_all[active] = np.sqrt(np.clip(np.diag(cov), 0, None))
 
@@ -323,6 +358,13 @@ def fit_lip_chunks(
     keep = coef[nl:] > 0
     std_errors = {name: float(v) for name, v in ses.items()}
     std_errors["ms_stiffness"] = se_all[nl:][keep]
+    # break-away sum_i k_i*Delta_i (+ Fc): its gradient over the active coefficients
+    grad = np.concatenate([[1.0 if n == "coulomb" else 0.0 for n in names], deltas])[active]
+    std_errors["breakaway"] = float(np.sqrt(max(grad @ cov @ grad, 0.0)))
+    if calibrated and grid.size:  # the larger of the two (uncertainty.bootstrap_standard_errors)
+        a_grid, y_grid = _rows(source, fs, s, cutoff, dec, grid, block)
+        bootstrap_standard_errors(std_errors, a_grid, y_grid, residual, names, grid)
+        del a_grid, y_grid
     model = FrictionModel(
         axis=axis,
         inertia=values["inertia"],

@@ -23,11 +23,13 @@ pattern is always "significant", so the effect size keeps the verdict physical.
 | input_xcorr | max_l corr(e, tau(t - l)), Fisher z, Bonferroni over lags | delay |
 | angle_spectrum | sin/cos(k*theta) per wavenumber k, Bonferroni over k | position_periodic |
 | angle_spectrum_direction | sign(v)*sin/cos(k*theta) | position_dependent_friction |
-| time_spectrum | Welch PSD line vs running-median background, chi^2 | (none: reported) |
+| position_level | sign(v)*(sin, cos)(theta); linear: sign(v)*P_1,2(travel) (1, sign v) | preload_variation |
+| time_spectrum | multitaper harmonic F-test per run (a line coherent over the record), Bonferroni | (none: reported) |
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -267,31 +269,128 @@ def _xcorr_diag(s: Signals, n_eff: float, alpha: float, min_effect: float, max_l
                  lag_s=lag_s, lags_s=lags / s.row_rate, rho=rho)
 
 
-def _time_spectrum(s: Signals, alpha: float, min_effect: float) -> Diagnostic:
-    from scipy import ndimage, signal, stats
+MT_NW = 4.0  # time-bandwidth product of the line test's Slepian tapers (half-bandwidth W = NW/T)
+MT_TAPERS = 7  # 2*NW - 1 tapers
 
-    nper = 256
-    psds = []
-    for lo, hi in s.run_rows:
-        if hi - lo >= 2 * nper:
-            f, pxx = signal.welch(s.residual[lo:hi] - s.residual[lo:hi].mean(), fs=s.row_rate, nperseg=nper)
-            psds.append((pxx, (hi - lo) // (nper // 2) - 1))
-    if not psds:
-        return Diagnostic("time_spectrum", 0.0, "ratio", 1.0, 0.0, False, (), "run too short for a spectrum", {})
-    segs = sum(k for _, k in psds)
-    pxx = sum(p * k for p, k in psds) / segs
+
+@functools.lru_cache(maxsize=8)
+def _slepian(n: int, nw: float, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Slepian tapers (k, n) of unit energy and their sums (k,); read-only (cached: each run asks twice)."""
+    from scipy.signal.windows import dpss
+
+    tapers = dpss(n, nw, k)
+    tapers.setflags(write=False)
+    u0 = tapers.sum(axis=1)
+    u0.setflags(write=False)
+    return tapers, u0
+
+
+def _harmonic_f(y: np.ndarray, u0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(F, mu) from eigencoefficients y (k, m) and the tapers' sums u0 (k,)."""
+    k = u0.size
+    mu = (u0 @ y) / float(u0 @ u0)
+    resid = np.sum(np.abs(y - np.outer(u0, mu)) ** 2, axis=0)
+    return (k - 1) * np.abs(mu) ** 2 * float(u0 @ u0) / np.maximum(resid, 1e-300), mu
+
+
+def harmonic_f_test(e: np.ndarray, fs: float, nw: float = MT_NW, k: int = MT_TAPERS, pad: int = 2
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Thomson's multitaper harmonic F-test for a line in a coloured residual.
+
+    With Slepian tapers v_j (sum_t v_j^2 = 1), eigencoefficients y_j(f) = sum_t v_j(t) e_t exp(-i 2 pi f t),
+    U_j = sum_t v_j(t) and mu(f) = sum_j U_j y_j(f) / sum_j U_j^2 (the complex amplitude A/2*exp(i phi) of a
+    line A*cos(2 pi f t + phi)),
+
+        F(f) = (K - 1) |mu|^2 sum_j U_j^2 / sum_j |y_j - mu U_j|^2   ~ F(2, 2K - 2) without a line.
+
+    The denominator is the residual's own spectrum within +-W of f (W = NW/T), so a coloured or red continuum is
+    not a line: only a component coherent across the tapers (constant amplitude and phase over the record) is.
+    Returns (frequencies Hz, F, 2|mu|^2 (the line variance A^2/2 at a grid frequency on the line), number of
+    frequencies tested), on the frequencies more than W from 0 and from fs/2, grid ``pad`` x finer than 1/T."""
+    x = np.asarray(e, float) - np.mean(e)
+    n = x.size
+    tapers, u0 = _slepian(n, nw, k)
+    nfft = int(2 ** np.ceil(np.log2(pad * n)))
+    fstat, mu = _harmonic_f(np.fft.rfft(tapers * x, nfft, axis=1), u0)
+    f = np.fft.rfftfreq(nfft, 1.0 / fs)
+    w = nw * fs / n
+    keep = (f > w) & (f < fs / 2 - w)
+    return f[keep], fstat[keep], 2.0 * np.abs(mu[keep]) ** 2, int(np.sum(keep))
+
+
+def line_test(e: np.ndarray, fs: float) -> tuple[float, float, float, float]:
+    """The strongest line of a residual: (frequency Hz, harmonic F, Bonferroni-adjusted p-value, share of the
+    variance).
+
+    The grid maximum of :func:`harmonic_f_test` is refined to the frequency whose least-squares sinusoid explains
+    the most (within one grid step), and F is taken there: half a grid step off a strong line, the line's own
+    leakage fills the F-test's denominator and caps F (an A = 2 sigma line in white noise reached only
+    p = 6e-5). The p-value is Bonferroni-adjusted over a grid 4x finer than 1/T (about 4x the n/2 independent
+    frequencies), which bounds the maximum over a continuous frequency: measured false-alarm rate at a nominal
+    0.05 of 0.017-0.047 on white and red (AR(1), phi 0.98) residuals of 1000 and 5000 rows (0.04-0.09 with the
+    pad-2 grid count alone)."""
+    from scipy import stats
+    from scipy.optimize import minimize_scalar
+
+    x = np.asarray(e, float) - np.mean(e)
+    f, fstat, _, n_tested = harmonic_f_test(x, fs)
+    if f.size == 0:
+        return 0.0, 0.0, 1.0, 0.0
+    i = int(np.argmax(fstat))
+    tapers, u0 = _slepian(x.size, MT_NW, MT_TAPERS)
+    t = np.arange(x.size) / fs
+    tot = float(x @ x)
+
+    def neg_share(fr: float) -> float:
+        a = np.column_stack([np.cos(2 * np.pi * fr * t), np.sin(2 * np.pi * fr * t)])
+        c, *_ = np.linalg.lstsq(a, x, rcond=None)
+        r = x - a @ c
+        return -(1.0 - float(r @ r) / tot) if tot > 0 else 0.0
+
+    step = float(f[1] - f[0]) if f.size > 1 else fs / x.size
+    opt = minimize_scalar(neg_share, bounds=(f[i] - step, f[i] + step), method="bounded",
+                          options={"xatol": step * 1e-3})
+    f_line = float(opt.x)
+    y = (tapers * x) @ np.exp(-2j * np.pi * f_line * t)
+    f_ref = float(_harmonic_f(y[:, None], u0)[0][0])
+    fmax = max(f_ref, float(fstat[i]))
+    # the maximum over a continuous frequency: Bonferroni over a grid 4x finer than 1/T (2 x the pad-2 grid)
+    p = min(1.0, float(stats.f.sf(fmax, 2, 2 * MT_TAPERS - 2)) * 2 * n_tested)
+    return f_line, fmax, p, float(-opt.fun)
+
+
+def _time_spectrum(s: Signals, alpha: float, min_effect: float) -> Diagnostic:
+    """A line in time: the multitaper harmonic F-test (:func:`harmonic_f_test`) per run, Bonferroni over the
+    independent frequencies and the runs; effect = the line's variance / the run's residual variance.
+
+    It replaced a Welch-PSD-against-running-median test that took the broad low-frequency continuum of a clean
+    record's residual (the Maxwell-slip grid's slow, path-dependent approximation error) for a line: its
+    background at the first bin came from the mean-removed DC bin, so bin 1 of any red spectrum stood out
+    (0.977 Hz = 250 rows/s / 256, 7.6x "the background", p = 6e-66 on the default simulated bench)."""
+    from scipy import ndimage, signal
+
+    runs = [(lo, hi) for lo, hi in s.run_rows if hi - lo >= 64]
+    if not runs:
+        return Diagnostic("time_spectrum", 0.0, "F", 1.0, 0.0, False, (), "run too short for a spectrum", {})
+    best = None
+    for lo, hi in runs:
+        f_line, fmax, p, share = line_test(s.residual[lo:hi], s.row_rate)
+        p = min(1.0, p * len(runs))
+        if best is None or p < best[0]:
+            best = (p, fmax, f_line, share)
+    if best is None:
+        return Diagnostic("time_spectrum", 0.0, "F", 1.0, 0.0, False, (), "run too short for a spectrum", {})
+    p, fmax, f0, effect = best
+    # the Welch PSD and its running median are kept for the report's figure only
+    nper = min(256, min(hi - lo for lo, hi in runs))
+    psds = [signal.welch(s.residual[lo:hi] - s.residual[lo:hi].mean(), fs=s.row_rate, nperseg=nper)
+            for lo, hi in runs]
+    freq, pxx = psds[0][0], np.mean([q for _, q in psds], axis=0)
     bg = ndimage.median_filter(pxx, size=17, mode="nearest")
-    ratio = pxx / np.maximum(bg, 1e-300)
-    dof = max(int(1.8 * segs), 2)  # Welch, Hann, 50 % overlap: ~0.9 x 2 dof per segment
-    p = np.minimum(1.0, stats.chi2.sf(ratio * dof, dof) * ratio.size)
-    i = int(np.argmax(ratio[1:])) + 1
-    df = f[1] - f[0]
-    line = float(np.sum(np.clip(pxx[i - 1: i + 2] - bg[i - 1: i + 2], 0, None)) * df)
-    total = float(np.sum(pxx) * df)
-    effect = line / total if total > 0 else 0.0
-    desc = f"strongest line at {f[i]:.3g} Hz ({ratio[i]:.1f}x the background)"
-    return _make("time_spectrum", float(ratio[i]), "line/background", float(p[i]), effect, (), desc, alpha,
-                 min_effect, frequency_hz=float(f[i]), spectrum={"frequency_hz": f, "psd": pxx, "background": bg})
+    desc = (f"strongest line at {f0:.3g} Hz (harmonic F {fmax:.3g}, {100 * effect:.1f} % of the residual "
+            "variance)")
+    return _make("time_spectrum", fmax, "F", p, effect, (), desc, alpha, min_effect, frequency_hz=f0,
+                 spectrum={"frequency_hz": freq, "psd": pxx, "background": bg})
 
 
 def run_diagnostics(s: Signals, alpha: float = ALPHA, min_effect: float = MIN_EFFECT) -> dict[str, Diagnostic]:
@@ -327,6 +426,13 @@ def run_diagnostics(s: Signals, alpha: float = ALPHA, min_effect: float = MIN_EF
     reg("acceleration", s.acceleration, one, ("torque_gain",), lambda: "residual proportional to the acceleration")
     reg("command", s.command, one, ("torque_gain",), lambda: "residual proportional to the command")
     reg("input_rate", s.command_rate, one, ("delay",), lambda: "residual largest where the torque changes fast")
+    if s.axis == "rotary":
+        slow = np.column_stack([np.sin(s.position), np.cos(s.position)])
+    else:
+        xi = (s.position - 0.5 * (s.position.max() + s.position.min())) / max(0.5 * float(np.ptp(s.position)), 1e-300)
+        slow = np.column_stack([xi, 1.5 * xi**2 - 0.5])
+    reg("position_level", sgn[:, None] * slow, np.column_stack([one, sgn]), ("preload_variation",),
+        lambda: "direction-odd residual that changes slowly along the travel (a friction level following position)")
     out["input_xcorr"] = _xcorr_diag(s, n_eff, alpha, min_effect)
     out["angle_spectrum"] = _spectrum_diag("angle_spectrum", s, n_eff, alpha, min_effect, None,
                                            ("position_periodic",), "residual")

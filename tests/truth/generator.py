@@ -55,6 +55,10 @@ class Truth:
     stribeck_exponent: float = 2.0
     asymmetry: float = 0.0  # relative: level x (1 + asymmetry*sign(v))
     angle_level: tuple[float, float, float] | None = None  # (order, relative depth m, phase)
+    level_slope: float = 0.0  # relative level change per unit position: level x (1 + level_slope*theta)
+    stroke: float | None = None  # rad: a position loop keeps the motor within +-stroke/2 (see simulate_torque_driven)
+    stroke_period: float = 2.5  # s, period of the position loop's sine reference across the stroke
+    axis: str = "rotary"  # units of the record: "linear" reads the same numbers as m, N, kg
     cogging: tuple[float, float, float] | None = None  # (order, amplitude N*m, phase)
     offset: float = 0.0  # N*m constant load c0
     drift: float = 0.0  # N*m/s load drift c1
@@ -141,6 +145,8 @@ class _Friction:
         if tr.angle_level is not None:
             order, depth, phase = tr.angle_level
             g *= 1.0 + depth * math.sin(order * theta + phase)
+        if tr.level_slope:
+            g *= 1.0 + tr.level_slope * theta
         return g
 
     def rate(self, z: float, v: float, theta: float) -> tuple[float, float]:
@@ -203,6 +209,19 @@ class _Body:
         return kb * rel + cb * (om - oml)
 
 
+STROKE_BANDWIDTH = 10.0  # Hz, the position loop of a stroke-limited record
+STROKE_DITHER = 0.8  # N*m, peak of the multisine added to the position loop's torque
+
+
+def position_loop(tr: Truth):
+    """(kp N*m/rad, kd N*m*s/rad, reference x_r(t) rad) of the stroke-limited record: a PD loop of bandwidth
+    STROKE_BANDWIDTH (damping 0.7) on the motor inertia, tracking (stroke/2)*sin(2 pi t/stroke_period)."""
+    w = TWO_PI * STROKE_BANDWIDTH
+    kp, kd = tr.inertia * w * w, 2 * 0.7 * tr.inertia * w
+    half, wr = tr.stroke / 2, TWO_PI / tr.stroke_period
+    return kp, kd, (lambda t: half * np.sin(wr * np.asarray(t, float)))
+
+
 def simulate_torque_driven(tr: Truth, seed: int, duration: float = 10.0, fs: float = 1000.0,
                            amplitude: float = 2.5, substeps: int = 10, rtol: float = 1e-7,
                            torque=None) -> Record:
@@ -211,8 +230,22 @@ def simulate_torque_driven(tr: Truth, seed: int, duration: float = 10.0, fs: flo
     LuGre and Dahl: LSODA (scipy.integrate.odeint, max step 1/(4 fs)). Maxwell-slip and GMS (element sets
     whose laws switch): fine fixed step h = 1/(substeps*fs), semi-implicit Euler for the bodies, the
     elements stepped along the path; the current loop is discretised exactly over h. ``torque``: a
-    vectorised callable u(t) (N*m) replacing the multisine."""
+    vectorised callable u(t) (N*m) replacing the multisine.
+
+    ``tr.stroke``: the torque command is kp*(x_r(t) - theta) - kd*omega + the multisine scaled to a peak of
+    STROKE_DITHER (:func:`position_loop`, a continuous-time loop on the true state), so the motor sweeps
+    about +-stroke/2 back and forth; the record holds that command (what a bench's current loop receives)."""
+    if tr.stroke is not None:
+        amplitude = STROKE_DITHER
     u = torque if torque is not None else multisine(seed, duration, amplitude)
+    if tr.stroke is not None:
+        kp, kd, ref = position_loop(tr)
+
+        def feedback(t, th, om):
+            return kp * (ref(t) - th) - kd * om
+    else:
+        def feedback(t, th, om):
+            return 0.0 * th
     grid_dt = 1.0 / 20000.0  # the input on a 20 kHz grid, linearly interpolated (band limit 25 Hz: error < 1e-5)
     u_grid = u(np.arange(int(duration / grid_dt) + 2) * grid_dt)
 
@@ -230,7 +263,7 @@ def simulate_torque_driven(tr: Truth, seed: int, duration: float = 10.0, fs: flo
 
         def rhs(tt, y):
             th, om = y[0], y[1]
-            tau = y[i_fr - 1] if lag else u_at(tt)
+            tau = y[i_fr - 1] if lag else u_at(tt) + feedback(tt, th, om)
             f, dz = fr.rate(y[i_fr], om, th)
             load = body.load(th, tt)
             out = np.empty_like(y)
@@ -241,7 +274,7 @@ def simulate_torque_driven(tr: Truth, seed: int, duration: float = 10.0, fs: flo
                 load += tb
             out[1] = (tau - f - load) / tr.inertia
             if lag:
-                out[i_fr - 1] = (u_at(tt) - tau) / tr.current_lag
+                out[i_fr - 1] = (u_at(tt) + feedback(tt, th, om) - tau) / tr.current_lag
             out[i_fr] = dz
             return out
 
@@ -250,6 +283,7 @@ def simulate_torque_driven(tr: Truth, seed: int, duration: float = 10.0, fs: flo
         if info["message"] != "Integration successful.":
             raise RuntimeError(f"truth integration failed: {info['message']}")
         theta = y[:, 0]
+        command = u(t) + feedback(t, theta, y[:, 1])
     else:
         h = 1.0 / (fs * substeps)
         z = np.zeros(fr.n)
@@ -257,11 +291,13 @@ def simulate_torque_driven(tr: Truth, seed: int, duration: float = 10.0, fs: flo
         f = 0.0
         decay = math.exp(-h / tr.current_lag) if lag else 0.0
         theta = np.empty(n)
+        command = np.empty(n)
         for i in range(n * substeps):
             tt = i * h
+            uu = u_at(tt) + feedback(tt, th, om)
             if i % substeps == 0:
                 theta[i // substeps] = th
-            uu = u_at(tt)
+                command[i // substeps] = uu
             tau = tau_a if lag else uu
             load = body.load(th, tt)
             if belt:
@@ -277,9 +313,11 @@ def simulate_torque_driven(tr: Truth, seed: int, duration: float = 10.0, fs: flo
     rng = np.random.default_rng(10_000 + seed)
     step = TWO_PI / tr.counts_per_rev
     pos = np.floor(theta / step + 0.5) * step
-    tau_rec = u(t) + tr.torque_noise * rng.standard_normal(t.size)
+    if tr.stroke is None:
+        command = u(t)  # exact at the samples (the loop above used the 20 kHz interpolant)
+    tau_rec = command + tr.torque_noise * rng.standard_normal(t.size)
     tau_rec = np.round(tau_rec / tr.torque_lsb) * tr.torque_lsb
-    return Record(t, pos, tau_rec, fs, tr, theta, u(t))
+    return Record(t, pos, tau_rec, fs, tr, theta, command)
 
 
 def stop_operator_forces(k: np.ndarray, w: np.ndarray, x: np.ndarray) -> np.ndarray:

@@ -16,6 +16,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from tests.truth.bench_records import BenchCase, prepared_pair
 from tests.truth.generator import Record, Truth, simulate_torque_driven
 
 START = ("inertia", "maxwell_slip", "viscous")
@@ -26,7 +27,8 @@ FS = 1000.0
 EFFECT_MAP = {
     "stribeck": "stribeck",  # any exponent, any family's own Stribeck curve
     "asymmetry": "asymmetric_friction",
-    "angle_level": "position_dependent_friction",
+    "angle_level": "position_dependent_friction",  # the record covers the level's period
+    "preload": "preload_variation",  # a level varying over a period longer than the stroke, or along the travel
     "cogging": "position_periodic",  # non-sinusoidal profile: a fundamental and its 2nd harmonic
     "current_lag": "delay",  # a first-order lag, not a pure delay
     "offset": "offset",
@@ -75,9 +77,39 @@ _case("stribeck+lag", _t("gms", stribeck_excess=0.3, stribeck_velocity=2.0, curr
 _case("angle-level+cogging", _t("lugre", angle_level=(4.0, 0.2, 0.0), cogging=(10.0, 0.06, 1.0)), "angle_level",
       "cogging")
 
+# clean records of the default simulated bench (tests/truth/bench_records.py): the plant is inertia + Maxwell-slip
+# + viscous, exactly START's structure, so the right answer is to add nothing and leave nothing unexplained
+BENCH_CASES = {
+    "bench-identification": BenchCase("identification", ("--duration", "20"), ("--duration", "20")),
+    "bench-identification-1k": BenchCase("identification", ("--duration", "20", "--sample-rate", "1000"),
+                                         ("--duration", "20", "--sample-rate", "1000")),
+    "bench-chirp": BenchCase("chirp", ("--duration", "20", "--gain", "6", "--sweep", "linear"),
+                             ("--duration", "20", "--gain", "6", "--sweep", "log", "--f-start", "0.3"), seeded=False),
+}
+for _name in BENCH_CASES:
+    CASES[_name] = (None, frozenset())
+
+# issue 29: a friction level whose period exceeds the stroke (an eccentric preload once per revolution seen over
+# 0.5-5 rad) or that changes along a linear axis' travel; a position loop keeps the motor within the stroke. An
+# 18-bit encoder: with the 20000-count one the loop's own clean-data error on these slow closed-loop records was
+# 15-19 % (0.8 % at 2^18 counts; the quantised low-speed rows, see docs/residual-blind-matrix.md)
+_ENC = 2**18
+_case("eccentric-stroke0.5", _t("maxwell", angle_level=(1.0, 0.25, 0.3), stroke=0.5, counts_per_rev=_ENC), "preload")
+_case("eccentric-stroke2", _t("lugre", angle_level=(1.0, 0.25, 1.2), stroke=2.0, counts_per_rev=_ENC), "preload")
+_case("eccentric-stroke5", _t("maxwell", angle_level=(1.0, 0.25, 2.0), stroke=5.0, counts_per_rev=_ENC), "preload")
+_case("preload-linear", _t("maxwell", level_slope=0.2, stroke=2.0, axis="linear", counts_per_rev=_ENC), "preload")
+_case("preload-linear-gms", _t("gms", level_slope=0.2, stroke=2.0, axis="linear", counts_per_rev=_ENC), "preload")
+_case("clean-stroke1", _t("maxwell", stroke=1.0, counts_per_rev=_ENC))
+_case("clean-stroke4-dahl", _t("dahl", stroke=4.0, counts_per_rev=_ENC))
+
 SEEDS = (1, 2, 3)
 #: the representative subset run by ``make test`` (one seed; the whole matrix is benchmarks/bench_residual.py)
-QUICK = ("clean-dahl", "stribeck-exp1", "angle-level", "current-lag", "stribeck+cogging")
+QUICK = ("clean-dahl", "stribeck-exp1", "angle-level", "current-lag", "stribeck+cogging", "bench-identification")
+
+
+def is_clean(case: str) -> bool:
+    """Clean data: a friction family the start model describes, no effect (clean-*, bench-*)."""
+    return case.startswith(("clean-", "bench-"))
 
 
 def _cache_dir() -> Path:
@@ -107,7 +139,7 @@ def record(truth: Truth, seed: int, duration: float = DURATION, fs: float = FS) 
 def prepared(rec: Record, name: str):
     from hilbench.analysis.residual import prepare_run
 
-    return prepare_run(rec.position, rec.torque, rec.fs, name=name, timing="instant")
+    return prepare_run(rec.position, rec.torque, rec.fs, name=name, timing="instant", axis=rec.truth.axis)
 
 
 @dataclass
@@ -119,10 +151,16 @@ class Outcome:
     seconds: float  # the loop's wall time (the records are generated beforehand)
     verdict: str
     alternatives: dict = None  # added term -> the terms the loop declared it indistinguishable from
+    unexplained: tuple = ()  # diagnostics still significant at the end
+
+    @property
+    def clean(self) -> bool:
+        """A record without any effect beyond the start model (issue 29: it must also end explained)."""
+        return is_clean(self.case)
 
     @property
     def right(self) -> bool:
-        return frozenset(self.added) == self.expected
+        return frozenset(self.added) == self.expected and not (self.clean and self.unexplained)
 
     @property
     def declared(self) -> bool:
@@ -132,6 +170,8 @@ class Outcome:
             return False
         extra = [a for a in self.added if a not in self.expected]
         missed = set(self.expected) - set(self.added)
+        if not extra:  # nothing wrongly added (a clean run wrong only by its unexplained verdict): nothing declared
+            return False
         alts = self.alternatives or {}
         named = {m for a in extra for m in alts.get(a, ()) if m in missed}
         return len(extra) == len(missed) and named == missed and all(
@@ -142,10 +182,14 @@ def run_case(case: str, seed: int, options=None) -> Outcome:
     from hilbench.analysis.residual import LoopOptions, residual_loop
 
     truth, expected = CASES[case]
-    train = prepared(record(truth, seed), f"{case}-{seed}")
-    valid = prepared(record(truth, seed + 1000), f"{case}-{seed + 1000}")
+    if case in BENCH_CASES:
+        train, valid = prepared_pair(BENCH_CASES[case], seed)
+    else:
+        train = prepared(record(truth, seed), f"{case}-{seed}")
+        valid = prepared(record(truth, seed + 1000), f"{case}-{seed + 1000}")
     t0 = time.perf_counter()
     res = residual_loop(train, valid, start=START, options=options or LoopOptions(sim_window=None))
     dt = time.perf_counter() - t0
     alts = {e["name"]: tuple(e.get("indistinguishable_from", ())) for e in res.effects_added}
-    return Outcome(case, seed, expected, tuple(res.names_added), dt, res.verdict, alts)
+    return Outcome(case, seed, expected, tuple(res.names_added), dt, res.verdict, alts,
+                   tuple(u["diagnostic"] for u in res.unexplained))

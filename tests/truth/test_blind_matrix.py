@@ -1,7 +1,8 @@
 """A representative subset of the strict blind matrix (one seed; the whole matrix, 3 seeds, is
 ``benchmarks/bench_residual.py`` and docs/residual-blind-matrix.md): clean data of a family the library
 does not contain (Dahl), a Stribeck curve with exponent 1, an angle-modulated friction level, a first-order
-current-loop lag, and Stribeck + 9th-order cogging on LuGre. Right means: the added set EQUALS the truth's."""
+current-loop lag, Stribeck + 9th-order cogging on LuGre, and a clean record of the default simulated bench (issue 29).
+Right means: the added set EQUALS the truth's, and a clean record ends with nothing unexplained."""
 
 from __future__ import annotations
 
@@ -13,5 +14,8 @@ from tests.truth.matrix import CASES, QUICK, run_case
 @pytest.mark.parametrize("case", QUICK)
 def test_added_set_equals_the_truth(case):
     out = run_case(case, 1)
-    assert frozenset(out.added) == CASES[case][1], f"{case}: added {out.added}, truth {sorted(CASES[case][1])}"
-    assert out.seconds < 10.0  # the loop's own time on 10 s at 1 kHz (issue 14: < 10 s for 30 s)
+    assert out.right, (f"{case}: added {out.added}, truth {sorted(CASES[case][1])}, "
+                       f"unexplained {out.unexplained}")
+    # the loop's own time: 10 s records at 1 kHz (issue 14: < 10 s for 30 s); the bench record is 20 s at 10 kHz
+    # (reduced to 2 kHz), 14.5 s measured under a load average of 11 on 2 cores
+    assert out.seconds < (30.0 if case.startswith("bench-") else 10.0)

@@ -103,3 +103,48 @@ def test_displacement_record_starts_on_the_virgin_curve():
     ref = virgin_curve(k, w, rec.position_true[first])
     assert np.max(np.abs(rec.torque_true[first] - ref)) < 1e-6 * 40
     assert np.ptp(rec.position_true) == pytest.approx(0.24e-3, rel=0.1)
+
+
+def test_stroke_limited_record_obeys_its_equation_and_stays_in_the_stroke():
+    """Issue 29's stroke-limited records: the PD position loop keeps the motor within about +-stroke/2 and sweeps
+    most of it, and the recorded (noise-free) command satisfies J*theta'' + F = tau along the true path, with F
+    the eccentric level (1 + m*sin(theta + phi)) times the Maxwell-slip elements' force, recomputed here from the
+    exact stop operators, plus b*v. Both sides filtered alike (zero-phase 50 Hz); tolerance 1 % of the torque's
+    rms (the fixed-step integration leaves 0.15 %)."""
+    from scipy import signal
+
+    from tests.truth.generator import elements, simulate_torque_driven
+
+    tr = Truth(family="maxwell", angle_level=(1.0, 0.25, 2.0), stroke=2.0, counts_per_rev=2**18)
+    rec = simulate_torque_driven(tr, 3, duration=4.0)
+    x, tau, fs = rec.position_true, rec.torque_true, rec.fs
+    assert 0.8 * tr.stroke / 2 < np.max(np.abs(x)) < 1.2 * tr.stroke / 2
+    assert np.ptp(x) > 0.8 * tr.stroke
+    k, w = elements(tr.coulomb, tr.presliding, tr.n_elements)
+    z, prev, f = np.zeros(k.size), x[0], np.empty(x.size)
+    for i, xi in enumerate(x):
+        z = np.clip(z + (xi - prev), -w / k, w / k)
+        prev = xi
+        f[i] = (1 + 0.25 * np.sin(xi + 2.0)) * (k @ z)
+    sos = signal.butter(4, 50.0, fs=fs, output="sos")
+    xf = signal.sosfiltfilt(sos, x)
+    acc = np.zeros_like(xf)
+    acc[1:-1] = (xf[2:] - 2 * xf[1:-1] + xf[:-2]) * fs * fs
+    friction = signal.sosfiltfilt(sos, f + tr.viscous * np.gradient(x, 1 / fs))
+    e = signal.sosfiltfilt(sos, tau) - tr.inertia * acc - friction
+    assert np.std(e[200:-200]) < 0.01 * np.std(tau)
+
+
+def test_level_slope_scales_the_sliding_level():
+    """level x (1 + g*theta): the Maxwell-slip force while sliding at theta is Fc*(1 + g*theta) (closed form),
+    checked on a monotonic path long past the presliding distance."""
+    from tests.truth.generator import _Friction
+
+    tr = Truth(family="maxwell", level_slope=0.2)
+    fr = _Friction(tr)
+    z = np.zeros(tr.n_elements)
+    theta, h = 0.0, 1e-4
+    for _ in range(20000):  # 2 rad at 1 rad/s
+        theta += h
+        force = fr.step(z, h, 1.0, theta, h)
+    assert force - tr.viscous == pytest.approx(tr.coulomb * (1 + 0.2 * theta), rel=1e-9)

@@ -66,7 +66,8 @@ def test_streamed_with_tiny_chunks_equals_the_whole_record(run, settings):
     margin = default_margin(FS, FS / 20)
     whole = fit_lip(x, tau, FS, settings=settings, block=x.size)
     grid = whole.candidate_deltas
-    tiny = fit_lip_chunks(array_chunks(x, tau, 97), FS, settings=settings, grid=grid, block=2 * margin)
+    tiny = fit_lip_chunks(array_chunks(x, tau, 97), FS, settings=settings, grid=grid, block=2 * margin,
+                          calibrated=True)  # the standard errors of whole arrays (HAC, bootstrap)
     assert tiny.model.ms_stiffness.size == whole.model.ms_stiffness.size > 3
     np.testing.assert_allclose(tiny.model.ms_delta, whole.model.ms_delta, rtol=1e-7)
     np.testing.assert_allclose(tiny.model.ms_stiffness, whole.model.ms_stiffness, rtol=1e-7)
