@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
@@ -45,6 +45,52 @@ class SyntheticCampaign:
     params: PlantParams | None = None
     operator: str = "sim"
     start: datetime = field(default_factory=lambda: datetime(2026, 1, 5, 8, 0, tzinfo=UTC))
+    #: put the drift's wear step at the distance slid when this run starts (None: at drift.wear_step_distance)
+    wear_step_at_run: int | None = None
+
+
+@dataclass
+class SimulatedRun:
+    index: int
+    name: str
+    repeat: int
+    start_time: str                 # ISO 8601 UTC
+    ambient: float                  # degC
+    channels: dict[str, np.ndarray]  # the run file's channels, plus "temperature" (degC)
+    params: dict                    # the identification protocol's parameters
+    distance_end: float             # cumulative distance slid at the run's end (truth), rad
+
+    @property
+    def key(self) -> str:
+        return f"{self.name}-{self.repeat}"
+
+
+def simulate_runs(spec: SyntheticCampaign) -> Iterator[SimulatedRun]:
+    """The campaign's runs one after another, with the drift state carried from run to run."""
+    base = (spec.params or dc_motor()).replace(counts_per_rev=spec.counts_per_rev,
+                                               noise_current=spec.noise_current)
+    fs = float(spec.sample_rate)
+    ambient0 = spec.ambient(0) if spec.ambient else 23.0
+    state = DriftState(temperature=ambient0, ambient=ambient0)
+    drift = spec.drift
+    for i in range(spec.runs):
+        if i == spec.wear_step_at_run:
+            drift = replace(drift, wear_step_distance=state.distance)
+        state.ambient = spec.ambient(i) if spec.ambient else 23.0
+        if i:
+            rest(drift, state, spec.interval - spec.duration)
+        ex = excitations.random_enveloped(spec.duration, fs, amplitude=spec.amplitude, period=spec.period,
+                                          seed=spec.seed + i, mode="current", limit=None)
+        out_i, temperature = simulate_drifting(base.replace(seed=spec.seed + i), ex.u, 1 / fs, drift, state)
+        n = ex.u.size
+        channels = {"sample_index": np.arange(n), "t": np.arange(n) / fs, "current_cmd": ex.u,
+                    "current": out_i.current_meas, "torque": base.torque_constant * out_i.current_meas,
+                    "position": out_i.position_meas, "temperature": temperature}
+        params = {"duration": spec.duration, "amplitude": spec.amplitude, "period": spec.period,
+                  "seed": spec.seed + i, "sample_rate": int(fs), "mode": "current"}
+        start = spec.start + timedelta(seconds=i * spec.interval)
+        yield SimulatedRun(i, f"id{i // spec.repeats + 1}", i % spec.repeats + 1,
+                           start.isoformat().replace("+00:00", "Z"), state.ambient, channels, params, state.distance)
 
 
 def write_campaign(out_dir: str | os.PathLike, spec: SyntheticCampaign,
@@ -56,42 +102,21 @@ def write_campaign(out_dir: str | os.PathLike, spec: SyntheticCampaign,
     out.mkdir(parents=True, exist_ok=True)
     if (out / INDEX_NAME).exists():
         raise FileExistsError(f"{out / INDEX_NAME}: exists; a synthetic campaign goes into a new folder")
-    base = (spec.params or dc_motor()).replace(counts_per_rev=spec.counts_per_rev,
-                                               noise_current=spec.noise_current)
-    fs = float(spec.sample_rate)
-    ambient0 = spec.ambient(0) if spec.ambient else 23.0
-    state = DriftState(temperature=ambient0, ambient=ambient0)
     entries = []
-    for i in range(spec.runs):
-        state.ambient = spec.ambient(i) if spec.ambient else 23.0
-        if i:
-            rest(spec.drift, state, spec.interval - spec.duration)
-        ex = excitations.random_enveloped(spec.duration, fs, amplitude=spec.amplitude, period=spec.period,
-                                          seed=spec.seed + i, mode="current", limit=None)
-        out_i, temperature = simulate_drifting(base.replace(seed=spec.seed + i), ex.u, 1 / fs, spec.drift, state)
-        name, repeat = f"id{i // spec.repeats + 1}", i % spec.repeats + 1
-        key = f"{name}-{repeat}"
-        n = ex.u.size
-        block = {"sample_index": np.arange(n), "t": np.arange(n) / fs, "current_cmd": ex.u,
-                 "current": out_i.current_meas, "torque": base.torque_constant * out_i.current_meas,
-                 "position": out_i.position_meas, "temperature": temperature}
-        channels = ["sample_index", "t", "current_cmd", "current", "torque"] + (["position"] if i not in fail_runs
-                                                                              else [])
-        params = {"duration": spec.duration, "amplitude": spec.amplitude, "period": spec.period,
-                  "seed": spec.seed + i, "sample_rate": int(fs), "mode": "current"}
-        start = spec.start + timedelta(seconds=i * spec.interval)
-        with RunWriter(out / f"{key}.h5", sample_rate=fs, channels=channels,
+    for run in simulate_runs(spec):
+        names = ["sample_index", "t", "current_cmd", "current", "torque"]
+        names += [] if run.index in fail_runs else ["position"]
+        with RunWriter(out / f"{run.key}.h5", sample_rate=float(spec.sample_rate), channels=names,
                        custom_channels={"temperature": TEMPERATURE_UNIT}, protocol_name="identification",
-                       protocol_params=params, operator=spec.operator,
-                       start_time=start.isoformat().replace("+00:00", "Z"),
+                       protocol_params=run.params, operator=spec.operator, start_time=run.start_time,
                        device={"model": "synthetic", "serial": "C-plant"}) as w:
-            w.append({k: block[k] for k in [*channels, "temperature"]})
+            w.append({k: run.channels[k] for k in [*names, "temperature"]})
             uid = w.uid
-        entries.append({"key": key, "name": name, "repeat": repeat, "protocol": "identification",
-                        "file": f"{key}.h5", "status": "completed", "uid": uid, "samples": int(n),
-                        "parameters": params, "settings": {},
-                        "environment": {"ambient": f"{state.ambient:g} C"},
-                        "truth": {"temperature_mean": float(np.mean(temperature)), "distance_end": state.distance}})
+        entries.append({"key": run.key, "name": run.name, "repeat": run.repeat, "protocol": "identification",
+                        "file": f"{run.key}.h5", "status": "completed", "uid": uid,
+                        "samples": int(run.channels["t"].size), "parameters": run.params, "settings": {},
+                        "environment": {"ambient": f"{run.ambient:g} C"},
+                        "truth": {"distance_end": run.distance_end}})
     doc = {"campaign": f"synthetic-{spec.seed}.toml", "schema": "hilbench-campaign-index", "version": 1,
            "runs": entries}
     (out / INDEX_NAME).write_text(json.dumps(doc, indent=2))
