@@ -9,7 +9,9 @@ For each monitored parameter y (one value per run, in start-time order):
    real but weak dependence would leave it in the residuals to raise alarms).
 2. Residuals r = y - fit over every run; sigma from the baseline residuals (n_b - p degrees of freedom);
    z = r/sigma.
-3. EWMA and CUSUM on z over the runs after the baseline, and PELT change points on z over all runs
+3. EWMA and CUSUM over the runs after the baseline on z clipped to +-``clip`` (3): the estimates of short runs
+   have heavy tails (a poorly excited run may land 8 sigma off), and one wild run must not read as a drift,
+   while a sustained shift still moves both charts. PELT change points on z over all runs
    (analysis.drift.charts). An alarm names the run where it starts.
 """
 
@@ -37,6 +39,7 @@ class DriftSettings:
     ewma_limit: float = 3.5            # in sigma of the EWMA
     cusum_k: float = 0.5               # in sigma
     cusum_h: float = 8.0               # in sigma
+    clip: float = 3.0                  # the charts read z clipped to +-clip (one wild run is not a drift)
     penalty: float | None = None       # PELT penalty (None: 3 ln n)
     min_size: int = 5                  # shortest segment between change points, runs
 
@@ -171,8 +174,9 @@ def monitor(rows: list[dict[str, Any]], settings: DriftSettings | None = None) -
         start = int(np.flatnonzero(~base)[0]) if (~base).any() else z.size
         w, lim, hi, lo = (np.full(z.size, np.nan) for _ in range(4))
         if start < z.size:
-            w[start:], lim[start:] = ewma(z[start:], s.ewma_lambda, s.ewma_limit)
-            hi[start:], lo[start:] = cusum(z[start:], s.cusum_k, s.cusum_h)
+            zc = np.clip(z[start:], -s.clip, s.clip)
+            w[start:], lim[start:] = ewma(zc, s.ewma_lambda, s.ewma_limit)
+            hi[start:], lo[start:] = cusum(zc, s.cusum_k, s.cusum_h)
         series[name] = Series(
             name, y, se, fitted, z, w, lim, hi, lo, sigma, report,
             ewma_alarms=[start + i for i in signals(np.abs(w[start:]) > lim[start:])],

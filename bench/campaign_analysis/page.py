@@ -9,6 +9,7 @@ import html
 import io
 import json
 import math
+import re
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
@@ -107,6 +108,11 @@ def run_figure(path: Path) -> str | None:
     return uri
 
 
+def _natural(text: str) -> list:
+    """Sort key that puts id2 before id10."""
+    return [(0, int(t), "") if t.isdigit() else (1, 0, t) for t in re.split(r"(\d+)", text)]
+
+
 def repeat_summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Mean and sample standard deviation of each parameter over the repeats of each planned run (ok rows)."""
     groups: dict[str, list[dict]] = defaultdict(list)
@@ -114,7 +120,7 @@ def repeat_summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         if r.get("status") == "ok":
             groups[str(r.get("name"))].append(r)
     out = []
-    for name, rs in sorted(groups.items()):
+    for name, rs in sorted(groups.items(), key=lambda g: _natural(g[0])):
         entry: dict[str, Any] = {"name": name, "n": len(rs)}
         for p in SUMMARY_PARAMETERS:
             v = np.array([r[p] for r in rs if r.get(p) is not None], dtype=float)
@@ -139,8 +145,9 @@ def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, st
              f"<style>{CSS}</style><script>{JS}</script></head><body>",
              f"<h1>Campaign {e(campaign)}</h1><pre id='js-errors'></pre>",
              f"<p>{len(rows)} analysed runs, {sum(r.get('status') == 'ok' for r in rows)} ok; "
-             f"folder {e(str(folder)) if folder else '?'}</p>"]
-    parts.append("<h2>Plan</h2><table><thead><tr><th class='t'>run</th><th class='t'>protocol</th>"
+             f"folder {e(folder.name) if folder else '?'}</p>"]
+    parts.append(f"<h2>Plan</h2><details><summary>{len(plan)} planned runs</summary><table><thead><tr>"
+                 "<th class='t'>run</th><th class='t'>protocol</th>"
                  "<th class='t'>status</th><th class='t'>parameters</th><th class='t'>environment</th></tr>"
                  "</thead><tbody>")
     for p in plan:
@@ -148,7 +155,7 @@ def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, st
                      f"<td class='t'>{e(str(p.get('status')))}</td>"
                      f"<td class='t'>{e(json.dumps(p.get('parameters', {})))}</td>"
                      f"<td class='t'>{e(json.dumps(p.get('environment', {})))}</td></tr>")
-    parts.append("</tbody></table>")
+    parts.append("</tbody></table></details>")
     parts.append("<h2>Mean &plusmn; standard deviation over repeats</h2><table><thead><tr><th class='t'>run</th>"
                  "<th>repeats</th>" + "".join(f"<th>{e(p)} ({e(units.get(p, ''))})</th>" for p in SUMMARY_PARAMETERS)
                  + "</tr></thead><tbody>")
@@ -160,7 +167,7 @@ def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, st
                  "<table id='runs'><thead><tr>")
     for col, head in RUN_COLUMNS:
         unit = units.get(col, "")
-        label = f"{head} ({unit})" if unit and unit not in ("1", "") else head
+        label = f"{head} ({unit})" if unit and unit not in ("1", "") and col != "start_time" else head
         cls = " class='t'" if col in ("key", "start_time", "status", "verdict", "error") else ""
         parts.append(f"<th data-sort='1'{cls}>{e(label)}</th>")
     parts.append("</tr></thead><tbody>")
