@@ -41,7 +41,7 @@ from hilbench.drivers.errors import DeviceURLError
 INDEX_NAME = "index.json"
 LOCK_NAME = ".campaign.lock"
 RUN_KEYS = {"name", "protocol", "repeats"}
-GENERAL_KEYS = {"device", "operator", "notes"}
+GENERAL_KEYS = {"device", "operator", "notes", "environment"}
 SETTING_UNITS = {"current_limit": "A", "velocity_limit": "rad/s", "position_min": "rad", "position_max": "rad",
                  "watchdog_timeout": "s", "torque_constant": "N*m/A", "counts_per_rev": "counts", "ratio": "1",
                  "position_kp": "A/rad", "position_ki": "A/(rad*s)", "position_kd": "A*s/rad", "position_i_limit": "A",
@@ -63,6 +63,7 @@ class PlannedRun:
     operator: str = ""
     notes: str = ""
     report: dict[str, float] = field(default_factory=dict)  # a [[compensate]] step's metric settings (SI)
+    environment: dict[str, Any] = field(default_factory=dict)  # operator's values, e.g. {"ambient": "23 C"}
 
     @property
     def key(self) -> str:
@@ -206,9 +207,15 @@ def load_campaign(path: str | Path) -> Campaign:
             check_device_url(device)
         except DeviceURLError as exc:
             raise fail("device", str(exc)) from None
+        environment = merged.get("environment", {})
+        if not isinstance(environment, dict) or not all(
+                isinstance(v, str | int | float) and not isinstance(v, bool) for v in environment.values()):
+            raise fail("environment", f"environment must be a table of values, e.g. {{ambient = \"23 C\", "
+                                      f"load = \"2 kg\"}}, got {environment!r}")
         for r in range(1, repeats + 1):
             campaign.runs.append(PlannedRun(name, r, protocol, settings, device,
-                                            str(merged.get("operator", "")), str(merged.get("notes", ""))))
+                                            str(merged.get("operator", "")), str(merged.get("notes", "")),
+                                            environment=dict(environment)))
     if steps:  # the compensation matrix: one planned run per case (docs/compensation.md)
         from hilbench.bench.compensation_matrix import campaign_step
 
@@ -332,7 +339,7 @@ def _play(campaign: Campaign, out_dir: Path, resume: bool, progress, control, be
                 "key": planned.key, "name": planned.name, "repeat": planned.repeat,
                 "protocol": planned.protocol.name, "file": path.name, "status": result.status, "uid": result.uid,
                 "samples": result.samples, "parameters": planned.protocol.parameters(),
-                "settings": settings_dict(planned.settings),
+                "settings": settings_dict(planned.settings), "environment": planned.environment,
             }
             _write_index(out_dir, campaign, entries)
             if progress:

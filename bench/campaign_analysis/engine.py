@@ -64,6 +64,7 @@ class Summary:
     failed: int = 0
     table: Path | None = None
     wall_time: float = 0.0
+    startup_time: float = 0.0  # of wall_time: cluster start and every worker's imports of the steps
     dashboard: str | None = None
     failures: list[str] = field(default_factory=list)
 
@@ -154,6 +155,18 @@ def execute(path: str, step: str, settings: StepSettings, function: StepFunction
     return row
 
 
+def warm_up() -> None:
+    """Import what the steps need (scipy, h5py, the analysis): once per process, before the first task. The
+    modules import much of this inside their functions; scipy.signal alone takes seconds."""
+    import importlib
+
+    for name in ("scipy.signal", "scipy.optimize", "scipy.interpolate", "h5py", "hilbench.bench.runfile",
+                 "hilbench.bench.verdict", "hilbench.bench.analysis_input", "hilbench.bench.commands.identify",
+                 "hilbench.analysis.identification.identify", "hilbench.analysis.identification.maxwell_fit",
+                 "hilbench.analysis.identification.output_error", "hilbench.analysis.run_file"):
+        importlib.import_module(name)
+
+
 def _finite_or_none(row: dict[str, Any]) -> dict[str, Any]:
     return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()}
 
@@ -194,12 +207,14 @@ def analyse(folders: list[Path], out: Path, steps: tuple[str, ...] = ("identify"
     bar = tqdm(total=len(todo), unit="run", desc="analyse", disable=not progress or not todo, dynamic_ncols=True)
     try:
         if serial:
+            warm_up()
+            summary.startup_time = time.perf_counter() - t0
             for task in todo:
                 record(task, execute(str(task.path.resolve()), task.step, settings, fn.get(task.step)))
                 bar.update()
         elif todo:
             _on_cluster(todo, settings, fn, record, bar, summary, workers, scheduler, scheduler_file, say, verbose,
-                        dashboard)
+                        dashboard, t0)
     finally:
         bar.close()
     summary.table = results.compact(current={t.key for t in tasks} | {row_key(r) for r in not_run})
@@ -209,7 +224,7 @@ def analyse(folders: list[Path], out: Path, steps: tuple[str, ...] = ("identify"
 
 def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunction], record, bar,
                 summary: Summary, workers: int | None, scheduler: str | None, scheduler_file: str | None,
-                say: Callable[[str], None], verbose: bool, want_dashboard: bool) -> None:
+                say: Callable[[str], None], verbose: bool, want_dashboard: bool, t0: float) -> None:
     import dask
     from distributed import Client, LocalCluster, as_completed
     from distributed.scheduler import KilledWorker
@@ -235,6 +250,8 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
             if dashboard is not None and client.dashboard_link:
                 summary.dashboard = client.dashboard_link
                 say(f"dask dashboard: {client.dashboard_link}")
+            client.run(warm_up)  # every worker imports in parallel before the tasks (and startup_time says how long)
+            summary.startup_time = time.perf_counter() - t0
             futures = {client.submit(execute, str(t.path.resolve()), t.step, settings, fn.get(t.step),
                                      pure=False): t for t in todo}
             for future in as_completed(futures):
