@@ -119,9 +119,16 @@ def read_campaign(folder: Path) -> list[dict[str, Any]]:
 def plan(folders: list[Path], steps: tuple[str, ...], settings: StepSettings) -> tuple[list[Task], list[dict]]:
     """(tasks to run, rows of runs that did not complete). Reads every index and hashes every run file."""
     tasks, not_run = [], []
+    folders = [f.resolve() for f in folders]  # "." has no name
+    names = [f.name for f in folders]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:  # a row names its campaign by the folder's name
+        raise AnalyseError(f"two campaign folders are both named {twice[0]!r}; rename one (rows name the campaign "
+                           "by its folder)")
     for folder in folders:
         for entry in read_campaign(folder):
             path = folder / entry["file"]
+            _environment(entry, f"{folder / INDEX_NAME}: run {entry['key']}")  # a bad unit stops before any work
             for step in steps_for(str(entry.get("protocol", "")), steps):
                 if entry.get("status") != "completed" or not path.exists():
                     reason = "run file missing" if not path.exists() else f"run {entry.get('status')}"
