@@ -246,7 +246,11 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
             if verbose:
                 say("dask dashboard: not available (it needs the bokeh package); going on without it")
     cluster = None
-    with dask.config.set({"distributed.scheduler.allowed-failures": 1, "distributed.admin.tick.limit": "60s"}):
+    # allowed-failures 1: a task whose worker dies is given to a fresh worker once. worker-saturation 1.0: a
+    # worker holds only the task it runs (at the default 1.1 a one-thread worker also holds a queued task, and
+    # a death then counts against that innocent task too: a 200-run benchmark lost a third row that way)
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1, "distributed.scheduler.worker-saturation": 1.0,
+                          "distributed.admin.tick.limit": "60s"}):
         if scheduler or scheduler_file:
             client = Client(scheduler, scheduler_file=scheduler_file, timeout="20s")
         else:

@@ -156,13 +156,6 @@ def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, st
                      f"<td class='t'>{e(json.dumps(p.get('parameters', {})))}</td>"
                      f"<td class='t'>{e(json.dumps(p.get('environment', {})))}</td></tr>")
     parts.append("</tbody></table></details>")
-    parts.append("<h2>Mean &plusmn; standard deviation over repeats</h2><table><thead><tr><th class='t'>run</th>"
-                 "<th>repeats</th>" + "".join(f"<th>{e(p)} ({e(units.get(p, ''))})</th>" for p in SUMMARY_PARAMETERS)
-                 + "</tr></thead><tbody>")
-    for s in repeat_summary(rows):
-        parts.append(f"<tr><td class='t'>{e(s['name'])}</td><td>{s['n']}</td>" + "".join(
-            f"<td>{_fmt(s[p][0], s[p][1])}</td>" for p in SUMMARY_PARAMETERS) + "</tr>")
-    parts.append("</tbody></table>")
     parts.append("<h2>Runs</h2><p>Click a column to sort, a run to show its figure. <span id='runs-shown'></span></p>"
                  "<table id='runs'><thead><tr>")
     for col, head in RUN_COLUMNS:
@@ -189,6 +182,14 @@ def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, st
         parts.append(f"<tr id='fig-{rid}' class='fig' style='display:none'><td colspan='{len(RUN_COLUMNS)}'>"
                      f"{body}</td></tr>")
     parts.append("</tbody></table>")
+    parts.append("<h2>Mean &plusmn; standard deviation over repeats</h2><details open><summary>per planned run"
+                 "</summary><table><thead><tr><th class='t'>run</th>"
+                 "<th>repeats</th>" + "".join(f"<th>{e(p)} ({e(units.get(p, ''))})</th>" for p in SUMMARY_PARAMETERS)
+                 + "</tr></thead><tbody>")
+    for s in repeat_summary(rows):
+        parts.append(f"<tr><td class='t'>{e(s['name'])}</td><td>{s['n']}</td>" + "".join(
+            f"<td>{_fmt(s[p][0], s[p][1])}</td>" for p in SUMMARY_PARAMETERS) + "</tr>")
+    parts.append("</tbody></table></details>")
     if drift_pngs:
         parts.append("<h2>Drift</h2>")
         if summary is not None:
