@@ -9,7 +9,7 @@ C_SRC  := $(wildcard firmware_sim/*.c firmware_sim/*.h firmware/core/*.[ch] firm
 PKG    := $(wildcard hilbench/*.py)
 export QT_QPA_PLATFORM ?= offscreen
 
-.PHONY: all setup demo test bench lint clean toolchain firmware
+.PHONY: all setup demo test bench lint clean toolchain firmware chromium
 
 all: test
 
@@ -44,12 +44,21 @@ toolchain:
 	    >/dev/null || echo "could not install$$missing: the target tests will skip"; \
 	else echo "not root: the target tests will skip (apt-get install$$missing)"; fi
 
+# The campaign page's test loads it in headless Chromium (Debian package chromium), installed like the toolchain.
+chromium:
+	@command -v chromium >/dev/null 2>&1 && exit 0; \
+	if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	  echo "installing chromium"; \
+	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium) \
+	    >/dev/null || echo "could not install chromium: the campaign page test will skip"; \
+	else echo "not root: the campaign page test will skip (apt-get install chromium)"; fi
+
 firmware: $(STAMP) toolchain
 	$(MAKE) -C firmware qemu nucleo PYTHON=$(abspath $(BIN)/python)
 
 # Tests without a realtime device run on every core; those with one (marked `realtime` by tests/conftest.py)
 # then run one at a time on a quiet machine. Both parts always run; the worse exit code is make's.
-test: $(STAMP) toolchain
+test: $(STAMP) toolchain chromium
 	@$(BIN)/python -m pytest -q -p no:cacheprovider -m "not realtime" -n auto --dist loadfile; a=$$?; \
 	$(BIN)/python -m pytest -q -p no:cacheprovider -m realtime; b=$$?; \
 	exit $$(( a > b ? a : b ))

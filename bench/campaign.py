@@ -162,12 +162,18 @@ def load_campaign(path: str | Path) -> Campaign:
             check_device_url(device)
         except DeviceURLError as exc:
             raise fail("device", str(exc)) from None
+        environment = merged.get("environment", {})
+        if not isinstance(environment, dict) or not all(
+                isinstance(v, str | int | float) and not isinstance(v, bool) for v in environment.values()):
+            raise fail("environment", f"environment must be a table of values, e.g. {{ambient = \"23 C\", "
+                                      f"load = \"2 kg\"}}, got {environment!r}")
         for r in range(1, repeats + 1):
             played = protocol
             if r > 1 and "seed" in specs:  # each repeat its own input (all repeats played seed 0 before)
                 played = cls.from_dict({**params, "seed": repeat_seed(protocol.seed, r)})  # type: ignore[attr-defined]
             campaign.runs.append(PlannedRun(name, r, played, settings, device,
-                                            str(merged.get("operator", "")), str(merged.get("notes", ""))))
+                                            str(merged.get("operator", "")), str(merged.get("notes", "")),
+                                            environment=dict(environment)))
     if steps:  # the compensation matrix: one planned run per case (docs/compensation.md)
         from hilbench.bench.compensation_matrix import campaign_step
 
@@ -303,7 +309,7 @@ def _play(campaign: Campaign, out_dir: Path, resume: bool, progress, control, be
                 "key": planned.key, "name": planned.name, "repeat": planned.repeat,
                 "protocol": planned.protocol.name, "file": path.name, "status": result.status, "uid": result.uid,
                 "samples": result.samples, "parameters": plan["parameters"], "settings": plan["settings"],
-                "model_sha256": plan["model_sha256"],
+                "model_sha256": plan["model_sha256"], "environment": planned.environment,
             }
             _write_index(out_dir, campaign, entries)
             if progress:

@@ -15,7 +15,7 @@ from hilbench.bench.errors import BenchError
 from hilbench.bench.protocols import Protocol
 from hilbench.bench.runner import DeviceSettings, settings_dict
 
-GENERAL_KEYS = {"device", "operator", "notes"}
+GENERAL_KEYS = {"device", "operator", "notes", "environment"}
 #: the unit of every device setting a campaign may give (the one table of device options)
 SETTING_UNITS = {name: unit for name, (unit, _what) in DEVICE_OPTIONS.items()}
 QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-z*/^0-9]+)?\s*$")
@@ -47,6 +47,7 @@ class PlannedRun:
     operator: str = ""
     notes: str = ""
     report: dict[str, float] = field(default_factory=dict)  # a [[compensate]] step's metric settings (SI)
+    environment: dict[str, Any] = field(default_factory=dict)  # operator's values, e.g. {"ambient": "23 C"}
 
     @property
     def key(self) -> str:

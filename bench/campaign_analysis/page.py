@@ -1,0 +1,216 @@
+"""One self-contained HTML page per campaign: the plan, a sortable table of its runs, the mean +- std over
+repeats, the drift figures, and each run's own figure one click away. No server, no network: CSS and JS are
+inline and every image is a data URI, so the file can be mailed or archived as it is."""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import math
+import re
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hilbench.bench import outputs
+
+#: (column, header) of the runs table; a parameter is shown with its standard error
+RUN_COLUMNS = [("key", "run"), ("repeat", "repeat"), ("start_time", "start (UTC)"), ("status", "status"),
+               ("inertia", "J"), ("breakaway", "break-away"), ("viscous", "b"),
+               ("validation_torque_nrmse", "validation NRMSE"), ("verdict", "verdict"),
+               ("temperature_mean", "temperature"), ("error", "reason")]
+SUMMARY_PARAMETERS = ("inertia", "breakaway", "viscous", "validation_torque_nrmse")
+
+CSS = """
+body{font-family:sans-serif;margin:1.5em;color:#222}
+table{border-collapse:collapse;font-size:13px;margin:0.5em 0}
+th,td{border:1px solid #ccc;padding:3px 6px;text-align:right}
+th{background:#eee;cursor:pointer;user-select:none}
+td.t,th.t{text-align:left}
+tr.failed td{background:#fdd}
+tr.fig td{background:#fafafa;text-align:left}
+a.run{cursor:pointer;color:#05c;text-decoration:underline}
+img{max-width:100%}
+#js-errors{color:#b00}
+"""
+
+JS = """
+var jsErrors = [];
+window.onerror = function (msg) { jsErrors.push(String(msg));
+  document.getElementById('js-errors').textContent = jsErrors.join('\\n'); };
+function sortTable(th) {
+  var table = th.closest('table'), body = table.tBodies[0], col = th.cellIndex;
+  var asc = th.getAttribute('data-asc') !== '1';
+  th.setAttribute('data-asc', asc ? '1' : '0');
+  var rows = Array.prototype.filter.call(body.rows, function (r) { return !r.classList.contains('fig'); });
+  rows.sort(function (a, b) {
+    var x = a.cells[col].getAttribute('data-v'), y = b.cells[col].getAttribute('data-v');
+    var nx = parseFloat(x), ny = parseFloat(y);
+    var c = (!isNaN(nx) && !isNaN(ny)) ? nx - ny : String(x).localeCompare(String(y));
+    return asc ? c : -c; });
+  rows.forEach(function (r) { body.appendChild(r);
+    var f = document.getElementById('fig-' + r.id); if (f) { body.appendChild(f); } });
+}
+function toggle(id) { var f = document.getElementById('fig-' + id);
+  f.style.display = f.style.display === 'none' ? '' : 'none'; }
+document.addEventListener('DOMContentLoaded', function () {
+  document.querySelectorAll('th[data-sort]').forEach(function (th) {
+    th.addEventListener('click', function () { sortTable(th); }); });
+  document.getElementById('runs-shown').textContent =
+    document.querySelectorAll('#runs tbody tr.run').length + ' runs shown';
+});
+"""
+
+
+def _png(fig) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=72)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
+
+
+def _file_png(path: Path) -> str:
+    return "data:image/png;base64," + base64.b64encode(path.read_bytes()).decode()
+
+
+def _fmt(v: Any, se: Any = None) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return ""
+    if isinstance(v, float):
+        return f"{v:.4g}" + (f" &plusmn; {se:.2g}" if isinstance(se, float) and math.isfinite(se) else "")
+    return html.escape(str(v))
+
+
+def run_figure(path: Path) -> str | None:
+    """The run's torque and position against time as a data URI (None when the file cannot be read)."""
+    import matplotlib.pyplot as plt
+
+    from hilbench.analysis.runfile import open_run
+
+    try:
+        with open_run(path) as run:
+            t = run.channel("t")
+            chans = {c: run.channel(c) for c in ("torque", "position") if c in run.channels}
+            units = {c: run.units[c] for c in chans}
+    except Exception:  # a damaged or missing file: the row says why; the page goes on
+        return None
+    fig, axes = plt.subplots(len(chans) or 1, 1, figsize=(7, 3.2), sharex=True, squeeze=False)
+    for ax, (c, v) in zip(axes[:, 0], chans.items(), strict=False):
+        ax.plot(t, v, lw=0.6)
+        ax.set_ylabel(f"{c} ({units[c]})")
+    axes[-1, 0].set_xlabel("t (s)")
+    fig.tight_layout()
+    uri = _png(fig)
+    plt.close(fig)
+    return uri
+
+
+def _natural(text: str) -> list:
+    """Sort key that puts id2 before id10."""
+    return [(0, int(t), "") if t.isdigit() else (1, 0, t) for t in re.split(r"(\d+)", text)]
+
+
+def repeat_summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Mean and sample standard deviation of each parameter over the repeats of each planned run (ok rows)."""
+    groups: dict[str, list[dict]] = defaultdict(list)
+    for r in rows:
+        if r.get("status") == "ok":
+            groups[str(r.get("name"))].append(r)
+    out = []
+    for name, rs in sorted(groups.items(), key=lambda g: _natural(g[0])):
+        entry: dict[str, Any] = {"name": name, "n": len(rs)}
+        for p in SUMMARY_PARAMETERS:
+            v = np.array([r[p] for r in rs if r.get(p) is not None], dtype=float)
+            entry[p] = (float(v.mean()) if v.size else math.nan, float(v.std(ddof=1)) if v.size > 1 else math.nan)
+        out.append(entry)
+    return out
+
+
+def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, str], drift_pngs: list[Path],
+                  summary: dict[str, Any] | None) -> str:
+    """The HTML text of one campaign's page."""
+    rows = sorted(rows, key=lambda r: (str(r.get("start_time")), str(r.get("key"))))
+    folder = Path(rows[0]["folder"]) if rows and rows[0].get("folder") else None
+    plan = []
+    if folder is not None and (folder / "index.json").is_file():
+        try:
+            plan = json.loads((folder / "index.json").read_text()).get("runs", [])
+        except ValueError:
+            plan = []
+    e = html.escape
+    parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>campaign {e(campaign)}</title>",
+             f"<style>{CSS}</style><script>{JS}</script></head><body>",
+             f"<h1>Campaign {e(campaign)}</h1><pre id='js-errors'></pre>",
+             f"<p>{len(rows)} analysed runs, {sum(r.get('status') == 'ok' for r in rows)} ok; "
+             f"folder {e(folder.name) if folder else '?'}</p>"]
+    parts.append(f"<h2>Plan</h2><details><summary>{len(plan)} planned runs</summary><table><thead><tr>"
+                 "<th class='t'>run</th><th class='t'>protocol</th>"
+                 "<th class='t'>status</th><th class='t'>parameters</th><th class='t'>environment</th></tr>"
+                 "</thead><tbody>")
+    for p in plan:
+        parts.append(f"<tr><td class='t'>{e(str(p.get('key')))}</td><td class='t'>{e(str(p.get('protocol')))}</td>"
+                     f"<td class='t'>{e(str(p.get('status')))}</td>"
+                     f"<td class='t'>{e(json.dumps(p.get('parameters', {})))}</td>"
+                     f"<td class='t'>{e(json.dumps(p.get('environment', {})))}</td></tr>")
+    parts.append("</tbody></table></details>")
+    parts.append("<h2>Runs</h2><p>Click a column to sort, a run to show its figure. <span id='runs-shown'></span></p>"
+                 "<table id='runs'><thead><tr>")
+    for col, head in RUN_COLUMNS:
+        unit = units.get(col, "")
+        label = f"{head} ({unit})" if unit and unit not in ("1", "") and col != "start_time" else head
+        cls = " class='t'" if col in ("key", "start_time", "status", "verdict", "error") else ""
+        parts.append(f"<th data-sort='1'{cls}>{e(label)}</th>")
+    parts.append("</tr></thead><tbody>")
+    for i, r in enumerate(rows):
+        rid = f"r{i}"
+        cls = "run" + (" failed" if r.get("status") != "ok" else "")
+        cells = []
+        for col, _ in RUN_COLUMNS:
+            v = r.get(col)
+            sort_value = "" if v is None else str(v)
+            text = _fmt(v, r.get(f"{col}_se"))
+            if col == "key":
+                text = f"<a class='run' onclick=\"toggle('{rid}')\">{e(str(v))}</a>"
+            left = " class='t'" if col in ("key", "start_time", "status", "verdict", "error") else ""
+            cells.append(f"<td{left} data-v='{e(sort_value)}'>{text}</td>")
+        parts.append(f"<tr id='{rid}' class='{cls}'>{''.join(cells)}</tr>")
+        uri = run_figure(Path(r["folder"]) / r["file"]) if r.get("folder") and r.get("file") else None
+        body = f"<img alt='run {e(str(r.get('key')))}' src='{uri}'>" if uri else "no figure (file unreadable)"
+        parts.append(f"<tr id='fig-{rid}' class='fig' style='display:none'><td colspan='{len(RUN_COLUMNS)}'>"
+                     f"{body}</td></tr>")
+    parts.append("</tbody></table>")
+    parts.append("<h2>Mean &plusmn; standard deviation over repeats</h2><details open><summary>per planned run"
+                 "</summary><table><thead><tr><th class='t'>run</th>"
+                 "<th>repeats</th>" + "".join(f"<th>{e(p)} ({e(units.get(p, ''))})</th>" for p in SUMMARY_PARAMETERS)
+                 + "</tr></thead><tbody>")
+    for s in repeat_summary(rows):
+        parts.append(f"<tr><td class='t'>{e(s['name'])}</td><td>{s['n']}</td>" + "".join(
+            f"<td>{_fmt(s[p][0], s[p][1])}</td>" for p in SUMMARY_PARAMETERS) + "</tr>")
+    parts.append("</tbody></table></details>")
+    if drift_pngs:
+        parts.append("<h2>Drift</h2>")
+        if summary is not None:
+            parts.append(f"<p>{len(summary.get('alarms', []))} alarm(s) over {summary.get('runs')} runs "
+                         f"(all campaigns of the results table); baseline: {len(summary.get('baseline', []))} "
+                         "runs.</p>")
+        for p in drift_pngs:
+            parts.append(f"<h3>{e(p.stem)}</h3><img alt='{e(p.stem)}' src='{_file_png(p)}'>")
+    parts.append("</body></html>")
+    return "\n".join(parts)
+
+
+def write_pages(rows: list[dict[str, Any]], units: dict[str, str], drift_pngs: list[Path],
+                summary: dict[str, Any] | None, out: Path) -> list[Path]:
+    """``out/campaign-<name>.html`` for every campaign in ``rows``."""
+    by_campaign: dict[str, list[dict]] = defaultdict(list)
+    for r in rows:
+        by_campaign[str(r.get("campaign"))].append(r)
+    paths = []
+    for campaign, rs in sorted(by_campaign.items()):
+        path = out / f"campaign-{campaign}.html"
+        outputs.write_text(path, campaign_page(campaign, rs, units, drift_pngs, summary))
+        paths.append(path)
+    return paths

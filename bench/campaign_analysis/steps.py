@@ -1,0 +1,134 @@
+"""The analysis steps ``hilbench analyse`` runs on one run file, each returning one small flat dict.
+
+This is the one adapter between the campaign engine and the analysis packages: a step reads the file itself
+through the one record loader (it runs inside a worker process; hilbench.analysis.record.load_record, so a run
+reads as the CLI and the GUI read it), calls the analysis and flattens its result into the columns of
+:data:`COLUMNS`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+#: step -> protocols whose runs it can analyse (a run gets the steps its protocol supports)
+PROTOCOLS_OF_STEP = {"identify": ("identification", "chirp")}
+STEPS_DONE = tuple(PROTOCOLS_OF_STEP)
+
+#: result columns of the steps: name -> (Arrow type name, unit). Common columns: engine.BASE_COLUMNS.
+COLUMNS: dict[str, tuple[str, str]] = {
+    "inertia": ("float64", "kg*m^2"), "inertia_se": ("float64", "kg*m^2"),
+    "breakaway": ("float64", "N*m"), "breakaway_se": ("float64", "N*m"),
+    "viscous": ("float64", "N*m*s/rad"), "viscous_se": ("float64", "N*m*s/rad"),
+    "coulomb": ("float64", "N*m"), "coulomb_se": ("float64", "N*m"),
+    "offset": ("float64", "N*m"), "offset_se": ("float64", "N*m"),
+    "n_elements": ("int64", "1"),
+    "train_torque_nrmse": ("float64", "1"), "validation_torque_nrmse": ("float64", "1"),
+    "validation_position_nrmse": ("float64", "1"), "validation_position_nrmse_segmented": ("float64", "1"),
+    "verdict": ("string", ""),
+    "temperature_mean": ("float64", "degC"), "sliding_distance": ("float64", "rad"),
+    "samples": ("int64", "1"), "duration": ("float64", "s"),
+}
+
+
+@dataclass(frozen=True)
+class StepSettings:
+    """What the steps compute with; part of every row's key (a changed setting re-analyses).
+
+    thresholds: candidate Maxwell-slip thresholds of the identification (``hilbench identify --thresholds``).
+    method: ``lip`` or ``oe`` (``paper`` is minutes per run). coulomb/offset: extra terms.
+    validation_fraction: the tail of each run held out for validation (the model is fitted on the rest)."""
+
+    thresholds: int = 32
+    method: str = "lip"
+    coulomb: bool = False
+    offset: bool = False
+    validation_fraction: float = 0.3
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def sliding_distance(position: np.ndarray, fs: float) -> float:
+    """Total variation of the position (rad): the distance slid, from a zero-phase low-passed position so that
+    encoder flicker and noise (which add |dx| without any sliding) do not count. Cut-off fs/20."""
+    from scipy import signal
+
+    x = np.asarray(position, dtype=float)
+    if x.size < 30:
+        return float(np.sum(np.abs(np.diff(x))))
+    sos = signal.butter(2, fs / 20, fs=fs, output="sos")
+    return float(np.sum(np.abs(np.diff(signal.sosfiltfilt(sos, x)))))
+
+
+def _breakaway_se(model) -> float:
+    """Standard error of the break-away sum k_i*Delta_i from the elements' own errors (their covariance is not
+    kept in the model, so correlations are ignored: an approximation that says so in docs/campaign-analysis.md)."""
+    se = np.asarray(model.std_errors.get("ms_stiffness", []), dtype=float)
+    if se.size != model.ms_stiffness.size:
+        return math.nan
+    return float(np.sqrt(np.sum((se * np.asarray(model.ms_delta)) ** 2)))
+
+
+def identify_step(path: str, settings: StepSettings) -> dict[str, Any]:
+    """Identify the friction model of one run (fit on the head, validate on the held-out tail)."""
+    from hilbench.analysis.identification.identify import RunArrays, identify
+    from hilbench.analysis.identification.maxwell_fit import LipSettings
+    from hilbench.analysis.record import load_record
+    from hilbench.bench.verdict import judge
+
+    rec = load_record(path, channels=("temperature",))  # the one loader: an aborted or short run is a failed row
+    arrays, timing = rec.arrays(), rec.timing
+    n = arrays.t.size
+    cut = int(round(n * (1 - settings.validation_fraction)))
+    head = RunArrays(arrays.t[:cut], arrays.torque[:cut], arrays.position[:cut], arrays.axis, arrays.name)
+    tail = None
+    if settings.validation_fraction > 0:
+        tail = RunArrays(arrays.t[cut:] - arrays.t[cut], arrays.torque[cut:], arrays.position[cut:], arrays.axis,
+                         arrays.name + " (tail)")
+    lip = LipSettings(n_thresholds=settings.thresholds, coulomb=settings.coulomb, offset=settings.offset,
+                      timing=timing)
+    res = identify(head, method=settings.method, validate=tail, settings=lip)
+    m, f, se = res.model, res.figures, res.model.std_errors
+    row: dict[str, Any] = {
+        "inertia": m.inertia, "inertia_se": se.get("inertia", math.nan),
+        "breakaway": m.breakaway, "breakaway_se": se.get("breakaway", _breakaway_se(m)),
+        "viscous": m.viscous, "viscous_se": se.get("viscous", math.nan),
+        "coulomb": m.coulomb, "coulomb_se": se.get("coulomb", math.nan),
+        "offset": m.offset, "offset_se": se.get("offset", math.nan),
+        "n_elements": int(m.ms_stiffness.size),
+        "train_torque_nrmse": f.get("train_torque_nrmse"),
+        "validation_torque_nrmse": f.get("validation_torque_nrmse"),
+        "validation_position_nrmse": f.get("validation_position_nrmse"),
+        "validation_position_nrmse_segmented": f.get("validation_position_nrmse_segmented"),
+        "samples": int(n), "duration": float(arrays.t[-1] - arrays.t[0]),
+        "sliding_distance": sliding_distance(arrays.position, arrays.fs),
+    }
+    where = "validation" if tail is not None else "train"
+    verdict = judge(100 * f[f"{where}_torque_nrmse"], 100 * f[f"{where}_position_nrmse"],
+                    100 * f[f"{where}_position_nrmse_segmented"], where, residual_hint=False)
+    grade = verdict.split(":", 1)[1].split()[0] if verdict.startswith("verdict:") else "none"
+    row["verdict"] = grade + ("; the open-loop position drifts" if "position drifts" in verdict else "")
+    if "temperature" in rec.channels:
+        row["temperature_mean"] = float(np.mean(rec.channels["temperature"]))
+    return row
+
+
+STEPS: dict[str, Callable[[str, StepSettings], dict[str, Any]]] = {"identify": identify_step}
+
+
+def steps_for(protocol: str, wanted: tuple[str, ...]) -> list[str]:
+    """The wanted steps a run of ``protocol`` supports."""
+    return [s for s in wanted if protocol in PROTOCOLS_OF_STEP.get(s, ())]
+
+
+def run_meta(path: str) -> dict[str, Any]:
+    """The run file's own identity: run id, start time and operator."""
+    from hilbench.analysis.runfile import open_run
+
+    with open_run(path) as run:
+        return {"run_id": run.uid, "start_time": str(run.start_time), "operator": str(run.meta.get("operator", ""))}

@@ -1,0 +1,136 @@
+"""``hilbench analyse``: every run of a campaign folder into one Parquet table, resumable, fault-tolerant.
+
+Campaigns here are short simulated runs (bench.campaign_analysis.synthetic: the C plant through RunWriter)."""
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+
+from hilbench.bench.campaign_analysis.engine import analyse
+from hilbench.bench.campaign_analysis.steps import StepSettings, identify_step
+from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
+from hilbench.bench.cli import main
+from hilbench.firmware_sim.friction_models import DC_MOTOR_BREAKAWAY, DC_MOTOR_INERTIA
+
+quiet = {"progress": False, "say": lambda _line: None}
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("campaign") / "c"
+    write_campaign(folder, SyntheticCampaign(runs=8, repeats=2, duration=1.5, seed=11), fail_runs=(5,))
+    return folder
+
+
+def _rows(table: Path) -> list[dict]:
+    return pq.read_table(table).to_pylist()
+
+
+def test_serial_analysis_recovers_the_plant_and_records_a_failing_run(campaign, tmp_path):
+    s = analyse([campaign], tmp_path / "r", serial=True, **quiet)
+    rows = {r["key"]: r for r in _rows(s.table)}
+    assert s.analysed == 8 and s.failed == 1 and len(rows) == 8
+    bad = rows["id3-2"]  # run index 5 was written without its position channel
+    assert bad["status"] == "failed" and "position" in bad["error"] and bad["breakaway"] is None
+    good = [r for r in rows.values() if r["status"] == "ok"]
+    for r in good:
+        # the plant's J within 3 of its standard errors and break-away within 5 % (no drift configured), from
+        # 1.05 s of 1 kHz data
+        assert abs(r["inertia"] - DC_MOTOR_INERTIA) <= 3 * r["inertia_se"]
+        assert r["breakaway"] == pytest.approx(DC_MOTOR_BREAKAWAY, rel=0.05)
+        assert r["breakaway_se"] > 0 and r["validation_torque_nrmse"] < 0.2
+        assert r["verdict"] == ("good" if r["validation_torque_nrmse"] <= 0.1 else "fair")  # bench.verdict bands
+        assert r["start_time"].startswith("2026-01-05T") and r["operator"] == "sim" and r["ambient"] == 23.0
+        assert r["temperature_mean"] >= 23.0
+    assert {r["repeat"] for r in good} == {1, 2}
+    index = json.loads((campaign / "index.json").read_text())["runs"]
+    assert {r["run_id"] for r in rows.values()} == {e["uid"] for e in index}
+    units = pq.read_schema(s.table).field("breakaway").metadata[b"unit"]
+    assert units == b"N*m"
+
+
+def test_resume_skips_what_is_there_and_a_changed_setting_or_file_reanalyses(campaign, tmp_path):
+    copy = tmp_path / "c"
+    shutil.copytree(campaign, copy)
+    out = tmp_path / "r"
+    first = pq.read_table(analyse([copy], out, serial=True, **quiet).table)
+    again = analyse([copy], out, serial=True, **quiet)
+    assert (again.analysed, again.skipped) == (0, 8)
+    assert pq.read_table(again.table).equals(first)
+    shutil.copyfile(copy / "id1-1.h5", copy / "id4-2.h5")  # another file under the same name
+    one = analyse([copy], out, serial=True, **quiet)
+    assert (one.analysed, one.skipped) == (1, 7)
+    rows = {r["key"]: r for r in _rows(one.table)}
+    assert rows["id4-2"]["breakaway"] == rows["id1-1"]["breakaway"] and len(rows) == 8
+    changed = analyse([copy], out, settings=StepSettings(thresholds=16), serial=True, **quiet)
+    assert (changed.analysed, changed.skipped) == (8, 0)
+    assert len(_rows(changed.table)) == 8  # one row per run and step: the older settings' rows are replaced
+    assert {r["settings_hash"] for r in _rows(changed.table)} != set(first.column("settings_hash").to_pylist())
+
+
+def test_identify_step_matches_hilbench_identify(campaign, tmp_path):
+    # the adapter runs the same identification as the command (same file, no held-out tail, same thresholds)
+    path = campaign / "id1-1.h5"
+    row = identify_step(str(path), StepSettings(thresholds=32, validation_fraction=0.0))
+    assert main(["-q", "identify", str(path), "--thresholds", "32", "--json", str(tmp_path / "m.json")]) == 0
+    model = json.loads((tmp_path / "m.json").read_text())["parameters"]
+    assert row["inertia"] == pytest.approx(model["inertia"], rel=1e-12)
+    assert row["viscous"] == pytest.approx(model["viscous"], rel=1e-12)
+
+
+def _dies(path: str, settings: StepSettings) -> dict:
+    """A step whose worker dies (as on a segfault or an out-of-memory kill) on id2-1."""
+    if path.endswith("id2-1.h5"):
+        os._exit(3)
+    return identify_step(path, settings)
+
+
+def test_cluster_survives_dying_workers_and_matches_serial(campaign, tmp_path):
+    serial = {r["key"]: r for r in _rows(analyse([campaign], tmp_path / "serial", serial=True, **quiet).table)}
+    s = analyse([campaign], tmp_path / "cluster", workers=2, dashboard=False, functions={"identify": _dies}, **quiet)
+    rows = {r["key"]: r for r in _rows(s.table)}
+    assert len(rows) == 8 and s.analysed == 8 and s.failed == 2
+    # a worker that dies on every try: retried once on a fresh worker, then a failed row with the reason
+    assert rows["id2-1"]["status"] == "failed" and "worker died twice" in rows["id2-1"]["error"]
+    assert "on 2 different workers" in rows["id2-1"]["error"]
+    assert rows["id3-2"]["status"] == "failed" and "position" in rows["id3-2"]["error"]  # a step that raises
+    # every other row is the serial one, bit for bit, whichever worker computed it
+    for key in rows.keys() - {"id2-1"}:
+        assert rows[key] == serial[key]
+
+
+def test_a_killed_client_leaves_good_parts_and_a_rerun_analyses_only_the_missing(campaign, tmp_path):
+    out = tmp_path / "r"
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[3])}
+    proc = subprocess.Popen([sys.executable, "-m", "hilbench.bench.cli", "-q", "analyse", str(campaign), "-o",
+                             str(out), "--serial"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 60
+    parts = out / "parts"
+    while time.monotonic() < deadline and len(list(parts.glob("*.parquet")) if parts.is_dir() else []) < 3:
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    done = len(list(parts.glob("*.parquet")))
+    assert 3 <= done < 8, "the client was to be killed mid-campaign"
+    assert not (out / "results.parquet").exists()
+    s = analyse([campaign], out, serial=True, **quiet)
+    assert (s.skipped, s.analysed) == (done, 8 - done)
+    assert len(_rows(s.table)) == 8 and not parts.exists()
+
+
+def test_cli_bad_input_is_one_line_and_exit_2(campaign, tmp_path, capsys):
+    assert main(["analyse", str(tmp_path)]) == 2
+    assert "no index.json" in capsys.readouterr().err
+    assert main(["analyse", str(campaign), str(campaign)]) == 2
+    assert "-o" in capsys.readouterr().err
+    assert main(["analyse", str(campaign), "-o", str(campaign)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "campaign folder" in err

@@ -1,0 +1,64 @@
+"""The campaign page: one self-contained HTML file, loaded in headless Chromium (no console error, the runs table
+shown) and screenshotted."""
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from hilbench.bench.campaign_analysis.engine import analyse
+from hilbench.bench.campaign_analysis.page import repeat_summary
+from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
+from hilbench.bench.cli import main
+
+CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+
+
+@pytest.fixture(scope="module")
+def page(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("page")
+    write_campaign(root / "bench1", SyntheticCampaign(runs=6, repeats=3, duration=2.0, seed=5), fail_runs=(4,))
+    analyse([root / "bench1"], root / "results", serial=True, progress=False, say=lambda _l: None)
+    assert main(["-q", "drift", str(root / "results"), "--baseline", "4"]) == 0
+    return root / "results" / "drift" / "campaign-bench1.html"
+
+
+def test_page_is_self_contained_and_holds_every_run(page):
+    text = page.read_text()
+    assert not re.search(r"""(src|href)\s*=\s*['"](?!data:)""", text), "every image and link is inline"
+    assert "http://" not in text and "https://" not in text
+    assert len(re.findall(r"<tr id='r\d+' class='run", text)) == 6
+    assert text.count("<img alt='run ") == 6 and "no figure" not in text  # the failed run has its file too
+    assert "class='run failed'" in text and "missing channel" in text
+    for fig in ("drift-breakaway", "charts-breakaway", "drift-viscous", "charts-viscous"):
+        assert f"<img alt='{fig}' src='data:image/png;base64," in text
+
+
+def test_repeat_summary_is_mean_and_sample_std():
+    rows = [{"name": "a", "status": "ok", "breakaway": v} for v in (1.0, 2.0, 4.0)]
+    rows.append({"name": "a", "status": "failed", "breakaway": None})
+    (s,) = repeat_summary(rows)
+    assert s["n"] == 3 and s["breakaway"][0] == pytest.approx(7 / 3)
+    assert s["breakaway"][1] == pytest.approx(((1 - 7 / 3) ** 2 + (2 - 7 / 3) ** 2 + (4 - 7 / 3) ** 2) ** 0.5 / 2**0.5)
+
+
+def test_page_in_headless_chromium(page, tmp_path):
+    browser = shutil.which("chromium")
+    if browser is None:
+        pytest.skip("chromium is not installed (Debian package chromium; `make chromium` installs it as root)")
+    flags = [browser, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'profile'}", "--enable-logging=stderr",
+             "--v=0", "--virtual-time-budget=3000"]
+    dom = subprocess.run([*flags, "--dump-dom", page.as_uri()], capture_output=True, text=True, timeout=120)
+    assert dom.returncode == 0, dom.stderr[-2000:]
+    # the page's script ran (it counts the rows) and caught no error; the console logged none
+    assert "6 runs shown" in dom.stdout
+    assert re.search(r"<pre id=\"js-errors\"></pre>", dom.stdout)
+    console = [line for line in dom.stderr.splitlines() if "CONSOLE" in line or "Uncaught" in line]
+    assert console == []
+    shot = tmp_path / "page.png"
+    run = subprocess.run([*flags, "--window-size=1280,1400", f"--screenshot={shot}", page.as_uri()],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0 and shot.stat().st_size > 20_000
