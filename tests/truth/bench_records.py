@@ -60,12 +60,16 @@ def bench_run(protocol: str, args: tuple[str, ...]) -> Path:
 
 
 def prepared_pair(case: BenchCase, seed: int):
-    """(train, validation) prepared as ``hilbench residual`` prepares a run file."""
-    from hilbench.bench.commands.residual import _load
+    """(train, validation) prepared as ``hilbench residual`` prepares a run file (the one record loader, then
+    prepare_run with the record's torque timing)."""
+    from hilbench.analysis.record import load_record
+    from hilbench.analysis.residual import prepare_run
 
     seed_args = (lambda s: ("--seed", str(s))) if case.seeded else (lambda s: ())
     runs = []
     for args, s in ((case.train_args, seed), (case.valid_args, seed + 1000)):
         path = bench_run(case.protocol, tuple(args) + seed_args(s))
-        runs.append(_load(str(path), None, None, None)[0])
+        rec = load_record(path)
+        runs.append(prepare_run(rec.position, rec.torque, rec.sample_rate, axis=rec.axis, name=str(path),
+                                timing=rec.timing))
     return runs[0], runs[1]
