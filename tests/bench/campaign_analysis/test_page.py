@@ -32,7 +32,7 @@ def test_page_is_self_contained_and_holds_every_run(page):
     assert "http://" not in text and "https://" not in text
     assert len(re.findall(r"<tr id='r\d+' class='run", text)) == 6
     assert text.count("<img alt='run ") == 6 and "no figure" not in text  # the failed run has its file too
-    assert "class='run failed'" in text and "missing channel" in text
+    assert "class='run failed'" in text and "no position channel" in text  # the record loader's one line
     for fig in ("drift-breakaway", "charts-breakaway", "drift-viscous", "charts-viscous"):
         assert f"<img alt='{fig}' src='data:image/png;base64," in text
 
