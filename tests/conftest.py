@@ -13,7 +13,9 @@ REALTIME = {"bench", "drivers", "reliability", "benchmarks", "firmware"}
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    # a test in those folders that declares it starts no device (module pytestmark or a parameter's marks:
+    # `device_free`) runs in the parallel part; a test marked `realtime` itself is realtime wherever it is
     for item in items:
         parts = Path(item.path).resolve().relative_to(TESTS).parts
-        if parts[0] in REALTIME:
+        if parts[0] in REALTIME and not item.get_closest_marker("device_free"):
             item.add_marker(pytest.mark.realtime)

@@ -17,6 +17,8 @@ from hilbench.firmware_sim.plant import simulate
 from tests.analysis.identification.test_identification import random_enveloped
 from tests.bench.test_paper_skeleton_commands import _write_chirp
 
+pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
+
 FS, N = 2000.0, 16_000
 
 

@@ -19,6 +19,8 @@ from hilbench.bench.cli import main
 from hilbench.bench.errors import BenchError
 from tests.bench.test_identify_command import _write_run
 
+pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
+
 
 @pytest.fixture(scope="module")
 def run_file(tmp_path_factory):

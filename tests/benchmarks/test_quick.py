@@ -10,7 +10,13 @@ from benchmarks.__main__ import discover
 KEYS = {"name", "value", "unit", "baseline_name", "baseline_value", "ratio", "target", "ok"}
 
 
-@pytest.mark.parametrize("name", discover())
+#: benchmarks that start no device (pure computation, files, or a Dask cluster): the parallel part of make test
+DEVICE_FREE = {"bench_afrf", "bench_campaign", "bench_identification", "bench_long_run", "bench_plant",
+               "bench_runfile", "bench_skeleton"}
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.device_free) if n in DEVICE_FREE else n
+                                  for n in discover()])
 def test_benchmark_runs_quick_and_reports_ratios(name):
     import importlib
 
