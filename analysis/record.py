@@ -27,7 +27,6 @@ from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.runfile import (
     LINEAR_ALIASES,
     SAMPLE_KINDS,
-    RunFileError,
     host_sampled,
     open_run,
     record_kind,
@@ -193,6 +192,15 @@ def completeness(run) -> str | None:
     return None
 
 
+def _checked_completeness(run, path: Path, allow_incomplete: bool) -> str | None:
+    """:func:`completeness`, refused in one line unless ``allow_incomplete``."""
+    reason = completeness(run)
+    if reason is not None and not allow_incomplete:
+        raise IncompleteRecordError(f"{path}: refusing an incomplete record: {reason}; pass {ALLOW_OPTION} to "
+                                    "analyse it anyway (every report then says so)")
+    return reason
+
+
 def load_record(path: str | Path, *, torque_channel: str | None = None, timing: str = "auto",
                 need_torque: bool = True, need_position: bool = True, channels: Sequence[str] = (),
                 protocol_arrays: Sequence[str] = (), allow_incomplete: bool = False) -> Record:
@@ -204,15 +212,10 @@ def load_record(path: str | Path, *, torque_channel: str | None = None, timing: 
         raise AnalysisError(f"{path}: no such run file")
     try:
         run = open_run(path)
-    except RunFileError:
-        raise
     except OSError as exc:
         raise AnalysisError(f"{path}: cannot open: {' '.join(str(exc).split())}") from None
     with run:
-        reason = completeness(run)
-        if reason is not None and not allow_incomplete:
-            raise IncompleteRecordError(f"{path}: refusing an incomplete record: {reason}; pass {ALLOW_OPTION} to "
-                                        "analyse it anyway (every report then says so)")
+        reason = _checked_completeness(run, path, allow_incomplete)
         if need_position and "position" not in run.channels:
             raise AnalysisError(f"{path}: no position channel (has: {', '.join(run.channels)})")
         name = choose_torque_channel(run.channels, torque_channel, path, run.axis) if need_torque else None
@@ -284,10 +287,7 @@ def stream_record(path: str | Path, *, torque_channel: str | None = None, timing
         if host_sampled(run.device, run.channels):
             return load_record(path, torque_channel=torque_channel, timing=timing,
                                allow_incomplete=allow_incomplete), None
-        reason = completeness(run)
-        if reason is not None and not allow_incomplete:
-            raise IncompleteRecordError(f"{path}: refusing an incomplete record: {reason}; pass {ALLOW_OPTION} to "
-                                        "analyse it anyway (every report then says so)")
+        reason = _checked_completeness(run, path, allow_incomplete)
         if "position" not in run.channels:
             raise AnalysisError(f"{path}: no position channel (has: {', '.join(run.channels)})")
         name = choose_torque_channel(run.channels, torque_channel, path, run.axis)

@@ -16,6 +16,17 @@ if TYPE_CHECKING:
     from hilbench.analysis.record import Record
 
 
+def _settings_for(record: Record, settings: LipSettings | None) -> LipSettings:
+    """``settings`` with the record's torque timing (the loader resolved it), and J = 0 for a displacement-driven
+    record unless ``settings.fixed_inertia`` says otherwise."""
+    from hilbench.analysis.identification.maxwell_fit import LipSettings
+
+    settings = replace(settings or LipSettings(), timing=record.timing)
+    if record.kind == "displacement-driven" and settings.fixed_inertia is None:
+        settings = replace(settings, fixed_inertia=0.0)
+    return settings
+
+
 def analyse(record: Record, settings: LipSettings | None = None, *, method: str = "lip",
             validation: Record | None = None) -> Identification:
     """Identify the Maxwell-slip model (J, k_i, Delta_i, b, options of ``settings``) of ``record``; score it on
@@ -23,11 +34,8 @@ def analyse(record: Record, settings: LipSettings | None = None, *, method: str 
     displacement-driven record is fitted with J = 0 unless ``settings.fixed_inertia`` says otherwise."""
     from hilbench.analysis.errors import AnalysisError
     from hilbench.analysis.identification.identify import identify
-    from hilbench.analysis.identification.maxwell_fit import LipSettings
 
-    settings = replace(settings or LipSettings(), timing=record.timing)
-    if record.kind == "displacement-driven" and settings.fixed_inertia is None:
-        settings = replace(settings, fixed_inertia=0.0)
+    settings = _settings_for(record, settings)
     if validation is not None:
         if validation.axis != record.axis:
             raise AnalysisError(f"{validation.path}: a {validation.axis} axis; {record.path} is {record.axis}")
@@ -66,11 +74,8 @@ def analyse_stream(record: Record, source, settings: LipSettings | None = None, 
     whatever the record's length; no curves for the figures (docs/long-runs.md)."""
     from hilbench.analysis.errors import AnalysisError
     from hilbench.analysis.identification.identify import identify_chunks
-    from hilbench.analysis.identification.maxwell_fit import LipSettings
 
-    settings = replace(settings or LipSettings(), timing=record.timing)
-    if record.kind == "displacement-driven" and settings.fixed_inertia is None:
-        settings = replace(settings, fixed_inertia=0.0)
+    settings = _settings_for(record, settings)
     val_source = None
     if validation is not None:
         val, val_source = validation

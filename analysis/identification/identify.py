@@ -143,6 +143,16 @@ def _figures(
     }
 
 
+def _force_mode(record: str, s: LipSettings, method: str) -> bool:
+    """Whether the fit maps the measured displacement to the force (a displacement-driven record or J = 0); only
+    ``lip`` fits that way (the other methods refine a simulated position)."""
+    force_mode = record == "displacement-driven" or s.fixed_inertia == 0
+    if force_mode and method != "lip":
+        raise AnalysisError(f"method {method!r} refines a simulated position; a force-against-displacement "
+                            "fit (displacement-driven record or inertia 0) uses method 'lip'")
+    return force_mode
+
+
 def identify(
     run: RunArrays,
     *,
@@ -170,10 +180,7 @@ def identify(
         if validate.axis != run.axis:
             raise AnalysisError(f"validation run axis {validate.axis!r} differs from {run.axis!r}")
     s = settings or LipSettings()
-    force_mode = record == "displacement-driven" or s.fixed_inertia == 0
-    if force_mode and method != "lip":
-        raise AnalysisError(f"method {method!r} refines a simulated position; a force-against-displacement "
-                            "fit (displacement-driven record or inertia 0) uses method 'lip'")
+    force_mode = _force_mode(record, s, method)
     t0 = time.perf_counter()
     extra: dict = {}
     lip = fit_lip(run.position, run.torque, run.fs, run.axis, s)
@@ -242,10 +249,7 @@ def identify_chunks(
     if method not in ("lip", "oe"):
         raise AnalysisError(f"method must be lip or oe for a record read chunk by chunk, got {method!r}")
     s = settings or LipSettings()
-    force_mode = record == "displacement-driven" or s.fixed_inertia == 0
-    if force_mode and method != "lip":
-        raise AnalysisError(f"method {method!r} refines a simulated position; a force-against-displacement "
-                            "fit (displacement-driven record or inertia 0) uses method 'lip'")
+    force_mode = _force_mode(record, s, method)
     t0 = time.perf_counter()
     sc = scan(source)
     if sc.n < 200:
