@@ -16,8 +16,8 @@ It does, once and the same way for the CLI, the GUI, campaigns and scripts (docs
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -262,8 +262,6 @@ def load_record(path: str | Path, *, torque_channel: str | None = None, timing: 
             calibration=run.calibration, device=run.device, events=events, notes=notes)
 
 
-
-
 #: samples per chunk read from a file by :func:`stream_record` (two float64 channels: 2 MiB)
 STREAM_CHUNK = 1 << 17
 
@@ -366,3 +364,81 @@ def resample_host_clocked(host_time: np.ndarray, rate: float, channels: dict[str
         means = np.diff(np.interp(np.append(t, t[-1] + period), edges, integral)) * rate
         out[name] = means if kind == "hold_next" else np.concatenate([[v[0]], means[:-1]])
     return t, out
+
+
+# --- decimation read chunk by chunk (docs/long-runs.md, "A decimated copy") ---------------------------------------
+
+#: bytes per kept sample of a decimated record: t, position and torque as float64
+DECIMATED_BYTES_PER_SAMPLE = 24
+
+
+def decimation_factor(sample_rate: float, max_rate: float) -> int:
+    """The smallest whole factor q that brings ``sample_rate`` (Hz) to at most ``max_rate`` (Hz); 1 when it is
+    already there."""
+    if not (np.isfinite(max_rate) and max_rate > 0):
+        raise AnalysisError(f"decimated rate must be > 0 Hz, got {max_rate}")
+    return max(1, int(np.ceil(sample_rate / max_rate - 1e-9)))
+
+
+def block_average(position: np.ndarray, torque: np.ndarray, fs: float, q: int,
+                  timing: str) -> tuple[np.ndarray, np.ndarray, float]:
+    """Reduce a run by a whole factor q: the torque is averaged over blocks of q samples and the position is
+    sampled at the matching block edge, so a torque held sample by sample stays exactly a held torque at fs/q
+    (the block mean is its impulse over the block divided by the block's length). ``hold_next`` (torque held over
+    [t_k, t_k+1)): block [k, k+q) with the position at t_k; ``hold_previous`` (mean over [t_k-1, t_k)): block
+    (k-q, k] with the position at t_k; ``instant``: block centred on t_k (approximate). Returns (position, torque,
+    fs/q); shapes (n // q,): a last partial block is dropped."""
+    n = (position.size // q) * q
+    blocks = torque[:n].reshape(-1, q).mean(axis=1)
+    if timing == "hold_previous":
+        x = position[q - 1:n:q]
+    elif timing == "instant":
+        x = position[q // 2:n:q]
+    else:
+        x = position[:n:q]
+    return x, blocks, fs / q
+
+
+def decimated_record(path: str | Path, max_rate: float, *, torque_channel: str | None = None, timing: str = "auto",
+                     allow_incomplete: bool = False, chunk: int = STREAM_CHUNK,
+                     progress: Callable[[int], None] | None = None) -> Record:
+    """The record of :func:`load_record` reduced to at most ``max_rate`` Hz by :func:`block_average`, read chunk by
+    chunk: memory is the decimated copy (:data:`DECIMATED_BYTES_PER_SAMPLE` per kept sample) plus one chunk,
+    whatever the record's length. The result equals ``block_average`` of the whole arrays bit for bit (each block's
+    samples are summed in the same order; tests/analysis/test_record.py). A record already at or below
+    ``max_rate`` is returned as read (q = 1). ``progress(samples)`` is called after each chunk with the samples
+    read so far (for a progress bar). A host-clocked run is resampled whole first (:func:`stream_record`).
+    The record's ``notes`` say what was done; ``n_samples`` is the kept count."""
+    rec, source = stream_record(path, torque_channel=torque_channel, timing=timing,
+                                allow_incomplete=allow_incomplete, chunk=chunk)
+    q = decimation_factor(rec.sample_rate, max_rate)
+    n_in = rec.n_samples
+    if source is None:  # host-clocked: already whole in memory
+        x, tau, fs = block_average(rec.position, rec.torque, rec.sample_rate, q, rec.timing)
+        if progress is not None:
+            progress(n_in)
+    else:
+        xs: list[np.ndarray] = []
+        taus: list[np.ndarray] = []
+        carry_x, carry_tau = np.empty(0), np.empty(0)
+        done = 0
+        for x_c, tau_c in source():
+            done += x_c.size
+            x_c, tau_c = np.concatenate([carry_x, x_c]), np.concatenate([carry_tau, tau_c])
+            whole = (x_c.size // q) * q
+            if whole:
+                bx, bt, _ = block_average(x_c[:whole], tau_c[:whole], rec.sample_rate, q, rec.timing)
+                xs.append(bx)
+                taus.append(bt)
+            carry_x, carry_tau = x_c[whole:], tau_c[whole:]
+            if progress is not None:
+                progress(done)
+        x = np.concatenate(xs) if xs else np.empty(0)
+        tau = np.concatenate(taus) if taus else np.empty(0)
+        fs = rec.sample_rate / q
+    notes = list(rec.notes)
+    if q > 1:
+        notes.append(f"decimated by {q} ({rec.sample_rate:g} -> {fs:g} Hz): torque averaged over blocks of {q} "
+                     f"samples ({rec.timing}), position at the block edge; {n_in} -> {x.size} samples")
+    return replace(rec, sample_rate=fs, t=np.arange(x.size) / fs, position=x, torque=tau, notes=notes,
+                   n_samples=int(x.size))

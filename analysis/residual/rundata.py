@@ -25,6 +25,7 @@ from hilbench.analysis.identification.regressors import (
     triangle_average,
     zero_phase_lowpass,
 )
+from hilbench.analysis.record import block_average  # noqa: F401 (re-exported: the loop's reduction)
 
 FAST_VELOCITY_FACTOR = 8.0  # cutoff of ``velocity_fast`` relative to the regression cutoff (capped at 0.4 fs)
 REST_SPREAD = 0.1  # rows within this fraction of a filter period (1/cutoff) of a rest phase are "at rest"
@@ -154,24 +155,6 @@ def prepare_run(
     v_fast = np.gradient(zero_phase_lowpass(x, fs, fast, order), 1.0 / fs)
     return RunData(x, tau, float(fs), axis, name, data, tauf, v_fast, np.arange(x.size) / fs, timing,
                    rest_rows(x, data.rows, fs, cutoff))
-
-
-def block_average(position: np.ndarray, torque: np.ndarray, fs: float, q: int,
-                  timing: str) -> tuple[np.ndarray, np.ndarray, float]:
-    """Reduce a run by an integer factor q: the torque is averaged over blocks of q samples and the position
-    is sampled at the matching block edge, so a torque held sample by sample stays exactly a held torque at
-    fs/q. ``hold_next`` (torque held over [t_k, t_k+1)): block [k, k+q) with the position at t_k;
-    ``hold_previous`` (mean over [t_k-1, t_k)): block (k-q, k] with the position at t_k; ``instant``:
-    block centred on t_k (approximate). Returns (position, torque, fs/q); shapes (n // q,)."""
-    n = (position.size // q) * q
-    blocks = torque[:n].reshape(-1, q).mean(axis=1)
-    if timing == "hold_previous":
-        x = position[q - 1:n:q]
-    elif timing == "instant":
-        x = position[q // 2:n:q]
-    else:
-        x = position[:n:q]
-    return x, blocks, fs / q
 
 
 def rest_rows(position: np.ndarray, rows: np.ndarray, fs: float, cutoff: float) -> np.ndarray:

@@ -100,3 +100,34 @@ def test_truncated_and_foreign_files_fail_fast_with_one_line(tmp_path):
         load_record(foreign)
     with pytest.raises(AnalysisError, match="missing.h5"):
         load_record(tmp_path / "missing.h5")
+
+
+@pytest.mark.parametrize("timing", ["hold_previous", "hold_next", "instant"])
+@pytest.mark.parametrize("chunk", [1, 7, 1000, 1 << 17])
+def test_decimated_record_read_chunk_by_chunk_equals_block_average_of_the_whole_arrays(tmp_path, timing, chunk):
+    from hilbench.analysis.record import block_average, decimated_record
+
+    path = tmp_path / "r.h5"
+    _write(path, n=5003)  # 5003 = 1000 blocks of 5 and 3 samples dropped
+    whole = load_record(path, timing=timing)
+    x, tau, fs = block_average(whole.position, whole.torque, whole.sample_rate, 5, timing)
+    seen = []
+    dec = decimated_record(path, 200.0, timing=timing, chunk=chunk, progress=seen.append)
+    assert (dec.sample_rate, dec.n_samples, dec.timing) == (200.0, 1000, timing)
+    np.testing.assert_array_equal(dec.position, x)  # bit for bit: the same samples summed in the same order
+    np.testing.assert_array_equal(dec.torque, tau)
+    np.testing.assert_allclose(dec.t, np.arange(1000) / 200.0, rtol=0, atol=1e-15)
+    assert seen[-1] == 5003 and "decimated by 5" in dec.notes[-1]
+
+
+def test_block_average_of_a_held_torque_keeps_its_impulse():
+    # Closed form: a torque held over each sample has impulse sum(tau) * T; the block means held over q*T keep it.
+    from hilbench.analysis.record import block_average, decimation_factor
+
+    rng = np.random.default_rng(1)
+    tau = rng.normal(size=3000)
+    x, means, fs = block_average(np.arange(3000.0), tau, 10_000.0, decimation_factor(10_000.0, 2_000.0), "hold_next")
+    assert fs == 2000.0 and means.size == 600
+    assert means.sum() / fs == pytest.approx(tau.sum() / 10_000.0, rel=1e-12)
+    np.testing.assert_array_equal(x, np.arange(0.0, 3000.0, 5.0))  # position at the block's first edge
+    assert decimation_factor(10_000.0, 10_000.0) == 1 and decimation_factor(20_000.0, 3_000.0) == 7
