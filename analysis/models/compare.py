@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -60,8 +61,10 @@ class Comparison:
 
 def compare(train: RunData, validation: RunData, *, timing: str, train_position: np.ndarray,
             train_torque: np.ndarray, families: tuple[str, ...] = FAMILIES, segment: float = 1.0,
-            max_nfev: int = 40, published: dict[str, PlantParams] | None = None) -> Comparison:
-    """Fit every family in ``families`` on ``train``; score it (and each ``published`` model) on both runs."""
+            max_nfev: int = 40, published: dict[str, PlantParams] | None = None,
+            progress: Callable[[str], None] | None = None) -> Comparison:
+    """Fit every family in ``families`` on ``train``; score it (and each ``published`` model) on both runs;
+    ``progress(name)`` after each row."""
     rows: list[Row] = []
     t0 = time.perf_counter()
     ms = maxwell_slip_start(train, timing, train_position, train_torque)
@@ -76,6 +79,8 @@ def compare(train: RunData, validation: RunData, *, timing: str, train_position:
             rows.append(_row(family, fit.n_parameters, fit.fit_time_s, fit.plant, train, validation, segment, fit))
         except (AnalysisError, PlantParameterError, FloatingPointError, np.linalg.LinAlgError) as exc:
             rows.append(failed_row(family, f"{type(exc).__name__}: {exc}", time.perf_counter() - t1))
+        if progress is not None:
+            progress(family)
     for name, plant in (published or {}).items():
         rows.append(_row(name, 4, math.nan, plant, train, validation, segment, None))
     return Comparison(train, validation, rows, segment)
@@ -160,3 +165,56 @@ def document(result: Comparison, data: dict) -> dict:
 
 def write_json(path: str | Path, doc: dict) -> None:
     Path(path).write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
+
+
+# --- the front door: records in, a Comparison out (docs/compare.md, docs/long-runs.md) ------------------------------
+
+#: peak bytes per sample of the comparison (training plus validation, at the rate compared) and its fixed part, from
+#: the peaks measured on 10 and 20 kHz runs (docs/long-runs.md), with margin
+COMPARE_BYTES_PER_SAMPLE = 400
+COMPARE_BYTES_FIXED = 160 << 20
+#: the lowest rate a record over the memory budget is reduced to (Hz): the friction's band reaches the presliding
+#: mode (about 200 Hz on the default bench), and the regression's low-pass (fs/20) must stay above it
+DECIMATED_RATE = 2000.0
+
+
+@dataclass(frozen=True)
+class CompareSettings:
+    """``families`` to fit; ``segment`` (s) between restarts of the segmented simulation; ``max_nfev`` output-error
+    evaluations per family; ``published`` models scored as extra rows (name -> plant)."""
+
+    families: tuple[str, ...] = FAMILIES
+    segment: float = 1.0
+    max_nfev: int = 40
+    published: dict[str, PlantParams] = field(default_factory=dict)
+
+
+def cost(samples: int) -> int:
+    """Estimated peak bytes of :func:`analyse` on ``samples`` (training plus validation)."""
+    return COMPARE_BYTES_FIXED + COMPARE_BYTES_PER_SAMPLE * int(samples)
+
+
+def run_data(record) -> RunData:
+    """A :class:`hilbench.analysis.record.Record` as the families read it."""
+    return RunData.from_arrays(record.name, record.axis, record.sample_rate, record.position, record.torque,
+                               record.timing)
+
+
+def analyse(record, validation, settings: CompareSettings | None = None, *,
+            progress: Callable[[str], None] | None = None) -> Comparison:
+    """Every family of ``settings`` fitted on ``record`` and scored on ``validation`` (records of
+    :mod:`hilbench.analysis.record`, same axis); ``progress(family)`` is called as each family is done."""
+    s = settings or CompareSettings()
+    if validation.axis != record.axis:
+        raise AnalysisError(f"validation run axis {validation.axis!r} differs from the training run's {record.axis!r}")
+    train, val = run_data(record), run_data(validation)
+    return compare(train, val, timing=record.timing, train_position=train.x, train_torque=record.torque,
+                   families=s.families, segment=s.segment, max_nfev=s.max_nfev, published=s.published,
+                   progress=progress)
+
+
+def report(result: Comparison, out_dir: str | Path) -> list[Path]:
+    """The comparison's figures (compare_hysteresis.png, compare_time.png) in ``out_dir``."""
+    from hilbench.analysis.models.compare_plots import write_plots
+
+    return write_plots(result, out_dir)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 
 #: Published models a comparison can add as a row: J (kg), Fv (N*s/m), Fc (N), offset (N). EMPS: Janot,
@@ -12,7 +13,7 @@ PUBLISHED = {"emps": ("EMPS published (IDIM-LS)", 95.1089, 203.5034, 20.3935, -3
 
 def register(subparsers) -> None:
     from hilbench.analysis.models.families import FAMILIES
-    from hilbench.bench.analysis_input import add_record_options
+    from hilbench.bench.analysis_input import add_memory_option, add_record_options
 
     parser = subparsers.add_parser(
         "compare",
@@ -39,28 +40,49 @@ def register(subparsers) -> None:
     parser.add_argument("--torque-timing", choices=("auto", "hold_previous", "hold_next", "instant"),
                         default="auto", help="what torque sample k means (as in hilbench identify)")
     add_record_options(parser)
+    add_memory_option(parser)
     parser.set_defaults(func=run)
 
 
-def _load(path: str, args):
-    """The run through the one loader: (torque, RunData, timing, record)."""
-    from hilbench.analysis.models.families import RunData
+def _records(args, budget: int) -> tuple:
+    """(train, validation) records: whole when the comparison fits ``budget`` (bytes) at the recorded rate, else
+    reduced to the lowest whole factor that keeps at least 2 kHz while reading chunk by chunk (docs/long-runs.md);
+    one line, before any sample is read, when even that does not fit."""
+    from hilbench.analysis.models.compare import DECIMATED_RATE, cost
+    from hilbench.analysis.record import decimated_record, stream_record
     from hilbench.bench import outputs
-    from hilbench.bench.analysis_input import load
+    from hilbench.bench.analysis_input import load, mib, read_decimated
+    from hilbench.bench.errors import BenchError
 
-    rec = load(path, args)
-    outputs.say(f"{path}: torque timing of {rec.torque_channel}: {rec.timing} ({rec.timing_origin})", level=2)
-    run = RunData.from_arrays(rec.name, rec.axis, rec.sample_rate, rec.position, rec.torque, rec.timing)
-    return rec.torque, run, rec.timing, rec
+    opts = {"torque_channel": args.torque_channel, "timing": args.torque_timing or "auto",
+            "allow_incomplete": args.allow_incomplete}
+    heads = [stream_record(p, **opts)[0] for p in (args.run, args.validate)]
+    samples = sum(h.n_samples for h in heads)
+    if cost(samples) <= budget:
+        recs = tuple(load(p, args) for p in (args.run, args.validate))
+    else:
+        # the largest factor that keeps the rate >= DECIMATED_RATE, so the decimated copy is as small as allowed
+        qs = [max(1, int(h.sample_rate // DECIMATED_RATE)) for h in heads]
+        kept = sum(h.n_samples // q for h, q in zip(heads, qs, strict=True))
+        if cost(kept) > budget:
+            raise BenchError(f"compare on {samples} samples needs about {mib(cost(samples))}, and about "
+                             f"{mib(cost(kept))} reduced to {DECIMATED_RATE:g} Hz, over --memory {mib(budget)}: "
+                             "raise --memory or compare shorter runs")
+        recs = tuple(read_decimated(p, args, partial(decimated_record, max_rate=h.sample_rate / q), h.n_samples)
+                     for p, h, q in zip((args.run, args.validate), heads, qs, strict=True))
+        outputs.say(f"over --memory {mib(budget)} read whole ({mib(cost(samples))}): compared at "
+                    f"{recs[0].sample_rate:g} Hz, read chunk by chunk ({recs[0].notes[-1]})")
+    for p, rec in zip((args.run, args.validate), recs, strict=True):
+        outputs.say(f"{p}: torque timing of {rec.torque_channel}: {rec.timing} ({rec.timing_origin})", level=2)
+    return recs
 
 
 def run(args) -> int:
-    from hilbench.analysis.errors import AnalysisError
-    from hilbench.analysis.models.compare import compare, document, markdown_table
-    from hilbench.analysis.models.compare_plots import write_plots
+    from hilbench.analysis.models.compare import CompareSettings, analyse, document, markdown_table, report
     from hilbench.analysis.models.families import FAMILIES, published_plant
     from hilbench.analysis.models.model_file import family_document
     from hilbench.bench import outputs
+    from hilbench.bench.analysis_input import memory_budget, progress_bar
     from hilbench.bench.errors import BenchError
 
     families = tuple(f.strip() for f in args.families.split(",") if f.strip())
@@ -75,25 +97,30 @@ def run(args) -> int:
     out = Path(args.out)
     outputs.refuse_inputs({"--output": out, **{f"--output {out / name}": out / name for name in OUTPUTS}},
                           [args.run, args.validate])
-    train_torque, train, timing, train_rec = _load(args.run, args)
-    _, val, _, val_rec = _load(args.validate, args)
-    if val.axis != train.axis:
-        raise AnalysisError(f"validation run axis {val.axis!r} differs from the training run's {train.axis!r}")
+    budget = memory_budget(args.memory)
+    train_rec, val_rec = _records(args, budget)
     published = {}
     for key in args.published:
         name, *values = PUBLISHED[key]
-        if train.axis != "linear":
-            raise BenchError(f"--published {key} is a linear-axis model; {args.run} is {train.axis}")
+        if train_rec.axis != "linear":
+            raise BenchError(f"--published {key} is a linear-axis model; {args.run} is {train_rec.axis}")
         published[name] = published_plant(*values)
-    result = compare(train, val, timing=timing, train_position=train.x, train_torque=train_torque,
-                     families=families, segment=args.segment,
-                     max_nfev=args.max_evaluations, published=published)
+    settings = CompareSettings(families=families, segment=args.segment, max_nfev=args.max_evaluations,
+                               published=published)
+    bar = progress_bar(len(families), "compare", unit="family")
+    try:
+        result = analyse(train_rec, val_rec, settings, progress=lambda name: (bar.set_postfix_str(name),
+                                                                               bar.update(1)))
+    finally:
+        bar.close()
+    train, val, timing = result.train, result.validation, train_rec.timing
     out.mkdir(parents=True, exist_ok=True)
     table = markdown_table(result)
     outputs.write_text(out / "compare.md", table)
     data = {"train": {"file": str(Path(args.run).resolve()), "samples": int(train.x.size),
                       "sample_rate_hz": train.fs, "torque_channel": train_rec.torque_channel, "torque_timing": timing,
-                      "incomplete": train_rec.incomplete},
+                      "incomplete": train_rec.incomplete,
+                      "read": next((n for n in train_rec.notes if n.startswith("decimated")), "whole")},
             "validation": {"file": str(Path(args.validate).resolve()), "samples": int(val.x.size),
                            "sample_rate_hz": val.fs, "incomplete": val_rec.incomplete}}
     outputs.write_json(out / "compare.json", document(result, data), indent=2, allow_nan=False)
@@ -108,7 +135,7 @@ def run(args) -> int:
             outputs.write_json(out / "models" / f"{row.name}.json", doc, indent=2, allow_nan=False)
             written.append(f"{row.name}.json")
     print(table, end="")
-    for p in write_plots(result, out):
+    for p in report(result, out):
         print(f"plot: {p}")
     print(f"-> {out / 'compare.md'}, {out / 'compare.json'}, {out / 'models'}/ ({', '.join(written) or 'no model'})")
     return 0

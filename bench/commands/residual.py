@@ -9,7 +9,7 @@ import math
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from hilbench.bench.analysis_input import add_record_options
+    from hilbench.bench.analysis_input import add_memory_option, add_record_options
 
     parser = subparsers.add_parser(
         "residual",
@@ -49,59 +49,37 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--candidates", default=None, metavar="TERMS",
                         help="comma-separated candidate terms to try (default: all registered)")
     add_record_options(parser)
+    add_memory_option(parser)
     parser.set_defaults(func=run)
 
 
-def _load(path: str, args: argparse.Namespace):
-    """The run through the one loader, prepared for the loop: (RunData, channel, timing, record kind, source)."""
-    from hilbench.analysis.residual import prepare_run
-    from hilbench.bench import outputs
-    from hilbench.bench.analysis_input import check_cutoff, load
+def _headers(args: argparse.Namespace) -> list:
+    """Each run's record without its arrays (the loader's checks, the sample count), read before any sample."""
+    from hilbench.analysis.record import stream_record
 
-    rec = load(path, args, timing=args.timing or "auto")
-    check_cutoff(args.cutoff, rec.sample_rate)
-    outputs.say(f"{path}: torque timing of {rec.torque_channel}: {rec.timing} ({rec.timing_origin})", args.json,
-                level=2)
-    run = prepare_run(rec.position, rec.torque, rec.sample_rate, axis=rec.axis, name=path, cutoff=args.cutoff,
-                      timing=rec.timing)
-    return run, rec.torque_channel, rec.timing, rec.kind, rec.source, rec.incomplete
+    return [stream_record(p, torque_channel=args.torque_channel, timing=args.timing or "auto",
+                          allow_incomplete=args.allow_incomplete)[0] for p in [args.run, *args.validate]]
 
 
-def _inertia(model: dict, fixed: float | None) -> float:
-    term = model.get("inertia")
-    if term is not None:
-        return float(term["parameters"]["inertia"])
-    return float(fixed or 0.0)
+def _check_budget(headers: list, budget: int) -> None:
+    """One line, before any sample is read, when the loop's estimated peak is over ``--memory``."""
+    from hilbench.analysis.residual.record_analysis import analysed_samples, cost
+    from hilbench.bench.analysis_input import mib
+    from hilbench.bench.errors import BenchError
 
-
-def write_hysteresis(result, directory, title: str, fixed_inertia: float | None):
-    """Friction against displacement on the first training run: measured (torque - J*acceleration, J of the
-    final model) against the starting and the final model (measured minus each one's residual)."""
-    from pathlib import Path
-
-    from hilbench.analysis.identification.plots import hysteresis_figure
-    from hilbench.analysis.models.friction_model import AXES
-
-    before, after = result.signals_before, result.signals_after
-    i0, i1 = after.run_rows[0]
-    j_after = _inertia(result.model_after, fixed_inertia)
-    j_before = _inertia(result.model_before, fixed_inertia)
-    measured = (after.command - j_after * after.acceleration)[i0:i1]
-    model_after = measured - after.residual[i0:i1]
-    model_before = (before.command - j_before * before.acceleration - before.residual)[i0:i1]
-    added = ", ".join(result.names_added) or "nothing added"
-    return hysteresis_figure(after.position[i0:i1], measured,
-                             [(f"final model (+ {added})", model_after),
-                              (f"starting model ({', '.join(result.start)})", model_before)],
-                             AXES[after.axis], title, Path(directory) / "hysteresis.png", t=after.time[i0:i1])
+    samples = sum(analysed_samples(h.n_samples, h.sample_rate) for h in headers)
+    if cost(samples) > budget:
+        raise BenchError(f"the residual loop on {samples} samples (at most 2 kHz) needs about {mib(cost(samples))}, "
+                         f"over --memory {mib(budget)}: raise --memory or analyse a shorter run")
 
 
 def run(args: argparse.Namespace) -> int:
     from hilbench.analysis.models.families import FAMILIES
-    from hilbench.analysis.residual import LoopOptions, family_start, residual_loop
-    from hilbench.analysis.residual.published import published_metric
-    from hilbench.analysis.residual.report import report_dict, write_report
+    from hilbench.analysis.record import decimation_factor
+    from hilbench.analysis.residual import record_analysis
+    from hilbench.analysis.residual.report import report_dict
     from hilbench.bench import outputs
+    from hilbench.bench.analysis_input import check_cutoff, memory_budget, read_decimated
     from hilbench.bench.errors import BenchError
     from hilbench.bench.verdict import judge
 
@@ -110,41 +88,37 @@ def run(args: argparse.Namespace) -> int:
     cands = None if args.candidates is None else tuple(t.strip() for t in args.candidates.split(",") if t.strip())
     if args.inertia is not None and not (math.isfinite(args.inertia) and args.inertia >= 0):
         raise BenchError(f"--inertia must be finite and >= 0, got {args.inertia}")
-    train, channel, timing, record, source, incomplete = _load(args.run, args)
-    if args.inertia == 0 and record == "torque-driven":  # J = 0 left the loop nothing to fit (a numpy error)
-        raise BenchError(f"--inertia 0 is for a displacement-driven record; {args.run} is torque-driven: give "
-                         "J > 0 or leave --inertia out to estimate it")
-    loaded = [_load(p, args) for p in args.validate]
-    if any(v[3] != record for v in loaded):
-        raise BenchError(f"{args.run} is {record}; every --validate run must be too")
-    validation = [v[0] for v in loaded]
-    opts = LoopOptions(fixed_inertia=args.inertia, candidates=cands, record=record)
-    if len(start) == 1 and start[0] not in FAMILIES and start[0] != "inertia":
-        raise BenchError(f"--start {start[0]!r} is neither a friction family ({', '.join(FAMILIES)}) nor a "
-                         "comma-separated list of terms with inertia")
+    budget = memory_budget(args.memory)
+    headers = _headers(args)
+    _check_budget(headers, budget)
+    for h in headers:  # the loop's cutoff applies at the rate it analyses (at most 2 kHz)
+        check_cutoff(args.cutoff, h.sample_rate / decimation_factor(h.sample_rate, record_analysis.MAX_RATE))
+    recs = [read_decimated(p, args, record_analysis.read, h.n_samples, timing=args.timing)
+            for p, h in zip([args.run, *args.validate], headers, strict=True)]
+    for p, rec in zip([args.run, *args.validate], recs, strict=True):
+        outputs.say(f"{p}: torque timing of {rec.torque_channel}: {rec.timing} ({rec.timing_origin})", args.json,
+                    level=2)
     if len(start) == 1 and start[0] in FAMILIES:
-        if record == "displacement-driven" or args.inertia is not None:
-            raise BenchError("--start FAMILY identifies J with the family; it takes neither --inertia nor a "
-                             "displacement-driven record (start from terms instead)")
         outputs.say(f"identifying the {start[0]} family on {args.run} (start of the residual loop)", args.json)
-        start = tuple(family_start(start[0], [train]))
-    result = residual_loop(train, validation or None, start=start, options=opts)
-    result.published_metric = published_metric(source, result.fit_before, result.fit_after, [train], validation)
+    settings = record_analysis.ResidualSettings(start=start, cutoff=args.cutoff, fixed_inertia=args.inertia,
+                                                candidates=cands)
+    res = record_analysis.analyse(recs[0], settings, validation=recs[1:])
+    result, train, rec = res.loop, res.train, recs[0]
+    record = rec.kind
     inputs = {"run": args.run, "validate": list(args.validate), "start": list(result.start),
-              "start_option": args.start, "torque_channel": channel,
-              "timing": timing, "cutoff_hz": train.data.cutoff, "decimation": train.data.decimation,
+              "start_option": args.start, "torque_channel": rec.torque_channel,
+              "timing": rec.timing, "cutoff_hz": train.data.cutoff, "decimation": train.data.decimation,
+              "sample_rate_hz": rec.sample_rate,
               "fixed_inertia": args.inertia if record == "torque-driven" or args.inertia is not None else 0.0,
               "record": record,
-              "incomplete": {p: v for p, v in zip([args.run, *args.validate], [incomplete, *(v[5] for v in loaded)],
-                                                  strict=True) if v is not None}}
+              "incomplete": {p: r.incomplete for p, r in zip([args.run, *args.validate], recs, strict=True)
+                             if r.incomplete is not None}}
     outputs.write_json(args.json, report_dict(result, inputs), indent=2, allow_nan=False)
     say = lambda text: outputs.say(text, args.json)  # noqa: E731
     if args.report:
-        write_report(result, args.report, title=f"Residual loop on {args.run}")
-        path = write_hysteresis(result, args.report, f"Residual loop on {args.run}: friction against displacement",
-                                inputs["fixed_inertia"])
-        extra = "force.png, " if record == "displacement-driven" else ""
-        say(f"report: {args.report} (summary.md, diagnostics_before.png, diagnostics_after.png, {extra}{path.name})")
+        paths = record_analysis.report(res, args.report, title=f"Residual loop on {args.run}")
+        say(f"report: {args.report} ({', '.join(p.name for p in paths)})")
+    channel, timing = rec.torque_channel, rec.timing
     before, after = result.error_before["validation"], result.error_after["validation"]
     pct = lambda v: None if v is None else 100.0 * v  # noqa: E731
     if record == "displacement-driven":

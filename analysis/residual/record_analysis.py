@@ -1,0 +1,158 @@
+"""The residual loop on records: :func:`read` (a run file, decimated chunk by chunk), :func:`analyse` (records in, a
+:class:`ResidualAnalysis` out) and :func:`report` (the figures). ``hilbench residual``, the GUI and campaign steps
+call these, so one run gives one answer (docs/long-runs.md, docs/residual-report.md).
+
+The loop runs at most at :data:`~hilbench.analysis.residual.rundata.MAX_RATE` (2 kHz): ``prepare_run`` reduces a
+faster record by :func:`hilbench.analysis.record.block_average`. :func:`read` does that reduction while reading the
+file chunk by chunk, so the full-rate record is never held; the result is the same bit for bit as loading the whole
+record (tests/analysis/residual/test_record_analysis.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from hilbench.analysis.errors import AnalysisError
+from hilbench.analysis.residual.rundata import MAX_RATE
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Sequence
+
+    from hilbench.analysis.record import Record
+    from hilbench.analysis.residual.rundata import RunData
+    from hilbench.analysis.residual.selection import LoopResult
+
+#: peak bytes of the loop per sample it analyses (after the reduction to 2 kHz; training plus validation) and its
+#: fixed part, from the peaks measured on the default identification runs (docs/long-runs.md), with margin
+LOOP_BYTES_PER_SAMPLE = 2400
+LOOP_BYTES_FIXED = 200 << 20
+
+
+@dataclass(frozen=True)
+class ResidualSettings:
+    """What :func:`analyse` does: ``start`` (terms, or one friction family to identify first), ``cutoff`` (Hz,
+    default fs/20 of the analysed rate), ``fixed_inertia`` (kg*m^2 or kg; None: estimated), ``candidates`` (None:
+    every registered one)."""
+
+    start: tuple[str, ...] = ("inertia", "maxwell_slip")
+    cutoff: float | None = None
+    fixed_inertia: float | None = None
+    candidates: tuple[str, ...] | None = None
+
+
+@dataclass
+class ResidualAnalysis:
+    """The loop's result with the runs it read: ``loop`` (:class:`LoopResult`), ``train`` and ``validation``
+    (:class:`RunData` as the loop saw them) and the records they came from."""
+
+    loop: LoopResult
+    train: RunData
+    validation: list[RunData]
+    record: Record
+    validation_records: list[Record] = field(default_factory=list)
+    fixed_inertia: float | None = None  # the settings' J, 0 for a displacement-driven record
+
+
+def analysed_samples(n_samples: int, sample_rate: float) -> int:
+    """Samples the loop analyses of a record of ``n_samples`` at ``sample_rate`` Hz (after the reduction)."""
+    from hilbench.analysis.record import decimation_factor
+
+    return int(n_samples) // decimation_factor(sample_rate, MAX_RATE)
+
+
+def cost(samples: int) -> int:
+    """Estimated peak bytes of :func:`analyse` over ``samples`` analysed samples (:func:`analysed_samples`)."""
+    return LOOP_BYTES_FIXED + LOOP_BYTES_PER_SAMPLE * int(samples)
+
+
+def read(path: str | Path, *, torque_channel: str | None = None, timing: str = "auto", allow_incomplete: bool = False,
+         chunk: int | None = None, progress: Callable[[int], None] | None = None) -> Record:
+    """The run file as the loop reads it: :func:`hilbench.analysis.record.decimated_record` at :data:`MAX_RATE`."""
+    from hilbench.analysis.record import STREAM_CHUNK, decimated_record
+
+    return decimated_record(path, MAX_RATE, torque_channel=torque_channel, timing=timing,
+                            allow_incomplete=allow_incomplete, chunk=chunk or STREAM_CHUNK, progress=progress)
+
+
+def _prepared(record: Record, cutoff: float | None) -> RunData:
+    from hilbench.analysis.residual.rundata import prepare_run
+
+    return prepare_run(record.position, record.torque, record.sample_rate, axis=record.axis, name=str(record.path),
+                       cutoff=cutoff, timing=record.timing)
+
+
+def analyse(record: Record, settings: ResidualSettings | None = None, *,
+            validation: Sequence[Record] = ()) -> ResidualAnalysis:
+    """The residual loop of ``record`` from ``settings.start``, its candidates judged on ``validation`` (never
+    fitted; none: blocked cross-validation). Records at any rate (a faster one is reduced to 2 kHz, as
+    :func:`read` does). Raises :class:`AnalysisError` in one line for runs that do not go together."""
+    from hilbench.analysis.models.families import FAMILIES
+    from hilbench.analysis.residual.family_start import family_start
+    from hilbench.analysis.residual.published import published_metric
+    from hilbench.analysis.residual.selection import LoopOptions, residual_loop
+
+    s = settings or ResidualSettings()
+    for v in validation:
+        if v.kind != record.kind:
+            raise AnalysisError(f"{record.path} is {record.kind}; every validation run must be too ({v.path} is "
+                                f"{v.kind})")
+    start: tuple | list = tuple(s.start)
+    if len(start) == 1 and start[0] not in FAMILIES and start[0] != "inertia":
+        raise AnalysisError(f"--start {start[0]!r} is neither a friction family ({', '.join(FAMILIES)}) nor a "
+                            "comma-separated list of terms with inertia")
+    if s.fixed_inertia == 0 and record.kind == "torque-driven":  # J = 0 leaves the loop nothing to fit
+        raise AnalysisError(f"--inertia 0 is for a displacement-driven record; {record.path} is torque-driven: "
+                            "give J > 0 or leave --inertia out to estimate it")
+    train = _prepared(record, s.cutoff)
+    val = [_prepared(v, s.cutoff) for v in validation]
+    if len(start) == 1:
+        if record.kind == "displacement-driven" or s.fixed_inertia is not None:
+            raise AnalysisError("--start FAMILY identifies J with the family; it takes neither --inertia nor a "
+                                "displacement-driven record (start from terms instead)")
+        start = tuple(family_start(start[0], [train]))
+    opts = LoopOptions(fixed_inertia=s.fixed_inertia, candidates=s.candidates, record=record.kind)
+    loop = residual_loop(train, val or None, start=start, options=opts)
+    loop.published_metric = published_metric(record.source, loop.fit_before, loop.fit_after, [train], val)
+    fixed = 0.0 if record.kind == "displacement-driven" and s.fixed_inertia is None else s.fixed_inertia
+    return ResidualAnalysis(loop, train, val, record, list(validation), fixed)
+
+
+def report(result: ResidualAnalysis, out_dir: str | Path, title: str | None = None) -> list[Path]:
+    """The loop's figures and summary in ``out_dir``: summary.md, diagnostics_before.png, diagnostics_after.png
+    (force.png for a displacement-driven record) and hysteresis.png. Returns the paths written."""
+    from hilbench.analysis.residual.report import write_report
+
+    title = title or f"Residual loop on {result.record.path}"
+    paths = list(write_report(result.loop, out_dir, title=title))
+    paths.append(_hysteresis(result, out_dir, f"{title}: friction against displacement"))
+    return paths
+
+
+def _inertia(model: dict, fixed: float | None) -> float:
+    term = model.get("inertia")
+    if term is not None:
+        return float(term["parameters"]["inertia"])
+    return float(fixed or 0.0)
+
+
+def _hysteresis(result: ResidualAnalysis, directory: str | Path, title: str) -> Path:
+    """Friction against displacement on the first training run: measured (torque - J*acceleration, J of the final
+    model) against the starting and the final model (measured minus each one's residual)."""
+    from hilbench.analysis.identification.plots import hysteresis_figure
+    from hilbench.analysis.models.friction_model import AXES
+
+    loop = result.loop
+    fixed = result.fixed_inertia
+    before, after = loop.signals_before, loop.signals_after
+    i0, i1 = after.run_rows[0]
+    j_after, j_before = _inertia(loop.model_after, fixed), _inertia(loop.model_before, fixed)
+    measured = (after.command - j_after * after.acceleration)[i0:i1]
+    model_after = measured - after.residual[i0:i1]
+    model_before = (before.command - j_before * before.acceleration - before.residual)[i0:i1]
+    added = ", ".join(loop.names_added) or "nothing added"
+    return hysteresis_figure(after.position[i0:i1], measured,
+                             [(f"final model (+ {added})", model_after),
+                              (f"starting model ({', '.join(loop.start)})", model_before)],
+                             AXES[after.axis], title, Path(directory) / "hysteresis.png", t=after.time[i0:i1])

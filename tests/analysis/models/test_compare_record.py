@@ -1,0 +1,50 @@
+"""compare's front door (analysis.models.compare.analyse) on a record read chunk by chunk and reduced to 2 kHz, as
+``hilbench compare --memory`` does over its budget: the same rows as the whole record reduced at once (bit for bit
+arrays; figures asserted to 1e-12), and within the tolerance docs/long-runs.md states of the full-rate comparison."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from hilbench.analysis.models.compare import CompareSettings, analyse
+from hilbench.analysis.record import block_average, decimated_record, load_record
+from tests.analysis.residual.test_record_analysis import write_run
+
+FAMILIES = ("coulomb_viscous", "maxwell_slip", "dahl")
+KEYS = ("torque_nrmse", "position_nrmse_segmented")
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    d = tmp_path_factory.mktemp("compare_front")
+    write_run(d / "a.h5", 5)
+    write_run(d / "b.h5", 6)
+    return d
+
+
+def _whole_reduced(path):
+    rec = load_record(path)
+    x, tau, fs = block_average(rec.position, rec.torque, rec.sample_rate, 5, rec.timing)
+    return replace(rec, position=x, torque=tau, sample_rate=fs, t=np.arange(x.size) / fs, n_samples=x.size)
+
+
+def _figures(result):
+    return {r.name: {k: r.validation[k] for k in KEYS} | {f"train_{k}": r.train[k] for k in KEYS}
+            for r in result.rows}
+
+
+def test_streamed_with_tiny_chunks_equals_the_whole_record_reduced(runs):
+    settings = CompareSettings(families=FAMILIES, max_nfev=10)
+    seen = []
+    streamed = analyse(decimated_record(runs / "a.h5", 2000.0, chunk=777),
+                       decimated_record(runs / "b.h5", 2000.0, chunk=777), settings, progress=seen.append)
+    whole = analyse(_whole_reduced(runs / "a.h5"), _whole_reduced(runs / "b.h5"), settings)
+    assert seen == list(FAMILIES) and all(r.error is None for r in streamed.rows)
+    a, b = _figures(streamed), _figures(whole)
+    assert a.keys() == b.keys()
+    for name in a:
+        for k in a[name]:
+            assert a[name][k] == pytest.approx(b[name][k], rel=1e-12), (name, k)
