@@ -20,6 +20,7 @@ from hilbench.analysis.residual.rundata import MAX_RATE
 if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
 
+    from hilbench.analysis.models.friction_model import FrictionModel
     from hilbench.analysis.record import Record
     from hilbench.analysis.residual.rundata import RunData
     from hilbench.analysis.residual.selection import LoopResult
@@ -40,6 +41,8 @@ class ResidualSettings:
     cutoff: float | None = None
     fixed_inertia: float | None = None
     candidates: tuple[str, ...] | None = None
+    start_model: FrictionModel | None = None  # start from this model, not refitted (``start`` is then ignored)
+    start_model_document: dict | None = None  # its model file (identify's cutoff and thinning for its figures)
 
 
 @dataclass
@@ -53,6 +56,7 @@ class ResidualAnalysis:
     record: Record
     validation_records: list[Record] = field(default_factory=list)
     fixed_inertia: float | None = None  # the settings' J, 0 for a displacement-driven record
+    start_model: dict | None = None  # the identified start model and its own figures (identify's definition)
 
 
 def analysed_samples(n_samples: int, sample_rate: float) -> int:
@@ -107,7 +111,10 @@ def analyse(record: Record, settings: ResidualSettings | None = None, *,
                             "give J > 0 or leave --inertia out to estimate it")
     train = _prepared(record, s.cutoff)
     val = [_prepared(v, s.cutoff) for v in validation]
-    if len(start) == 1:
+    start_model = None
+    if s.start_model is not None or start == ("maxwell_slip",):
+        start, start_model = _identified_start(record, list(validation), s)
+    elif len(start) == 1:
         if record.kind == "displacement-driven" or s.fixed_inertia is not None:
             raise AnalysisError("--start FAMILY identifies J with the family; it takes neither --inertia nor a "
                                 "displacement-driven record (start from terms instead)")
@@ -116,7 +123,35 @@ def analyse(record: Record, settings: ResidualSettings | None = None, *,
     loop = residual_loop(train, val or None, start=start, options=opts)
     loop.published_metric = published_metric(record.source, loop.fit_before, loop.fit_after, [train], val)
     fixed = 0.0 if record.kind == "displacement-driven" and s.fixed_inertia is None else s.fixed_inertia
-    return ResidualAnalysis(loop, train, val, record, list(validation), fixed)
+    return ResidualAnalysis(loop, train, val, record, list(validation), fixed, start_model)
+
+
+def _identified_start(record: Record, validation: list[Record], s: ResidualSettings) -> tuple[list, dict]:
+    """The loop's start from an identified Maxwell-slip model: ``s.start_model`` (a model file's), else identify's
+    fit of ``record`` (:func:`hilbench.analysis.identification.analyse`, the same call as ``hilbench identify``).
+    Returns (start entries, the model's own figures by identify's definition on the runs the loop reads)."""
+    from hilbench.analysis.identification import analyse as identify
+    from hilbench.analysis.residual.model_start import document_settings, model_start, start_figures
+
+    if record.kind == "displacement-driven" or s.fixed_inertia is not None:
+        raise AnalysisError("--start maxwell_slip or MODEL.json identifies J with the model; it takes neither "
+                            "--inertia nor a displacement-driven record (start from terms instead)")
+    runs = {"train": record} | ({"validation": validation[0]} if validation else {})
+    if s.start_model is not None:
+        model = s.start_model
+        if model.axis != record.axis:
+            raise AnalysisError(f"the start model is for a {model.axis} axis; {record.path} is {record.axis}")
+        cutoff, order, decimation = document_settings(s.start_model_document or {}, record.sample_rate)
+        figures = start_figures(model, runs, cutoff, order, decimation)
+        source = "model file, not refitted"
+    else:
+        ident = identify(record, validation=validation[0] if validation else None)
+        model = ident.model
+        figures = {k: ident.figures[k] for k in ("train_torque_nrmse", "validation_torque_nrmse")
+                   if k in ident.figures}
+        source = "identify's fit"
+    return model_start(model), {"source": source, "parameters": model.to_dict(), "figures": figures,
+                                "sample_rate_hz": record.sample_rate}
 
 
 def report(result: ResidualAnalysis, out_dir: str | Path, title: str | None = None) -> list[Path]:

@@ -25,11 +25,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("run", metavar="RUN.h5", help="training run file (position and torque channels)")
     parser.add_argument("--validate", metavar="RUN2.h5", action="append", default=[],
                         help="validation run never fitted (repeatable); default: 5-fold blocked cross-validation")
-    parser.add_argument("--start", default="inertia,maxwell_slip", metavar="TERMS|FAMILY",
+    parser.add_argument("--start", default="inertia,maxwell_slip", metavar="TERMS|FAMILY|MODEL.json",
                         help="comma-separated starting terms (default inertia,maxwell_slip; "
                              "EMPS reference: inertia,coulomb,viscous,offset), or one friction family to identify "
-                             "first and start from: coulomb_viscous, stribeck, dahl, lugre, maxwell_slip, gms, "
-                             "continuous (docs/residual-report.md)")
+                             "first and start from: coulomb_viscous, stribeck, dahl, lugre, maxwell_slip (identify's "
+                             "own fit), gms, continuous, or a Maxwell-slip model file of hilbench identify to start "
+                             "from unrefitted (docs/residual-report.md)")
     parser.add_argument("--json", required=True, metavar="OUT.json", help="write the JSON report here")
     parser.add_argument("--report", metavar="DIR", help="write diagnostics PNGs and summary.md into DIR")
     parser.add_argument("--torque-channel", default=None, metavar="NAME",
@@ -75,6 +76,7 @@ def _check_budget(headers: list, budget: int) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from hilbench.analysis.models.families import FAMILIES
+    from hilbench.analysis.models.model_file import read_model
     from hilbench.analysis.record import decimation_factor
     from hilbench.analysis.residual import record_analysis
     from hilbench.analysis.residual.report import report_dict
@@ -83,8 +85,10 @@ def run(args: argparse.Namespace) -> int:
     from hilbench.bench.errors import BenchError
     from hilbench.bench.verdict import judge
 
-    outputs.refuse_inputs({"--json": args.json, "--report": args.report}, [args.run, *args.validate])
-    start = tuple(t.strip() for t in args.start.split(",") if t.strip())
+    model_file = args.start if args.start.strip().lower().endswith(".json") else None
+    outputs.refuse_inputs({"--json": args.json, "--report": args.report}, [args.run, *args.validate, model_file])
+    start_model = read_model(model_file) if model_file else (None, None)
+    start = tuple(t.strip() for t in args.start.split(",") if t.strip()) if model_file is None else ()
     cands = None if args.candidates is None else tuple(t.strip() for t in args.candidates.split(",") if t.strip())
     if args.inertia is not None and not (math.isfinite(args.inertia) and args.inertia >= 0):
         raise BenchError(f"--inertia must be finite and >= 0, got {args.inertia}")
@@ -101,7 +105,8 @@ def run(args: argparse.Namespace) -> int:
     if len(start) == 1 and start[0] in FAMILIES:
         outputs.say(f"identifying the {start[0]} family on {args.run} (start of the residual loop)", args.json)
     settings = record_analysis.ResidualSettings(start=start, cutoff=args.cutoff, fixed_inertia=args.inertia,
-                                                candidates=cands)
+                                                candidates=cands, start_model=start_model[0],
+                                                start_model_document=start_model[1])
     res = record_analysis.analyse(recs[0], settings, validation=recs[1:])
     result, train, rec = res.loop, res.train, recs[0]
     record = rec.kind
@@ -110,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
               "timing": rec.timing, "cutoff_hz": train.data.cutoff, "decimation": train.data.decimation,
               "sample_rate_hz": rec.sample_rate,
               "fixed_inertia": args.inertia if record == "torque-driven" or args.inertia is not None else 0.0,
-              "record": record,
+              "record": record, "start_model": res.start_model,
               "incomplete": {p: r.incomplete for p, r in zip([args.run, *args.validate], recs, strict=True)
                              if r.incomplete is not None}}
     outputs.write_json(args.json, report_dict(result, inputs), indent=2, allow_nan=False)
@@ -121,6 +126,11 @@ def run(args: argparse.Namespace) -> int:
     channel, timing = rec.torque_channel, rec.timing
     before, after = result.error_before["validation"], result.error_after["validation"]
     pct = lambda v: None if v is None else 100.0 * v  # noqa: E731
+    if res.start_model is not None:  # the start model's own figure, as identify reports it
+        f = res.start_model["figures"]
+        where = "validation" if "validation_torque_nrmse" in f else "train"
+        say(f"start model ({res.start_model['source']}): {where} torque NRMSE "
+            f"{pct(f[f'{where}_torque_nrmse']):.3g} %")
     if record == "displacement-driven":
         say(f"{result.verdict}; validation force simulated from the measured displacement: NRMSE "
             f"{pct(before['torque_nrmse']):.3g} % -> {pct(after['torque_nrmse']):.3g} % "

@@ -86,3 +86,24 @@ def test_a_record_over_the_memory_budget_is_read_chunk_by_chunk_with_the_same_re
                  "--plots", str(runs / "plots")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--plots draws the whole record" in err
+
+
+def test_residual_starts_from_the_model_identify_reports(runs, capsys):
+    """residual --start maxwell_slip starts from identify's own fit, and --start MODEL.json from identify's model
+    file unrefitted: the start model's validation figure is identify's (it read 1.57 % against identify's 0.816 %
+    when residual refitted its start terms)."""
+    assert main(["identify", str(runs / "a.h5"), "--validate", str(runs / "b.h5"), "--json",
+                 str(runs / "id.json")]) == 0
+    ident = json.loads((runs / "id.json").read_text())["figures"]["validation_torque_nrmse"]
+    capsys.readouterr()
+    for start, name in (("maxwell_slip", "r_family.json"), (str(runs / "id.json"), "r_file.json")):
+        assert main(["residual", str(runs / "a.h5"), "--validate", str(runs / "b.h5"), "--start", start,
+                     "--candidates", "offset", "--json", str(runs / name)]) == 0
+        out = capsys.readouterr().out
+        doc = json.loads((runs / name).read_text())
+        figure = doc["inputs"]["start_model"]["figures"]["validation_torque_nrmse"]
+        assert figure == pytest.approx(ident, rel=1e-9), start
+        assert _pct(out, r"start model \([^)]*\): validation torque NRMSE") == pytest.approx(100 * ident, rel=5e-3)
+        assert "family_model" in doc["start"]
+        # the simulated start model carries the model's elements (without them its position drifted: 2.4e4 %)
+        assert doc["error_before"]["validation"]["position_nrmse"] < 0.1
