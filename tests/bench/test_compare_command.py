@@ -71,3 +71,25 @@ def test_compare_missing_file_is_one_line_exit_2(tmp_path, capsys):
     rc = main(["compare", str(tmp_path / "nope.h5"), "--validate", str(tmp_path / "nope.h5"), "-o", str(tmp_path)])
     err = capsys.readouterr().err
     assert rc == 2 and "no such run file" in err and len(err.strip().splitlines()) == 1
+
+
+def test_compare_over_its_memory_budget_reads_reduced_runs_or_refuses_in_one_line(tmp_path, capsys, monkeypatch):
+    """--memory below what the whole 10 kHz arrays need: compare reads both runs chunk by chunk reduced to 2 kHz
+    and says so; below what even the reduced copies need: one line, exit 2, before reading (docs/long-runs.md)."""
+    import hilbench.analysis.models.compare as compare
+
+    _write(tmp_path / "a.h5", 1, fs=10_000.0, n=20_000)
+    _write(tmp_path / "b.h5", 2, fs=10_000.0, n=20_000)
+    monkeypatch.setattr(compare, "COMPARE_BYTES_FIXED", 0)
+    monkeypatch.setattr(compare, "COMPARE_BYTES_PER_SAMPLE", 10_000)  # whole: 400 MB; reduced by 5: 80 MB
+    args = ["compare", str(tmp_path / "a.h5"), "--validate", str(tmp_path / "b.h5"), "--families", "coulomb_viscous",
+            "--torque-timing", "hold_next", "--max-evaluations", "5", "--memory", "300M"]
+    assert main([*args, "-o", str(tmp_path / "out")]) == 0
+    doc = json.loads((tmp_path / "out" / "compare.json").read_text())
+    assert doc["data"]["train"]["sample_rate_hz"] == 2000.0 and doc["data"]["train"]["samples"] == 4000
+    assert doc["data"]["train"]["read"].startswith("decimated by 5 (10000 -> 2000 Hz)")
+    monkeypatch.setattr(compare, "COMPARE_BYTES_PER_SAMPLE", 40_000)  # reduced: 320 MB, over 256 MiB
+    capsys.readouterr()
+    assert main([*args[:-1], "256M", "-o", str(tmp_path / "out2")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "over --memory 256 MiB" in err and not (tmp_path / "out2").exists()

@@ -66,3 +66,16 @@ def test_cli_bad_input_is_one_line(runs, capsys):
     assert err.startswith("hilbench residual: error:") and "\n" not in err
     assert main(["residual", str(runs / "train.h5"), "--start", "inertia,bogus", "--json", str(runs / "x.json")]) == 2
     assert "unknown model term" in capsys.readouterr().err
+
+
+def test_cli_over_its_memory_budget_refuses_in_one_line_before_reading(runs, capsys, monkeypatch):
+    import hilbench.analysis.record as record
+
+    def no_read(*args, **kwargs):
+        raise AssertionError("read the samples before checking the budget")
+
+    monkeypatch.setattr(record, "decimated_record", no_read)
+    assert main(["residual", str(runs / "train.h5"), "--validate", str(runs / "valid.h5"), "--memory", "256M",
+                 "--json", str(runs / "m.json")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "over --memory 256 MiB" in err and not (runs / "m.json").exists()
