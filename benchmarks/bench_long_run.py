@@ -37,20 +37,23 @@ from pathlib import Path
 FS = 10_000.0
 CHUNK = 1 << 16  # samples per read
 
-_CHILD = r"""
+#: the child's peak RSS, KiB: VmHWM of its own address space (module docstring)
+_PEAK = r"""
 import json, resource, sys, time
-import numpy as np
-from hilbench.analysis.identification.identify import RunArrays, identify, identify_chunks
-from hilbench.analysis.identification.maxwell_fit import LipSettings
-
-path, n, fs, mode, chunk = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), sys.argv[4], int(sys.argv[5])
 def peak_kib():
     try:
         with open("/proc/self/status") as fh:
             return next(int(line.split()[1]) for line in fh if line.startswith("VmHWM:"))
     except (OSError, StopIteration):
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+"""
 
+_CHILD = _PEAK + r"""
+import numpy as np
+from hilbench.analysis.identification.identify import RunArrays, identify, identify_chunks
+from hilbench.analysis.identification.maxwell_fit import LipSettings
+
+path, n, fs, mode, chunk = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), sys.argv[4], int(sys.argv[5])
 base = peak_kib()
 
 def source():
@@ -97,15 +100,8 @@ def record(path: Path, duration: float, fs: float = FS, seed: int = 0) -> int:
     return int(u.size)
 
 
-_ANALYSIS_CHILD = r"""
-import json, resource, sys, time
+_ANALYSIS_CHILD = _PEAK + r"""
 path, val, mode = sys.argv[1], sys.argv[2], sys.argv[3]
-def peak_kib():
-    try:
-        with open("/proc/self/status") as fh:
-            return next(int(line.split()[1]) for line in fh if line.startswith("VmHWM:"))
-    except (OSError, StopIteration):
-        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 base = peak_kib()
 t0 = time.perf_counter()
 if mode == "residual":
@@ -159,15 +155,15 @@ def write_run_file(path: Path, duration: float, fs: float, seed: int = 0) -> int
 
 def measure_analysis(path: Path, val: Path, mode: str) -> dict:
     """Peak RSS (MiB), wall time (s) and the headline figure of one analysis of a run file in a child process."""
+    import importlib
     import importlib.util
 
     if mode in HOOKS:
         module, func = HOOKS[mode]
-        if importlib.util.find_spec(module) is None:
+        if importlib.util.find_spec(module) is None or not hasattr(importlib.import_module(module), func):
             return {"missing": f"{module}.{func}"}
-        code = (f"import json, time, resource\nfrom {module} import {func}\nt0 = time.perf_counter()\n"
-                f"{func}({str(path)!r}, {str(val)!r})\nprint(json.dumps({{'wall_s': time.perf_counter() - t0, "
-                "'peak_rss_mib': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))")
+        code = _PEAK + (f"from {module} import {func}\nt0 = time.perf_counter()\n{func}(sys.argv[1], sys.argv[2])\n"
+                        "print(json.dumps({'wall_s': time.perf_counter() - t0, 'peak_rss_mib': peak_kib() / 1024}))")
     else:
         code = _ANALYSIS_CHILD
     done = subprocess.run([sys.executable, "-c", code, str(path), str(val), mode], capture_output=True, text=True,
