@@ -211,10 +211,3 @@ def analyse(record, validation, settings: CompareSettings | None = None, *,
     return compare(train, val, timing=record.timing, train_position=train.x, train_torque=record.torque,
                    families=s.families, segment=s.segment, max_nfev=s.max_nfev, published=s.published,
                    progress=progress)
-
-
-def report(result: Comparison, out_dir: str | Path) -> list[Path]:
-    """The comparison's figures (compare_hysteresis.png, compare_time.png) in ``out_dir``."""
-    from hilbench.analysis.models.compare_plots import write_plots
-
-    return write_plots(result, out_dir)

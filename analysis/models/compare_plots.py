@@ -75,3 +75,9 @@ def write_plots(result: Comparison, outdir: str | Path, window_s: float = 2.0, l
     fig.savefig(p2, dpi=110)
     plt.close(fig)
     return [p1, p2]
+
+
+def report(result: Comparison, out_dir: str | Path) -> list[Path]:
+    """The comparison's report (:func:`hilbench.analysis.models.compare.analyse` is its front door): its figures,
+    ``compare_hysteresis.png`` and ``compare_time.png``, in ``out_dir``."""
+    return write_plots(result, out_dir)

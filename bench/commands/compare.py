@@ -78,7 +78,8 @@ def _records(args, budget: int) -> tuple:
 
 
 def run(args) -> int:
-    from hilbench.analysis.models.compare import CompareSettings, analyse, document, markdown_table, report
+    from hilbench.analysis.models.compare import CompareSettings, analyse, document, markdown_table
+    from hilbench.analysis.models.compare_plots import report
     from hilbench.analysis.models.families import FAMILIES, published_plant
     from hilbench.analysis.models.model_file import family_document
     from hilbench.bench import outputs
