@@ -428,7 +428,7 @@ def decimated_record(path: str | Path, max_rate: float, *, torque_channel: str |
             whole = (x_c.size // q) * q
             if whole:
                 bx, bt, _ = block_average(x_c[:whole], tau_c[:whole], rec.sample_rate, q, rec.timing)
-                xs.append(bx)
+                xs.append(bx.copy())  # a strided view would keep the whole chunk alive: memory of the full record
                 taus.append(bt)
             carry_x, carry_tau = x_c[whole:], tau_c[whole:]
             if progress is not None:
