@@ -11,18 +11,10 @@ import pytest
 
 from hilbench.analysis.models.compare import CompareSettings, analyse
 from hilbench.analysis.record import block_average, decimated_record, load_record
-from tests.analysis.residual.test_record_analysis import write_run
+from tests.analysis.residual.test_record_analysis import runs  # noqa: F401 (the fixture: two 3 s runs at 10 kHz)
 
 FAMILIES = ("coulomb_viscous", "maxwell_slip", "dahl")
 KEYS = ("torque_nrmse", "position_nrmse_segmented")
-
-
-@pytest.fixture(scope="module")
-def runs(tmp_path_factory):
-    d = tmp_path_factory.mktemp("compare_front")
-    write_run(d / "a.h5", 5)
-    write_run(d / "b.h5", 6)
-    return d
 
 
 def _whole_reduced(path):
@@ -36,7 +28,7 @@ def _figures(result):
             for r in result.rows}
 
 
-def test_streamed_with_tiny_chunks_equals_the_whole_record_reduced(runs):
+def test_streamed_with_tiny_chunks_equals_the_whole_record_reduced(runs):  # noqa: F811
     settings = CompareSettings(families=FAMILIES, max_nfev=10)
     seen = []
     streamed = analyse(decimated_record(runs / "a.h5", 2000.0, chunk=777),
