@@ -13,7 +13,7 @@ Elsewhere than on Linux the benchmark falls back to ``ru_maxrss``.
 - ``residual``: the residual loop (``analysis.residual.record_analysis``: the run file read chunk by chunk and reduced
   to 2 kHz, then the loop with blocked cross-validation);
 - ``compare``: the seven families (``analysis.models.compare.analyse``) on the run file read chunk by chunk and
-  reduced to 2 kHz, scored on a second run of another seed;
+  reduced to 5 kHz (``compare.DECIMATED_RATE``), scored on a second run of another seed;
 - ``afrf``, ``skeleton``, ``presliding``: listed in :data:`HOOKS` when their streamed entry points exist (another
   branch builds them); a missing one is reported as not measured.
 

@@ -46,7 +46,7 @@ def register(subparsers) -> None:
 
 def _records(args, budget: int) -> tuple:
     """(train, validation) records: whole when the comparison fits ``budget`` (bytes) at the recorded rate, else
-    reduced to the lowest whole factor that keeps at least 2 kHz while reading chunk by chunk (docs/long-runs.md);
+    reduced by the largest whole factor that keeps at least 5 kHz while reading chunk by chunk (docs/long-runs.md);
     one line, before any sample is read, when even that does not fit."""
     from hilbench.analysis.models.compare import DECIMATED_RATE, cost
     from hilbench.analysis.record import decimated_record, stream_record
@@ -61,7 +61,7 @@ def _records(args, budget: int) -> tuple:
     if cost(samples) <= budget:
         recs = tuple(load(p, args) for p in (args.run, args.validate))
     else:
-        # the largest factor that keeps the rate >= DECIMATED_RATE, so the decimated copy is as small as allowed
+        # the largest factor that keeps the rate >= DECIMATED_RATE: the smallest copy the physics allows
         qs = [max(1, int(h.sample_rate // DECIMATED_RATE)) for h in heads]
         kept = sum(h.n_samples // q for h, q in zip(heads, qs, strict=True))
         if cost(kept) > budget:

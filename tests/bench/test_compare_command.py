@@ -81,14 +81,14 @@ def test_compare_over_its_memory_budget_reads_reduced_runs_or_refuses_in_one_lin
     _write(tmp_path / "a.h5", 1, fs=10_000.0, n=20_000)
     _write(tmp_path / "b.h5", 2, fs=10_000.0, n=20_000)
     monkeypatch.setattr(compare, "COMPARE_BYTES_FIXED", 0)
-    monkeypatch.setattr(compare, "COMPARE_BYTES_PER_SAMPLE", 10_000)  # whole: 400 MB; reduced by 5: 80 MB
+    monkeypatch.setattr(compare, "COMPARE_BYTES_PER_SAMPLE", 10_000)  # whole: 400 MB; reduced by 2: 200 MB
     args = ["compare", str(tmp_path / "a.h5"), "--validate", str(tmp_path / "b.h5"), "--families", "coulomb_viscous",
             "--torque-timing", "hold_next", "--max-evaluations", "5", "--memory", "300M"]
     assert main([*args, "-o", str(tmp_path / "out")]) == 0
     doc = json.loads((tmp_path / "out" / "compare.json").read_text())
-    assert doc["data"]["train"]["sample_rate_hz"] == 2000.0 and doc["data"]["train"]["samples"] == 4000
-    assert doc["data"]["train"]["read"].startswith("decimated by 5 (10000 -> 2000 Hz)")
-    monkeypatch.setattr(compare, "COMPARE_BYTES_PER_SAMPLE", 40_000)  # reduced: 320 MB, over 256 MiB
+    assert doc["data"]["train"]["sample_rate_hz"] == 5000.0 and doc["data"]["train"]["samples"] == 10_000
+    assert doc["data"]["train"]["read"].startswith("decimated by 2 (10000 -> 5000 Hz)")
+    monkeypatch.setattr(compare, "COMPARE_BYTES_PER_SAMPLE", 40_000)  # reduced: 800 MB, over 256 MiB
     capsys.readouterr()
     assert main([*args[:-1], "256M", "-o", str(tmp_path / "out2")]) == 2
     err = capsys.readouterr().err

@@ -1,6 +1,6 @@
-"""compare's front door (analysis.models.compare.analyse) on a record read chunk by chunk and reduced to 2 kHz, as
+"""compare's front door (analysis.models.compare.analyse) on a record read chunk by chunk and reduced to 5 kHz, as
 ``hilbench compare --memory`` does over its budget: the same rows as the whole record reduced at once (bit for bit
-arrays; figures asserted to 1e-12), and within the tolerance docs/long-runs.md states of the full-rate comparison."""
+arrays; figures asserted to 1e-12, the tolerance docs/long-runs.md states)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from hilbench.analysis.models.compare import CompareSettings, analyse
+from hilbench.analysis.models.compare import DECIMATED_RATE, CompareSettings, analyse
 from hilbench.analysis.record import block_average, decimated_record, load_record
 from tests.analysis.residual.test_record_analysis import runs  # noqa: F401 (the fixture: two 3 s runs at 10 kHz)
 
@@ -19,7 +19,7 @@ KEYS = ("torque_nrmse", "position_nrmse_segmented")
 
 def _whole_reduced(path):
     rec = load_record(path)
-    x, tau, fs = block_average(rec.position, rec.torque, rec.sample_rate, 5, rec.timing)
+    x, tau, fs = block_average(rec.position, rec.torque, rec.sample_rate, 2, rec.timing)
     return replace(rec, position=x, torque=tau, sample_rate=fs, t=np.arange(x.size) / fs, n_samples=x.size)
 
 
@@ -31,10 +31,11 @@ def _figures(result):
 def test_streamed_with_tiny_chunks_equals_the_whole_record_reduced(runs):  # noqa: F811
     settings = CompareSettings(families=FAMILIES, max_nfev=10)
     seen = []
-    streamed = analyse(decimated_record(runs / "a.h5", 2000.0, chunk=777),
-                       decimated_record(runs / "b.h5", 2000.0, chunk=777), settings, progress=seen.append)
+    streamed = analyse(decimated_record(runs / "a.h5", DECIMATED_RATE, chunk=777),
+                       decimated_record(runs / "b.h5", DECIMATED_RATE, chunk=777), settings, progress=seen.append)
     whole = analyse(_whole_reduced(runs / "a.h5"), _whole_reduced(runs / "b.h5"), settings)
     assert seen == list(FAMILIES) and all(r.error is None for r in streamed.rows)
+    assert streamed.train.fs == 5000.0 and streamed.train.x.size == 15_000
     a, b = _figures(streamed), _figures(whole)
     assert a.keys() == b.keys()
     for name in a:
