@@ -79,3 +79,31 @@ def test_cli_over_its_memory_budget_refuses_in_one_line_before_reading(runs, cap
                  "--json", str(runs / "m.json")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "over --memory 256 MiB" in err and not (runs / "m.json").exists()
+
+
+def test_progress_goes_to_a_terminal_and_quiet_silences_it(monkeypatch):
+    """The analyses' progress bar (tqdm, with ETA) writes to standard error when it is a terminal; -q (verbosity 0)
+    silences it."""
+    import io
+
+    from hilbench.bench import outputs
+    from hilbench.bench.analysis_input import progress_bar
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    err = Terminal()
+    monkeypatch.setattr("sys.stderr", err)
+    monkeypatch.setattr(outputs, "verbosity", 1)
+    bar = progress_bar(1000, "read run.h5")
+    bar.update(500)
+    bar.close()
+    assert "read run.h5" in err.getvalue() and "500/1.00k" in err.getvalue()
+    quiet = Terminal()
+    monkeypatch.setattr("sys.stderr", quiet)
+    monkeypatch.setattr(outputs, "verbosity", 0)
+    bar = progress_bar(1000, "read run.h5")
+    bar.update(1000)
+    bar.close()
+    assert quiet.getvalue() == ""
