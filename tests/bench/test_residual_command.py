@@ -93,17 +93,13 @@ def test_progress_goes_to_a_terminal_and_quiet_silences_it(monkeypatch):
         def isatty(self):
             return True
 
-    err = Terminal()
-    monkeypatch.setattr("sys.stderr", err)
-    monkeypatch.setattr(outputs, "verbosity", 1)
-    bar = progress_bar(1000, "read run.h5")
-    bar.update(500)
-    bar.close()
-    assert "read run.h5" in err.getvalue() and "500/1.00k" in err.getvalue()
-    quiet = Terminal()
-    monkeypatch.setattr("sys.stderr", quiet)
-    monkeypatch.setattr(outputs, "verbosity", 0)
-    bar = progress_bar(1000, "read run.h5")
-    bar.update(1000)
-    bar.close()
-    assert quiet.getvalue() == ""
+    written = {}
+    for verbosity in (1, 0):
+        written[verbosity] = Terminal()
+        monkeypatch.setattr("sys.stderr", written[verbosity])
+        monkeypatch.setattr(outputs, "verbosity", verbosity)
+        bar = progress_bar(1000, "read run.h5")
+        bar.update(500)
+        bar.close()
+    assert "read run.h5" in written[1].getvalue() and "500/1.00k" in written[1].getvalue()
+    assert written[0].getvalue() == ""
