@@ -14,7 +14,7 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
-from hilbench.bench.campaign_analysis.engine import analyse
+from hilbench.bench.campaign_analysis.engine import MAX_CHUNK, analyse, chunk
 from hilbench.bench.campaign_analysis.steps import StepSettings, identify_step
 from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
 from hilbench.bench.cli import main
@@ -97,16 +97,23 @@ def _dies(path: str, settings: StepSettings) -> dict:
 
 def test_cluster_survives_dying_workers_and_matches_serial(campaign, tmp_path):
     serial = {r["key"]: r for r in _rows(analyse([campaign], tmp_path / "serial", serial=True, **quiet).table)}
-    s = analyse([campaign], tmp_path / "cluster", workers=2, dashboard=False, functions={"identify": _dies}, **quiet)
+    # one worker: tasks of 2 runs (engine.chunk), so the task that dies also holds an innocent run (id2-2)
+    s = analyse([campaign], tmp_path / "cluster", workers=1, dashboard=False, functions={"identify": _dies}, **quiet)
     rows = {r["key"]: r for r in _rows(s.table)}
     assert len(rows) == 8 and s.analysed == 8 and s.failed == 2
-    # a worker that dies on every try: retried once on a fresh worker, then a failed row with the reason
+    # a worker that dies on every try: retried once on a fresh worker; the task is split into its runs, and the
+    # run that kills its worker again becomes a failed row with the reason, its task-mate a good row
+    assert rows["id2-2"]["status"] == "ok"
     assert rows["id2-1"]["status"] == "failed" and "worker died twice" in rows["id2-1"]["error"]
     assert "on 2 different workers" in rows["id2-1"]["error"]
     assert rows["id3-2"]["status"] == "failed" and "position" in rows["id3-2"]["error"]  # a step that raises
     # every other row is the serial one, bit for bit, whichever worker computed it
     for key in rows.keys() - {"id2-1"}:
         assert rows[key] == serial[key]
+
+
+def _rows_in_parts(parts: Path) -> int:
+    return sum(pq.read_metadata(f).num_rows for f in parts.glob("*.parquet")) if parts.is_dir() else 0
 
 
 def test_a_killed_client_leaves_good_parts_and_a_rerun_analyses_only_the_missing(campaign, tmp_path):
@@ -116,16 +123,24 @@ def test_a_killed_client_leaves_good_parts_and_a_rerun_analyses_only_the_missing
                              str(out), "--serial"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 60
     parts = out / "parts"
-    while time.monotonic() < deadline and len(list(parts.glob("*.parquet")) if parts.is_dir() else []) < 3:
+    while time.monotonic() < deadline and _rows_in_parts(parts) < 3:  # parts of 2 runs each (8 runs, 1 worker)
         time.sleep(0.01)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
-    done = len(list(parts.glob("*.parquet")))
+    done = _rows_in_parts(parts)
     assert 3 <= done < 8, "the client was to be killed mid-campaign"
     assert not (out / "results.parquet").exists()
     s = analyse([campaign], out, serial=True, **quiet)
     assert (s.skipped, s.analysed) == (done, 8 - done)
     assert len(_rows(s.table)) == 8 and not parts.exists()
+
+
+def test_chunks_balance_the_workers_and_cap_the_task_size():
+    todo = list(range(200))
+    parts = chunk(todo, 2)  # 200 runs, 2 workers: 8 per task, 25 tasks
+    assert [len(p) for p in parts] == [MAX_CHUNK] * 25 and sum(parts, []) == todo
+    assert [len(p) for p in chunk(todo[:20], 2)] == [2] * 10  # at least 4 tasks per worker
+    assert [len(p) for p in chunk(todo[:5], 2)] == [1] * 5
 
 
 def test_cli_bad_input_is_one_line_and_exit_2(campaign, tmp_path, capsys):
