@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 
 #: step -> protocols whose runs it can analyse (a run gets the steps its protocol supports)
-PROTOCOLS_OF_STEP = {"identify": ("identification", "chirp")}
+PROTOCOLS_OF_STEP = {"identify": ("identification", "chirp"), "compare": ("identification", "chirp"),
+                     "residual": ("identification", "chirp")}
 STEPS_DONE = tuple(PROTOCOLS_OF_STEP)
 
 #: result columns of the steps: name -> (Arrow type name, unit). Common columns: engine.BASE_COLUMNS.
@@ -30,6 +31,8 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "train_torque_nrmse": ("float64", "1"), "validation_torque_nrmse": ("float64", "1"),
     "validation_position_nrmse": ("float64", "1"), "validation_position_nrmse_segmented": ("float64", "1"),
     "verdict": ("string", ""),
+    # compare: the family with the lowest validation torque NRMSE; residual: the terms of the final model
+    "model": ("string", ""), "validation_torque_nrmse_start": ("float64", "1"),
     "temperature_mean": ("float64", "degC"), "sliding_distance": ("float64", "rad"),
     "samples": ("int64", "1"), "duration": ("float64", "s"),
 }
@@ -48,6 +51,8 @@ class StepSettings:
     coulomb: bool = False
     offset: bool = False
     validation_fraction: float = 0.3
+    compare_families: tuple[str, ...] = ("coulomb_viscous", "stribeck", "maxwell_slip")
+    residual_start: tuple[str, ...] = ("inertia", "maxwell_slip")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -74,9 +79,22 @@ def _breakaway_se(model) -> float:
     return float(np.sqrt(np.sum((se * np.asarray(model.ms_delta)) ** 2)))
 
 
+def _split(rec, fraction: float):
+    """(head, tail or None) of a record's arrays: fitted on the head, validated on the held-out tail."""
+    from hilbench.analysis.identification.identify import RunArrays
+
+    arrays = rec.arrays()
+    cut = int(round(arrays.t.size * (1 - fraction)))
+    head = RunArrays(arrays.t[:cut], arrays.torque[:cut], arrays.position[:cut], arrays.axis, arrays.name)
+    if fraction <= 0:
+        return head, None
+    return head, RunArrays(arrays.t[cut:] - arrays.t[cut], arrays.torque[cut:], arrays.position[cut:], arrays.axis,
+                           arrays.name + " (tail)")
+
+
 def identify_step(path: str, settings: StepSettings) -> dict[str, Any]:
     """Identify the friction model of one run (fit on the head, validate on the held-out tail)."""
-    from hilbench.analysis.identification.identify import RunArrays, identify
+    from hilbench.analysis.identification.identify import identify
     from hilbench.analysis.identification.maxwell_fit import LipSettings
     from hilbench.analysis.record import load_record
     from hilbench.bench.verdict import judge
@@ -84,12 +102,7 @@ def identify_step(path: str, settings: StepSettings) -> dict[str, Any]:
     rec = load_record(path, channels=("temperature",))  # the one loader: an aborted or short run is a failed row
     arrays, timing = rec.arrays(), rec.timing
     n = arrays.t.size
-    cut = int(round(n * (1 - settings.validation_fraction)))
-    head = RunArrays(arrays.t[:cut], arrays.torque[:cut], arrays.position[:cut], arrays.axis, arrays.name)
-    tail = None
-    if settings.validation_fraction > 0:
-        tail = RunArrays(arrays.t[cut:] - arrays.t[cut], arrays.torque[cut:], arrays.position[cut:], arrays.axis,
-                         arrays.name + " (tail)")
+    head, tail = _split(rec, settings.validation_fraction)
     lip = LipSettings(n_thresholds=settings.thresholds, coulomb=settings.coulomb, offset=settings.offset,
                       timing=timing)
     res = identify(head, method=settings.method, validate=tail, settings=lip)
@@ -118,7 +131,64 @@ def identify_step(path: str, settings: StepSettings) -> dict[str, Any]:
     return row
 
 
-STEPS: dict[str, Callable[[str, StepSettings], dict[str, Any]]] = {"identify": identify_step}
+def _held_out(path: str, settings: StepSettings, step: str):
+    """The record and its head and tail for a step that needs a validation set (compare, residual)."""
+    from hilbench.analysis.errors import AnalysisError
+    from hilbench.analysis.record import load_record
+
+    if settings.validation_fraction <= 0:
+        raise AnalysisError(f"{step} scores models on the held-out tail: --validation-fraction must be > 0")
+    rec = load_record(path)
+    head, tail = _split(rec, settings.validation_fraction)
+    return rec, head, tail
+
+
+def compare_step(path: str, settings: StepSettings) -> dict[str, Any]:
+    """``hilbench compare`` on one run: every family of ``compare_families`` fitted on the head, scored on the
+    tail; the row is the family with the lowest validation torque NRMSE (a thin adapter: analysis.models has no
+    ``analyse(record, settings)`` front door yet)."""
+    from hilbench.analysis.errors import AnalysisError
+    from hilbench.analysis.models.compare import compare
+    from hilbench.analysis.models.families import RunData
+
+    rec, head, tail = _held_out(path, settings, "compare")
+    train = RunData.from_arrays(rec.name, rec.axis, rec.sample_rate, head.position, head.torque, rec.timing)
+    val = RunData.from_arrays(rec.name + " (tail)", rec.axis, rec.sample_rate, tail.position, tail.torque,
+                              rec.timing)
+    result = compare(train, val, timing=rec.timing, train_position=train.x, train_torque=head.torque,
+                     families=settings.compare_families)
+    scored = [r for r in result.rows if r.error is None and math.isfinite(r.validation["torque_nrmse"])]
+    if not scored:
+        raise AnalysisError("compare: no family could be fitted (" + "; ".join(
+            f"{r.name}: {r.error}" for r in result.rows) + ")")
+    best = min(scored, key=lambda r: r.validation["torque_nrmse"])
+    return {"model": best.name, "train_torque_nrmse": best.train["torque_nrmse"],
+            "validation_torque_nrmse": best.validation["torque_nrmse"],
+            "validation_position_nrmse_segmented": best.validation["position_nrmse_segmented"],
+            "samples": int(rec.t.size), "duration": float(rec.t[-1] - rec.t[0])}
+
+
+def residual_step(path: str, settings: StepSettings) -> dict[str, Any]:
+    """``hilbench residual`` on one run: the residual loop from ``residual_start``, fitted on the head and judged
+    on the tail; the row has the validation torque NRMSE of the start and of the final model and the loop's
+    verdict (a thin adapter: analysis.residual has no ``analyse(record, settings)`` front door yet)."""
+    from hilbench.analysis.residual import LoopOptions, prepare_run, residual_loop
+
+    rec, head, tail = _held_out(path, settings, "residual")
+    runs = [prepare_run(a.position, a.torque, rec.sample_rate, axis=rec.axis, name=a.name, timing=rec.timing)
+            for a in (head, tail)]
+    result = residual_loop(runs[0], [runs[1]], start=settings.residual_start,
+                           options=LoopOptions(record=rec.kind))
+    before, after = result.error_before["validation"], result.error_after["validation"]
+    return {"model": ",".join([*result.start, *result.names_added]),
+            "validation_torque_nrmse_start": before["torque_nrmse"],
+            "validation_torque_nrmse": after["torque_nrmse"],
+            "validation_position_nrmse": after.get("position_nrmse"),
+            "verdict": result.verdict, "samples": int(rec.t.size), "duration": float(rec.t[-1] - rec.t[0])}
+
+
+STEPS: dict[str, Callable[[str, StepSettings], dict[str, Any]]] = {
+    "identify": identify_step, "compare": compare_step, "residual": residual_step}
 
 
 def steps_for(protocol: str, wanted: tuple[str, ...]) -> list[str]:

@@ -10,7 +10,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     from hilbench.bench.analysis_input import whole_number
 
     p = sub.add_parser(
-        "analyse", help="analyse every run of campaign folders (identify, ...) into one Parquet table, in parallel",
+        "analyse", help="analyse every run of campaign folders (identify, compare, residual) into one Parquet "
+        "table, in parallel",
         description="Run the chosen steps on every run of the campaign folders (their index.json) on a Dask "
         "cluster: one row per run and step in OUT/results.parquet, keyed by the run file's content hash, the "
         "settings and the hilbench version; rows already there are skipped (--resume, the default). See "
@@ -18,7 +19,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("campaigns", nargs="+", type=Path, metavar="CAMPAIGN_DIR", help="campaign folder(s)")
     p.add_argument("-o", "--output", type=Path, default=None,
                    help="results folder (default: CAMPAIGN_DIR/analysis with one campaign; required with several)")
-    p.add_argument("--steps", default="identify", help="comma-separated steps (available: identify)")
+    p.add_argument("--steps", default="identify",
+                   help="comma-separated steps, each run gets those its protocol supports (default identify; "
+                   "available: identify, compare, residual)")
     engine = p.add_mutually_exclusive_group()
     engine.add_argument("--serial", action="store_true", help="run in this process (no cluster)")
     engine.add_argument("--scheduler", metavar="tcp://HOST:8786", help="use a running Dask scheduler")
