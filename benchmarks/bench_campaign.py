@@ -30,8 +30,10 @@ def run(quick: bool = False) -> list[dict]:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "campaign"
         write_campaign(folder, SyntheticCampaign(runs=n, duration=2.0, seed=3), fail_runs=(4,))
+        load_before = os.getloadavg()[0]  # the machine is shared: the figures mean little under others' load
         serial = analyse([folder], Path(tmp) / "serial", serial=True, **quiet)
         cluster = analyse([folder], Path(tmp) / "cluster", workers=2, dashboard=False, **quiet)
+        load_after = os.getloadavg()[0]
         identical = pq.read_table(serial.table).equals(pq.read_table(cluster.table))
         faults = analyse([folder], Path(tmp) / "faults", workers=2, dashboard=False, functions={"identify": _dies},
                          **quiet)
@@ -52,6 +54,10 @@ def run(quick: bool = False) -> list[dict]:
          "baseline_name": "serial start-up", "baseline_value": serial.startup_time,
          "ratio": cluster.startup_time / serial.startup_time if serial.startup_time else None,
          "target": None, "ok": None},
+        {"name": "analyse_load_average_1min", "value": load_after, "unit": "processes",
+         "baseline_name": "before the serial run", "baseline_value": load_before,
+         "ratio": load_after / load_before if load_before else None, "target": "< 2 for a clean figure",
+         "ok": None},
         {"name": "analyse_parquet_tables_identical", "value": float(identical), "unit": "bool", "baseline_name": None,
          "baseline_value": None, "ratio": None, "target": "1 (serial == cluster)", "ok": identical},
         {"name": "analyse_faults_rows_failed", "value": float(len(failed)), "unit": "rows",
