@@ -17,7 +17,7 @@ import numpy as np
 
 #: step -> protocols whose runs it can analyse (a run gets the steps its protocol supports)
 PROTOCOLS_OF_STEP = {"identify": ("identification", "chirp"), "compare": ("identification", "chirp"),
-                     "residual": ("identification", "chirp")}
+                     "residual": ("identification", "chirp"), "presliding": ("presliding",)}
 STEPS_DONE = tuple(PROTOCOLS_OF_STEP)
 
 #: result columns of the steps: name -> (Arrow type name, unit). Common columns: engine.BASE_COLUMNS.
@@ -33,6 +33,12 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "verdict": ("string", ""),
     # compare: the family with the lowest validation torque NRMSE; residual: the terms of the final model
     "model": ("string", ""), "validation_torque_nrmse_start": ("float64", "1"),
+    # presliding: the quantities of docs/presliding.md with their standard uncertainties (axis units: rotary
+    # N*m, N*m/rad, rad; linear N, N/m, m) and the force simulated from the displacement against the measured one
+    "presliding_breakaway": ("float64", "N*m"), "presliding_breakaway_se": ("float64", "N*m"),
+    "initial_stiffness": ("float64", "N*m/rad"), "initial_stiffness_se": ("float64", "N*m/rad"),
+    "presliding_distance": ("float64", "rad"), "presliding_distance_se": ("float64", "rad"),
+    "validation_force_relative_error": ("float64", "1"),
     "temperature_mean": ("float64", "degC"), "sliding_distance": ("float64", "rad"),
     "samples": ("int64", "1"), "duration": ("float64", "s"),
 }
@@ -53,6 +59,7 @@ class StepSettings:
     validation_fraction: float = 0.3
     compare_families: tuple[str, ...] = ("coulomb_viscous", "stribeck", "maxwell_slip")
     residual_start: tuple[str, ...] = ("inertia", "maxwell_slip")
+    presliding_replicates: int = 20
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -187,8 +194,34 @@ def residual_step(path: str, settings: StepSettings) -> dict[str, Any]:
             "verdict": result.verdict, "samples": int(rec.t.size), "duration": float(rec.t[-1] - rec.t[0])}
 
 
+def presliding_step(path: str, settings: StepSettings) -> dict[str, Any]:
+    """``hilbench presliding`` on one displacement-driven run with the command's defaults (fraction 0.9, 48
+    thresholds, the protocol's inertia, ``presliding_replicates`` bootstrap replicates); the row has the
+    quantities with their standard uncertainties and the relative rms error of the force simulated from the
+    measured displacement (a thin adapter: analysis.presliding has no ``analyse(record, settings)`` front door)."""
+    from hilbench.analysis.errors import AnalysisError
+    from hilbench.analysis.presliding.analyse import analyse
+    from hilbench.analysis.presliding.identify import PreslidingSettings
+    from hilbench.analysis.presliding.report import protocol_inertia
+    from hilbench.analysis.record import load_record
+
+    rec = load_record(path)
+    if rec.kind != "displacement-driven":
+        raise AnalysisError(f"{path}: a {rec.kind} record; presliding needs a displacement-driven one")
+    res = analyse(rec.t, rec.position, rec.torque, rec.sample_rate, rec.axis,
+                  PreslidingSettings(inertia=protocol_inertia(rec.protocol_params, path)),
+                  counts_per_rev=rec.calibration.get("counts_per_rev"), replicates=settings.presliding_replicates)
+    q, e = res.quantities, res.uncertainties
+    row: dict[str, Any] = {"validation_force_relative_error": res.fit.relative_rms, "samples": int(rec.t.size),
+                           "duration": float(rec.t[-1] - rec.t[0])}
+    for name, column in (("breakaway", "presliding_breakaway"), ("initial_stiffness", "initial_stiffness"),
+                         ("presliding_distance", "presliding_distance")):
+        row[column], row[f"{column}_se"] = q[name], e[name]
+    return row
+
+
 STEPS: dict[str, Callable[[str, StepSettings], dict[str, Any]]] = {
-    "identify": identify_step, "compare": compare_step, "residual": residual_step}
+    "identify": identify_step, "compare": compare_step, "residual": residual_step, "presliding": presliding_step}
 
 
 def steps_for(protocol: str, wanted: tuple[str, ...]) -> list[str]:

@@ -10,7 +10,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     from hilbench.bench.analysis_input import whole_number
 
     p = sub.add_parser(
-        "analyse", help="analyse every run of campaign folders (identify, compare, residual) into one Parquet "
+        "analyse", help="analyse every run of campaign folders (identify, compare, residual, ...) into one Parquet "
         "table, in parallel",
         description="Run the chosen steps on every run of the campaign folders (their index.json) on a Dask "
         "cluster: one row per run and step in OUT/results.parquet, keyed by the run file's content hash, the "
@@ -21,7 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="results folder (default: CAMPAIGN_DIR/analysis with one campaign; required with several)")
     p.add_argument("--steps", default="identify",
                    help="comma-separated steps, each run gets those its protocol supports (default identify; "
-                   "available: identify, compare, residual)")
+                   "available: identify, compare, residual, presliding)")
     engine = p.add_mutually_exclusive_group()
     engine.add_argument("--serial", action="store_true", help="run in this process (no cluster)")
     engine.add_argument("--scheduler", metavar="tcp://HOST:8786", help="use a running Dask scheduler")

@@ -4,6 +4,7 @@ tail it is validated on, written as two run files; and against the plant: the C 
 Maxwell-slip model, so that family must score best and the residual loop must find nothing missing."""
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -51,10 +52,10 @@ def _one_row(spec: SyntheticCampaign, tmp_path: Path, step: str) -> dict:
 
 
 def test_each_step_runs_on_the_protocols_that_support_it():
-    wanted = ("identify", "compare", "residual")
-    assert steps_for("identification", wanted) == list(wanted)
-    assert steps_for("chirp", wanted) == list(wanted)
-    assert steps_for("stepped_sine", wanted) == [] and steps_for("presliding", wanted) == []
+    wanted = ("identify", "compare", "residual", "presliding")
+    assert steps_for("identification", wanted) == list(wanted[:3])
+    assert steps_for("chirp", wanted) == list(wanted[:3])
+    assert steps_for("stepped_sine", wanted) == [] and steps_for("presliding", wanted) == ["presliding"]
 
 
 def test_compare_step_is_hilbench_compare_on_the_head_and_tail(tmp_path):
@@ -96,3 +97,42 @@ def test_residual_step_is_hilbench_residual_on_the_head_and_tail(tmp_path):
 def test_a_run_too_short_for_the_residual_loop_is_a_failed_row_with_the_reason(tmp_path):
     row = _one_row(SyntheticCampaign(runs=1, duration=1.5, seed=5), tmp_path, "residual")
     assert row["status"] == "failed" and "too few moving rows" in row["error"]
+
+
+def test_presliding_step_is_hilbench_presliding_and_meets_the_truth(tmp_path):
+    """A displacement-driven linear record (40 Maxwell-slip elements of tests/truth: break-away 40 N, largest
+    element 0.1 mm; nested reversals, 20 mN noise), as tests/bench/test_presliding_command.py builds it, put in a
+    campaign as a presliding run."""
+    from tests.analysis.presliding.records import maxwell_force, smooth_path
+    from tests.truth.generator import elements
+
+    breakaway, largest = 40.0, 0.1e-3
+    k, w = elements(breakaway, largest, 40)
+    x = smooth_path(largest / 4, 40)
+    f = maxwell_force(x, k, w) + 0.02 * np.random.default_rng(3).standard_normal(x.size)
+    csv, folder = tmp_path / "tribo.csv", tmp_path / "c"
+    np.savetxt(csv, np.column_stack([np.arange(x.size) * 1e-3, x * 1e6, f * 1e3]), delimiter=",",
+               header="t,displacement,force", comments="", fmt="%.12g")
+    folder.mkdir()
+    assert main(["-q", "import", "csv", str(csv), "--linear", "--record", "displacement-driven", "--unit", "t=s",
+                 "--unit", "displacement=um", "--unit", "force=mN", "-o", str(folder / "p1.h5")]) == 0
+    (folder / "index.json").write_text(json.dumps({"runs": [
+        {"key": "p1", "name": "p", "repeat": 1, "protocol": "presliding", "file": "p1.h5", "status": "completed"}]}))
+    s = analyse([folder], tmp_path / "r", ("identify", "presliding"), replace(SETTINGS, presliding_replicates=6),
+                serial=True, **quiet)
+    rows = pq.read_table(s.table).to_pylist()
+    assert [r["step"] for r in rows] == ["presliding"]  # identify does not apply to a presliding run
+    row = rows[0]
+    assert row["status"] == "ok", row["error"]
+    assert main(["-q", "presliding", str(folder / "p1.h5"), "-o", str(tmp_path / "cmd"), "--replicates", "6"]) == 0
+    doc = json.loads((tmp_path / "cmd" / "presliding.json").read_text())
+    for name, column in (("breakaway", "presliding_breakaway"), ("initial_stiffness", "initial_stiffness"),
+                         ("presliding_distance", "presliding_distance")):
+        assert row[column] == pytest.approx(doc["quantities"][name]["value"], rel=1e-9)
+        assert row[f"{column}_se"] == pytest.approx(doc["quantities"][name]["std_uncertainty"], rel=1e-9)
+    assert row["validation_force_relative_error"] == pytest.approx(doc["validation"]["force_rms_error_relative"],
+                                                                   rel=1e-9)
+    # the truth: break-away 40 N to 2 %; its virgin curve 40*(1 - (1 - x/P)^2) reaches 90 % at P*(1 - sqrt(0.1))
+    assert row["presliding_breakaway"] == pytest.approx(breakaway, rel=0.02)
+    assert row["presliding_distance"] == pytest.approx(largest * (1 - np.sqrt(0.1)), rel=0.05)
+    assert row["validation_force_relative_error"] < 0.01
