@@ -15,6 +15,7 @@ import pytest
 from hilbench.bench.campaign_analysis.engine import analyse
 from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
 from hilbench.bench.cli import main
+from hilbench.drivers.device_url import stop_simulator
 
 pytestmark = pytest.mark.device_free
 
@@ -52,13 +53,8 @@ def remote(tmp_path_factory):
             client.wait_for_workers(1, timeout=60)
         yield address, file
     finally:
-        for p in reversed(procs):  # only the processes this fixture started
-            p.terminate()
-            try:
-                p.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+        for p in reversed(procs):  # only the processes this fixture started: terminate, reap (kill if stuck)
+            stop_simulator(p)
 
 
 @pytest.fixture(scope="module")
