@@ -626,6 +626,7 @@ class PreloadVariation(Term):
     def parameters(self, fit, nl, axis):
         u = _units(axis)
         c, cov = fit.term_coef(self.name), np.nan_to_num(fit.term_cov(self.name))
+        mode = nl.get("_presliding", "scaled")  # what of the presliding force follows the level (PRESLIDING_MODES)
         # relative to the sliding level of this fit (not the held start model's, which the unmodelled variation
         # biased: 0.46 against 0.60 N*m on an eccentric preload over 5 rad)
         level = sum(float(fit.term_coef(t.name)[0] + fit.term_coef(t.name)[1:] @ fit.setting.thresholds)
@@ -636,13 +637,13 @@ class PreloadVariation(Term):
             g = np.array([c[0], c[1]]) / amp if amp > 0 else np.zeros(2)
             se_amp = float(np.sqrt(max(g @ cov @ g, 0.0)))
             return ({"level_variation": amp, "phase": float(np.arctan2(c[1], c[0])),
-                     "relative_depth": amp / level if level > 0 else None,
+                     "relative_depth": amp / level if level > 0 else None, "presliding": mode,
                      "units": {"level_variation": u["torque"], "phase": "rad", "relative_depth": "1"}},
                     {"level_variation": se_amp, "relative_depth": se_amp / level if level > 0 else None})
         # linear: the level's change from one end of the training travel to the other is 2*a (P_1 = -1 .. +1)
         se = fit.term_se(self.name)
         return ({"level_variation": float(2 * c[0]), "slope": float(c[0] / nl["_half"]), "curvature": float(c[1]),
-                 "travel_mid": float(nl["_mid"]), "half_travel": float(nl["_half"]),
+                 "travel_mid": float(nl["_mid"]), "half_travel": float(nl["_half"]), "presliding": mode,
                  "units": {"level_variation": u["torque"], "slope": f"{u['torque']}/{u['position']}",
                            "curvature": u["torque"], "travel_mid": u["position"], "half_travel": u["position"]}},
                 {"level_variation": float(2 * se[0]), "slope": float(se[0] / nl["_half"]), "curvature": float(se[1])})
