@@ -301,7 +301,7 @@ SPRING_MARGIN = 1.5  # the spring element is added when the excursion exceeds th
 
 def with_spring_element(thresholds: np.ndarray, train: list[RunData]) -> np.ndarray:
     """The threshold grid plus one element as wide as the training runs' largest excursion from their start (the loop
-    adds it when the start model's residual still correlates with position, the ``position`` diagnostic).
+    adds it when the start model wants an element wider than its grid, :func:`_grid_truncated`).
 
     The grid ends at half the largest travel between reversals: an element wider than that never slips after a
     reversal. It still acts, as a linear spring k*(theta - theta_0), and the Maxwell-slip family contains it (the
