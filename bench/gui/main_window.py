@@ -23,6 +23,9 @@ from hilbench.drivers.device import refusal
 
 #: signals from worker threads always reach the GUI thread through its event queue
 QUEUED = QtCore.Qt.ConnectionType.QueuedConnection
+#: side panel widths, px: fixed, so a long status text wraps instead of pushing the centre around; with the
+#: centre they fit a 1280 px wide screen
+PANEL_WIDTHS = {"Device": 290, "Protocol": 330}
 ESTOP_STYLE = ("QPushButton { background: #d00000; color: white; font-size: 20px; font-weight: bold; "
                "border: 3px solid #800000; border-radius: 8px; padding: 12px 28px; }"
                "QPushButton:pressed { background: #800000; }")
@@ -100,12 +103,15 @@ class MainWindow(QtWidgets.QMainWindow):
             dock = QtWidgets.QDockWidget(panel.title(), self)
             dock.setObjectName(panel.title())
             dock.setWidget(panel)
+            panel.setFixedWidth(PANEL_WIDTHS.get(panel.title(), 300))
             panel.setTitle("")  # the dock's title bar names it
             dock.setFeatures(QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetMovable
                              | QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetFloatable)
             self.addDockWidget(area, dock)
+        for tabs in (self.tabs, self.protocol.tabs, self.browser.tabs):
+            tabs.currentChanged.connect(lambda _index: self._clear_error())
         self.statusBar().showMessage("not connected")
-        self.resize(1500, 900)
+        self.resize(1280, 800)
 
         # wiring
         self.connection.connect_requested.connect(self.connect_device)
@@ -132,6 +138,13 @@ class MainWindow(QtWidgets.QMainWindow):
         colour = "#c00000" if error else "#202020"
         self.banner.setText(f"<span style='color:{colour}'>{'Error: ' if error else ''}{text}</span>")
         self.statusBar().showMessage(text, 0 if error else 15000)
+
+    def _clear_error(self) -> None:
+        """A red error belongs to what the operator was doing; moving to another tab clears it (it stays in
+        ``self.messages``)."""
+        if self.messages and self.messages[-1][2]:
+            self.banner.setText("")
+            self.statusBar().clearMessage()
 
     # ------------------------------------------------------------------ device
     @property

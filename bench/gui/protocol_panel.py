@@ -11,6 +11,7 @@ from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
+from hilbench.bench.gui.elided_label import ElidedLabel
 from hilbench.bench.protocols import PROTOCOLS, ParameterSpec, Protocol, ProtocolError, make_protocol
 
 #: forms build the setpoints (to run their checks) up to this many samples; longer runs are checked at start
@@ -236,7 +237,12 @@ class ProtocolPanel(QtWidgets.QGroupBox):
     def __init__(self, parent: QtWidgets.QWidget | None = None, runs_dir: str | Path = "runs") -> None:
         super().__init__("Protocol", parent)
         self.runs_dir = Path(runs_dir)
+        # two tabs that fit a narrow side panel (five did not: three hid behind scroll arrows); the protocol is
+        # chosen in a list above its form
         self.tabs = QtWidgets.QTabWidget()
+        self.tabs.tabBar().setUsesScrollButtons(False)
+        self.protocol_box = QtWidgets.QComboBox()
+        self.stack = QtWidgets.QStackedWidget()
         self.forms: dict[str, ProtocolForm] = {}
         for name, cls in PROTOCOLS.items():
             form = ProtocolForm(cls)
@@ -244,19 +250,30 @@ class ProtocolPanel(QtWidgets.QGroupBox):
             scroll = QtWidgets.QScrollArea()
             scroll.setWidget(form)
             scroll.setWidgetResizable(True)
-            self.tabs.addTab(scroll, TITLES.get(name, name))
+            self.protocol_box.addItem(TITLES.get(name, name), name)
+            self.stack.addWidget(scroll)
             self.forms[name] = form
+        page = QtWidgets.QWidget()
+        page_layout = QtWidgets.QVBoxLayout(page)
+        page_layout.setContentsMargins(2, 4, 2, 2)
+        page_layout.addWidget(self.protocol_box)
+        page_layout.addWidget(self.stack, 1)
+        self.tabs.addTab(page, "Protocol")
         self.device_form = DeviceSettingsForm()
         self.device_form.changed.connect(self.validate)
         scroll = QtWidgets.QScrollArea()
         scroll.setWidget(self.device_form)
         scroll.setWidgetResizable(True)
         self.tabs.addTab(scroll, "Device settings")
-        self.tabs.currentChanged.connect(self._on_tab)
+        self.protocol_box.currentIndexChanged.connect(self._on_protocol)
+        self.tabs.currentChanged.connect(lambda _i: self.validate())
         self.summary = QtWidgets.QLabel("")
         self.summary.setWordWrap(True)
         self.out_edit = QtWidgets.QLineEdit()
-        self.out_edit.setToolTip("run file to write (HDF5); a new name is proposed after every run")
+        # the line edit shows the end of a long path; the label under it shows its start and end (elided in the
+        # middle) and the tooltip the whole path
+        self.out_label = ElidedLabel("")
+        self.out_edit.textChanged.connect(self._show_out)
         browse = QtWidgets.QPushButton("...")
         browse.setFixedWidth(30)
         browse.clicked.connect(self._browse)
@@ -283,6 +300,7 @@ class ProtocolPanel(QtWidgets.QGroupBox):
         out_row.addWidget(browse)
         meta = QtWidgets.QFormLayout()
         meta.addRow("Output", out_row)
+        meta.addRow("", self.out_label)
         meta.addRow("Operator", self.operator_edit)
         meta.addRow("Notes", self.notes_edit)
         buttons = QtWidgets.QHBoxLayout()
@@ -299,26 +317,28 @@ class ProtocolPanel(QtWidgets.QGroupBox):
         self.set_running(False)
         self.validate()
 
-    def _on_tab(self, index: int) -> None:
-        if index < len(self.forms):
-            self._protocol_index = index
-            self._new_out_name()
-            self.device_form.recommend(PROTOCOLS[self.current_name])
+    def _on_protocol(self, index: int) -> None:
+        self.stack.setCurrentIndex(index)
+        self._new_out_name()
+        self.device_form.recommend(PROTOCOLS[self.current_name])
         self.validate()
 
-    _protocol_index = 0
+    def _show_out(self, text: str) -> None:
+        self.out_edit.setToolTip(f"run file to write (HDF5); a new name is proposed after every run:\n{text}")
+        self.out_label.set_full_text(text)
 
     @property
     def current_name(self) -> str:
-        """The protocol of the last protocol tab shown (the device-settings tab keeps it)."""
-        return list(self.forms)[self._protocol_index]
+        """The protocol chosen in the list (the device-settings tab keeps it)."""
+        return list(self.forms)[max(0, self.protocol_box.currentIndex())]
 
     @property
     def current_form(self) -> ProtocolForm:
         return self.forms[self.current_name]
 
     def select(self, name: str) -> ProtocolForm:
-        self.tabs.setCurrentIndex(list(self.forms).index(name))
+        self.tabs.setCurrentIndex(0)
+        self.protocol_box.setCurrentIndex(list(self.forms).index(name))
         return self.forms[name]
 
     def _new_out_name(self) -> None:
@@ -380,7 +400,7 @@ class ProtocolPanel(QtWidgets.QGroupBox):
 
     def set_running(self, running: bool) -> None:
         self._running = running
-        self.tabs.setEnabled(not running)
+        self.tabs.setEnabled(not running)  # the protocol list and both forms
         self.out_edit.setEnabled(not running)
         self.start_button.setEnabled(not running)
         self.pause_button.setEnabled(running)

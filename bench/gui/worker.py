@@ -22,9 +22,12 @@ from hilbench.drivers import protocol as wire
 
 
 def one_line(exc: BaseException) -> str:
-    """An exception as one line for the status bar: ``Type: message``."""
+    """An exception as one line of words for the status bar: its message, never its class name (an operator
+    reads "device fault: ESTOP", not "DeviceFaultError: ..."); a message-less exception says so in words."""
     text = " ".join(str(exc).split())
-    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+    if isinstance(exc, KeyError) and text:  # str(KeyError('x')) is just "'x'"
+        return f"missing entry {text}"
+    return text or "an unexpected failure without a message"
 
 
 @dataclass
