@@ -18,6 +18,8 @@ from hilbench.analysis.identification.identify import Identification
 from hilbench.analysis.models.friction_model import AXES
 
 MEASURED = {"color": "0.15", "lw": 1.4}
+#: dots per model in the whole-record panel of the hysteresis figure
+MAX_DOTS = 3000
 MODEL_STYLES = ({"color": "tab:orange", "lw": 1.0, "ls": "--"}, {"color": "tab:blue", "lw": 1.0, "ls": ":"})
 
 
@@ -58,32 +60,15 @@ def busiest_window(t: np.ndarray, x: np.ndarray, length: float) -> tuple[int, in
     return int(i0[best]), int(i1[best])
 
 
-def _branch_means(x: np.ndarray, y: np.ndarray, bins: int = 100) -> list[tuple[str, np.ndarray, np.ndarray]]:
-    """Mean of ``y`` per displacement bin, separately while x rises and while it falls: the two branches of a
-    loop, readable where thousands of overlaid cycles are not. Empty bins are NaN (gaps)."""
-    from scipy.stats import binned_statistic
-
-    dx = np.gradient(x)
-    edges = np.linspace(np.nanmin(x), np.nanmax(x) + 1e-12 * max(1.0, abs(np.nanmax(x))), bins + 1)
-    centre = 0.5 * (edges[1:] + edges[:-1])
-    out = []
-    for name, m in (("x rising", dx > 0), ("x falling", dx < 0)):
-        if m.sum() < 2:
-            continue
-        mean = binned_statistic(x[m], y[m], "mean", bins=edges).statistic
-        out.append((name, centre, mean))
-    return out
-
-
 def hysteresis_figure(position: np.ndarray, measured: np.ndarray, models: Sequence[tuple[str, np.ndarray]],
                       units: dict, title: str, path: str | Path, t: np.ndarray | None = None,
                       window: float = 1.0) -> Path:
     """Friction (``units['torque']``) against displacement (``units['position']``), measured against one or two
     models, all shape (n,) on the same rows; ``t`` (s) picks the zoom window (:func:`busiest_window`).
 
-    Left, the whole record: thousands of overlaid cycles would be a solid blot, so the measured friction is drawn
-    as a sample density (grey, log scale) and each curve's mean per displacement bin and direction on top (the
-    two branches of the loop). Right, the window with the most reversals, every sample."""
+    Left, the whole record: thousands of overlaid cycles drawn as lines are a solid blot, so the measured friction
+    is drawn as a sample density (grey, log scale) and each model as dots of at most MAX_DOTS samples, evenly
+    spaced. Right, the window with the most reversals, every sample as lines."""
     from matplotlib.colors import LogNorm
 
     from hilbench.analysis.figure_style import engineering, plain_numbers
@@ -98,16 +83,15 @@ def hysteresis_figure(position: np.ndarray, measured: np.ndarray, models: Sequen
     i0, i1 = busiest_window(t, x, window)
     finite = np.isfinite(x) & np.isfinite(y)
     if finite.sum() > 1 and np.ptp(x[finite]) > 0 and np.ptp(y[finite]) > 0:
-        ax[0].hist2d(fx * x[finite], fy * y[finite], bins=(160, 100), cmap="Greys", norm=LogNorm(), rasterized=True)
-    curves = [("measured", y, MEASURED), *[(label, np.asarray(m, float), style)
-                                           for (label, m), style in zip(models, MODEL_STYLES, strict=False)]]
-    for label, values, style in curves:
-        for j, (_branch, xc, mean) in enumerate(_branch_means(x, values)):
-            colour = "tab:green" if style is MEASURED else style["color"]
-            ax[0].plot(fx * xc, fy * mean, color=colour, lw=1.3, ls=style.get("ls", "-"),
-                       label=f"{label}: mean per bin and direction" if j == 0 else None)
-    ax[0].set_title("whole record: measured sample density (grey), mean per 1/100 of the travel and direction",
-                    fontsize=9)
+        ax[0].hist2d(fx * x[finite], fy * y[finite], bins=(100, 60), cmap="Greys", norm=LogNorm(), rasterized=True)
+        ax[0].plot([], [], ls="none", marker="s", ms=7, color="0.45", label="measured: samples per cell (log)")
+    # the models as dots of every step-th sample (at most MAX_DOTS): lines through thousands of cycles are a blot
+    step = max(1, x.size // MAX_DOTS)
+    for (label, m), style in zip(models, MODEL_STYLES, strict=False):
+        ax[0].plot(fx * x[::step], fy * np.asarray(m, float)[::step], ls="none", marker=".", ms=1.5, alpha=0.35,
+                   color=style["color"], rasterized=True, label=f"{label}, every {step}th sample" if step > 1 else
+                   label)
+    ax[0].set_title("whole record: measured as sample density (grey, log scale), model as dots", fontsize=9)
     sl = slice(i0, i1)
     ax[1].plot(fx * x[sl], fy * y[sl], label="measured (torque - J*acceleration)", **MEASURED)
     for (label, m), style in zip(models, MODEL_STYLES, strict=False):
