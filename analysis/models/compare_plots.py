@@ -10,6 +10,14 @@ from hilbench.analysis.figure_style import engineering, plain_numbers
 from hilbench.analysis.models.compare import Comparison
 
 
+def _key():
+    """Legend entries of both figures: the model's colour is its panel's, so its entry is grey."""
+    from matplotlib.lines import Line2D
+
+    return [Line2D([], [], color="0.15", lw=1.6, label="measured"),
+            Line2D([], [], color="0.5", lw=1.2, ls="--", label="model (in the colour of its panel title)")]
+
+
 def write_plots(result: Comparison, outdir: str | Path, window_s: float = 2.0, loop_s: float = 0.3) -> list[Path]:
     """Write ``compare_hysteresis.png`` and ``compare_time.png`` into ``outdir`` (created); returns the paths.
 
@@ -66,7 +74,7 @@ def write_plots(result: Comparison, outdir: str | Path, window_s: float = 2.0, l
         ax.set_xlabel(f"filtered position ({xu})")
     for ax in axes[:, 0]:
         ax.set_ylabel(f"friction {u[2]} ({fu})")
-    fig.legend(*axes.flat[0].get_legend_handles_labels(), loc="outside lower center", ncol=2, frameon=False,
+    fig.legend(handles=_key(), loc="outside lower center", ncol=2, frameon=False,
                title=f"measured: L[{u[2]}] - J L[x''] - c0 with J, c0 of {fitted[0].name}; model: each family's "
                      "friction along the measured path")
     fig.suptitle(f"{val.name} (validation): friction against position, t = {t[flip]:.2f} … "
@@ -108,7 +116,7 @@ def write_plots(result: Comparison, outdir: str | Path, window_s: float = 2.0, l
         plain_numbers(a)
     for a in axes[-1]:
         a.set_xlabel("time (s)")
-    fig.legend(*axes[1, 1].get_legend_handles_labels(), loc="outside lower center", ncol=2, frameon=False)
+    fig.legend(handles=_key(), loc="outside lower center", ncol=2, frameon=False)
     fig.suptitle(f"{val.name} (validation): segmented simulation (restart every {result.segment_s:g} s) and "
                  f"{u[2]}, the {window_s:g} s with the most reversals")
     p2 = out / "compare_time.png"

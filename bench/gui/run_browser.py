@@ -275,6 +275,8 @@ class RunBrowser(QtWidgets.QWidget):
         except Exception as exc:
             self.message.emit(f"cannot open {path}: {one_line(exc)}", True)
             return False
+        if path != self.path_edit.text():  # the model of another run is not this run's: nothing to save
+            self.save_model_button.setEnabled(False)
         self.close_run()
         self.run = run
         self.path_edit.setText(path)
