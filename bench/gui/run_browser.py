@@ -348,7 +348,8 @@ class RunBrowser(QtWidgets.QWidget):
                 item = self.plot.addPlot(row=row, col=0)
                 item.showGrid(x=True, y=True, alpha=0.3)
                 item.addLegend(offset=(5, 5), labelTextColor="k")
-                item.getAxis("left").enableAutoSIPrefix(False)  # the unit stays the channel's unit
+                for side in ("left", "bottom"):  # the unit stays the channel's unit: no "(x0.001)"
+                    item.getAxis(side).enableAutoSIPrefix(False)
                 item.setClipToView(True)
                 item.setDownsampling(auto=True, mode="peak")
                 item.setLabel("left", f"{', '.join(members)} ({unit})")

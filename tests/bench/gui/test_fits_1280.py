@@ -195,6 +195,21 @@ def test_small_values_are_drawn_in_engineering_units():
     assert scaled_label("amplitude A (m)", [5e-6]) == (1e6, "amplitude A (µm)")
 
 
+def test_no_plot_axis_adds_a_multiplier_to_its_unit(window):
+    """pyqtgraph's automatic SI prefix wrote "position (rad) (x0.001)" on the live plot; every axis says its unit
+    in its label and nothing else."""
+    import pyqtgraph as pg
+
+    plots = [*window.live.plots]
+    window.browser.show_result(_result("good fit"))
+    plots += [item for item in window.browser.figures.ci.items if isinstance(item, pg.PlotItem)]
+    assert len(plots) >= 5
+    for plot in plots:
+        for side in ("left", "bottom"):
+            axis = plot.getAxis(side)
+            assert not axis.autoSIPrefix or not plot.getAxis(side).isVisible(), (side, axis.labelText)
+
+
 def _state(name: str, faults=(), counters=None) -> DeviceState:
     return DeviceState(name, list(faults), 1 if faults else 0, 10, 0.0, counters or {"host_crc_errors": 0})
 
