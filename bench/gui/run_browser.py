@@ -18,7 +18,7 @@ COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e
 #: analysis curves: the measurement dark and solid, a model orange and dashed, anything else from COLOURS with a
 #: line style of its own, so no two curves of a plot differ by colour alone
 MEASURED_PEN = {"color": "#202020", "width": 1}
-MODEL_PEN = {"color": "#ff7f0e", "width": 2, "style": QtCore.Qt.PenStyle.DashLine}
+MODEL_PEN = {"color": "#ff7f0e", "width": 1, "style": QtCore.Qt.PenStyle.DashLine}
 STYLES = (QtCore.Qt.PenStyle.SolidLine, QtCore.Qt.PenStyle.DashLine, QtCore.Qt.PenStyle.DotLine,
           QtCore.Qt.PenStyle.DashDotLine)
 #: a value longer than this goes above the table (wrapped), not into a cell
@@ -100,6 +100,9 @@ class RunBrowser(QtWidgets.QWidget):
         self.follow_box.setToolTip("re-read a file that is still being written (SWMR) once a second")
         self.follow_box.toggled.connect(self._on_follow)
         self.files = QtWidgets.QListWidget()
+        # a long file name is elided in the middle (its time stamp stays readable), whole in the tooltip
+        self.files.setTextElideMode(QtCore.Qt.TextElideMode.ElideMiddle)
+        self.files.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         # one click opens a run (Enter too); a double click would open it twice
         self.files.itemClicked.connect(lambda item: self.open(item.data(QtCore.Qt.ItemDataRole.UserRole)))
         self.files.itemActivated.connect(self._activated)
@@ -248,6 +251,7 @@ class RunBrowser(QtWidgets.QWidget):
         paths = sorted(self.runs_dir.glob("*.h5"), key=lambda p: p.stat().st_mtime, reverse=True)
         for p in paths:
             item = QtWidgets.QListWidgetItem(p.name)
+            item.setToolTip(str(p))
             item.setData(QtCore.Qt.ItemDataRole.UserRole, str(p))
             self.files.addItem(item)
 
