@@ -7,6 +7,7 @@ status and clears faults; a :class:`~bench.gui.worker.RunWorker` QThread runs ea
 
 from __future__ import annotations
 
+import html
 import threading
 import time
 from pathlib import Path
@@ -18,7 +19,7 @@ from hilbench.bench.gui.connection_panel import ConnectionPanel, identity_text
 from hilbench.bench.gui.live_plot import LivePlot
 from hilbench.bench.gui.protocol_panel import ProtocolPanel
 from hilbench.bench.gui.run_browser import RunBrowser
-from hilbench.bench.gui.worker import DeviceWorker, EStopLine, RunWorker
+from hilbench.bench.gui.worker import DeviceWorker, EStopLine, RunWorker, one_line
 from hilbench.drivers.device import refusal
 
 #: signals from worker threads always reach the GUI thread through its event queue
@@ -124,6 +125,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.protocol.start_requested.connect(self.start_run)
         self.protocol.pause_requested.connect(self.pause_run)
         self.protocol.abort_requested.connect(self.abort_run)
+        self.protocol.plan_requested.connect(self.start_plan)
         self.browser.message.connect(self.show_message)
         self.campaign.message.connect(self.show_message)
         self.campaign.start_requested.connect(self.start_campaign)
@@ -275,6 +277,52 @@ class MainWindow(QtWidgets.QMainWindow):
         self._start_worker(worker, "campaign")
         return True
 
+    def start_plan(self, target: str) -> bool:
+        """``hilbench plan`` from the window: a break-away probe on the connected device (run files in
+        ``runs/plan-probe-<time>/``, drawn live), then the campaign sized from it, written to ``target`` (TOML)
+        and put in the Campaign tab. Runs in the run thread, like a protocol."""
+        import importlib
+
+        from hilbench.bench.gui.protocol_panel import planning_unavailable
+
+        why = planning_unavailable()
+        if why:
+            self.show_message(f"Plan experiments: {why}", error=True)
+            return False
+        if self.running:
+            self.show_message("a run is already in progress", error=True)
+            return False
+        bench = self.device.bench
+        if bench is None or not self.connected:
+            self.show_message("connect to a device before planning experiments (the plan probes the motor)",
+                              error=True)
+            return False
+        if not str(target).strip():
+            self.show_message("choose a campaign file (.toml) for the plan", error=True)
+            return False
+        settings = self.protocol.settings if self.protocol.validate() is not None else bench.settings
+        plan_experiments = importlib.import_module("hilbench.bench.planning").plan_experiments
+        probe_dir = self.runs_dir / f"plan-probe-{time.strftime('%Y%m%d-%H%M%S')}"
+        self.current_out = str(probe_dir)
+        self.plan_target = str(target)
+        worker = RunWorker(lambda progress, control: plan_experiments(bench, settings, probe_dir=probe_dir,
+                                                                      progress=progress))
+        self._start_worker(worker, "plan")
+        self.show_message(f"planning: break-away probe on {self.device.url} (runs in {probe_dir})")
+        return True
+
+    def _plan_done(self, plan) -> None:
+        try:
+            plan.write(self.plan_target)
+        except Exception as exc:  # a bad name or a full disk: said, the plan's lines still shown
+            self.show_message(f"the plan could not be written to {self.plan_target}: {one_line(exc)}", error=True)
+            return
+        self.protocol.show_finished("plan written")
+        self.campaign.path_edit.setText(self.plan_target)
+        lines = plan.lines()
+        self.show_message(f"plan written to {self.plan_target} ({len(plan.runs)} runs): load it in the Campaign tab")
+        self.banner.setText(self.banner.text() + "".join(f"<br>{html.escape(line)}" for line in lines))
+
     def pause_run(self, paused: bool) -> None:
         if self.run_worker is None:
             return
@@ -328,6 +376,9 @@ class MainWindow(QtWidgets.QMainWindow):
             self.campaign.show_finished(text, error=states.count("completed") != len(states))
             self.protocol.show_finished("campaign finished")
             self.show_message(text)
+            return
+        if kind == "plan":
+            self._plan_done(result)
             return
         self.last_result = result
         self.protocol.show_finished(f"{result.status}: {result.samples} samples")

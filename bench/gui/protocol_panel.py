@@ -20,6 +20,17 @@ TITLES = {"identification": "Identification", "chirp": "Chirp", "stepped_sine": 
           "presliding": "Presliding"}
 
 
+def planning_unavailable() -> str:
+    """"" when ``bench.planning.plan_experiments`` (``hilbench plan``) is installed, else why not (one line)."""
+    import importlib
+
+    try:
+        module = importlib.import_module("hilbench.bench.planning")
+    except ImportError:
+        return "not available: hilbench.bench.planning is not part of this installation yet"
+    return "" if hasattr(module, "plan_experiments") else "not available: plan_experiments does not exist yet"
+
+
 def default_values(cls: type[Protocol]) -> dict[str, Any]:
     """Each field's dataclass default."""
     out = {}
@@ -231,6 +242,7 @@ class ProtocolPanel(QtWidgets.QGroupBox):
     :meth:`show_progress` and :meth:`show_finished`."""
 
     start_requested = QtCore.Signal(object, str, str, str, object)  # protocol, out, operator, notes, settings
+    plan_requested = QtCore.Signal(str)  # the campaign TOML the plan goes to
     pause_requested = QtCore.Signal(bool)
     abort_requested = QtCore.Signal()
 
@@ -288,6 +300,12 @@ class ProtocolPanel(QtWidgets.QGroupBox):
         self.abort_button = QtWidgets.QPushButton("Abort")
         self.abort_button.setToolTip("stop the run after the current block; the file is marked aborted")
         self.abort_button.clicked.connect(self.abort_requested)
+        self.plan_button = QtWidgets.QPushButton("Plan experiments...")
+        why = planning_unavailable()
+        self.plan_button.setToolTip(why or "probe the motor's break-away on the connected device (a few seconds, "
+                                           "within the device settings' limits) and write a campaign sized from it "
+                                           "(hilbench plan)")
+        self.plan_button.clicked.connect(self._on_plan)
         self.progress = QtWidgets.QProgressBar()
         self.progress.setRange(0, 1000)
         self.progress.setFormat("idle")
@@ -311,6 +329,7 @@ class ProtocolPanel(QtWidgets.QGroupBox):
         layout.addWidget(self.summary)
         layout.addLayout(meta)
         layout.addLayout(buttons)
+        layout.addWidget(self.plan_button)
         layout.addWidget(self.progress)
         layout.addWidget(self.eta_label)
         self._new_out_name()
@@ -391,6 +410,12 @@ class ProtocolPanel(QtWidgets.QGroupBox):
             return
         self.start_requested.emit(protocol, out, self.operator_edit.text(), self.notes_edit.text(), self.settings)
 
+    def _on_plan(self) -> None:
+        path, _ = QtWidgets.QFileDialog.getSaveFileName(self, "Campaign file for the plan",
+                                                        str(self.runs_dir / "plan.toml"), "campaign files (*.toml)")
+        if path:
+            self.plan_requested.emit(path)
+
     def _on_pause(self, paused: bool) -> None:
         self.pause_button.setText("Resume" if paused else "Pause")
         self.pause_requested.emit(paused)
@@ -405,6 +430,7 @@ class ProtocolPanel(QtWidgets.QGroupBox):
         self.start_button.setEnabled(not running)
         self.pause_button.setEnabled(running)
         self.abort_button.setEnabled(running)
+        self.plan_button.setEnabled(not running and not planning_unavailable())
         if not running:
             self.pause_button.blockSignals(True)
             self.pause_button.setChecked(False)

@@ -307,3 +307,58 @@ def test_the_model_is_saved_as_identify_writes_it_and_starts_the_residual_loop(w
     res = analyses.residual(load_record(str(run)), {"start_model": str(tmp_path / "gui.json")})
     shown = dict((q, v) for q, v, _u in res.numbers)
     assert shown["start model"].startswith("inertia, maxwell_slip, viscous") and said in res.warnings
+
+
+class _FakePlan:
+    runs = {"identification": object(), "chirp": object()}
+
+    def lines(self) -> list[str]:
+        return ["probe: 1 run(s), peak 7.5 A", "identification: amplitude 12 A <sized>"]
+
+    def write(self, path) -> None:
+        from pathlib import Path
+
+        Path(path).write_text("[defaults]\ndevice = \"sim://\"\n")
+
+
+def test_plan_experiments_calls_the_planner_with_the_connected_bench(window, qtbot, tmp_path, monkeypatch):
+    """The button's path: plan_experiments(bench, the form's device settings, probe_dir under the runs folder,
+    progress) in the run thread; the campaign TOML written where asked, put in the Campaign tab, the plan's lines
+    shown. bench.planning comes from another branch: here a stand-in module records the call."""
+    import sys
+    import types
+
+    calls = []
+
+    def plan_experiments(bench, settings, *, probe_dir, progress):
+        calls.append((bench, settings, probe_dir, progress))
+        return _FakePlan()
+
+    monkeypatch.setitem(sys.modules, "hilbench.bench.planning",
+                        types.SimpleNamespace(plan_experiments=plan_experiments))
+    assert not window.start_plan(str(tmp_path / "plan.toml"))  # not connected: refused in words
+    assert "connect to a device" in window.messages[-1][1]
+    bench = types.SimpleNamespace(settings=None)
+    monkeypatch.setattr(window.device, "bench", bench)
+    monkeypatch.setattr(window.device, "url", "sim://")
+    window.device_info = {"url": "sim://"}
+    try:
+        assert window.start_plan(str(tmp_path / "plan.toml"))
+        qtbot.waitUntil(lambda: window.run_worker is None, timeout=10000)
+    finally:
+        window.device_info = None
+    (called_bench, settings, probe_dir, progress), = calls
+    assert called_bench is bench and settings.current_limit == float(window.protocol.device_form.fields[
+        "current_limit"].text()) and str(probe_dir).startswith(str(window.runs_dir / "plan-probe-"))
+    assert callable(progress)
+    assert (tmp_path / "plan.toml").read_text().startswith("[defaults]")
+    assert window.campaign.path_edit.text() == str(tmp_path / "plan.toml")
+    assert "identification: amplitude 12 A &lt;sized&gt;" in window.banner.text()
+
+
+def test_without_the_planner_the_button_says_why(window, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "hilbench.bench.planning", None)  # import fails
+    assert not window.start_plan("plan.toml")
+    assert "not available" in window.messages[-1][1]
