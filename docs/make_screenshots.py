@@ -54,7 +54,8 @@ def main(argv: list[str] | None = None) -> int:
             if not spin(lambda: window.connected, 20):
                 print(f"make_screenshots: cannot connect: {window.messages[-1][1]}", file=sys.stderr)
                 return 1
-            # 0.5 s device watchdog: a busy shared machine can starve the host of 0.1 s (the default)
+            # 0.5 s device watchdog (the default; set here in case a config file lowers it): a busy shared machine
+            # can starve the host of 0.1 s
             window.protocol.device_form.set_value("watchdog_timeout", "0.5")
             form = window.protocol.select("identification")
             for key, value in {"duration": "5", "amplitude": "8", "period": "1", "cutoff": "100"}.items():
