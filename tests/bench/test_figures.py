@@ -172,3 +172,22 @@ def test_compare_figures_are_small_multiples_with_the_legend_outside(tmp_path):
     time = figures["compare_time.png"]
     assert len(time.axes) == 2 * 4 and all(len(ax.get_lines()) <= 2 + 1 for ax in time.axes)
     assert all(ax.get_legend() is None for ax in time.axes) and len(time.legends) == 1
+
+
+def test_engineering_units_and_gaps_against_hand_values():
+    from hilbench.analysis.figure_style import engineering, with_gaps
+
+    assert engineering("rad", [0.05, -0.02]) == (1e3, "mrad")
+    assert engineering("rad", [0.1]) == (1.0, "rad")  # 0.1 rad reads well as it is
+    assert engineering("rad", [5e-5]) == (1e6, "µrad")
+    assert engineering("N*m", [np.nan, -0.01]) == (1e3, "mN*m")  # NaN ignored, sign ignored
+    assert engineering("rad/s", [0.002]) == (1e3, "mrad/s")
+    for unit in ("mrad", "mm", "mN*m", "1", "%", "s", "Hz", "kg*m^2", ""):
+        assert engineering(unit, [1e-5]) == (1.0, unit)
+    assert engineering("rad", [0.0]) == (1.0, "rad") and engineering("rad", []) == (1.0, "rad")
+    x = np.array([1.0, 2.0, 4.0, 8.0, 64.0, 128.0])  # log steps ln 2, one of ln 8: one break
+    gx, gy = with_gaps(x, 10 * x)
+    np.testing.assert_array_equal(np.isnan(gx), [False] * 4 + [True] + [False] * 2)
+    np.testing.assert_array_equal(gy[~np.isnan(gy)], 10 * x)
+    lx, = with_gaps(np.array([0.0, 1.0, 2.0, 3.0, 4.0, 10.0]), log=False)
+    assert np.isnan(lx[5]) and lx.size == 7
