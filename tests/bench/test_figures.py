@@ -191,3 +191,19 @@ def test_engineering_units_and_gaps_against_hand_values():
     np.testing.assert_array_equal(gy[~np.isnan(gy)], 10 * x)
     lx, = with_gaps(np.array([0.0, 1.0, 2.0, 3.0, 4.0, 10.0]), log=False)
     assert np.isnan(lx[5]) and lx.size == 7
+
+
+def test_presliding_figures_are_readable_with_the_legend_below():
+    """Issue 28: the presliding legends were 6-7 pt inside the data; now one legend per figure below the axes at
+    8.5 pt or more, ticks in mrad (a 2^16 counts/rev ramp of 20 counts spans 1.9 mrad), no offset text."""
+    from hilbench.analysis.presliding.analyse import analyse, figures
+    from tests.analysis.presliding.test_edges import record
+
+    _theta, x, force, _k, _w = record()
+    res = analyse(np.arange(x.size) / 1e4, x, force, 1e4, counts_per_rev=65536, replicates=2)
+    for name, fig in figures(res).items():
+        fig.canvas.draw()
+        assert not figure_problems(fig), (name, figure_problems(fig))
+        assert len(fig.legends) == 1 and all(ax.get_legend() is None for ax in fig.axes), name
+        assert min(t.get_fontsize() for t in fig.legends[0].get_texts()) >= 8.5, name
+        assert "(mrad" in fig.axes[0].get_xlabel(), name
