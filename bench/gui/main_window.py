@@ -7,7 +7,6 @@ status and clears faults; a :class:`~bench.gui.worker.RunWorker` QThread runs ea
 
 from __future__ import annotations
 
-import html
 import threading
 import time
 from pathlib import Path
@@ -318,10 +317,15 @@ class MainWindow(QtWidgets.QMainWindow):
             self.show_message(f"the plan could not be written to {self.plan_target}: {one_line(exc)}", error=True)
             return
         self.protocol.show_finished("plan written")
+        self.plan_lines = plan.lines()
+        # the campaign tab shows the planned runs; the plan's lines (probe findings, each run sized) are the
+        # banner's tooltip: several lines would not fit the banner row
         self.campaign.path_edit.setText(self.plan_target)
-        lines = plan.lines()
-        self.show_message(f"plan written to {self.plan_target} ({len(plan.runs)} runs): load it in the Campaign tab")
-        self.banner.setText(self.banner.text() + "".join(f"<br>{html.escape(line)}" for line in lines))
+        self.campaign.load()
+        self.tabs.setCurrentWidget(self.campaign)
+        self.show_message(f"plan written to {self.plan_target} ({len(plan.runs)} runs), loaded in the Campaign tab "
+                          f"(hover here for the plan)")
+        self.banner.setToolTip("\n".join(self.plan_lines))
 
     def pause_run(self, paused: bool) -> None:
         if self.run_worker is None:

@@ -353,7 +353,8 @@ def test_plan_experiments_calls_the_planner_with_the_connected_bench(window, qtb
     assert callable(progress)
     assert (tmp_path / "plan.toml").read_text().startswith("[defaults]")
     assert window.campaign.path_edit.text() == str(tmp_path / "plan.toml")
-    assert "identification: amplitude 12 A &lt;sized&gt;" in window.banner.text()
+    assert window.banner.toolTip().splitlines() == _FakePlan().lines()
+    assert "loaded in the Campaign tab" in window.banner.text() and window.tabs.currentWidget() is window.campaign
 
 
 def test_without_the_planner_the_button_says_why(window, monkeypatch):
