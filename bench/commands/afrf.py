@@ -9,7 +9,7 @@ MAX_FREQUENCIES = 1000  # simulated grid points per amplitude: each is a separat
 
 
 def register(subparsers) -> None:
-    from hilbench.bench.analysis_input import add_record_options
+    from hilbench.bench.analysis_input import add_memory_option, add_record_options
 
     parser = subparsers.add_parser(
         "afrf",
@@ -40,6 +40,7 @@ def register(subparsers) -> None:
     parser.add_argument("--json", metavar="OUT.json", help="write the AFRF as JSON ('-': stdout)")
     parser.add_argument("--plot", metavar="OUT.png", help="write the paper-style figure")
     add_record_options(parser)
+    add_memory_option(parser)
     parser.set_defaults(func=run)
 
 
@@ -100,18 +101,41 @@ def _summary(result) -> str:
     return "\n".join(lines)
 
 
+def _measured(args):
+    """The AFRF of ``args.run``: read whole when it fits ``--memory``, else one step window at a time (the same
+    result); a one-line BenchError, before reading the samples, when neither fits."""
+    from hilbench.analysis import afrf
+    from hilbench.analysis.afrf.steps import largest_window
+    from hilbench.bench.analysis_input import memory_budget
+    from hilbench.bench.analysis_progress import progress_bar
+    from hilbench.bench.errors import BenchError
+
+    budget = memory_budget(args.memory)
+    record, windows = afrf.stream_header(args.run, args.allow_incomplete)
+    with progress_bar("afrf") as progress:
+        if afrf.array_cost(record.n_samples) <= budget or record.position is not None:
+            return afrf.analyse(afrf.load(args.run, allow_incomplete=args.allow_incomplete), progress=progress)
+        window = largest_window(windows)
+        if afrf.stream_cost(window) > budget:
+            raise BenchError(f"{args.run}: its longest step window ({window} samples) needs about "
+                             f"{afrf.stream_cost(window) >> 20} MiB, over --memory {budget >> 20} MiB: raise --memory")
+        return afrf.analyse_stream(args.run, allow_incomplete=args.allow_incomplete, progress=progress)
+
+
 def run(args) -> int:
-    from hilbench.analysis.afrf.frf import afrf_from_run, plot_afrf
+    from hilbench.analysis.afrf.frf import plot_afrf
     from hilbench.bench import outputs
 
     if (args.run is None) == (args.model is None):
         raise ValueError("give either a stepped-sine RUN.h5 or --model (not both)")
     outputs.refuse_inputs({"--json": args.json, "--plot": args.plot}, [args.run])
     if args.run:
-        result = afrf_from_run(args.run, allow_incomplete=args.allow_incomplete)
+        result = _measured(args)
         if result.settings.get("incomplete"):
             print(f"warning: INCOMPLETE RECORD {args.run}: {result.settings['incomplete']} "
                   "(analysed with --allow-incomplete)", file=sys.stderr)
+        for line in result.warnings:
+            print(f"hilbench afrf: warning: {line}", file=sys.stderr)
     else:
         result = _simulate(args)
     outputs.say(_summary(result), args.json)
