@@ -117,9 +117,8 @@ def _as_signal(name: str, a, n: int | None = None) -> np.ndarray:
     return arr
 
 
-def spectral_extent(x: np.ndarray, fs: float) -> tuple[float, float, float]:
-    """Frequencies (Hz) at the 0.1 % and 99.9 % quantiles of the detrended energy spectrum of x, widened by
-    one octave each side (f_lo/2, 2*f_hi), and the frequency of the spectral peak."""
+def detrended_energy(x: np.ndarray) -> np.ndarray:
+    """Energy spectrum |rFFT|^2 of x after removing its least-squares line (DC bin zeroed), shape (n//2 + 1,)."""
     n = x.size
     idx = np.arange(n)
     xd = x - np.polyval(np.polyfit(idx, x, 1), idx) if n > 2 else x - x.mean()
@@ -127,6 +126,11 @@ def spectral_extent(x: np.ndarray, fs: float) -> tuple[float, float, float]:
         raise AnalysisError("signal is constant: no oscillation to analyse")
     energy = np.abs(sfft.rfft(xd)) ** 2
     energy[0] = 0.0
+    return energy
+
+
+def extent_of_energy(energy: np.ndarray, fs: float, n: int) -> tuple[float, float, float]:
+    """:func:`spectral_extent` from an energy spectrum on the grid k*fs/n (n: the transform's length)."""
     total = energy.sum()
     if not total > 0:
         raise AnalysisError("signal is constant: no oscillation to analyse")
@@ -137,13 +141,25 @@ def spectral_extent(x: np.ndarray, fs: float) -> tuple[float, float, float]:
     return float(f_lo), float(min(f_hi, fs / 2)), float(f[np.argmax(energy)])
 
 
+def spectral_extent(x: np.ndarray, fs: float) -> tuple[float, float, float]:
+    """Frequencies (Hz) at the 0.1 % and 99.9 % quantiles of the detrended energy spectrum of x, widened by
+    one octave each side (f_lo/2, 2*f_hi), and the frequency of the spectral peak."""
+    return extent_of_energy(detrended_energy(x), fs, x.size)
+
+
 def default_band(x: np.ndarray, fs: float, fb: float, fc: float, coi: float) -> tuple[float, float]:
     """Wavelet analysis band (Hz): ``spectral_extent`` of x, no lower than the frequency whose wavelet
     (+-coi time-widths) fits in the record, no higher than what fs resolves with the wavelet's bandwidth."""
-    t_rec = x.size / fs
+    return band_of_extent(x.size, fs, spectral_extent(x, fs), fb, fc, coi)
+
+
+def band_of_extent(n: int, fs: float, extent: tuple[float, float, float], fb: float, fc: float, coi: float
+                   ) -> tuple[float, float]:
+    """:func:`default_band` of a record of ``n`` samples whose :func:`spectral_extent` is ``extent``."""
+    t_rec = n / fs
     f_floor = 2.0 * coi * fc * math.sqrt(fb / 2.0) / t_rec
     f_ceil = 0.45 * fs / (1.0 + 6.0 * relative_bandwidth(fb, fc))
-    f_lo, f_hi, f_peak = spectral_extent(x, fs)
+    f_lo, f_hi, f_peak = extent
     if f_floor > min(f_hi / 2.0, f_peak):
         raise AnalysisError(
             f"record of {t_rec:.4g} s is too short for cmor{fb}-{fc}: below {f_floor:.4g} Hz its wavelet "

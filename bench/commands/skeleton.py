@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from hilbench.bench.analysis_input import add_record_options, whole_number
+    from hilbench.bench.analysis_input import add_memory_option, add_record_options, whole_number
 
     parser = subparsers.add_parser(
         "skeleton",
@@ -50,133 +49,56 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--torque-channel", default=None, metavar="NAME",
                         help="force channel (default: torque if present, else torque_cmd; as identify)")
     add_record_options(parser)
+    add_memory_option(parser)
     parser.set_defaults(func=run)
 
 
-def _mass(args, runs) -> float:
-    from hilbench.bench.errors import BenchError
+def _analyse(args, settings):
+    """The skeleton of ``args.runs``: read whole when they fit ``--memory``, else chunk by chunk into decimated
+    copies (docs/long-runs.md); a one-line error before the samples are read when neither fits."""
+    from hilbench.analysis import skeleton
+    from hilbench.analysis.record import stream_record
+    from hilbench.bench.analysis_input import load, memory_budget
+    from hilbench.bench.analysis_progress import progress_bar
 
-    if args.mass is not None:
-        mass = args.mass
-    else:
-        declared = [r.calibration.get("inertia") for r in runs]
-        if any(m is None for m in declared):
-            raise BenchError("no --mass given and a run declares no inertia in its calibration")
-        mass = float(declared[0])
-    if not (math.isfinite(mass) and mass > 0):
-        raise BenchError(f"--mass must be positive, got {mass}")
-    return mass
-
-
-def centred_force(torque, timing: str):
-    """Torque at the sample instants t_k from a logged channel: a value averaged over [t_k-1, t_k)
-    (``hold_previous``) or held over [t_k, t_k+1) (``hold_next``) is centred half a sample off, which biases
-    ForceVib's damping by ~5 %; the mean of two neighbours is centred on t_k (ends repeated)."""
-    import numpy as np
-
-    f = np.asarray(torque, float)
-    if timing == "hold_previous":
-        return 0.5 * (f + np.append(f[1:], f[-1]))
-    if timing == "hold_next":
-        return 0.5 * (f + np.insert(f[:-1], 0, f[0]))
-    return f
+    budget = memory_budget(args.memory)
+    opts = {"torque_channel": args.torque_channel, "allow_incomplete": args.allow_incomplete}
+    heads = [stream_record(p, **opts) for p in args.runs]
+    samples = sum(h[0].n_samples for h in heads)
+    with progress_bar("skeleton") as progress:
+        if skeleton.array_cost(samples) <= budget or any(src is None for _, src in heads):
+            return skeleton.analyse([load(p, args) for p in args.runs], settings, progress=progress)
+        return skeleton.analyse_stream(args.runs, settings, budget=budget, progress=progress, **opts)
 
 
 def run(args: argparse.Namespace) -> int:
-    from hilbench.analysis.skeleton.forcevib import compose, forcevib
+    from hilbench.analysis.skeleton import SkeletonSettings
     from hilbench.bench import outputs
-    from hilbench.bench.analysis_input import MAX_BINS, check_count, load
-    from hilbench.bench.errors import BenchError
+    from hilbench.bench.analysis_input import MAX_BINS, check_count
 
     outputs.refuse_inputs({"--json": args.json, "--plot": args.plot}, args.runs)
     check_count(args.bins, "--bins", 1, MAX_BINS, "log-spaced bins per skeleton curve")
-    runs = [load(p, args) for p in args.runs]
-    if len({r.axis for r in runs}) > 1:
-        raise BenchError("runs mix rotary and linear axes")
-    if not (math.isfinite(args.spring) and args.spring >= 0):
-        raise BenchError(f"--spring must be >= 0, got {args.spring}")
-    mass = _mass(args, runs)
-    options = {"fb": args.fb, "fc": args.fc} if args.method == "cwt" else {}
-    if args.band:
-        options["freq_range"] = tuple(args.band)
-    results = []
-    for r in runs:
-        force = centred_force(r.torque, r.timing)
-        outputs.say(f"{r.name}: torque timing of {r.torque_channel}: {r.timing} ({r.timing_origin})", level=2)
-        results.append(forcevib(r.position, force, r.sample_rate, mass, args.method, spring=args.spring, **options))
-    pos, trq = ("rad", "N*m") if runs[0].axis == "rotary" else ("m", "N")
-    for r, res in zip(runs, results, strict=True):
-        v = res.valid
-        outputs.say(f"{r.path.name}: {v.sum()} valid samples, A {res.amplitude[v].min():.4g} .. "
-                    f"{res.amplitude[v].max():.4g} {pos}", args.json)
-    curves = compose(results, n_bins=args.bins, method=args.compose)
-    warnings = _stiffness_warnings(curves, pos, trq, args.spring, mass)
-    doc = {
-        "runs": [str(p) for p in args.runs],
-        "incomplete": {str(r.path): r.incomplete for r in runs if r.incomplete is not None},
-        "mass": mass,
-        "spring": args.spring,
-        "method": args.method,
-        "compose": args.compose,
-        "units": {
-            "amplitude": pos,
-            "stiffness": f"{trq}/{pos}",
-            "restoring_force": trq,
-            "energy": f"{trq}*{pos}",
-            "velocity": f"{pos}/s",
-            "damping": f"{trq}*s/{pos}",
-            "damping_force": trq,
-        },
-        **{
-            k: getattr(curves, k).tolist()
-            for k in (
-                "amplitude",
-                "stiffness",
-                "restoring_force",
-                "energy",
-                "amplitude_count",
-                "velocity",
-                "damping",
-                "damping_force",
-                "velocity_count",
-            )
-        },
-    }
-    doc["warnings"] = warnings
+    settings = SkeletonSettings(mass=args.mass, spring=args.spring, method=args.method, fb=args.fb, fc=args.fc,
+                                band=tuple(args.band) if args.band else None, bins=args.bins, compose=args.compose)
+    result = _analyse(args, settings)
+    curves, u = result.curves, result.units
+    pos, trq = u["amplitude"], u["restoring_force"]
+    for r in result.per_run:
+        outputs.say(f"{r['run']}: {r['valid_samples']} valid samples, A {r['amplitude_min']:.4g} .. "
+                    f"{r['amplitude_max']:.4g} {pos}" + ("" if r["read"] == "whole" else f" ({r['read']})"), args.json)
     outputs.say(
-        f"composed {len(results)} runs: {curves.amplitude.size} amplitude bins "
+        f"composed {len(result.runs)} runs: {curves.amplitude.size} amplitude bins "
         f"({curves.amplitude.min():.4g} .. {curves.amplitude.max():.4g} {pos}), k_eq "
         f"{curves.stiffness.max():.4g} .. {curves.stiffness.min():.4g} {trq}/{pos}", args.json
     )
-    for w in warnings:
+    for w in result.warnings:
         print(f"hilbench skeleton: warning: {w}", file=sys.stderr)
     if args.json:
-        outputs.write_json(args.json, doc)
+        outputs.write_json(args.json, result.to_dict())
     if args.plot:
-        outputs.save_figure(skeleton_figure(curves, [r.name for r in runs], pos, trq), args.plot, dpi=110,
+        outputs.save_figure(skeleton_figure(curves, result.names, pos, trq), args.plot, dpi=110,
                             bbox_inches="tight")
     return 0
-
-
-def _stiffness_warnings(curves, pos: str, trq: str, spring: float, mass: float) -> list[str]:
-    """A negative k_eq is no stiffness: say so, and refuse when no bin is positive."""
-    import numpy as np
-
-    from hilbench.bench.errors import BenchError
-
-    k = np.asarray(curves.stiffness, float)
-    neg = np.isfinite(k) & (k < 0)
-    if not neg.any():
-        return []
-    a = np.asarray(curves.amplitude, float)[neg]
-    mass_unit = "kg*m^2" if pos == "rad" else "kg"
-    why = (f"the restoring force is negative: --spring {spring:g} {trq}/{pos} is larger than the system's spring, "
-           f"--mass {mass:g} {mass_unit} is too large, or the system has no restoring force at these amplitudes "
-           "(no spring, free sliding), where the skeleton method does not apply")
-    if neg.all():
-        raise BenchError(f"k_eq < 0 in every amplitude bin: {why}")
-    return [f"k_eq < 0 in {int(neg.sum())} of {k.size} amplitude bins (A {a.min():.3g} .. {a.max():.3g} {pos}): "
-            f"{why}"]
 
 
 def skeleton_figure(curves, names: list[str], pos: str, trq: str):

@@ -78,6 +78,6 @@ def test_skeleton_cli_errors(tmp_path, capsys):
     [("hold_previous", [1.5, 2.5, 3.0]), ("hold_next", [1.0, 1.5, 2.5]), ("instant", [1.0, 2.0, 3.0])],
 )
 def test_centred_force(timing, expect):
-    from hilbench.bench.commands.skeleton import centred_force
+    from hilbench.analysis.skeleton import centred_force
 
     np.testing.assert_allclose(centred_force(np.array([1.0, 2.0, 3.0]), timing), expect)
