@@ -6,15 +6,14 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 OUTPUT_FILES = ("presliding.json", "summary.md", "reversals.csv", "loops.png", "virgin.png")
-#: run-file channels that hold no force: refused as --torque-channel
-NOT_FORCE = ("t", "sample_index", "position", "position_cmd", "velocity", "velocity_cmd", "counts")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from hilbench.bench.analysis_input import add_record_options, whole_number
+    from hilbench.bench.analysis_input import add_memory_option, add_record_options, whole_number
 
     parser = subparsers.add_parser(
         "presliding",
@@ -46,6 +45,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "step measured from the data)")
     parser.add_argument("--torque-channel", default=None, metavar="NAME", help="force channel (default torque)")
     add_record_options(parser)
+    add_memory_option(parser)
     parser.set_defaults(func=run)
 
 
@@ -66,11 +66,13 @@ def _check(args) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hilbench.analysis.presliding.analyse import analyse, figures, table_csv, table_markdown
+    from hilbench.analysis import presliding
     from hilbench.analysis.presliding.identify import PreslidingSettings
-    from hilbench.analysis.presliding.report import protocol_inertia, report, summary_lines, summary_markdown
+    from hilbench.analysis.presliding.report import summary_lines
+    from hilbench.analysis.record import stream_record
     from hilbench.bench import outputs
-    from hilbench.bench.analysis_input import load
+    from hilbench.bench.analysis_input import load, memory_budget
+    from hilbench.bench.analysis_progress import progress_bar
     from hilbench.bench.errors import BenchError
 
     _check(args)
@@ -80,28 +82,29 @@ def run(args: argparse.Namespace) -> int:
     present = [p.name for p in targets.values() if p.exists()]
     if present and not args.overwrite:
         raise BenchError(f"{out} holds {', '.join(present)} already; use --overwrite or another folder")
-    rf = load(args.run, args)
-    if rf.kind != "displacement-driven":
-        raise BenchError(f"{args.run}: a {rf.kind} record; presliding needs a displacement-driven one "
-                         "(hilbench import ... --record displacement-driven, or a presliding protocol run)")
-    name, x, force = rf.torque_channel, rf.position, rf.torque
-    if name in NOT_FORCE:  # a position taken as the force overflowed the fit (issue 30 item 12)
-        raise BenchError(f"--torque-channel {args.torque_channel}: {name!r} is not a force or torque channel")
-    cpr = args.counts_per_rev if args.counts_per_rev is not None else rf.calibration.get("counts_per_rev")
-    inertia = args.inertia if args.inertia is not None else protocol_inertia(rf.protocol_params, args.run)
-    settings = PreslidingSettings(inertia=inertia, viscous=not args.no_viscous, coulomb=args.coulomb,
-                                  n_thresholds=args.thresholds)
-    res = analyse(rf.t, x, force, rf.sample_rate, rf.axis, settings, counts_per_rev=cpr,
-                  hysteresis=args.hysteresis, fraction=args.fraction, replicates=args.replicates)
-    doc = report(res, args.run, name)
-    doc["incomplete"] = rf.incomplete
-    out.mkdir(parents=True, exist_ok=True)
-    outputs.write_json(targets["presliding.json"], doc, indent=2)  # strict JSON: a NaN is written as null
-    outputs.write_text(targets["reversals.csv"], table_csv(res))
-    outputs.write_text(targets["summary.md"], summary_markdown(doc, table_markdown(res)))
-    for key, fig in figures(res).items():
-        outputs.save_figure(fig, targets[f"{key}.png"], dpi=110)
+    budget = memory_budget(args.memory)
+    head, source = stream_record(args.run, torque_channel=args.torque_channel, allow_incomplete=args.allow_incomplete)
+    settings = PreslidingSettings(viscous=not args.no_viscous, coulomb=args.coulomb, n_thresholds=args.thresholds)
+    options = {"inertia": args.inertia, "counts_per_rev": args.counts_per_rev, "hysteresis": args.hysteresis,
+               "fraction": args.fraction, "replicates": args.replicates}
+    whole = presliding.array_cost(head.n_samples) <= budget or source is None
+    if not whole and presliding.stream_cost(head.n_samples) > budget:
+        raise BenchError(f"{args.run}: needs about {presliding.stream_cost(head.n_samples) >> 20} MiB even read "
+                         f"chunk by chunk, over --memory {budget >> 20} MiB: raise --memory")
+    with progress_bar("presliding") as progress:
+        if whole:
+            rec = load(args.run, args)
+            res, read = presliding.analyse(rec, settings, **options), "whole"
+        else:
+            res, rec = presliding.analyse_stream(args.run, settings, torque_channel=args.torque_channel,
+                                                 allow_incomplete=args.allow_incomplete, progress=progress,
+                                                 **options)
+            read = "chunk by chunk (--memory)"
+    doc = presliding.document(res, rec, read)
+    presliding.report(res, out, doc)
     for line in summary_lines(doc):
         outputs.say(line)
+    for line in res.warnings:
+        print(f"hilbench presliding: warning: {line}", file=sys.stderr)
     outputs.say(f"-> {out}/ ({', '.join(OUTPUT_FILES)})")
     return 0
