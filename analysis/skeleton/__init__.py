@@ -33,8 +33,10 @@ CHIRP_PROTOCOLS = ("chirp",)
 #: per-sample estimates), and the fixed part
 ARRAY_BYTES_PER_SAMPLE = 320
 ARRAY_BYTES_FIXED = 160 << 20
-#: the streamed path: one chunk and one spectrum segment (fixed), then ForceVib on the decimated copy
+#: the streamed path: one chunk and one spectrum segment (fixed), then ForceVib on the decimated copy (per sample
+#: of the copy: the analytic signal, its ratios and the per-sample estimates)
 STREAM_BYTES_FIXED = 200 << 20
+DECIMATED_BYTES_PER_SAMPLE = 320
 CURVE_NAMES = ("amplitude", "stiffness", "restoring_force", "energy", "amplitude_count", "velocity", "damping",
                "damping_force", "velocity_count")
 
@@ -276,7 +278,7 @@ def stream_cost(samples: int, q: int) -> int:
     """Estimated peak bytes of :func:`analyse_stream` on a run of ``samples`` decimated by ``q``."""
     from hilbench.analysis.skeleton.streaming import SEGMENT
 
-    return STREAM_BYTES_FIXED + 16 * SEGMENT + ARRAY_BYTES_PER_SAMPLE * (-(-int(samples) // max(1, q)))
+    return STREAM_BYTES_FIXED + 16 * SEGMENT + DECIMATED_BYTES_PER_SAMPLE * (-(-int(samples) // max(1, q)))
 
 
 def report(result: SkeletonResult, out_dir: str | Path,
