@@ -148,7 +148,10 @@ def skeleton(run, options: dict | None = None) -> AnalysisResult:
         Figure("damping force skeleton", f"velocity amplitude V ({pos_unit}/s)", f"F_d ({tq_unit})",
                [("c_eq V", v, fd)], scatter=True),
     ]
-    return AnalysisResult(TITLES["skeleton"], numbers, figures)
+    from hilbench.analysis.skeleton import not_chirp_warning  # a non-chirp run gives F_k of -2e4 N*m (issue 28)
+
+    line = not_chirp_warning(os.path.basename(run.path), run.protocol_name)
+    return AnalysisResult(TITLES["skeleton"], numbers, figures, [line] if line else [])
 
 
 def afrf(run, options: dict | None = None) -> AnalysisResult:
@@ -172,7 +175,7 @@ def afrf(run, options: dict | None = None) -> AnalysisResult:
     why = res.settings.get("incomplete")
     name = os.path.basename(run.path)
     warnings = [f"INCOMPLETE RECORD {name}: {why} (analysed with --allow-incomplete)"] if why else []
-    return AnalysisResult(TITLES["afrf"], numbers, figures, warnings)
+    return AnalysisResult(TITLES["afrf"], numbers, figures, warnings + list(res.warnings))
 
 
 def residual(run, options: dict | None = None) -> AnalysisResult:
@@ -253,7 +256,11 @@ def presliding(run, options: dict | None = None) -> AnalysisResult:
     if res.edge_rolling is not None:
         virgin.curves.append((f"parametric on the edge points ({res.edge_rolling.exponent_text()})", grid,
                               res.edge_rolling.virgin_curve(grid)))
-    return AnalysisResult(TITLES["presliding"], numbers, [loops, virgin], list(res.resolution.lines))
+    from hilbench.analysis.presliding import reversal_warning
+
+    few = reversal_warning(res)
+    return AnalysisResult(TITLES["presliding"], numbers, [loops, virgin], list(res.resolution.lines) + ([few] if few
+                                                                                                      else []))
 
 
 ANALYSES: dict[str, Callable] = {"identification": identification, "skeleton": skeleton, "afrf": afrf,
