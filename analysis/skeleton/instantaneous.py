@@ -176,11 +176,24 @@ def band_of_extent(n: int, fs: float, extent: tuple[float, float, float], fb: fl
     return float(f_lo), float(f_hi)
 
 
-def _pick_hop(n: int, fs: float, scales: np.ndarray, fb: float, fc: float) -> int:
+def _hop(fs: float, scales: np.ndarray, fb: float, fc: float) -> int:
+    """Columns of the |W| map are ``hop`` samples apart: a power of two, at most a quarter of the narrowest
+    wavelet's time width and one period of the band's top frequency (with its bandwidth)."""
     sig_min = float(time_width(scales.min(), fb)) * fs
     f_top = fc / scales.min() * (1.0 + 6.0 * relative_bandwidth(fb, fc))
     hop_max = max(1, min(int(sig_min / 4.0), int(fs / f_top)))
-    hop = 1 << int(math.floor(math.log2(hop_max)))
+    return 1 << int(math.floor(math.log2(hop_max)))
+
+
+def map_cells(n: int, fs: float, band: tuple[float, float], fb: float = DEFAULT_FB, fc: float = DEFAULT_FC,
+              voices: int = 16) -> int:
+    """Cells of the |W| map of a cwt analysis of ``n`` samples at ``fs`` in ``band`` (what bounds its memory)."""
+    scales = scale_grid(band[0], band[1], fc, voices)
+    return (n // _hop(fs, scales, fb, fc) + 1) * scales.size
+
+
+def _pick_hop(n: int, fs: float, scales: np.ndarray, fb: float, fc: float) -> int:
+    hop = _hop(fs, scales, fb, fc)
     if (n // hop + 1) * scales.size > MAX_MAP_CELLS:
         raise AnalysisError(
             f"band up to {fc / scales.min():.4g} Hz is too wide for a record of {n} samples; "
