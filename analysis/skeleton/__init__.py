@@ -247,6 +247,13 @@ def analyse_stream(paths: Sequence[str | Path], settings: SkeletonSettings | Non
     done = 0
     results, reads = [], []
     for path, r in zip(paths, records, strict=True):
+        if r.position is not None:  # a host-clocked run, resampled whole by the loader
+            results.append(forcevib(r.position, centred_force(r.torque, r.timing), r.sample_rate, mass,
+                                    settings.method, spring=settings.spring, **settings.options(),
+                                    **({"freq_range": tuple(settings.band)} if settings.band else {})))
+            reads.append("whole (a host-clocked run is resampled whole)")
+            done += 2 * r.n_samples
+            continue
         with ChannelReader(path) as reader:
             band = stream_band(reader, r, settings, chunk)
             done += r.n_samples

@@ -111,3 +111,23 @@ def test_warns_on_a_run_that_is_no_chirp(tmp_path):
     _write_chirp(path, paper_system(), 5.0, protocol="identification")
     res = sk.analyse([load_record(path)], sk.SkeletonSettings(spring=50.0))
     assert any("not a chirp" in w and "hilbench run chirp" in w for w in res.warnings), res.warnings
+
+
+def test_a_host_clocked_run_is_read_whole_by_the_streamed_path(tmp_path):
+    """A run sampled at its host_time (a CiA 402 drive) is resampled over the whole record by the loader, so the
+    streamed path reads it whole: the same curves as :func:`analyse`, and it says so."""
+    path = tmp_path / "host.h5"
+    n = 20_000
+    t = np.arange(n) / FS
+    p = paper_system()
+    out = simulate(p, 5.0 * np.sin(np.pi * 0.05 * t**2), 1 / FS, substeps=4)
+    with RunWriter(path, sample_rate=FS, channels=("sample_index", "t", "torque", "position"),
+                   custom_channels={"host_time": "s"}, device={"sample_times": "host_time"},
+                   calibration={"inertia": p.inertia}, protocol_name="chirp") as w:
+        w.append({"sample_index": np.arange(n), "t": t, "host_time": t + 1e-5 * np.sin(t),
+                  "torque": 5.0 * np.sin(np.pi * 0.05 * t**2), "position": out.theta})
+    settings = sk.SkeletonSettings(spring=50.0)
+    whole = sk.analyse([load_record(path)], settings)
+    streamed = sk.analyse_stream([path], settings, chunk=1000)
+    assert streamed.per_run[0]["read"].startswith("whole (a host-clocked run")
+    np.testing.assert_array_equal(streamed.curves.stiffness, whole.curves.stiffness)
