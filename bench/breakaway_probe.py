@@ -197,7 +197,7 @@ def _sliding_fit(ramps: np.ndarray, breakaway: list[int | None], current: np.nda
     still ramps (before the quick return): the sliding current of each direction (A), J/Kt (A*s^2/rad) and
     b/Kt (A*s/rad). None when a direction has fewer than :data:`MIN_FIT_SAMPLES` sliding samples."""
     rows: list[np.ndarray] = []
-    for (start, stop, sign), k in zip(ramps, breakaway, strict=True):
+    for (_start, stop, sign), k in zip(ramps, breakaway, strict=True):
         if k is None:
             continue
         seg = np.arange(k, min(int(stop), current.size))
@@ -215,4 +215,3 @@ def _sliding_fit(ramps: np.ndarray, breakaway: list[int | None], current: np.nda
     coef = np.linalg.lstsq(design, current[idx], rcond=None)[0]
     return {"inertia_per_kt": float(coef[0]), "viscous_per_kt": float(coef[1]), "positive": float(coef[2]),
             "negative": float(-coef[3])}
-    return ProbeResult(str(path), peak, tuple(breakaway), d, threshold)

@@ -274,8 +274,9 @@ def _chirp(probe: ProbeResult, settings: DeviceSettings, level: float, clipped: 
                  sample_rate=sample_rate)
 
 
-def plan_experiments(device: str | Bench, settings: DeviceSettings | None = None, *, probe_dir: str | Path = "plan-probe",
-                     sample_rate: int = 10000, duration: float = 20.0, seed: int = 0, overwrite: bool = False,
+def plan_experiments(device: str | Bench, settings: DeviceSettings | None = None, *,
+                     probe_dir: str | Path = "plan-probe", sample_rate: int = 10000, duration: float = 20.0,
+                     seed: int = 0, overwrite: bool = False,
                      progress: Callable[[Progress], None] | None = None,
                      on_probe: Callable[[ProbeResult], None] | None = None) -> Plan:
     """Probe the device's break-away and size a campaign from it (the module docstring says how).
