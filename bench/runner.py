@@ -225,6 +225,11 @@ class Bench:
             overwrite: bool = False) -> RunResult:
         """Run ``protocol`` and log it to ``out`` (default ``runs/<protocol>-<uid>.h5``).
 
+        ``progress`` is called with a :class:`Progress` after every sample block the device returns, in the
+        calling thread: ``done`` (samples received so far) grows strictly from call to call, ``total`` is the
+        protocol's sample count in every call, and a completed run's last call has ``done == total``. The call
+        sits in the streaming loop: keep it short (print a line, update a bar), or the device's buffer drains.
+
         Raises whatever the device or the link raised after the file has been finished as ``aborted``;
         :class:`AbortRun` and Ctrl-C are turned into an ``aborted`` result (Ctrl-C is re-raised).
         """

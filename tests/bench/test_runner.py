@@ -45,6 +45,21 @@ def test_identification_run_logs_every_sample(bench, tmp_path):
     assert bench.amplifier.status().state == wire.State.DISARMED  # shutdown disarmed
 
 
+def test_progress_contract_done_grows_to_total_in_every_segment(bench, tmp_path):
+    """Issue 28: the scripting API reports progress. Every call has total = the protocol's samples, done grows
+    strictly, the last call of a completed run is done == total, and the blocks' lengths add up to done."""
+    proto = SteppedSine(frequencies=(20.0, 40.0), amplitudes=(1.0, 2.0), settle_periods=2, measure_periods=4)
+    calls = []
+    result = bench.run(proto, tmp_path / "s.h5", progress=lambda p: calls.append((p.done, p.total, p.t.size,
+                                                                                  p.segment, p.n_segments)))
+    assert result.status == "completed" and len(calls) > 4
+    done, total, block, segment, n_segments = (np.array(c) for c in zip(*calls, strict=True))
+    assert np.all(total == proto.n_samples) and np.all(np.diff(done) > 0)
+    assert done[-1] == proto.n_samples == result.samples
+    np.testing.assert_array_equal(np.cumsum(block), done)
+    assert np.all(np.diff(segment) >= 0) and segment[-1] == n_segments[0] - 1 == 3
+
+
 def test_pause_and_resume_between_stepped_sine_steps(bench, tmp_path):
     proto = SteppedSine(frequencies=(20.0, 40.0), amplitudes=(1.0,), settle_periods=2, measure_periods=4)
     control = RunControl()
