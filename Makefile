@@ -25,7 +25,7 @@ $(STAMP): $(BIN)/python pyproject.toml setup.py $(C_SRC) $(PKG)
 setup: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/hilbench demo -o demo-out
+	$(BIN)/hilbench demo -o demo-out --overwrite
 
 # The emulated Cortex-M target (tests marked `target`) needs a cross compiler, newlib and QEMU. They are
 # installed from Debian packages when missing and we may (root with apt-get); otherwise those tests skip

@@ -74,7 +74,7 @@ def load_campaign(path: str | Path) -> Campaign:
     except OSError as exc:
         raise CampaignError(f"{path}: cannot read: {exc.strerror}") from None
     if len(raw) > MAX_CAMPAIGN_BYTES:
-        raise CampaignError(f"{path}: longer than {MAX_CAMPAIGN_BYTES} bytes (MAX_CAMPAIGN_BYTES); is it a campaign?")
+        raise CampaignError(f"{path}: longer than {MAX_CAMPAIGN_BYTES} bytes; is it a campaign?")
     try:
         text = raw.decode("utf-8")
         data = tomllib.loads(text)

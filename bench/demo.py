@@ -121,7 +121,7 @@ def _cli(*argv: str) -> None:
 
 def identify_step(files: dict[str, Path], out: Path) -> None:
     _cli("identify", files["identification"], "--validate", files["validation"], "--json", out / "model.json",
-         "--plots", out / "identification")
+         "--plots", out / "identification", "--overwrite")  # run_demo has refused a used folder already
     _say("  (position NRMSE: the whole-record open-loop simulation integrates every torque error and the hidden "
          "cogging into drift; 'segmented' restarts it every second from the measured state, docs/model-file.md)")
 
@@ -150,7 +150,16 @@ def analysis_steps() -> list[tuple[str, Callable[[dict[str, Path], Path], None]]
             ("residual loop from inertia,maxwell_slip: what does the model lack?", residual_step)]
 
 
-def run_demo(out: Path, duration: float = 20.0) -> int:
+#: What a demo leaves in its folder: another demo's files are replaced only with --overwrite.
+DEMO_OUTPUTS = ("runs", "model.json", "afrf.json", "residual.json", "paper_chirp_hysteresis.png")
+
+
+def run_demo(out: Path, duration: float = 20.0, overwrite: bool = False) -> int:
+    from hilbench.bench.errors import BenchError
+
+    present = [name for name in DEMO_OUTPUTS if (out / name).exists()]
+    if present and not overwrite:
+        raise BenchError(f"{out} holds {', '.join(present)} of a demo already; use --overwrite or another --output")
     out.mkdir(parents=True, exist_ok=True)
     files = measure(out, duration)
     paper_figure(out)

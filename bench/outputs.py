@@ -59,6 +59,16 @@ def refuse_inputs(outputs: dict[str, str | os.PathLike | None], inputs: Iterable
                                  "input: choose another path")
 
 
+def refuse_existing(option: str, target: str | os.PathLike | None, overwrite: bool) -> None:
+    """Raise :class:`BenchError` if ``target`` (the value of ``option``) is a file that exists and ``overwrite``
+    (``--overwrite``) was not given: every command that writes replaces an existing output only with
+    --overwrite. Standard output (``-``) and what is not a regular file (``/dev/null``) are written as always."""
+    if target is None or str(target) == STDOUT or overwrite:
+        return
+    if Path(target).is_file():
+        raise BenchError(f"{target} exists; use --overwrite to replace it, or another {option}")
+
+
 def write_text(target: str | os.PathLike, text: str) -> None:
     """Write ``text`` (UTF-8) to ``target`` atomically, or to standard output if ``target`` is ``-``."""
     if str(target) == STDOUT:

@@ -125,7 +125,7 @@ class Protocol:
         if n > MAX_PROTOCOL_SAMPLES:
             raise ProtocolError(f"{self.name} would play {n} samples ({n / self.sample_rate:.6g} s at "  # type: ignore
                                 f"{self.sample_rate} Hz, about {_gib(self.memory_bytes)} of memory), above the "  # type: ignore
-                                f"bound of {MAX_PROTOCOL_SAMPLES} samples (MAX_PROTOCOL_SAMPLES, 1 h at 20 kHz)")
+                                f"bound of {MAX_PROTOCOL_SAMPLES} samples (1 h at 20 kHz)")
 
     @property
     def n_samples(self) -> int:

@@ -297,6 +297,8 @@ class Bench:
         except RunFileError:  # the writer failed (disk full): it has recorded why and marked the run failed
             raise
         except DeviceFaultError as exc:
+            if exc.faults & wire.Fault.WATCHDOG:  # "WATCHDOG" alone does not say what to do
+                exc.args = (f"{exc}: {watchdog_hint(self.settings.watchdog_timeout)}",)
             message = str(exc)
             writer.add_event("fault", message)
             raise
@@ -368,6 +370,13 @@ class Bench:
                 raise SampleLossError(f"the device returned {k - a} of the {b - a} samples of step {seg} "
                                       f"({done} of {total} in all): the run is incomplete")
         return done
+
+
+def watchdog_hint(timeout: float) -> str:
+    """What a watchdog trip means and what to change, in the CLI's words."""
+    return (f"the device's watchdog tripped: no setpoint reached it for {timeout:g} s (--watchdog-timeout), "
+            f"usually a busy host or link; raise --watchdog-timeout (e.g. {max(1.0, 2 * timeout):g} s) or run with "
+            f"less load, then 'hilbench fault clear' before the next run")
 
 
 @contextmanager

@@ -20,6 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hilbench.bench import outputs
     from hilbench.bench.campaign import load_campaign, run_campaign
     from hilbench.bench.progress import ProgressBar
     from hilbench.bench.runner import signals_as_interrupt
@@ -44,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
         elif ev.state != "running":
             if ev.key in bars:
                 bars.pop(ev.key).close()
-            print(f"[{ev.index + 1}/{ev.total}] {ev.key}: {ev.state}")
+            outputs.say(f"[{ev.index + 1}/{ev.total}] {ev.key}: {ev.state}")
 
     try:
         with signals_as_interrupt():
@@ -55,5 +56,5 @@ def run(args: argparse.Namespace) -> int:
         print(f"hilbench campaign: interrupted ({exc or 'Ctrl-C'}); device disarmed. Continue with --resume.")
         return 130
     done = sum(e["status"] == "completed" for e in entries.values())
-    print(f"{done}/{len(campaign.runs)} runs completed; index: {out / 'index.json'}")
+    outputs.say(f"{done}/{len(campaign.runs)} runs completed; index: {out / 'index.json'}")
     return 0 if done == len(campaign.runs) else 1

@@ -16,6 +16,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("-o", "--output", dest="out", type=Path, default=Path("demo-out"),
                    help="output folder (default: demo-out)")
+    p.add_argument("--overwrite", action="store_true", help="replace the files of an earlier demo in the folder")
     p.add_argument("--duration", type=float, default=20.0, help="identification run length in s (default 20)")
     p.set_defaults(func=run)
 
@@ -25,4 +26,4 @@ def run(args: argparse.Namespace) -> int:
 
     if not (math.isfinite(args.duration) and 1.0 <= args.duration <= 600.0):
         raise ValueError(f"--duration must be within [1, 600] s, got {args.duration}")
-    return run_demo(args.out, args.duration)
+    return run_demo(args.out, args.duration, overwrite=args.overwrite)

@@ -1,4 +1,5 @@
-"""``hilbench fault {show,clear} --device URL``: read or clear the faults a device has latched."""
+"""``hilbench fault {show,clear} [--device URL]``: read or clear the faults a device has latched (the default
+device when --device is not given, as every command that drives one)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     for name, text in (("show", "print the latched faults"), ("clear", "clear every latched fault")):
         q = actions.add_parser(name, help=text, description=text)
-        q.add_argument("--device", required=True, help=f"device URL: {describe_schemes()}")
+        q.add_argument("--device", default=None, help=f"device URL: {describe_schemes()} (default "
+                       "$HILBENCH_DEVICE, the config file's 'device', else sim://; docs/cli.md)")
         q.set_defaults(func=run)
 
 

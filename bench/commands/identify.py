@@ -31,6 +31,7 @@ def register(subparsers) -> None:
     )
     parser.add_argument("--json", required=True, metavar="OUT.json", help="model file to write ('-': stdout)")
     parser.add_argument("--plots", metavar="DIR", help="write PNG plots into DIR")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
     parser.add_argument(
         "--thresholds", type=whole_number, default=64,
         help=f"candidate thresholds (default 64, at most {MAX_THRESHOLDS}; 0: no Maxwell-slip elements)"
@@ -109,6 +110,7 @@ def run(args) -> int:
     from hilbench.bench.verdict import judge
 
     outputs.refuse_inputs({"--json": args.json, "--plots": args.plots}, [args.run, args.validate])
+    outputs.refuse_existing("--json", args.json, args.overwrite)
     check_count(args.thresholds, "--thresholds", 0, MAX_THRESHOLDS,
                 "candidate thresholds; a model must fit the plant's element limit")
     if args.inertia is not None and not (math.isfinite(args.inertia) and args.inertia >= 0):

@@ -173,23 +173,22 @@ def run(args: argparse.Namespace) -> int:
     importers.write_run(imported, out, overwrite=args.force, operator=args.operator, notes=args.notes)
     units = {name: imported.custom_units.get(name) or _unit(name, imported.axis) for name in imported.samples}
     channels = ", ".join(f"{name} [{unit}]" for name, unit in units.items())
-    print(
-        f"wrote {out}: {imported.n_samples} samples at {imported.sample_rate:g} Hz, {imported.axis} axis; "
-        f"channels {channels}"
-    )
+    outputs.say(f"wrote {out}: {imported.n_samples} samples at {imported.sample_rate:g} Hz, {imported.axis} axis; "
+                f"channels {channels}")
     params = imported.protocol_params
     if params.get("ignored_columns"):
-        print(f"ignored columns: {', '.join(params['ignored_columns'])}")
+        outputs.say(f"ignored columns: {', '.join(params['ignored_columns'])}")
     if params.get("units_assumed"):
-        print(f"no unit stated for {', '.join(params['units_assumed'])}: taken as SI (--unit CHANNEL=UNIT if not)")
-    if params.get("resampled"):
+        outputs.say(f"no unit stated for {', '.join(params['units_assumed'])}: taken as SI (--unit CHANNEL=UNIT "
+                    f"if not)")
+    if params.get("resampled"):  # what --resample did: informational, -v
         r = params["resampled"]
-        print(f"resampled: {r['method']}, step {r['step_s']:.6g} s, {r['samples_before']} -> {r['samples_after']} "
-              f"samples (largest source step {r['largest_step_s']:.6g} s)")
-    if imported.torque_timing:
-        print(f"torque timing: {imported.torque_timing} (stored in the run file)")
+        outputs.say(f"resampled: {r['method']}, step {r['step_s']:.6g} s, {r['samples_before']} -> "
+                    f"{r['samples_after']} samples (largest source step {r['largest_step_s']:.6g} s)", level=2)
+    if imported.torque_timing:  # the declared --torque-timing, echoed: -v
+        outputs.say(f"torque timing: {imported.torque_timing} (stored in the run file)", level=2)
     elif "torque" in imported.samples:
-        print("torque timing: not declared; analyses will assume instant (--torque-timing to declare it)")
+        outputs.say("torque timing: not declared; analyses will assume instant (--torque-timing to declare it)")
     return 0
 
 

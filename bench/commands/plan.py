@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from hilbench.bench.device_options import add_device_options, settings_from_args
+from hilbench.bench.commands.run import options_named
+from hilbench.bench.device_options import DEVICE_OPTIONS, add_device_options, settings_from_args
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -42,16 +43,16 @@ def run(args: argparse.Namespace) -> int:
         raise BenchError(f"--sample-rate {args.sample_rate} Hz is not one of {', '.join(map(str, SAMPLE_RATES))} Hz")
     if not 0.1 <= args.duration <= 3600:
         raise BenchError(f"--duration {args.duration:g} s is outside [0.1, 3600] s")
-    if args.out.exists() and not args.overwrite:
-        raise BenchError(f"{args.out} exists; use --overwrite or another --output")
+    outputs.refuse_existing("--output", args.out, args.overwrite)
     probe_dir = args.probe_dir or args.out.with_name(args.out.stem + "-probe")
-    settings = settings_from_args(args)
+    with options_named(DEVICE_OPTIONS):
+        settings = settings_from_args(args)
     bars: list[ProgressBar] = []
     last = [0]  # samples done in the probe run under way: a smaller count starts the next probe's bar
 
     def progress(p) -> None:
         if not bars or p.done < last[0]:
-            bars.append(ProgressBar(disable=args.quiet or outputs.verbosity == 0, desc=f"probe {len(bars) + 1}"))
+            bars.append(ProgressBar(disable=args.quiet, desc=f"probe {len(bars) + 1}"))
         last[0] = p.done
         bars[-1].update(p)
 

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from hilbench.bench.device_options import add_device_options, settings_from_args
@@ -35,7 +37,25 @@ def add_protocol_options(parser: argparse.ArgumentParser, cls: type[Protocol]) -
 
 def protocol_from_args(cls: type[Protocol], args: argparse.Namespace) -> Protocol:
     values = {name: getattr(args, name) for name in cls.specs() if getattr(args, name, None) is not None}
-    return cls.from_dict(values)
+    with options_named(cls.specs()):
+        return cls.from_dict(values)
+
+
+@contextmanager
+def options_named(names: Iterable[str]) -> Iterator[None]:
+    """A protocol's or the device settings' error starts with the parameter's name (``cutoff = 6000 Hz is
+    outside ...``); on the command line it is the option: ``--cutoff 6000 Hz is outside ...``."""
+    from hilbench.bench.errors import BenchError
+
+    try:
+        yield
+    except BenchError as exc:
+        text = str(exc)
+        for name in sorted(names, key=len, reverse=True):
+            if text.startswith(name) and text[len(name):len(name) + 1] in (" ", ""):
+                rest = text[len(name):].removeprefix(" =")
+                raise type(exc)("--" + name.replace("_", "-") + rest) from None
+        raise
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -58,11 +78,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hilbench.bench import outputs
+    from hilbench.bench.device_options import DEVICE_OPTIONS
     from hilbench.bench.progress import ProgressBar
     from hilbench.bench.runner import Bench, RunControl, signals_as_interrupt
 
     protocol = protocol_from_args(args.protocol_class, args)
-    settings = settings_from_args(args)
+    with options_named(DEVICE_OPTIONS):
+        settings = settings_from_args(args)
     control = RunControl()
     with signals_as_interrupt(control=control), Bench.open(args.device, settings) as bench, \
             ProgressBar(disable=args.quiet) as bar:
@@ -73,5 +96,5 @@ def run(args: argparse.Namespace) -> int:
             bar.close()
             print(f"hilbench run: interrupted ({exc or 'Ctrl-C'}); device disarmed, run file marked aborted")
             return 130
-    print(f"{result.status}: {result.path} ({result.samples} samples, uid {result.uid})")
+    outputs.say(f"{result.status}: {result.path} ({result.samples} samples, uid {result.uid})")
     return 0 if result.status == "completed" else 1

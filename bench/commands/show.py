@@ -23,6 +23,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--events", type=int, default=20, metavar="N", help="show at most N events (default 20)"
     )
     parser.add_argument("--json", metavar="PATH", help="also write the summary as JSON to PATH ('-': stdout)")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
     parser.set_defaults(func=run)
 
 
@@ -35,6 +36,7 @@ def run(args: argparse.Namespace) -> int:
     from hilbench.bench import outputs
 
     outputs.refuse_inputs({"--json": args.json}, [args.run])
+    outputs.refuse_existing("--json", args.json, args.overwrite)
     repaired = None
     if args.repair:
         repaired = repair(args.run)
