@@ -14,9 +14,9 @@ the two directions, ``x_p`` the presliding distance x_p(0.9)):
 
 - identification: the random-enveloped input's quiet half-periods stay within ``QUIET_SHARE * I_s`` (presliding),
   its loud half-periods are scaled, on the very input the protocol will play (same seed, rate and length), until
-  at least :data:`SLIDE_SHARE` of all samples drive above ``1.1 * I_s`` in each direction. The input's rms for a
-  given amplitude depends on the sample rate (the noise is normalised to its peak), so the amplitude is found
-  for the plan's sample rate, not carried over from another;
+  at least :data:`SLIDE_SHARE` of all samples drive above ``1.1 * I_s`` in each direction. The noise is
+  normalised to its peak, so how much of it lies above a level depends on the seed and the length: the amplitude
+  is found on the input itself, not from a rule of thumb;
 - stepped sine: amplitudes ``STEP_FACTORS * I_s``, from presliding to gross sliding;
 - chirp: a log sweep at ``CHIRP_GAIN * I_s``, whose sliding displacement amplitude falls as 1/f^2 (Den Hartog's
   continuous-sliding solution for an inertia under a sine force and Coulomb friction) from
