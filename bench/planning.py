@@ -214,38 +214,43 @@ def size_protocols(probe: ProbeResult, settings: DeviceSettings, *, sample_rate:
 def _identification(level: float, cap: float, sample_rate: int, duration: float, seed: int,
                     notes: list[str]) -> Identification:
     """Quiet half-periods at QUIET_SHARE of the sliding current; loud ones grown on the played input until
-    SLIDE_SHARE of the samples drive past 1.1 x the sliding current each way (bisection, 30 halvings)."""
+    SLIDE_SHARE of the samples drive past 1.1 x the sliding current each way (bisection, 40 halvings)."""
+    from hilbench.bench.excitations import lowpass_uniform_noise, rectangular_envelope
+
     quiet = QUIET_SHARE * level
     base = Identification(duration=duration, amplitude=1.0, offset=0.0, seed=seed, sample_rate=sample_rate)
-
-    def played(loud: float) -> np.ndarray:
-        proto = replace(base, amplitude=(loud - quiet) / 2, offset=(loud + quiet) / 2)
-        return proto.excitation(None).u
+    # The played input is noise * (offset + amplitude * square), i.e. loud * a + quiet * b with a and b below:
+    # linear in the loud level, so the search scales two arrays instead of regenerating the input.
+    n = base.n_samples
+    noise = lowpass_uniform_noise(n, sample_rate, base.cutoff, seed)
+    square = rectangular_envelope(np.arange(n) / sample_rate, 1.0, base.period)
+    a, b = noise * (1 + square) / 2, noise * (1 - square) / 2
 
     def share(loud: float) -> float:
-        u = played(loud)
-        return min(np.mean(u > 1.1 * level), np.mean(u < -1.1 * level))
+        u = loud * a + quiet * b
+        return float(min(np.mean(u > 1.1 * level), np.mean(u < -1.1 * level)))
 
     def peak(loud: float) -> float:
-        return float(np.max(np.abs(played(loud))))
+        return float(np.max(np.abs(loud * a + quiet * b)))
 
-    top = quiet * 1.01
-    while peak(top * 2) <= cap and top < 1e3:
-        top *= 2
-    lo, hi = quiet * 1.01, top * 2
-    if share(top) < SLIDE_SHARE:  # find the largest loud level within the limit instead
-        for _ in range(30):
-            mid = (lo + hi) / 2
-            lo, hi = (mid, hi) if peak(mid) <= cap else (lo, mid)
-        notes.append(f"identification: within the current limit only {100 * share(lo):.2g} % of the samples "
+    lo, hi = quiet, quiet
+    while peak(hi * 2) <= cap and hi < 1e3:
+        hi *= 2
+    hi *= 2  # the peak of `hi` is above the cap: the largest loud level within it lies in [lo, hi]
+    for _ in range(40):
+        mid = (lo + hi) / 2
+        lo, hi = (mid, hi) if peak(mid) <= cap else (lo, mid)
+    loud = lo
+    if share(loud) < SLIDE_SHARE:
+        notes.append(f"identification: within the current limit only {100 * share(loud):.2g} % of the samples "
                      f"slide each way (aim {100 * SLIDE_SHARE:g} %); raise --current-limit for a stronger input")
-    else:
-        hi = top
-        for _ in range(30):
-            mid = (lo + hi) / 2
-            lo, hi = (lo, mid) if share(mid) >= SLIDE_SHARE else (mid, hi)
-        lo = hi
-    return replace(base, amplitude=(lo - quiet) / 2, offset=(lo + quiet) / 2)
+    else:  # the smallest loud level that slides enough: no harder on the motor than it needs
+        lo = quiet
+        for _ in range(40):
+            mid = (lo + loud) / 2
+            lo, loud = (lo, mid) if share(mid) >= SLIDE_SHARE else (mid, loud)
+    planned = replace(base, amplitude=(loud - quiet) / 2, offset=(loud + quiet) / 2)
+    return planned
 
 
 def _chirp(probe: ProbeResult, settings: DeviceSettings, level: float, clipped: Callable[[float, str], float],

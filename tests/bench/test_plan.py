@@ -83,6 +83,11 @@ def test_sizing_stays_within_the_current_limit_and_says_what_it_clipped():
             assert np.max(np.abs(proto.setpoints(settings.current_limit))) <= cap + 1e-9, name
     assert any("stepped-sine amplitude 2 x sliding current 7.6 A clipped to 5.4 A" in n for n in notes), notes
     assert any(n.startswith("identification:") for n in notes), notes
+    # within a roomy limit the played identification input drives 5 % of its samples past 1.1 x 3.8 A each way
+    runs, notes = size_protocols(probe, DeviceSettings(current_limit=20.0), duration=5.0)
+    u = runs["identification"].setpoints(20.0)
+    assert min(np.mean(u > 1.1 * 3.8), np.mean(u < -1.1 * 3.8)) == pytest.approx(0.05, abs=0.002)
+    assert np.max(np.abs(u)) <= LIMIT_SHARE * 20.0 and not [n for n in notes if n.startswith("identification")]
 
 
 def test_probe_finds_the_simulated_motors_friction(tmp_path):
