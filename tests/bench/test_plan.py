@@ -154,3 +154,20 @@ def test_plan_refuses_to_replace_its_output_without_overwrite(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "--overwrite" in err
     assert toml.read_text() == "# mine\n"
+
+
+def test_default_identification_slides_both_ways_on_the_simulated_motor(tmp_path):
+    """The issue's figures: the default identification (seed 0, 10 kHz) peaked at 5.8 A and moved 0.027 rad
+    (seed 1: 17.6 A), the noise's start transient having scaled it down. Now seed 0 is as strong as the others
+    (15.1 A, 3.0 rad, 20 % of the samples sliding each way) on the same 20 A limit."""
+    from hilbench.bench.protocols import Identification
+    from hilbench.bench.runner import Bench
+
+    with Bench.open(LOCKSTEP) as bench:
+        result = bench.run(Identification(), tmp_path / "id.h5")
+    with open_run(result.path) as run:
+        current = np.asarray(run.channel("current_cmd"))
+        position = np.asarray(run.channel("position"))
+    v = smoothed_velocity(position, 10000, 0.01)
+    assert 12.0 < np.max(np.abs(current)) <= 20.0 and np.ptp(position) > 1.0
+    assert np.mean(v > 1.0) > 0.1 and np.mean(v < -1.0) > 0.1
