@@ -140,7 +140,8 @@ def analyse_probe(path: str, window: float = 0.01, velocity_threshold: float | N
     rad/s or, on a coarse encoder, five counts per window, whichever is larger. The presliding distance is half
     the displacement from the previous slide's turning point (its extreme position) to where the force has
     changed by twice :data:`PRESLIDING_FRACTION` of the sliding level (Masing's rule: the virgin curve at twice
-    the scale), i.e. x_p(0.9) as docs/presliding.md defines it, with the break-away current as sliding level."""
+    the scale), i.e. x_p(0.9) as docs/presliding.md defines it. The sliding level is the fitted sliding current
+    (:func:`_sliding_fit`, the mean of both directions); without that fit there is no presliding distance."""
     from hilbench.analysis.runfile import open_run
 
     with open_run(path) as run:
