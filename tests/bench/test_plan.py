@@ -171,3 +171,20 @@ def test_default_identification_slides_both_ways_on_the_simulated_motor(tmp_path
     v = smoothed_velocity(position, 10000, 0.01)
     assert 12.0 < np.max(np.abs(current)) <= 20.0 and np.ptp(position) > 1.0
     assert np.mean(v > 1.0) > 0.1 and np.mean(v < -1.0) > 0.1
+
+
+def test_default_stepped_sine_spans_breakaway_on_the_simulated_motor(tmp_path):
+    """The issue: the default stepped sine (0.5 and 2 A) never reached break-away (3.8 A). Its amplitudes are now
+    2 and 5 A: the recorded 2 A steps stay within the presliding loop, the 5 A steps slide."""
+    from hilbench.bench.protocols import SteppedSine
+    from hilbench.bench.runner import Bench
+
+    proto = SteppedSine(frequencies=(5.0,), settle_periods=3, measure_periods=5)  # the default amplitudes
+    assert proto.amplitudes == (2.0, 5.0)
+    with Bench.open(LOCKSTEP) as bench:
+        result = bench.run(proto, tmp_path / "s.h5")
+    with open_run(result.path) as run:
+        x = np.asarray(run.channel("position"))
+        steps = run.protocol_array("step_windows")
+    p2p = {float(r["amplitude"]): np.ptp(x[r["measure_start"]:r["measure_stop"]]) for r in steps}
+    assert p2p[2.0] < 2 * _xp() < 50 * _xp() < p2p[5.0], p2p
