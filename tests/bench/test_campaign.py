@@ -91,8 +91,9 @@ def test_killed_campaign_resumes_to_every_run_completed_once(tmp_path):
     proc.wait(timeout=10)
     with open_run(out / "id-2.h5") as run:
         assert run.status == "crashed"
-    cp = subprocess.run([sys.executable, "-m", "hilbench.bench.cli", "campaign", str(path), "-o", str(out), "--resume",
-                         "--quiet"], capture_output=True, text=True, timeout=120)
+    # (no --quiet: it is the global -q, which prints nothing but errors, and these lines are the result)
+    cp = subprocess.run([sys.executable, "-m", "hilbench.bench.cli", "campaign", str(path), "-o", str(out), "--resume"],
+                        capture_output=True, text=True, timeout=120)
     assert cp.returncode == 0, cp.stderr
     assert "id-1: skipped" in cp.stdout
     runs = json.loads((out / "index.json").read_text())["runs"]
