@@ -295,6 +295,7 @@ def plan_experiments(device: str | Bench, settings: DeviceSettings | None = None
     device raised."""
     own = not isinstance(device, Bench)
     bench = Bench.open(device, settings) if own else device  # type: ignore[arg-type]
+    previous = bench.settings  # a caller's bench gets its own settings back
     try:
         if settings is not None:
             bench.settings = settings
@@ -303,8 +304,10 @@ def plan_experiments(device: str | Bench, settings: DeviceSettings | None = None
                                             progress=progress, on_probe=on_probe)
         except ProbeError as exc:
             raise PlanError(str(exc)) from None
-        runs, notes = size_protocols(probe, bench.settings, sample_rate=sample_rate, duration=duration, seed=seed)
-        return Plan(bench.url, bench.settings, probe, played, runs, notes)
+        used = bench.settings
+        runs, notes = size_protocols(probe, used, sample_rate=sample_rate, duration=duration, seed=seed)
+        return Plan(bench.url, used, probe, played, runs, notes)
     finally:
+        bench.settings = previous
         if own:
             bench.close()

@@ -188,3 +188,17 @@ def test_default_stepped_sine_spans_breakaway_on_the_simulated_motor(tmp_path):
         steps = run.protocol_array("step_windows")
     p2p = {float(r["amplitude"]): np.ptp(x[r["measure_start"]:r["measure_stop"]]) for r in steps}
     assert p2p[2.0] < 2 * _xp() < 50 * _xp() < p2p[5.0], p2p
+
+
+def test_no_breakaway_within_the_limit_is_one_line_naming_the_option(tmp_path, capsys):
+    """A current limit below the motor's break-away (3.8 A): the probe grows to 0.9 x 3 A and stops there."""
+    toml = tmp_path / "plan.toml"
+    assert main(["plan", "--device", LOCKSTEP, "--current-limit", "3", "-o", str(toml), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "never slid both ways up to 2.7 A" in err and "--current-limit" in err
+    assert not toml.exists()
+    peaks = []
+    for path in sorted((tmp_path / "plan-probe").glob("probe-*.h5")):
+        with open_run(path) as run:
+            peaks.append(float(np.max(np.abs(run.channel("current_cmd")))))
+    assert peaks == pytest.approx([0.6, 0.9, 1.35, 2.025, 2.7], abs=1e-6)  # A: x1.5 per probe up to the cap
