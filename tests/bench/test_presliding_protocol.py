@@ -85,8 +85,8 @@ def test_bad_parameters_are_refused(values, message):
 @pytest.mark.parametrize("argv, message", [
     (["--amplitudes", "1", "2"], "must not increase"),
     (["--unit", "m"], "m_per_rad > 0"),
-    (["--rate", "-1"], "rate"),
-    (["--position-kp", "-5"], "position_kp"),
+    (["--rate", "-1"], "--rate -1"),
+    (["--position-kp", "-5"], "--position-kp -5.0 A/rad"),  # the option, not the Python field
 ])
 def test_cli_refuses_bad_parameters_in_one_line(argv, message, capsys, tmp_path):
     assert main(["run", "presliding", "-o", str(tmp_path / "x.h5"), *argv]) == 2
