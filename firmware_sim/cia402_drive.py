@@ -18,6 +18,17 @@ applies the controlword received before a SYNC and then reports the state in tha
 ``"sample-then-apply"`` reports the state from before it. ``enable_latency`` (0..3 SYNCs) delays "operation
 enabled" after an enable operation received by RPDO, as a drive that closes its current loop first.
 
+As a CST drive does, it applies the target torque 0x6071 as soon as operation is enabled, and 0x6071 holds the
+last value written, by SDO or by an RPDO on reception (applied at the next SYNC). ``stale_torque`` (per mille)
+starts it with the value a killed run left there; ``spin`` (rad/s) starts the axis moving (a machine still
+coasting when the host arrives). Both are for the host's check of the run's first samples.
+
+What its object dictionary says, it does: SYNC on the COB-ID of 0x1005, EMCY on that of 0x1014; position 0x6064
+and velocity 0x606C in the units of the factor objects where the EDS has them (0x6093 position factor, else 0x6091
+gear ratio with 0x6092 feed constant; 0x6094 velocity encoder factor), else in increments of 0x608F.
+``loss_in_any_state``: the loss reaction 0x6007 applies in every state, not only in operation enabled, as some
+drives do (a host that leaves its heartbeat consumer armed on close then faults the drive).
+
 The plant: at each SYNC the drive samples the plant (position 0x6064, velocity 0x606C, torque 0x6077) and then
 applies the target torque received before that SYNC, held until the next SYNC. Internally the plant runs at
 ``oversample`` times the SYNC rate. With ``clock="sync"`` each SYNC advances the plant by exactly one
@@ -67,11 +78,13 @@ class SimCia402Drive:
         order: whether a SYNC's TPDO reports the state after (``apply-then-sample``) or before
             (``sample-then-apply``) the controlword received with that SYNC.
         enable_latency: SYNCs between an enable operation received by RPDO and "operation enabled" (0..3).
+        stale_torque: per mille in 0x6071 at start (what a killed run left); spin: the axis' speed at start, rad/s.
     """
 
     def __init__(self, network: canopen.Network, node_id: int, sim: SimConfig, eds: str | Path = EDS_PATH,
                  clock: str = "real", oversample: int = 10, supported_modes: int | None = None,
-                 sync_timeout: float = SYNC_TIMEOUT, order: str = "apply-then-sample", enable_latency: int = 0) -> None:
+                 sync_timeout: float = SYNC_TIMEOUT, order: str = "apply-then-sample", enable_latency: int = 0,
+                 stale_torque: int = 0, spin: float = 0.0, loss_in_any_state: bool = False) -> None:
         if clock not in CLOCKS:
             raise ValueError(f"clock must be one of {CLOCKS}, got {clock!r}")
         if order not in ORDERS:
@@ -97,7 +110,9 @@ class SimCia402Drive:
         self._plant_key: tuple | None = None
         self.cycle = 0              # SYNCs processed while operational
         self.u_held = 0.0           # current command held since the previous SYNC, A
-        self.target_pm = 0          # latest target torque, per mille
+        self.target_pm = int(stale_torque)  # target torque 0x6071, per mille: the last value written
+        self.spin = float(spin)
+        self.loss_in_any_state = bool(loss_in_any_state)
         self.meas = (0, 0, 0, 0)    # position inc, velocity inc/s, torque per mille, current per mille
         self.last_sync = math.inf
         self._arrival = math.inf    # bus timestamp of the previous SYNC, s
@@ -114,7 +129,11 @@ class SimCia402Drive:
         self.node.add_write_callback(self._on_write)
         self.node.add_read_callback(self._on_read)
         network.add_node(self.node)
-        network.subscribe(0x80, self._on_sync)
+        od = self.node.object_dictionary
+        self.sync_id = self._raw(c.SYNC_COB_ID) & 0x7FF if c.SYNC_COB_ID in od else 0x80
+        if c.EMCY_COB_ID in od:
+            self.node.emcy.cob_id = self._raw(c.EMCY_COB_ID) & 0x7FF
+        network.subscribe(self.sync_id, self._on_sync)
         network.subscribe(0, self._on_nmt)
         self._monitor = threading.Thread(target=self._watch, name="cia402-sim-monitor", daemon=True)
         self._monitor.start()
@@ -145,12 +164,15 @@ class SimCia402Drive:
     def _on_write(self, index: int, subindex: int, od, data: bytes) -> None:
         value = od.decode_raw(data)
         with self._lock:
-            if index in (c.COMM_CYCLE_PERIOD, c.MAX_TORQUE, c.RATED_TORQUE, c.RATED_CURRENT, c.ENCODER_RESOLUTION):
+            if index in (c.COMM_CYCLE_PERIOD, c.MAX_TORQUE, c.RATED_TORQUE, c.RATED_CURRENT, c.ENCODER_RESOLUTION,
+                         c.GEAR_RATIO, c.FEED_CONSTANT, c.POSITION_FACTOR, c.VELOCITY_ENCODER_FACTOR):
                 self._settings = None
             if index == c.ERROR_HISTORY and subindex == 0 and int(value) == 0:
                 self.history.clear()  # CiA 301: writing 0 to sub 0 clears the history
             elif index == c.CONTROLWORD:
                 self._command(int(value))
+            elif index == c.TARGET_TORQUE:
+                self.target_pm = int(value)
             elif index == c.MODES_OF_OPERATION:
                 self.mode_display = int(value) if self._supports(int(value)) else self.mode_display
             elif index == c.CONSUMER_HEARTBEAT and subindex == 1:
@@ -189,6 +211,9 @@ class SimCia402Drive:
                 self.state = c.State.SWITCHED_ON  # the power stage takes its time: enabled after the latency
                 return
             self._enabled()
+            if not by_rpdo:  # CST: 0x6071 acts as soon as operation is enabled (by RPDO: from this SYNC on)
+                self._ensure_plant()
+                self.u_held = self.target_pm / 1000.0 * self._rated / self._settings[2]
 
     def _enabled(self) -> None:
         self.state = c.State.OPERATION_ENABLED
@@ -227,6 +252,10 @@ class SimCia402Drive:
             if not stalls.may_judge(now, shortest):
                 continue
             with self._lock:
+                if self.loss_in_any_state and self.state not in (c.State.FAULT, c.State.OPERATION_ENABLED):
+                    if self._host_hb is not None and now - self.last_host_heartbeat > self._host_hb[1]:
+                        self._lost(EMCY_HEARTBEAT)
+                    continue
                 if self.state is not c.State.OPERATION_ENABLED:
                     continue
                 if self._host_hb is not None and now - self.last_host_heartbeat > self._host_hb[1]:
@@ -249,8 +278,29 @@ class SimCia402Drive:
                 for m in self._rpdos:
                     m.is_received = False
                     self.network.subscribe(m.cob_id, m.on_message)
+                    if self._on_rpdo not in m.callbacks:
+                        m.add_callback(self._on_rpdo)
             elif self.state is c.State.OPERATION_ENABLED:
                 self.state = c.State.SWITCH_ON_DISABLED  # leaving OPERATIONAL disables the drive
+
+    def _on_rpdo(self, m) -> None:
+        """An RPDO's target torque lands in 0x6071 on reception (its controlword waits for the SYNC)."""
+        with self._lock:
+            for var in m.map:
+                if var.index == c.TARGET_TORQUE:
+                    self.target_pm = int(var.raw)
+
+    def _pair(self, index: int) -> tuple[int, int] | None:
+        if index not in self.node.object_dictionary:
+            return None
+        one, two = self._raw(index, 1), self._raw(index, 2)
+        return (one, two) if one and two else None
+
+    def _in_units(self, counts: int, velocity: float) -> tuple[int, int]:
+        """Position (increments) and velocity (increments/s) in the units 0x6064 and 0x606C report."""
+        per_unit, velocity_factor = self._factors
+        per_velocity_unit = velocity_factor[0] / velocity_factor[1] if velocity_factor else per_unit
+        return round(counts / per_unit), round(velocity / per_velocity_unit)
 
     def _ensure_plant(self) -> Plant:
         if self._settings is None:
@@ -261,12 +311,16 @@ class SimCia402Drive:
             period = self._raw(c.COMM_CYCLE_PERIOD) * 1e-6 or 1e-3
             self._settings = (period, limit, kt, cpr)
             self._rated = rated_torque
+            self._factors = (c.increments_per_unit(cpr, self._pair(c.GEAR_RATIO), self._pair(c.FEED_CONSTANT),
+                                                   self._pair(c.POSITION_FACTOR)),
+                             self._pair(c.VELOCITY_ENCODER_FACTOR))
         period, limit, kt, cpr = self._settings
         if self._plant_key != self._settings:
             params = self.sim.plant_for(max(limit, 1e-9), kt, cpr)
             dt = period / self.oversample
             theta = self.plant.theta if self.plant is not None else 0.0
-            self.plant = Plant(params, dt, self.sim.substeps or substeps_for(params, dt), theta0=theta)
+            omega = self.plant.omega if self.plant is not None else self.spin
+            self.plant = Plant(params, dt, self.sim.substeps or substeps_for(params, dt), theta0=theta, omega0=omega)
             self._plant_key = self._settings
         return self.plant
 
@@ -315,12 +369,12 @@ class SimCia402Drive:
             u[-1] = u_new
             out = plant.run(u)  # the last row is measured now, before u_new acts
             self.u_held = u_new
-            wrap = (int(out.counts[-1]) + 2**31) % 2**32 - 2**31
-            velocity = out.omega[-1] * cpr / (2 * math.pi)
+            position, velocity = self._in_units(int(out.counts[-1]), out.omega[-1] * cpr / (2 * math.pi))
+            wrap = (position + 2**31) % 2**32 - 2**31
             # torque actual: the measured current (mean over the cycle that ends now) times the nominal k_t,
             # as a drive computes it; per mille of the rated torque
             torque_pm = round(out.current_meas[-1] * kt / self._rated * 1000.0)
-            self.meas = (wrap, int(round(velocity)), int(np.clip(torque_pm, -32768, 32767)),
+            self.meas = (wrap, velocity, int(np.clip(torque_pm, -32768, 32767)),
                          int(np.clip(round(out.current_meas[-1] / (self._rated / kt) * 1000.0), -32768, 32767)))
             if enabled:
                 self._check_limits(int(out.counts[-1]), float(out.omega[-1]))
@@ -330,9 +384,9 @@ class SimCia402Drive:
         """The drive's own limits: software position limit 0x607D (increments) and max motor speed 0x6080 (rpm),
         checked on the sample just taken; either faults the drive (torque off at once)."""
         od = self.node.object_dictionary
-        if c.SOFTWARE_POSITION_LIMIT in od:
+        if c.SOFTWARE_POSITION_LIMIT in od:  # in position units
             low, high = self._raw(c.SOFTWARE_POSITION_LIMIT, 1), self._raw(c.SOFTWARE_POSITION_LIMIT, 2)
-            if not low <= counts <= high:
+            if not low <= self._in_units(counts, 0.0)[0] <= high:
                 self.fault(EMCY_POSITION_LIMIT)
                 return
         if c.MAX_MOTOR_SPEED in od and abs(omega) * 60 / (2 * math.pi) > self._raw(c.MAX_MOTOR_SPEED):
@@ -355,7 +409,7 @@ class SimCia402Drive:
         self._stop.set()
         self.node.nmt.stop_heartbeat()
         self._monitor.join(timeout=1.0)
-        self.network.unsubscribe(0x80, self._on_sync)
+        self.network.unsubscribe(self.sync_id, self._on_sync)
         self.network.unsubscribe(0, self._on_nmt)
 
 
