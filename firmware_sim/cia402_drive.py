@@ -33,7 +33,9 @@ The plant: at each SYNC the drive samples the plant (position 0x6064, velocity 0
 applies the target torque received before that SYNC, held until the next SYNC. Internally the plant runs at
 ``oversample`` times the SYNC rate. With ``clock="sync"`` each SYNC advances the plant by exactly one
 communication cycle (an ideal drive, deterministic, for tests); with ``clock="real"`` it advances by the
-time that really passed since the previous SYNC, so a late SYNC holds the torque longer, as on a real drive.
+time that really passed since the previous SYNC, so a late SYNC holds the torque longer, as on a real drive;
+there the axis also coasts, torque off, while operation is disabled (a fault, a killed host, between streams),
+simulated when operation is enabled again (at most ``COAST_LIMIT`` s).
 """
 
 from __future__ import annotations
@@ -60,6 +62,7 @@ EMCY_HEARTBEAT = 0x8130
 EMCY_SYNC_LOST = 0x8250  # the synchronous RPDOs stop with the SYNC
 EMCY_POSITION_LIMIT = 0x8612  # software position limit 0x607D passed
 EMCY_OVER_SPEED = 0x8400      # max motor speed 0x6080 passed
+COAST_LIMIT = 10.0            # s of coasting simulated at most between operation disabled and enabled again
 HISTORY_LENGTH = 8            # entries of the error history 0x1003 (the EDS's sub-indices)
 CLOCKS = ("sync", "real")
 ORDERS = ("apply-then-sample", "sample-then-apply")
@@ -102,7 +105,8 @@ class SimCia402Drive:
         self.node = canopen.LocalNode(node_id, str(eds))
         if supported_modes is not None:
             self.node.data_store.setdefault(c.SUPPORTED_MODES, {})[0] = int(supported_modes).to_bytes(4, "little")
-        self.state = c.State.SWITCH_ON_DISABLED
+        self._state = c.State.SWITCH_ON_DISABLED
+        self._idle_since = math.inf  # when operation was last disabled (monotonic s): the axis coasts since
         self.mode_display = 0
         self.error_code = 0
         self.error_register = 0
@@ -139,6 +143,16 @@ class SimCia402Drive:
         self._monitor.start()
         self.node.nmt.send_command(130)  # reset communication: boot-up message
         self.node.nmt.send_command(128)  # pre-operational; starts the producer heartbeat
+
+    @property
+    def state(self) -> c.State:
+        return self._state
+
+    @state.setter
+    def state(self, value: c.State) -> None:
+        if self._state is c.State.OPERATION_ENABLED and value is not c.State.OPERATION_ENABLED:
+            self._idle_since = time.monotonic()
+        self._state = value
 
     # ------------------------------------------------------------------ object dictionary
     def _raw(self, index: int, sub: int | None = None) -> int:
@@ -216,6 +230,13 @@ class SimCia402Drive:
                 self.u_held = self.target_pm / 1000.0 * self._rated / self._settings[2]
 
     def _enabled(self) -> None:
+        if self.clock == "real" and self.plant is not None and math.isfinite(self._idle_since):
+            # the axis coasted, torque off, since operation was disabled (a fault, a killed host): real time
+            # passed for it, as for a real machine; at most COAST_LIMIT s are simulated
+            steps = int(min(time.monotonic() - self._idle_since, COAST_LIMIT) / self.plant.dt)
+            if steps:
+                self.plant.run(np.zeros(steps))
+        self._idle_since = math.inf
         self.state = c.State.OPERATION_ENABLED
         self.last_sync = math.inf  # SYNC monitoring starts with the first SYNC in operation enabled
         self._arrival, self._lag = math.inf, 0.0
