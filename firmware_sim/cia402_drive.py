@@ -19,7 +19,7 @@ applies the controlword received before a SYNC and then reports the state in tha
 enabled" after an enable operation received by RPDO, as a drive that closes its current loop first.
 
 As a CST drive does, it applies the target torque 0x6071 as soon as operation is enabled, and 0x6071 holds the
-last value written, by SDO or by an RPDO on reception (applied at the next SYNC). ``stale_torque`` (per mille)
+last value written, by SDO or by an RPDO (at the SYNC that applies it). ``stale_torque`` (per mille)
 starts it with the value a killed run left there; ``spin`` (rad/s) starts the axis moving (a machine still
 coasting when the host arrives). Both are for the host's check of the run's first samples.
 
@@ -299,17 +299,8 @@ class SimCia402Drive:
                 for m in self._rpdos:
                     m.is_received = False
                     self.network.subscribe(m.cob_id, m.on_message)
-                    if self._on_rpdo not in m.callbacks:
-                        m.add_callback(self._on_rpdo)
             elif self.state is c.State.OPERATION_ENABLED:
                 self.state = c.State.SWITCH_ON_DISABLED  # leaving OPERATIONAL disables the drive
-
-    def _on_rpdo(self, m) -> None:
-        """An RPDO's target torque lands in 0x6071 on reception (its controlword waits for the SYNC)."""
-        with self._lock:
-            for var in m.map:
-                if var.index == c.TARGET_TORQUE:
-                    self.target_pm = int(var.raw)
 
     def _pair(self, index: int) -> tuple[int, int] | None:
         if index not in self.node.object_dictionary:

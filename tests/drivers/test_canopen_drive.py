@@ -246,8 +246,12 @@ def test_configuration_reaches_the_object_dictionary(bus):
         tpdos = {m.cob_id: [v.index for v in m.map] for m in bus.drive._tpdos}
         assert tpdos == {0x180 + 3: [c.STATUSWORD, c.TORQUE_ACTUAL], 0x280 + 3: [c.POSITION_ACTUAL, c.VELOCITY_ACTUAL]}
         assert all(m.trans_type == 1 for m in bus.drive._tpdos)
-        with pytest.raises(ConfigError, match="0x608F"):
-            host.configure(config(counts_per_rev=4096))
+        assert (raw(c.INTERPOLATION_PERIOD, 1), raw(c.INTERPOLATION_PERIOD, 2)) == (5, -4)  # 0.5 ms
+        other = config(counts_per_rev=4096)  # the drive's encoder resolution is adopted, and said (issue #25)
+        host.configure(other)
+        assert other.counts_per_rev == CPR
+        assert any("counts_per_rev 4096 replaced by the drive's encoder resolution 0x608F = 1048576" in line
+                   for _, line in host.run_events())
     finally:
         host.close()
 
