@@ -22,11 +22,11 @@ import numpy as np
 import pytest
 
 from hilbench.bench.protocols import SteppedSine
-from hilbench.bench.runner import Bench, DeviceSettings
 from hilbench.drivers import cia402 as c
 from hilbench.drivers.canopen_drive import CanopenDrive
 from hilbench.firmware_sim.cia402_drive import EDS_PATH, SimCia402Drive
 from hilbench.firmware_sim.sim_config import load_sim_config
+from tests.drivers.cia402_runs import run_on_sim
 
 pytestmark = pytest.mark.drives
 STEP = SteppedSine(frequencies=[5.0], amplitudes=[15.0], settle_periods=1, measure_periods=1, sample_rate=1000)
@@ -88,35 +88,24 @@ VARIANTS = {
 }
 
 
-def _run(tmp_path, eds: str) -> tuple[dict, list[str], SimCia402Drive, list]:
-    channel = f"o-{uuid.uuid4().hex[:8]}"
-    network = canopen.Network()
-    network.connect(interface="virtual", channel=channel)
-    sim = SimCia402Drive(network, 3, load_sim_config(), eds=eds, clock="sync", sync_timeout=1.0)
-    out = tmp_path / "r.h5"
-    emcy = []
-    try:
-        host = CanopenDrive("virtual", channel, 3, eds, timeout=1.0)
-        try:
-            result = Bench(host, "canopen://virtual", DeviceSettings(counts_per_rev=1 << 20, watchdog_timeout=1.0)
-                           ).run(STEP, out)
-            period = (sim._raw(c.INTERPOLATION_PERIOD, 1), sim._raw(c.INTERPOLATION_PERIOD, 2)) \
-                if c.INTERPOLATION_PERIOD in sim.node.object_dictionary else None
-            sim.fault(0x2310, 0x02)  # is the EMCY heard on the drive's COB-ID?
-            host._emcy_event.wait(1.0)
-            emcy = [code for code, _, _ in host._emcy]
-        finally:
-            host.close()
-    finally:
-        sim.close()
-        network.disconnect()
-    assert result.status == "completed"
+def _run(tmp_path, eds: str) -> tuple[dict, list[str], tuple[int, int] | None, list[int]]:
+    seen: dict = {}
+
+    def after(host: CanopenDrive, sim: SimCia402Drive) -> None:
+        od = sim.node.object_dictionary
+        seen["period"] = (sim._raw(c.INTERPOLATION_PERIOD, 1), sim._raw(c.INTERPOLATION_PERIOD, 2)) \
+            if c.INTERPOLATION_PERIOD in od else None
+        sim.fault(0x2310, 0x02)  # is the EMCY heard on the drive's COB-ID?
+        host._emcy_event.wait(1.0)
+        seen["emcy"] = [code for code, _, _ in host._emcy]
+
+    out = run_on_sim(tmp_path / "r.h5", STEP, eds=eds, after=after)
     with h5py.File(out) as f:
         s = f["samples"]
         arrays = {k: s[k][:] for k in ("position", "velocity", "counts")}
         arrays["counts_per_rev"] = json.loads(f["device/calibration"][()])["counts_per_rev"]
         events = [m.decode() for m in f["events"]["message"][:]]
-    return arrays, events, period, emcy
+    return arrays, events, seen["period"], seen["emcy"]
 
 
 @pytest.fixture(scope="module")

@@ -16,11 +16,11 @@ import h5py
 import pytest
 
 from hilbench.bench.protocols import SteppedSine
-from hilbench.bench.runner import Bench, DeviceSettings
 from hilbench.drivers import cia402 as c
 from hilbench.drivers.canopen_drive import CanopenDrive
 from hilbench.firmware_sim.cia402_drive import EDS_PATH, SimCia402Drive
 from hilbench.firmware_sim.sim_config import load_sim_config
+from tests.drivers.cia402_runs import run_on_sim
 
 pytestmark = pytest.mark.drives
 ONE = SteppedSine(frequencies=[20.0], amplitudes=[0.5], settle_periods=1, measure_periods=1, sample_rate=1000)
@@ -33,23 +33,8 @@ class CarelessHost(CanopenDrive):
         pass
 
 
-def _run(tmp_path, host_class=CanopenDrive, **sim_options) -> tuple[list[str], list]:
-    channel = f"z-{uuid.uuid4().hex[:8]}"
-    network = canopen.Network()
-    network.connect(interface="virtual", channel=channel)
-    sim = SimCia402Drive(network, 3, load_sim_config(), clock="sync", sync_timeout=1.0, **sim_options)
-    out = tmp_path / "r.h5"
-    try:
-        host = host_class("virtual", channel, 3, str(EDS_PATH), timeout=1.0)
-        try:
-            result = Bench(host, "canopen://virtual", DeviceSettings(counts_per_rev=1 << 20, watchdog_timeout=1.0)
-                           ).run(ONE, out)
-        finally:
-            host.close()
-    finally:
-        sim.close()
-        network.disconnect()
-    assert result.status == "completed"
+def _run(tmp_path, host_class=CanopenDrive, **sim_options) -> tuple[list[str], float]:
+    out = run_on_sim(tmp_path / "r.h5", ONE, host_class=host_class, **sim_options)
     with h5py.File(out) as f:
         events = [m.decode() for m in f["events"]["message"][:]]
         first = float(f["samples/torque"][0])
