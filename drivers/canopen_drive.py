@@ -17,8 +17,13 @@ Set-up (``configure``): NMT pre-operational; SDO: mode 10 (checked against 0x650
 cycle period 0x1006, max torque 0x6072 from the host's current limit, producer heartbeat 0x1017, the host
 as heartbeat consumer 0x1016 (timeout = the watchdog timeout), lost-communication reaction 0x6007 = fault;
 PDO mapping by SDO; NMT operational; the host starts its own heartbeat. ``arm`` walks the CiA 402 state
-machine to operation enabled (fault reset first if needed). EMCY messages latch a fault host-side with the
-code's text; ``estop`` sends quick stop.
+machine to operation enabled (fault reset first if needed), with 0x6071 = 0 by SDO and in one RPDO first; the
+run's first sample is checked for motion the host did not command. EMCY messages latch a fault host-side with
+the code's text; ``estop`` sends quick stop.
+
+What the drive says is used, not assumed: the encoder resolution 0x608F (adopted), the factor objects for the
+units of 0x6064 and 0x606C (0x6091-0x6094 where present), the SYNC and EMCY COB-IDs (0x1005, 0x1014); 0x60C2 gets
+the cycle period where the drive has it. docs/drives.md lists every object the host assumes.
 """
 
 from __future__ import annotations
@@ -248,7 +253,8 @@ class CanopenDrive(HostClockedDevice):
         # the drive samples at each SYNC: the analysis resamples on host_time (analysis/record.py)
         self._info = {"protocol": "CiA 402 over CANopen", "url": self.name, "sample_times": "host_time",
                       "device_type": f"0x{device_type:08X}", "supported_modes": f"0x{supported:08X}",
-                      "rated_torque_Nm": self.rated_torque, "encoder_counts_per_rev": self.counts_per_rev}
+                      "rated_torque_Nm": self.rated_torque, "encoder_counts_per_rev": self.counts_per_rev,
+                      "units": self._adopted[0].removeprefix("units adopted from the drive: ")}
         try:
             self._info["model"] = str(self._read(c.DEVICE_NAME, what="device name"))
         except (CommandRefusedError, KeyError):
