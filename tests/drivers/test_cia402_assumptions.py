@@ -30,6 +30,7 @@ def documented() -> list[int]:
     return [int(m, 16) for m in re.findall(r"^- (0x[0-9A-F]{4}) ", section, re.M)]
 
 
+@pytest.mark.device_free
 def test_the_section_lists_each_object_once():
     objects = documented()
     assert len(objects) == len(set(objects)) and len(objects) > 30
