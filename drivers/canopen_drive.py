@@ -106,7 +106,7 @@ class CanopenDrive(HostClockedDevice):
         self.interface, self.channel, self.bus_kwargs = interface, channel, dict(bus_kwargs)
         self._skipped: list[str] = []  # optional objects the drive lacks, said once in the run events
         self._restore: dict[tuple[int, int | None], int] = {}  # objects to put back on close
-        self._check_rest = False  # set by arm: the next stream's first sample is checked for uncommanded motion
+        self._check_rest = False  # set by configure: the next stream's first sample is checked for motion
         od = _check_eds(eds, node_id)  # before the bus is even opened
         import can
 
@@ -381,6 +381,9 @@ class CanopenDrive(HostClockedDevice):
         self._wait_nmt("OPERATIONAL")
         self.config = config
         self.calibration = Calibration(config.torque_constant, self.counts_per_rev, config.ratio)
+        # the run's first sample is checked for motion the host did not command (not a resume's: the runner
+        # configures once per run and arms again after a pause)
+        self._check_rest = True
 
     def _map_pdos(self) -> None:
         node = self.node
@@ -459,7 +462,6 @@ class CanopenDrive(HostClockedDevice):
                                    f"clear it with `hilbench fault clear --device URL` first")
         self._estop_requested = False
         self._zero_torque()
-        self._check_rest = True  # the run's first sample is checked for motion the host did not command
         self._walk_to(c.State.OPERATION_ENABLED, (c.Command.SHUTDOWN, c.Command.SWITCH_ON,
                                                   c.Command.ENABLE_OPERATION))
         display = int(self._read(c.MODES_DISPLAY, what="modes of operation display"))
