@@ -7,7 +7,7 @@ import pytest
 
 from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.cli import main
-from hilbench.firmware_sim.plant import Hysteresis, PlantParams, simulate
+from hilbench.firmware_sim.engine.plant import Hysteresis, PlantParams, simulate
 from tests.analysis.identification.test_identification import random_enveloped
 
 pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part

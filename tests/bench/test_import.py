@@ -13,8 +13,8 @@ import pytest
 from scipy.io import loadmat, savemat
 
 from hilbench.analysis.runfile import open_run
-from hilbench.bench import importers
 from hilbench.bench.cli import main as bench_main
+from hilbench.bench.storage import importers
 from tests import real_data
 
 pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part

@@ -47,7 +47,8 @@ def test_drivers_never_import_firmware_sim_bench_or_analysis():
 
 
 def test_firmware_imports_only_the_protocol_from_drivers():
-    code = ("import sys, hilbench.firmware_sim.device, hilbench.firmware_sim.core_c, hilbench.firmware_sim.__main__; "
+    code = ("import sys, hilbench.firmware_sim.devices.device, hilbench.firmware_sim.devices.core_c, "
+            "hilbench.firmware_sim.__main__; "
             "print(sorted(m.removeprefix('hilbench.') for m in sys.modules "
             "if m.split('.')[:2] in (['hilbench', 'drivers'], ['hilbench', 'bench'], ['hilbench', 'analysis'])))")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)

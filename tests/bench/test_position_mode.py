@@ -11,9 +11,9 @@ import h5py
 import numpy as np
 import pytest
 
-from hilbench.bench import excitations
-from hilbench.bench.protocols import ParameterSpec, Protocol
-from hilbench.bench.runner import Bench, DeviceSettings
+from hilbench.bench.acquisition import excitations
+from hilbench.bench.acquisition.protocols import ParameterSpec, Protocol
+from hilbench.bench.acquisition.runner import Bench, DeviceSettings
 
 FS = 10000
 CPR = 1 << 16

@@ -10,8 +10,8 @@ from hilbench.drivers.amplifier import Amplifier
 from hilbench.drivers.device_url import open_device
 from hilbench.drivers.errors import CommandRefusedError, ConfigError, DeviceURLError, SetpointError
 from hilbench.drivers.links import SerialLink
-from hilbench.firmware_sim.plant import simulate
-from hilbench.firmware_sim.sim_config import load_sim_config
+from hilbench.firmware_sim.devices.sim_config import load_sim_config
+from hilbench.firmware_sim.engine.plant import simulate
 
 
 def direct_run(sim_path: str, config: p.Config, setpoints: np.ndarray):

@@ -18,8 +18,8 @@ from hilbench.drivers import protocol as p
 from hilbench.drivers.device_url import open_device
 from hilbench.drivers.errors import CommandRefusedError, DeviceFaultError, DeviceTimeoutError
 from hilbench.drivers.odrive_drive import OdriveDrive
-from hilbench.firmware_sim.odrive_sim import TVL_ENDPOINT, SimOdrive
-from hilbench.firmware_sim.sim_config import load_sim_config
+from hilbench.firmware_sim.devices.odrive_sim import TVL_ENDPOINT, SimOdrive
+from hilbench.firmware_sim.devices.sim_config import load_sim_config
 
 pytestmark = pytest.mark.drives
 

@@ -9,10 +9,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hilbench.drivers import protocol as p
-from hilbench.firmware_sim._fwcore import ffi, lib
-from hilbench.firmware_sim.core_c import CoreDevice
-from hilbench.firmware_sim.plant import simulate
-from hilbench.firmware_sim.sim_config import sim_config_from_dict
+from hilbench.firmware_sim.devices._fwcore import ffi, lib
+from hilbench.firmware_sim.devices.core_c import CoreDevice
+from hilbench.firmware_sim.devices.sim_config import sim_config_from_dict
+from hilbench.firmware_sim.engine.plant import simulate
 from tests.firmware.host import Host, samples
 
 SIM = sim_config_from_dict({"device": {"buffer_capacity": 4096},

@@ -12,8 +12,8 @@ import h5py
 import numpy as np
 import pytest
 
-from hilbench.bench.protocols import Identification
-from hilbench.bench.runner import Bench, DeviceSettings
+from hilbench.bench.acquisition.protocols import Identification
+from hilbench.bench.acquisition.runner import Bench, DeviceSettings
 from hilbench.drivers.device_url import open_device
 from tests.firmware import qemu_target
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from hilbench.drivers import protocol as p
-from hilbench.firmware_sim.core_c import CoreDevice
-from hilbench.firmware_sim.sim_config import sim_config_from_dict
+from hilbench.firmware_sim.devices.core_c import CoreDevice
+from hilbench.firmware_sim.devices.sim_config import sim_config_from_dict
 from tests.firmware.host import Host
 from tests.reliability.wire import Wire
 

@@ -124,7 +124,7 @@ def test_dropping_counts_only_frames_that_do_not_decode():
     import can
 
     from hilbench.drivers.can_frames import drop_malformed_frames
-    from hilbench.firmware_sim.bus_frames import drop_malformed
+    from hilbench.firmware_sim.devices.bus_frames import drop_malformed
 
     port = random.randint(40000, 60000)
     group = f"239.{random.randint(1, 254)}.{random.randint(1, 254)}.{random.randint(1, 254)}"

@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from hilbench.bench.campaign import CampaignError, load_campaign, run_campaign
+from hilbench.bench.acquisition.campaign import CampaignError, load_campaign, run_campaign
 from hilbench.bench.campaign_analysis.engine import AnalyseError, _environment
 
 TOML = """

@@ -17,9 +17,9 @@ from PySide6 import QtCore
 
 from hilbench.analysis.runfile import open_run
 from hilbench.bench.gui.main_window import MainWindow
-from hilbench.firmware_sim.cia402_drive import EDS_PATH, SimCia402Drive
-from hilbench.firmware_sim.odrive_sim import TVL_ENDPOINT, SimOdrive
-from hilbench.firmware_sim.sim_config import load_sim_config
+from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH, SimCia402Drive
+from hilbench.firmware_sim.devices.odrive_sim import TVL_ENDPOINT, SimOdrive
+from hilbench.firmware_sim.devices.sim_config import load_sim_config
 
 pytestmark = pytest.mark.drives
 
