@@ -61,8 +61,9 @@ def test_wheel_holds_one_namespace_and_the_package_data(installed):
     names = zipfile.ZipFile(installed["wheel"]).namelist()
     top = {n.split("/")[0] for n in names}
     assert {t for t in top if not t.endswith(".dist-info")} == {"hilbench"}, top
-    for needed in ("hilbench/firmware_sim/plant.c", "hilbench/firmware_sim/plant.h",
-                   "hilbench/firmware_sim/default_sim.toml", "hilbench/__main__.py"):
+    for needed in ("hilbench/firmware_sim/engine/plant.c", "hilbench/firmware_sim/engine/plant.h",
+                   "hilbench/firmware_sim/devices/default_sim.toml", "hilbench/firmware_sim/devices/hb_cia402.eds",
+                   "hilbench/__main__.py"):
         assert needed in names, needed
     assert any(n.startswith("hilbench/firmware_sim/engine/_plant") and n.endswith(".so") for n in names)
 

@@ -13,6 +13,8 @@ import pytest
 from hilbench.analysis.runfile import open_run
 from hilbench.bench.acquisition.campaign import CampaignError, load_campaign
 
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
+
 GOOD = """
 [defaults]
 device = "sim://?pacing=lockstep"

@@ -10,8 +10,6 @@ from hilbench.bench.cli import main
 from hilbench.firmware_sim.engine.plant import Hysteresis, PlantParams, simulate
 from tests.analysis.identification.test_identification import random_enveloped
 
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
-
 TRUTH = PlantParams(inertia=0.01, viscous=0.05, hysteresis=Hysteresis(0.3, 2e-3, 64))
 
 

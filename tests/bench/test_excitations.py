@@ -11,8 +11,6 @@ from scipy import signal
 
 from hilbench.bench.acquisition import excitations as ex
 
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
-
 
 def _zero_crossings(t: np.ndarray, u: np.ndarray) -> np.ndarray:
     """Times where u changes sign, by linear interpolation between samples."""

@@ -13,8 +13,6 @@ from tests.analysis.afrf.test_afrf_run import _write_run as write_stepped_sine
 from tests.bench.test_paper_skeleton_commands import _write_chirp
 from tests.figure_checks import figure_problems, recording_figures
 
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
-
 
 def _assert_readable(seen: dict, expected: set[str]) -> None:
     assert expected <= set(seen), f"figures written: {sorted(seen)}"

@@ -3,7 +3,6 @@
 import json
 
 import numpy as np
-import pytest
 
 from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.cli import main
@@ -12,8 +11,6 @@ from hilbench.firmware_sim.engine.plant import simulate
 from tests import real_data
 from tests.analysis.identification.test_identification import random_enveloped
 from tests.figure_checks import recording_figures
-
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
 
 
 def _write_run(path, seed, channels=("sample_index", "t", "torque", "position")):

@@ -17,8 +17,6 @@ from hilbench.bench.cli import main as bench_main
 from hilbench.bench.storage import importers
 from tests import real_data
 
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
-
 EMPS, EMPS_PULSES = real_data.EMPS_TRAIN, real_data.EMPS_TEST
 _HSM_DIR = real_data.real_data("hsm150")
 HSM = sorted(_HSM_DIR.glob("idf_*.mat")) if _HSM_DIR else []

@@ -20,8 +20,6 @@ from hilbench.bench.storage import importers
 from tests import real_data
 from tests.bench.test_identify_command import _write_run
 
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
-
 
 def _one_line_error(capsys, argv, *patterns):
     assert main(argv) == 2

@@ -13,8 +13,6 @@ from hilbench.firmware_sim.engine.plant import simulate
 from tests.analysis.identification.test_identification import random_enveloped
 from tests.bench.test_identify_command import _write_run
 
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
-
 
 def _aborted(path, seed=3, fs=2000.0, n=12_000, planned=40_000):
     """An identification run stopped by the operator after n of its planned samples."""

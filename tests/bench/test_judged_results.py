@@ -17,8 +17,6 @@ from hilbench.firmware_sim.engine.plant import simulate
 from tests.analysis.identification.test_identification import random_enveloped
 from tests.bench.test_paper_skeleton_commands import _write_chirp
 
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
-
 FS, N = 2000.0, 16_000
 
 

@@ -20,8 +20,6 @@ from hilbench.bench.errors import BenchError
 from hilbench.bench.storage import outputs
 from tests.bench.test_identify_command import _write_run
 
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
-
 
 @pytest.fixture(scope="module")
 def run_file(tmp_path_factory):

@@ -11,8 +11,6 @@ from hilbench.bench.cli import main
 from hilbench.firmware_sim.engine.friction_models import paper_system
 from hilbench.firmware_sim.engine.plant import simulate
 
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
-
 FS = 1000.0
 
 

@@ -14,8 +14,6 @@ from hilbench.firmware_sim.engine.plant import simulate
 from tests.analysis.residual.test_residual_loop import FS, excitation
 from tests.figure_checks import recording_figures
 
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
-
 
 def write_run(path, seed: int) -> None:
     params = dc_motor().replace(viscous=0.01, counts_per_rev=20000, seed=seed)

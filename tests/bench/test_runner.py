@@ -15,6 +15,8 @@ from hilbench.bench.acquisition.protocols import Identification, ProtocolError, 
 from hilbench.bench.acquisition.runner import Bench, DeviceSettings, RunControl
 from hilbench.drivers import protocol as wire
 
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
+
 LOCKSTEP = "sim://?pacing=lockstep"
 
 

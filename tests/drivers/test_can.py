@@ -15,6 +15,8 @@ from hilbench.firmware_sim.devices.device import CanTransport, serve
 from hilbench.firmware_sim.devices.sim_config import load_sim_config
 from hilbench.firmware_sim.engine.plant import simulate
 
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
+
 
 @pytest.fixture
 def virtual_device(sim_toml):

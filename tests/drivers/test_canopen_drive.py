@@ -31,7 +31,7 @@ from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH, SimCia402Drive
 from hilbench.firmware_sim.devices.sim_config import load_sim_config, substeps_for
 from hilbench.firmware_sim.engine.plant import simulate
 
-pytestmark = pytest.mark.drives
+pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
 KT, RATED, CPR = 0.2, 0.5, 1 << 20  # N*m/A, N*m (EDS 0x6076), counts/rev (EDS 0x608F)
 
 

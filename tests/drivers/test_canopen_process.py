@@ -22,9 +22,7 @@ from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH
 from hilbench.firmware_sim.devices.sim_config import load_sim_config, substeps_for
 from hilbench.firmware_sim.engine.plant import simulate
 
-pytestmark = pytest.mark.drives
-
-
+pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
 def _free_udp_port() -> int:
     return random.randint(40000, 60000)
 

@@ -36,9 +36,7 @@ from hilbench.firmware_sim.devices.odrive_sim import TVL_ENDPOINT, SimOdrive
 from hilbench.firmware_sim.devices.sim_config import load_sim_config
 from tests.reliability.cli import hilbench, one_line_error
 
-pytestmark = pytest.mark.drives
-
-
+pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
 # ---------------------------------------------------------------- item 5
 def test_an_odrive_that_vanishes_mid_run_is_never_completed(tmp_path):
     channel = uuid.uuid4().hex[:8]

@@ -30,7 +30,7 @@ from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH, SimCia402Drive
 from hilbench.firmware_sim.devices.odrive_sim import TVL_ENDPOINT, SimOdrive
 from hilbench.firmware_sim.devices.sim_config import load_sim_config
 
-pytestmark = pytest.mark.drives
+pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
 CPR = 1 << 20
 LIMITS = {"position": {"position_min": -0.001, "position_max": 0.001}, "velocity": {"velocity_limit": 0.5}}
 

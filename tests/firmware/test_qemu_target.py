@@ -17,9 +17,7 @@ from hilbench.bench.acquisition.runner import Bench, DeviceSettings
 from hilbench.drivers.device_url import open_device
 from tests.firmware import qemu_target
 
-pytestmark = pytest.mark.target
-
-
+pytestmark = [pytest.mark.target, pytest.mark.usefixtures("starts_devices")]  # starts a device
 @pytest.fixture(scope="module")
 def lockstep_image():
     why = qemu_target.missing_tools()

@@ -14,6 +14,8 @@ from hilbench.drivers.amplifier import Amplifier
 from hilbench.drivers.errors import DriverError
 from tests.reliability.cli import hilbench, one_line_error, start
 
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
+
 HEAD = '[defaults]\ndevice = "sim://?pacing=lockstep"\n'
 ONE_RUN = '[[run]]\nname = "a"\nprotocol = "chirp"\nduration = "1 s"\n'
 

@@ -12,6 +12,8 @@ from hilbench.firmware_sim.devices.sim_config import sim_config_from_dict
 from tests.firmware.host import Host
 from tests.reliability.wire import Wire
 
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
+
 
 def test_host_gone_with_the_watchdog_off_latches_underrun_and_the_device_lives(simulator):
     """Item 1: watchdog 0, 1 kHz, the host vanishes mid-stream. A 0.5 ms tick consumes the buffer one

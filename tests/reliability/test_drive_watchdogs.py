@@ -38,8 +38,7 @@ from hilbench.firmware_sim.devices.odrive_sim import TVL_ENDPOINT, SimOdrive
 from hilbench.firmware_sim.devices.sim_config import load_sim_config, sim_config_from_dict
 from tests.reliability.wire import Wire
 
-pytestmark = pytest.mark.drives
-
+pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
 MARGIN = 0.35  # s of scheduling slack on a shared 2-core machine, on top of each documented timeout
 
 

@@ -20,8 +20,6 @@ from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_
 from hilbench.bench.cli import main
 from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_BREAKAWAY, DC_MOTOR_INERTIA
 
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
-
 quiet = {"progress": False, "say": lambda _line: None}
 
 
