@@ -148,7 +148,7 @@ def test_sim_config_errors(tmp_path):
     assert load_sim_config(seed=42).plant.seed == 42
 
 
-def test_cli_bad_config_is_one_line(tmp_path):
+def test_cli_bad_config_is_one_line(tmp_path, starts_devices):
     bad = tmp_path / "bad.toml"
     bad.write_text("[plant]\ninertia = -1\n")
     res = subprocess.run([sys.executable, "-m", "hilbench.firmware_sim", "--serial", "--config", str(bad)],
