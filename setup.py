@@ -16,5 +16,5 @@ for sub in SUBPACKAGES:
     packages += [f"hilbench.{sub}"] + [f"hilbench.{sub}.{name}" for name in find_packages(sub)]
 
 setup(packages=packages, package_dir=package_dir,
-      cffi_modules=["firmware_sim/plant_build.py:ffibuilder",
+      cffi_modules=["firmware_sim/engine/plant_build.py:ffibuilder",
                     "firmware/targets/host/core_build.py:ffibuilder"])

@@ -8,10 +8,12 @@ from pathlib import Path
 
 import pytest
 
+from hilbench.bench.acquisition.protocols import PROTOCOLS
+from hilbench.bench.acquisition.user_config import config_path, default_device
 from hilbench.bench.cli import build_parser, main, split_global_flags
-from hilbench.bench.protocols import PROTOCOLS
-from hilbench.bench.user_config import config_path, default_device
 from tests.bench.test_identify_command import _write_run
+
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 
 @pytest.fixture(scope="module")

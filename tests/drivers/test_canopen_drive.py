@@ -14,8 +14,8 @@ import h5py
 import numpy as np
 import pytest
 
-from hilbench.bench.protocols import Identification
-from hilbench.bench.runner import Bench, DeviceSettings
+from hilbench.bench.acquisition.protocols import Identification
+from hilbench.bench.acquisition.runner import Bench, DeviceSettings
 from hilbench.drivers import cia402 as c
 from hilbench.drivers import protocol as p
 from hilbench.drivers.canopen_drive import CanopenDrive
@@ -27,11 +27,11 @@ from hilbench.drivers.errors import (
     DeviceTimeoutError,
     SampleLossError,
 )
-from hilbench.firmware_sim.cia402_drive import EDS_PATH, SimCia402Drive
-from hilbench.firmware_sim.plant import simulate
-from hilbench.firmware_sim.sim_config import load_sim_config, substeps_for
+from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH, SimCia402Drive
+from hilbench.firmware_sim.devices.sim_config import load_sim_config, substeps_for
+from hilbench.firmware_sim.engine.plant import simulate
 
-pytestmark = pytest.mark.drives
+pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
 KT, RATED, CPR = 0.2, 0.5, 1 << 20  # N*m/A, N*m (EDS 0x6076), counts/rev (EDS 0x608F)
 
 

@@ -18,13 +18,11 @@ import pytest
 from hilbench.analysis.identification.identify import RunArrays, identify
 from hilbench.analysis.identification.maxwell_fit import LipSettings
 from hilbench.drivers import cia402 as c
-from hilbench.firmware_sim.cia402_drive import EDS_PATH
-from hilbench.firmware_sim.plant import simulate
-from hilbench.firmware_sim.sim_config import load_sim_config, substeps_for
+from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH
+from hilbench.firmware_sim.devices.sim_config import load_sim_config, substeps_for
+from hilbench.firmware_sim.engine.plant import simulate
 
-pytestmark = pytest.mark.drives
-
-
+pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
 def _free_udp_port() -> int:
     return random.randint(40000, 60000)
 
