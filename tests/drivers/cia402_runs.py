@@ -8,10 +8,10 @@ from pathlib import Path
 
 import canopen
 
-from hilbench.bench.runner import Bench, DeviceSettings
+from hilbench.bench.acquisition.runner import Bench, DeviceSettings
 from hilbench.drivers.canopen_drive import CanopenDrive
-from hilbench.firmware_sim.cia402_drive import EDS_PATH, SimCia402Drive
-from hilbench.firmware_sim.sim_config import load_sim_config
+from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH, SimCia402Drive
+from hilbench.firmware_sim.devices.sim_config import load_sim_config
 
 
 def run_on_sim(out: Path, protocol, eds: str = str(EDS_PATH), host_class: type = CanopenDrive,

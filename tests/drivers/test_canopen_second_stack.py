@@ -16,9 +16,9 @@ import h5py
 import numpy as np
 import pytest
 
+from hilbench.bench.acquisition.protocols import SteppedSine
 from hilbench.bench.cli import main
-from hilbench.bench.protocols import SteppedSine
-from hilbench.firmware_sim.cia402_drive import EDS_PATH
+from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH
 from tests.drivers.second_stack import SecondStackDrive
 
 pytestmark = pytest.mark.drives

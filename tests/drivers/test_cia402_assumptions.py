@@ -16,8 +16,8 @@ import pytest
 
 from hilbench.drivers import protocol as p
 from hilbench.drivers.canopen_drive import CanopenDrive
-from hilbench.firmware_sim.cia402_drive import SimCia402Drive
-from hilbench.firmware_sim.sim_config import load_sim_config
+from hilbench.firmware_sim.devices.cia402_drive import SimCia402Drive
+from hilbench.firmware_sim.devices.sim_config import load_sim_config
 from tests.drivers.test_cia402_drive_objects import _pair, eds_variant
 
 pytestmark = pytest.mark.drives

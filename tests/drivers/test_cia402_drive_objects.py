@@ -21,11 +21,11 @@ import h5py
 import numpy as np
 import pytest
 
-from hilbench.bench.protocols import SteppedSine
+from hilbench.bench.acquisition.protocols import SteppedSine
 from hilbench.drivers import cia402 as c
 from hilbench.drivers.canopen_drive import CanopenDrive
-from hilbench.firmware_sim.cia402_drive import EDS_PATH, SimCia402Drive
-from hilbench.firmware_sim.sim_config import load_sim_config
+from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH, SimCia402Drive
+from hilbench.firmware_sim.devices.sim_config import load_sim_config
 from tests.drivers.cia402_runs import run_on_sim
 
 pytestmark = pytest.mark.drives
