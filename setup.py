@@ -21,5 +21,5 @@ package_dir["hilbench.examples"] = "examples"
 packages.append("hilbench.examples")
 
 setup(packages=packages, package_dir=package_dir,
-      cffi_modules=["firmware_sim/plant_build.py:ffibuilder",
+      cffi_modules=["firmware_sim/engine/plant_build.py:ffibuilder",
                     "firmware/targets/host/core_build.py:ffibuilder"])

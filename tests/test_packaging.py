@@ -62,17 +62,18 @@ def test_wheel_holds_one_namespace_and_the_package_data(installed):
     names = zipfile.ZipFile(installed["wheel"]).namelist()
     top = {n.split("/")[0] for n in names}
     assert {t for t in top if not t.endswith(".dist-info")} == {"hilbench"}, top
-    for needed in ("hilbench/firmware_sim/plant.c", "hilbench/firmware_sim/plant.h",
-                   "hilbench/firmware_sim/default_sim.toml", "hilbench/__main__.py"):
+    for needed in ("hilbench/firmware_sim/engine/plant.c", "hilbench/firmware_sim/engine/plant.h",
+                   "hilbench/firmware_sim/devices/default_sim.toml", "hilbench/firmware_sim/devices/hb_cia402.eds",
+                   "hilbench/__main__.py"):
         assert needed in names, needed
-    assert any(n.startswith("hilbench/firmware_sim/_plant") and n.endswith(".so") for n in names)
+    assert any(n.startswith("hilbench/firmware_sim/engine/_plant") and n.endswith(".so") for n in names)
 
 
 def test_installed_wheel_is_what_runs_and_nothing_generic_is_importable(installed):
     import json
 
     probe = (
-        "import importlib.util, json, sys, hilbench, hilbench.firmware_sim._plant as p\n"
+        "import importlib.util, json, sys, hilbench, hilbench.firmware_sim.engine._plant as p\n"
         f"generic = {GENERIC!r}\n"
         "print(json.dumps({'hilbench': hilbench.__file__, 'plant': p.__file__,\n"
         "  'generic': [g for g in generic if importlib.util.find_spec(g) is not None],\n"

@@ -15,12 +15,10 @@ from scipy.io import savemat
 
 from hilbench.analysis.record import load_record
 from hilbench.analysis.runfile import open_run, run_torque_timing
-from hilbench.bench import importers
 from hilbench.bench.cli import main
+from hilbench.bench.storage import importers
 from tests import real_data
 from tests.bench.test_identify_command import _write_run
-
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
 
 
 def _one_line_error(capsys, argv, *patterns):

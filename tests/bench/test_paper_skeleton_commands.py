@@ -8,10 +8,8 @@ import pytest
 from hilbench.analysis.reproductions.paper import maxwell_slip_closed_form
 from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.cli import main
-from hilbench.firmware_sim.friction_models import paper_system
-from hilbench.firmware_sim.plant import simulate
-
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
+from hilbench.firmware_sim.engine.friction_models import paper_system
+from hilbench.firmware_sim.engine.plant import simulate
 
 FS = 1000.0
 
@@ -78,6 +76,6 @@ def test_skeleton_cli_errors(tmp_path, capsys):
     [("hold_previous", [1.5, 2.5, 3.0]), ("hold_next", [1.0, 1.5, 2.5]), ("instant", [1.0, 2.0, 3.0])],
 )
 def test_centred_force(timing, expect):
-    from hilbench.bench.commands.skeleton import centred_force
+    from hilbench.bench.cli.commands.skeleton import centred_force
 
     np.testing.assert_allclose(centred_force(np.array([1.0, 2.0, 3.0]), timing), expect)

@@ -11,10 +11,12 @@ import h5py
 import numpy as np
 import pytest
 
-from hilbench.bench import excitations
+from hilbench.bench.acquisition import excitations
+from hilbench.bench.acquisition.protocols import Presliding, ProtocolError, make_protocol
+from hilbench.bench.acquisition.runner import Bench, DeviceSettings
 from hilbench.bench.cli import main
-from hilbench.bench.protocols import Presliding, ProtocolError, make_protocol
-from hilbench.bench.runner import Bench, DeviceSettings
+
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 CPR = 1 << 16
 COUNT = 2 * math.pi / CPR  # rad, one encoder count

@@ -11,9 +11,11 @@ import numpy as np
 import pytest
 
 from hilbench.analysis.runfile import open_run
-from hilbench.bench.protocols import Identification, ProtocolError, SteppedSine
-from hilbench.bench.runner import Bench, DeviceSettings, RunControl
+from hilbench.bench.acquisition.protocols import Identification, ProtocolError, SteppedSine
+from hilbench.bench.acquisition.runner import Bench, DeviceSettings, RunControl
 from hilbench.drivers import protocol as wire
+
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 LOCKSTEP = "sim://?pacing=lockstep"
 
@@ -189,7 +191,7 @@ def _children(pid: int) -> list[int]:
 def test_a_ctrl_c_lost_as_an_exception_still_aborts_through_the_flag():
     """signals_as_interrupt(control=...): SIGINT raises KeyboardInterrupt and sets the abort flag. If code the run
     calls swallows the exception (C code that clears a pending error), the run loop still sees the flag."""
-    from hilbench.bench.runner import RunControl, signals_as_interrupt
+    from hilbench.bench.acquisition.runner import RunControl, signals_as_interrupt
 
     outer = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a foreground process
     try:
