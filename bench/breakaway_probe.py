@@ -19,9 +19,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hilbench.bench import excitations
+from hilbench.bench.acquisition import excitations
+from hilbench.bench.acquisition.protocols import ParameterSpec, Protocol, ProtocolError
 from hilbench.bench.errors import BenchError
-from hilbench.bench.protocols import ParameterSpec, Protocol, ProtocolError
 
 #: Time of the quick return from the peak to 0 A, s: short enough that a slide stops soon after it.
 RETURN_TIME = 0.02

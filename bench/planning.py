@@ -33,10 +33,10 @@ from pathlib import Path
 
 import numpy as np
 
+from hilbench.bench.acquisition.protocols import Chirp, Identification, Presliding, Protocol, SteppedSine
+from hilbench.bench.acquisition.runner import Bench, DeviceSettings, Progress
 from hilbench.bench.breakaway_probe import BreakawayProbe, ProbeError, ProbeResult, analyse_probe
 from hilbench.bench.errors import BenchError
-from hilbench.bench.protocols import Chirp, Identification, Presliding, Protocol, SteppedSine
-from hilbench.bench.runner import Bench, DeviceSettings, Progress
 
 #: Largest share of the current limit any planned current (probe or protocol) reaches.
 LIMIT_SHARE = 0.9
@@ -94,7 +94,7 @@ class Plan:
 
     def toml(self) -> str:
         """The campaign file: ``hilbench campaign`` plays it as is."""
-        from hilbench.bench.campaign_plan import SETTING_UNITS
+        from hilbench.bench.acquisition.campaign_plan import SETTING_UNITS
 
         head = ["# Sized by `hilbench plan` from a break-away probe:", *[f"#   {line}" for line in self.lines()],
                 "", "[defaults]", f"device = {_toml(self.device)}"]
@@ -115,7 +115,7 @@ class Plan:
         return "\n".join(head) + "\n"
 
     def write(self, path: str | Path) -> None:
-        from hilbench.bench.outputs import write_text
+        from hilbench.bench.storage.outputs import write_text
 
         write_text(path, self.toml())
 
@@ -215,7 +215,7 @@ def _identification(level: float, cap: float, sample_rate: int, duration: float,
                     notes: list[str]) -> Identification:
     """Quiet half-periods at QUIET_SHARE of the sliding current; loud ones grown on the played input until
     SLIDE_SHARE of the samples drive past 1.1 x the sliding current each way (bisection, 40 halvings)."""
-    from hilbench.bench.excitations import lowpass_uniform_noise, rectangular_envelope
+    from hilbench.bench.acquisition.excitations import lowpass_uniform_noise, rectangular_envelope
 
     quiet = QUIET_SHARE * level
     base = Identification(duration=duration, amplitude=1.0, offset=0.0, seed=seed, sample_rate=sample_rate)

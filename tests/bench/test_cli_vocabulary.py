@@ -10,10 +10,12 @@ from pathlib import Path
 import pytest
 
 from hilbench.analysis.runfile import open_run
+from hilbench.bench.acquisition.protocols import PROTOCOLS
+from hilbench.bench.acquisition.user_config import config_path, default_device
 from hilbench.bench.cli import build_parser, main, split_global_flags
-from hilbench.bench.protocols import PROTOCOLS
-from hilbench.bench.user_config import config_path, default_device
 from tests.bench.test_identify_command import _write_run
+
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 
 @pytest.fixture(scope="module")
@@ -259,7 +261,7 @@ def test_campaign_and_run_are_silent_with_quiet(tmp_path, capsys):
 def test_parameter_errors_name_the_option_not_the_python_name(capsys):
     """Walk every protocol parameter and device setting of `run`: a value out of range is refused in one line
     that starts with the option the user typed (--cutoff), never the dataclass field (cutoff = ...)."""
-    from hilbench.bench.device_options import DEVICE_OPTIONS
+    from hilbench.bench.acquisition.device_options import DEVICE_OPTIONS
 
     checked = 0
     for name, cls in PROTOCOLS.items():

@@ -3,7 +3,7 @@
 The done-when test plays the planned campaign on the simulated bench and checks the recorded data, not the plan's
 own numbers: the identification slides both ways, the stepped sine spans break-away, the chirp covers >= 5x in
 displacement amplitude. The probe's findings are checked against the simulated DC motor's parameters
-(firmware_sim.friction_models.dc_motor): break-away sum(W_i) / Kt, J, b and x_p(0.9) of its virgin curve.
+(firmware_sim.engine.friction_models.dc_motor): break-away sum(W_i) / Kt, J, b and x_p(0.9) of its virgin curve.
 """
 
 from __future__ import annotations
@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 
 from hilbench.analysis.runfile import open_run
+from hilbench.bench.acquisition.excitations import lowpass_uniform_noise, random_enveloped
+from hilbench.bench.acquisition.runner import DeviceSettings
 from hilbench.bench.breakaway_probe import BreakawayProbe, ProbeResult, smoothed_velocity
 from hilbench.bench.cli import main
-from hilbench.bench.excitations import lowpass_uniform_noise, random_enveloped
 from hilbench.bench.planning import LIMIT_SHARE, plan_experiments, size_protocols
-from hilbench.bench.runner import DeviceSettings
-from hilbench.firmware_sim.friction_models import (
+from hilbench.firmware_sim.engine.friction_models import (
     DC_MOTOR_BREAKAWAY,
     DC_MOTOR_INERTIA,
     DC_MOTOR_TORQUE_CONSTANT,
@@ -160,8 +160,8 @@ def test_default_identification_slides_both_ways_on_the_simulated_motor(tmp_path
     """The issue's figures: the default identification (seed 0, 10 kHz) peaked at 5.8 A and moved 0.027 rad
     (seed 1: 17.6 A), the noise's start transient having scaled it down. Now seed 0 is as strong as the others
     (15.1 A, 3.0 rad, 20 % of the samples sliding each way) on the same 20 A limit."""
-    from hilbench.bench.protocols import Identification
-    from hilbench.bench.runner import Bench
+    from hilbench.bench.acquisition.protocols import Identification
+    from hilbench.bench.acquisition.runner import Bench
 
     with Bench.open(LOCKSTEP) as bench:
         result = bench.run(Identification(), tmp_path / "id.h5")
@@ -176,8 +176,8 @@ def test_default_identification_slides_both_ways_on_the_simulated_motor(tmp_path
 def test_default_stepped_sine_spans_breakaway_on_the_simulated_motor(tmp_path):
     """The issue: the default stepped sine (0.5 and 2 A) never reached break-away (3.8 A). Its amplitudes are now
     2 and 5 A: the recorded 2 A steps stay within the presliding loop, the 5 A steps slide."""
-    from hilbench.bench.protocols import SteppedSine
-    from hilbench.bench.runner import Bench
+    from hilbench.bench.acquisition.protocols import SteppedSine
+    from hilbench.bench.acquisition.runner import Bench
 
     proto = SteppedSine(frequencies=(5.0,), settle_periods=3, measure_periods=5)  # the default amplitudes
     assert proto.amplitudes == (2.0, 5.0)

@@ -20,10 +20,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hilbench.bench import outputs
-    from hilbench.bench.campaign import load_campaign, run_campaign
-    from hilbench.bench.progress import ProgressBar
-    from hilbench.bench.runner import signals_as_interrupt
+    from hilbench.bench.acquisition.campaign import load_campaign, run_campaign
+    from hilbench.bench.acquisition.progress import ProgressBar
+    from hilbench.bench.acquisition.runner import signals_as_interrupt
+    from hilbench.bench.storage import outputs
 
     campaign = load_campaign(args.file)  # checks every run's memory against what is available now
     if args.check:

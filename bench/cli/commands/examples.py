@@ -26,8 +26,8 @@ def shipped() -> list:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hilbench.bench import outputs
     from hilbench.bench.errors import BenchError
+    from hilbench.bench.storage import outputs
 
     examples = shipped()
     if args.out is None:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from hilbench.bench.commands.run import options_named
-from hilbench.bench.device_options import DEVICE_OPTIONS, add_device_options, settings_from_args
+from hilbench.bench.acquisition.device_options import DEVICE_OPTIONS, add_device_options, settings_from_args
+from hilbench.bench.cli.commands.run import options_named
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -32,12 +32,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hilbench.bench import outputs
+    from hilbench.bench.acquisition.progress import ProgressBar
+    from hilbench.bench.acquisition.protocols import SAMPLE_RATES
+    from hilbench.bench.acquisition.runner import signals_as_interrupt
     from hilbench.bench.errors import BenchError
     from hilbench.bench.planning import plan_experiments
-    from hilbench.bench.progress import ProgressBar
-    from hilbench.bench.protocols import SAMPLE_RATES
-    from hilbench.bench.runner import signals_as_interrupt
+    from hilbench.bench.storage import outputs
 
     if args.sample_rate not in SAMPLE_RATES:
         raise BenchError(f"--sample-rate {args.sample_rate} Hz is not one of {', '.join(map(str, SAMPLE_RATES))} Hz")

@@ -7,8 +7,8 @@ from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from hilbench.bench.device_options import add_device_options, settings_from_args
-from hilbench.bench.protocols import PROTOCOLS, Protocol
+from hilbench.bench.acquisition.device_options import add_device_options, settings_from_args
+from hilbench.bench.acquisition.protocols import PROTOCOLS, Protocol
 
 RUNNABLE: dict[str, type[Protocol]] = dict(PROTOCOLS)  # every protocol of the table (campaign names)
 # Old spellings of `run`'s protocol names, kept as argparse aliases (they map onto the one name; docs/cli.md).
@@ -78,10 +78,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hilbench.bench import outputs
-    from hilbench.bench.device_options import DEVICE_OPTIONS
-    from hilbench.bench.progress import ProgressBar
-    from hilbench.bench.runner import Bench, RunControl, signals_as_interrupt
+    from hilbench.bench.acquisition.device_options import DEVICE_OPTIONS
+    from hilbench.bench.acquisition.progress import ProgressBar
+    from hilbench.bench.acquisition.runner import Bench, RunControl, signals_as_interrupt
+    from hilbench.bench.storage import outputs
 
     protocol = protocol_from_args(args.protocol_class, args)
     with options_named(DEVICE_OPTIONS):
