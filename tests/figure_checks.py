@@ -62,7 +62,7 @@ def recording_figures():
     def savefig(self, fname, *args, **kwargs):
         result = original(self, fname, *args, **kwargs)
         name = Path(str(fname)).name
-        # bench.outputs writes through a temporary '.<name>.<random>.tmp.png'; report the real name
+        # bench.storage.outputs writes through a temporary '.<name>.<random>.tmp.png'; report the real name
         match = re.match(r"^\.(.+?)\.[^.]+\.tmp\.[a-z]+$", name)
         seen[match.group(1) if match else name] = figure_problems(self)
         return result

@@ -13,7 +13,7 @@ P integer this is exactly rFFT bin k*P, so whole periods of other harmonics leak
 
 Sources of an AFRF:
 
-- :func:`simulate_afrf`: stepped sine on a :class:`firmware_sim.plant.PlantParams` model with the C engine,
+- :func:`simulate_afrf`: stepped sine on a :class:`firmware_sim.engine.plant.PlantParams` model with the C engine,
   one independent simulation per (amplitude, frequency) cell, parallel over processes. The sample rate is
   chosen per frequency (``samples_per_period``), since the plant's dt is free.
 - :func:`afrf_from_run`: a measured stepped-sine run file (``hilbench run`` with the ``stepped_sine``
@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
-from hilbench.firmware_sim.plant import PlantParameterError, PlantParams, simulate, stiffest_eigenvalue
+from hilbench.firmware_sim.engine.plant import PlantParameterError, PlantParams, simulate, stiffest_eigenvalue
 
 #: Relative tolerance on "the window holds a whole number of periods" (n*f/fs within this of an integer).
 WHOLE_PERIOD_TOL = 1e-6

@@ -206,7 +206,7 @@ def residual(run, options: dict | None = None) -> AnalysisResult:
 
 def presliding(run, options: dict | None = None) -> AnalysisResult:
     """The presliding analysis (``analysis.presliding.analyse.analyse``) of a displacement-driven run, with the
-    numbers ``hilbench presliding`` writes (bench/commands/presliding.report): the quantities with their
+    numbers ``hilbench presliding`` writes (bench/cli/commands/presliding.report): the quantities with their
     uncertainties, the edge-pinned sum(k), the memory checks, the reversal forces; the resolution verdicts as
     warnings. ``options['replicates']``: bootstrap replicates (default 8)."""
     analyse = _entry("presliding")
