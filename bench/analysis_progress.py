@@ -17,7 +17,7 @@ DELAY_S = 2.0
 @contextmanager
 def progress_bar(desc: str, unit: str = "sample") -> Iterator[Callable[[int, int], None]]:
     """Context manager yielding the callback; the bar is closed on exit."""
-    from hilbench.bench import outputs
+    from hilbench.bench.storage import outputs
 
     bars: list[tqdm] = []
 

@@ -61,8 +61,8 @@ def _write_device_run(path: Path, u, fs: float, protocol: str, params: dict, arr
     import numpy as np
 
     from hilbench.analysis.runfile import RunWriter
-    from hilbench.firmware_sim.friction_models import dc_motor
-    from hilbench.firmware_sim.plant import Plant
+    from hilbench.firmware_sim.engine.friction_models import dc_motor
+    from hilbench.firmware_sim.engine.plant import Plant
 
     p = dc_motor().replace(counts_per_rev=2**20, seed=0)
     plant = Plant(p, 1.0 / fs)
@@ -81,7 +81,7 @@ def _write_device_run(path: Path, u, fs: float, protocol: str, params: dict, arr
 def record(kind: str, path: Path, duration: float, fs: float = FS) -> int:
     """Write the ``kind`` record of about ``duration`` s (module docstring); returns its sample count."""
 
-    from hilbench.bench.protocols import Chirp, SteppedSine
+    from hilbench.bench.acquisition.protocols import Chirp, SteppedSine
 
     if kind == "chirp":
         proto = Chirp(duration=duration, sample_rate=int(fs))
@@ -101,7 +101,7 @@ def _write_presliding(path: Path, duration: float, fs: float) -> int:
     from hilbench.analysis.models.friction_model import FrictionModel
     from hilbench.analysis.presliding.identify import model_force
     from hilbench.analysis.runfile import RunWriter
-    from hilbench.firmware_sim.friction_models import DC_MOTOR_D, dc_motor
+    from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_D, dc_motor
 
     turns = np.array([0.0, 6, -4, 3, -2, 1.5, -1, 0.5, -0.25, 2.5, -5, 8, 0]) * DC_MOTOR_D
     cycle = np.concatenate([a + (b - a) * 0.5 * (1 - np.cos(np.pi * np.linspace(0, 1, 2000, endpoint=False)))

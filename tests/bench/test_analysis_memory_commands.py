@@ -13,8 +13,8 @@ import pytest
 from hilbench.analysis import afrf, presliding, skeleton
 from hilbench.bench import analysis_progress
 from hilbench.bench.cli import main
-from hilbench.firmware_sim.friction_models import DC_MOTOR_D, paper_system
-from hilbench.firmware_sim.plant import PlantParams
+from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_D, paper_system
+from hilbench.firmware_sim.engine.plant import PlantParams
 from tests.analysis.afrf.test_afrf_stream import _write as write_stepped_sine
 from tests.analysis.presliding.records import smooth_path
 from tests.analysis.presliding.test_presliding_stream import _noisy

@@ -8,8 +8,8 @@ import pytest
 from hilbench.analysis.reproductions.paper import maxwell_slip_closed_form
 from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.cli import main
-from hilbench.firmware_sim.friction_models import paper_system
-from hilbench.firmware_sim.plant import simulate
+from hilbench.firmware_sim.engine.friction_models import paper_system
+from hilbench.firmware_sim.engine.plant import simulate
 
 pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
 

@@ -48,7 +48,7 @@ def _simulate(args):
     import numpy as np
 
     from hilbench.analysis.afrf.frf import closed_form_equivalent, coulomb_system, settle_schedule, simulate_afrf
-    from hilbench.firmware_sim.friction_models import PAPER_D, PAPER_H, paper_system
+    from hilbench.firmware_sim.engine.friction_models import PAPER_D, PAPER_H, paper_system
 
     if args.frequencies is not None and args.log_frequencies is not None:
         raise ValueError("give --frequencies or --log-frequencies, not both")
@@ -124,7 +124,7 @@ def _measured(args):
 
 def run(args) -> int:
     from hilbench.analysis.afrf.frf import plot_afrf
-    from hilbench.bench import outputs
+    from hilbench.bench.storage import outputs
 
     if (args.run is None) == (args.model is None):
         raise ValueError("give either a stepped-sine RUN.h5 or --model (not both)")

@@ -70,10 +70,10 @@ def run(args: argparse.Namespace) -> int:
     from hilbench.analysis.presliding.identify import PreslidingSettings
     from hilbench.analysis.presliding.report import summary_lines
     from hilbench.analysis.record import stream_record
-    from hilbench.bench import outputs
     from hilbench.bench.analysis_input import load, memory_budget
     from hilbench.bench.analysis_progress import progress_bar
     from hilbench.bench.errors import BenchError
+    from hilbench.bench.storage import outputs
 
     _check(args)
     out = Path(args.output)

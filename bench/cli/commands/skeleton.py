@@ -73,8 +73,8 @@ def _analyse(args, settings):
 
 def run(args: argparse.Namespace) -> int:
     from hilbench.analysis.skeleton import SkeletonSettings
-    from hilbench.bench import outputs
     from hilbench.bench.analysis_input import MAX_BINS, check_count
+    from hilbench.bench.storage import outputs
 
     outputs.refuse_inputs({"--json": args.json, "--plot": args.plot}, args.runs)
     check_count(args.bins, "--bins", 1, MAX_BINS, "log-spaced bins per skeleton curve")

@@ -11,9 +11,9 @@ import pytest
 from hilbench.analysis import afrf
 from hilbench.analysis import runfile as rf
 from hilbench.analysis.afrf.steps import SLIDING_SLOPE, sliding_slopes
-from hilbench.bench.excitations import stepped_sine
-from hilbench.firmware_sim.friction_models import dc_motor
-from hilbench.firmware_sim.plant import PlantParams, simulate
+from hilbench.bench.acquisition.excitations import stepped_sine
+from hilbench.firmware_sim.engine.friction_models import dc_motor
+from hilbench.firmware_sim.engine.plant import PlantParams, simulate
 
 FS = 1000.0
 

@@ -12,7 +12,7 @@ from hilbench.analysis import presliding
 from hilbench.analysis.presliding.streamed import NOT_STREAMED
 from hilbench.analysis.record import load_record
 from hilbench.analysis.runfile import RunWriter
-from hilbench.firmware_sim.friction_models import DC_MOTOR_D
+from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_D
 from tests.analysis.presliding.records import dc_elements, maxwell_force, smooth_path
 
 FS = 1000.0

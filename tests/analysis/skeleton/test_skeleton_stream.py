@@ -12,8 +12,8 @@ from hilbench.analysis import skeleton as sk
 from hilbench.analysis.record import load_record
 from hilbench.analysis.runfile import RunWriter
 from hilbench.analysis.skeleton.streaming import Decimator, centred_chunks, decimation_factor
-from hilbench.firmware_sim.friction_models import paper_system
-from hilbench.firmware_sim.plant import PlantParams, simulate
+from hilbench.firmware_sim.engine.friction_models import paper_system
+from hilbench.firmware_sim.engine.plant import PlantParams, simulate
 
 FS = 1000.0
 
