@@ -124,7 +124,7 @@ def recording_figures(figures: dict | None = None):
     def savefig(self, fname, *args, **kwargs):
         result = original(self, fname, *args, **kwargs)
         name = Path(str(fname)).name
-        # bench.outputs writes through a temporary '.<name>.<random>.tmp.png'; report the real name
+        # bench.storage.outputs writes through a temporary '.<name>.<random>.tmp.png'; report the real name
         match = re.match(r"^\.(.+?)\.[^.]+\.tmp\.[a-z]+$", name)
         key = match.group(1) if match else name
         seen[key] = figure_problems(self)

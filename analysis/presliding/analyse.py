@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import io
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -58,6 +58,7 @@ class PreslidingResult:
     extremes: np.ndarray | None = None  # each turning point's extreme force (reversals.extreme_forces)
     edge_rolling: RollingFit | None = None  # the shape with a free exponent fitted to the edge-pinned virgin ramp
     edge_rolling_fixed: RollingFit | None = None  # the same with the rolling-friction exponent 2 (the baseline)
+    warnings: list[str] = field(default_factory=list)  # what the input cannot support (one line each)
 
     @property
     def units(self) -> dict[str, str]:
@@ -103,11 +104,24 @@ def analyse(t: np.ndarray, x: np.ndarray, force: np.ndarray, fs: float, axis: st
     first averaged in blocks (:func:`block_means`). AnalysisError for unusable input (e.g. no reversal)."""
     step = position_resolution(np.asarray(x, float))  # of the samples as recorded, before any averaging
     raw = np.asarray(force, float)
-    edges, edge_fit, edge_why, edge_rolling, edge_fixed = _edge_fit(np.asarray(x, float), raw, step, axis,
-                                                                    settings, max(1, math.ceil(MIN_EXCURSION_S * fs)))
+    edge = _edge_fit(np.asarray(x, float), raw, step, axis, settings, max(1, math.ceil(MIN_EXCURSION_S * fs)))
     window = max(1, round(EXTREME_WINDOW_S * fs))
     t, x, force, block = block_means(t, x, force, max_samples)
-    fs = fs / block
+    return analyse_blocks(t, x, force, fs / block, block, step, axis, settings, edge,
+                          lambda rev: extreme_forces(raw, rev * block + block // 2, window),
+                          counts_per_rev=counts_per_rev, hysteresis=hysteresis, fraction=fraction,
+                          replicates=replicates, seed=seed)
+
+
+def analyse_blocks(t: np.ndarray, x: np.ndarray, force: np.ndarray, fs: float, block: int, step: float, axis: str,
+                   settings: PreslidingSettings | None, edge: tuple, extremes_of, *,
+                   counts_per_rev: float | None = None, hysteresis: float | None = None,
+                   fraction: float = DEFAULT_FRACTION, replicates: int = 20, seed: int = 0) -> PreslidingResult:
+    """:func:`analyse` from the block-averaged record (t, x, force at ``fs`` = the raw rate / ``block``) and what
+    it read from the raw samples: the position ``step``, ``edge`` (:func:`_edge_fit`'s tuple) and
+    ``extremes_of(reversals)``, each turning point's extreme force (:func:`extreme_forces` on the raw force).
+    Whole arrays (:func:`analyse`) and a record read chunk by chunk (:mod:`~.streamed`) meet here."""
+    edges, edge_fit, edge_why, edge_rolling, edge_fixed = edge
     if hysteresis is None:
         hysteresis = HYSTERESIS_STEPS * step
     rev = find_reversals(x, hysteresis)
@@ -127,7 +141,7 @@ def analyse(t: np.ndarray, x: np.ndarray, force: np.ndarray, fs: float, axis: st
         rolling, why = None, str(exc)
     res = resolution(fit, x, force, travels, counts_per_rev, fraction, step=step, rolling=rolling,
                      edge_rolling=edge_rolling, edge_fixed=edge_fixed)
-    extremes = extreme_forces(raw, rev * block + block // 2, window)
+    extremes = extremes_of(rev)
     return PreslidingResult(t, x, force, axis, fit, rev, travels[:-1], check,
                             quantities(fit.model, fraction), unc, res, fraction, block, rolling, why,
                             edges, edge_fit, edge_why, extremes, edge_rolling, edge_fixed)

@@ -23,8 +23,8 @@ from hilbench.analysis.reproductions.paper import (
     virgin_closed_form,
 )
 from hilbench.analysis.skeleton.equivalent import describing_function
-from hilbench.firmware_sim.friction_models import PAPER_D, PAPER_H, maxwell_virgin_curve, virgin_curve
-from hilbench.firmware_sim.plant import stop_operator
+from hilbench.firmware_sim.engine.friction_models import PAPER_D, PAPER_H, maxwell_virgin_curve, virgin_curve
+from hilbench.firmware_sim.engine.plant import stop_operator
 
 DPI = 100
 

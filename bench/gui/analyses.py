@@ -218,7 +218,10 @@ def skeleton(run, options: dict | None = None) -> AnalysisResult:
         Figure("damping force skeleton", f"velocity amplitude V ({pos_unit}/s)", f"F_d ({tq_unit})",
                [("c_eq V", v, fd)], scatter=True),
     ]
-    return AnalysisResult(TITLES["skeleton"], numbers, figures)
+    from hilbench.analysis.skeleton import not_chirp_warning  # a non-chirp run gives F_k of -2e4 N*m (issue 28)
+
+    line = not_chirp_warning(os.path.basename(run.path), run.protocol_name)
+    return AnalysisResult(TITLES["skeleton"], numbers, figures, [line] if line else [])
 
 
 def afrf(run, options: dict | None = None) -> AnalysisResult:
@@ -242,7 +245,7 @@ def afrf(run, options: dict | None = None) -> AnalysisResult:
     why = res.settings.get("incomplete")
     name = os.path.basename(run.path)
     warnings = [f"INCOMPLETE RECORD {name}: {why} (analysed with --allow-incomplete)"] if why else []
-    return AnalysisResult(TITLES["afrf"], numbers, figures, warnings)
+    return AnalysisResult(TITLES["afrf"], numbers, figures, warnings + list(res.warnings))
 
 
 def residual(run, options: dict | None = None) -> AnalysisResult:
@@ -279,7 +282,7 @@ def residual(run, options: dict | None = None) -> AnalysisResult:
 
 def presliding(run, options: dict | None = None) -> AnalysisResult:
     """The presliding analysis (``analysis.presliding.analyse.analyse``) of a displacement-driven run, with the
-    numbers ``hilbench presliding`` writes (bench/commands/presliding.report): the quantities with their
+    numbers ``hilbench presliding`` writes (bench/cli/commands/presliding.report): the quantities with their
     uncertainties, the edge-pinned sum(k), the memory checks, the reversal forces; the resolution verdicts as
     warnings. ``options['replicates']``: bootstrap replicates (default 8)."""
     analyse = _entry("presliding")
@@ -330,7 +333,11 @@ def presliding(run, options: dict | None = None) -> AnalysisResult:
     if res.edge_rolling is not None:
         virgin.curves.append((f"parametric on the edge points ({res.edge_rolling.exponent_text()})", grid,
                               res.edge_rolling.virgin_curve(grid)))
-    return AnalysisResult(TITLES["presliding"], numbers, [loops, virgin], list(res.resolution.lines))
+    from hilbench.analysis.presliding import reversal_warning
+
+    few = reversal_warning(res)
+    return AnalysisResult(TITLES["presliding"], numbers, [loops, virgin], list(res.resolution.lines) + ([few] if few
+                                                                                                      else []))
 
 
 ANALYSES: dict[str, Callable] = {"identification": identification, "skeleton": skeleton, "afrf": afrf,

@@ -236,7 +236,7 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def start_run(self, protocol, out: str, operator: str = "", notes: str = "", settings=None) -> bool:
         """Run ``protocol`` on the connected bench in a worker thread, logging to ``out``; ``settings``
-        (:class:`bench.runner.DeviceSettings`) replace the bench's device settings first."""
+        (:class:`bench.acquisition.runner.DeviceSettings`) replace the bench's device settings first."""
         if self.running:
             self.show_message("a run is already in progress", error=True)
             return False
@@ -256,7 +256,7 @@ class MainWindow(QtWidgets.QMainWindow):
         return True
 
     def start_campaign(self, campaign, out_dir: str, resume: bool) -> bool:
-        from hilbench.bench.campaign import run_campaign
+        from hilbench.bench.acquisition.campaign import run_campaign
 
         if self.running:
             self.show_message("a run is already in progress", error=True)

@@ -508,8 +508,8 @@ def _entries(values: dict, units: dict[str, str], indent: str = "  ") -> list[st
 
 def describe_run(r) -> list[str]:
     """The metadata pane: one fact per line, units named, dicts spelled out as ``key = value unit``."""
-    from hilbench.bench.device_options import DEVICE_OPTIONS
-    from hilbench.bench.protocols import PROTOCOLS
+    from hilbench.bench.acquisition.device_options import DEVICE_OPTIONS
+    from hilbench.bench.acquisition.protocols import PROTOCOLS
 
     device_units = {k: unit for k, (unit, _text) in DEVICE_OPTIONS.items()}
     device_units.update({"sample_rate": "Hz", "sample_period": "s"})

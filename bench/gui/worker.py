@@ -1,7 +1,7 @@
 """Threads of the GUI: nothing that talks to the device runs in the GUI thread.
 
 - :class:`DeviceWorker` lives in its own QThread: connect, disconnect, status polling, clear faults.
-- :class:`RunWorker` is a QThread whose ``run`` calls :meth:`bench.runner.Bench.run`; sample blocks are
+- :class:`RunWorker` is a QThread whose ``run`` calls :meth:`bench.acquisition.runner.Bench.run`; sample blocks are
   queued and handed to the GUI thread with one Qt signal per batch (never more signals than the GUI takes).
 - :class:`EStopLine` is a dedicated plain thread that only waits for a trigger and calls
   ``amplifier.estop()``: it never waits for the stream, the device thread or the GUI.
@@ -65,7 +65,7 @@ def describe_status(status: wire.Status, counters: dict[str, int]) -> DeviceStat
 
 
 class DeviceWorker(QtCore.QObject):
-    """Owns the :class:`bench.runner.Bench`; every slot runs in the device thread.
+    """Owns the :class:`bench.acquisition.runner.Bench`; every slot runs in the device thread.
 
     The bench is shared (read-only reference) with the run thread and the e-stop line; the amplifier is
     thread-safe for status, estop and streaming at once.
@@ -87,7 +87,7 @@ class DeviceWorker(QtCore.QObject):
 
     @QtCore.Slot(str, float)
     def open(self, url: str, timeout: float) -> None:
-        from hilbench.bench.runner import Bench
+        from hilbench.bench.acquisition.runner import Bench
 
         if self.bench is not None:
             self.close()
@@ -171,7 +171,7 @@ class RunWorker(QtCore.QThread):
 
     def __init__(self, job: Callable[[Callable[[Any], None], Any], Any]) -> None:
         super().__init__()
-        from hilbench.bench.runner import RunControl
+        from hilbench.bench.acquisition.runner import RunControl
 
         self.job = job
         self.control = RunControl()

@@ -7,13 +7,11 @@ import numpy as np
 import pytest
 
 from hilbench.bench.cli import main
-from hilbench.firmware_sim.plant import PlantParams
+from hilbench.firmware_sim.engine.plant import PlantParams
 from tests.analysis.afrf.test_afrf_run import C, K, M
 from tests.analysis.afrf.test_afrf_run import _write_run as write_stepped_sine
 from tests.bench.test_paper_skeleton_commands import _write_chirp
 from tests.figure_checks import figure_problems, recording_figures
-
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
 
 
 def _assert_readable(seen: dict, expected: set[str]) -> None:
@@ -72,7 +70,7 @@ def test_skeleton_figure(tmp_path):
 
 
 def test_demo_paper_figure(tmp_path):
-    from hilbench.bench.demo import paper_figure
+    from hilbench.bench.cli.demo import paper_figure
 
     with recording_figures() as seen:
         paper_figure(tmp_path)

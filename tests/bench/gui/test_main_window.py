@@ -18,6 +18,8 @@ from hilbench.analysis.record import load_record
 from hilbench.analysis.runfile import RunFileError, open_run
 from hilbench.bench.gui.main_window import MainWindow
 
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
+
 ESTOP_LIMIT_S = 0.050  # the requirement: e-stop reaches the device within 50 ms of the click
 
 
