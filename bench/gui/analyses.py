@@ -141,7 +141,7 @@ def save_model(document: dict, target: str, inputs: list[str]) -> str:
     Returns the path written."""
     from pathlib import Path
 
-    from hilbench.bench import outputs
+    from hilbench.bench.storage import outputs
 
     target = str(target).strip()
     if not target:

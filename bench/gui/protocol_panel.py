@@ -11,8 +11,8 @@ from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
+from hilbench.bench.acquisition.protocols import PROTOCOLS, ParameterSpec, Protocol, ProtocolError, make_protocol
 from hilbench.bench.gui.elided_label import ElidedLabel
-from hilbench.bench.protocols import PROTOCOLS, ParameterSpec, Protocol, ProtocolError, make_protocol
 
 #: forms build the setpoints (to run their checks) up to this many samples; longer runs are checked at start
 CHECK_SETPOINTS_UP_TO = 600_000
@@ -72,7 +72,7 @@ def planned_samples(protocol: Protocol) -> tuple[int, int]:
     form can check every keystroke of a one-hour run without freezing): ``duration*sample_rate`` or, for
     a stepped sine, whole periods ``(settle + measure)/f`` per (amplitude, frequency) step."""
     fs = protocol.sample_rate
-    if hasattr(protocol, "frequencies"):  # as bench.excitations.stepped_sine snaps each step
+    if hasattr(protocol, "frequencies"):  # as bench.acquisition.excitations.stepped_sine snaps each step
         g = math.gcd(protocol.settle_periods, protocol.measure_periods)
         blocks = protocol.settle_periods // g + protocol.measure_periods // g
         per_amplitude = sum(blocks * max(1, int(round(g * fs / f))) for f in protocol.frequencies)
@@ -165,12 +165,12 @@ class DeviceSettingsForm(QtWidgets.QWidget):
     changed = QtCore.Signal()
 
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
-        from hilbench.bench.device_options import DEVICE_OPTIONS
-        from hilbench.bench.runner import DeviceSettings
+        from hilbench.bench.acquisition.device_options import DEVICE_OPTIONS
+        from hilbench.bench.acquisition.runner import DeviceSettings
 
         super().__init__(parent)
+        from hilbench.bench.acquisition.user_config import default_settings
         from hilbench.bench.errors import BenchError
-        from hilbench.bench.user_config import default_settings
 
         try:  # the config file's [settings] (docs/cli.md); a bad file is reported by the CLI, not here
             configured = default_settings()
@@ -207,8 +207,8 @@ class DeviceSettingsForm(QtWidgets.QWidget):
         self.fields[name].setText(value if isinstance(value, str) else format_value(value))
 
     def settings(self):
-        """A :class:`bench.runner.DeviceSettings`; raises ProtocolError naming a bad field."""
-        from hilbench.bench.runner import DeviceSettings
+        """A :class:`bench.acquisition.runner.DeviceSettings`; raises ProtocolError naming a bad field."""
+        from hilbench.bench.acquisition.runner import DeviceSettings
 
         values: dict[str, Any] = {}
         for name, edit in self.fields.items():

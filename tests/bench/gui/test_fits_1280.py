@@ -257,7 +257,7 @@ def test_side_panels_keep_their_width(window, qtbot):
 
 
 def _write_run(path) -> None:
-    from hilbench.firmware_sim.plant import PlantParams
+    from hilbench.firmware_sim.engine.plant import PlantParams
     from tests.analysis.afrf.test_afrf_run import C, K, M
     from tests.analysis.afrf.test_afrf_run import _write_run as write_stepped_sine
 
