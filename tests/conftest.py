@@ -21,8 +21,9 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     # pytest.mark.usefixtures("starts_devices")`); it, and a test marked `realtime` itself, is realtime, which `make
     # test` runs one at a time after the parallel part so that no other test competes with it for the cores. The
     # folder a test sits in plays no part; `_device_guard` fails a test that starts a device without saying so.
+    # A test of such a module that itself starts none says so with the `device_free` marker.
     for item in items:
-        if "starts_devices" in getattr(item, "fixturenames", ()):
+        if "starts_devices" in getattr(item, "fixturenames", ()) and not item.get_closest_marker("device_free"):
             item.add_marker(pytest.mark.realtime)
 
 
@@ -61,7 +62,7 @@ def _device_processes(root: int) -> set[str]:
 def _device_guard(request: pytest.FixtureRequest):
     """A test that did not declare `starts_devices` must not start one: it would run in the parallel part, where
     a device's timing competes with other tests. Descendant processes are sampled every 0.1 s while it runs."""
-    if "starts_devices" in request.fixturenames or request.node.get_closest_marker("realtime") \
+    if request.node.get_closest_marker("realtime") \
             or not Path("/proc/self/stat").exists():
         yield
         return

@@ -300,7 +300,7 @@ class MainWindow(QtWidgets.QMainWindow):
             self.show_message("choose a campaign file (.toml) for the plan", error=True)
             return False
         settings = self.protocol.settings if self.protocol.validate() is not None else bench.settings
-        plan_experiments = importlib.import_module("hilbench.bench.planning").plan_experiments
+        plan_experiments = importlib.import_module("hilbench.bench.acquisition.planning").plan_experiments
         probe_dir = self.runs_dir / f"plan-probe-{time.strftime('%Y%m%d-%H%M%S')}"
         self.current_out = str(probe_dir)
         self.plan_target = str(target)

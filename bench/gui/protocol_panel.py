@@ -21,13 +21,13 @@ TITLES = {"identification": "Identification", "chirp": "Chirp", "stepped_sine": 
 
 
 def planning_unavailable() -> str:
-    """"" when ``bench.planning.plan_experiments`` (``hilbench plan``) is installed, else why not (one line)."""
+    """"" when ``acquisition.planning.plan_experiments`` (``hilbench plan``) is installed, else why not (one line)."""
     import importlib
 
     try:
-        module = importlib.import_module("hilbench.bench.planning")
+        module = importlib.import_module("hilbench.bench.acquisition.planning")
     except ImportError:
-        return "not available: hilbench.bench.planning is not part of this installation yet"
+        return "not available: hilbench.bench.acquisition.planning is not part of this installation yet"
     return "" if hasattr(module, "plan_experiments") else "not available: plan_experiments does not exist yet"
 
 

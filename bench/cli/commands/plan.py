@@ -1,4 +1,4 @@
-"""``hilbench plan``: a break-away probe on the device, then a campaign sized from it (bench/planning.py)."""
+"""``hilbench plan``: a break-away probe on the device, then a campaign sized from it (acquisition/planning.py)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from hilbench.bench.acquisition.device_options import DEVICE_OPTIONS, add_device_options, settings_from_args
-from hilbench.bench.cli.commands.run import options_named
+from hilbench.bench.cli.option_errors import options_named
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -32,11 +32,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hilbench.bench.acquisition.planning import plan_experiments
     from hilbench.bench.acquisition.progress import ProgressBar
     from hilbench.bench.acquisition.protocols import SAMPLE_RATES
     from hilbench.bench.acquisition.runner import signals_as_interrupt
     from hilbench.bench.errors import BenchError
-    from hilbench.bench.planning import plan_experiments
     from hilbench.bench.storage import outputs
 
     if args.sample_rate not in SAMPLE_RATES:

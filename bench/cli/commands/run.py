@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import argparse
-from collections.abc import Iterable, Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 from hilbench.bench.acquisition.device_options import add_device_options, settings_from_args
 from hilbench.bench.acquisition.protocols import PROTOCOLS, Protocol
+from hilbench.bench.cli.option_errors import options_named
 
 RUNNABLE: dict[str, type[Protocol]] = dict(PROTOCOLS)  # every protocol of the table (campaign names)
 # Old spellings of `run`'s protocol names, kept as argparse aliases (they map onto the one name; docs/cli.md).
@@ -39,23 +38,6 @@ def protocol_from_args(cls: type[Protocol], args: argparse.Namespace) -> Protoco
     values = {name: getattr(args, name) for name in cls.specs() if getattr(args, name, None) is not None}
     with options_named(cls.specs()):
         return cls.from_dict(values)
-
-
-@contextmanager
-def options_named(names: Iterable[str]) -> Iterator[None]:
-    """A protocol's or the device settings' error starts with the parameter's name (``cutoff = 6000 Hz is
-    outside ...``); on the command line it is the option: ``--cutoff 6000 Hz is outside ...``."""
-    from hilbench.bench.errors import BenchError
-
-    try:
-        yield
-    except BenchError as exc:
-        text = str(exc)
-        for name in sorted(names, key=len, reverse=True):
-            if text.startswith(name) and text[len(name):len(name) + 1] in (" ", ""):
-                rest = text[len(name):].removeprefix(" =")
-                raise type(exc)("--" + name.replace("_", "-") + rest) from None
-        raise
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -324,7 +324,7 @@ class _FakePlan:
 def test_plan_experiments_calls_the_planner_with_the_connected_bench(window, qtbot, tmp_path, monkeypatch):
     """The button's path: plan_experiments(bench, the form's device settings, probe_dir under the runs folder,
     progress) in the run thread; the campaign TOML written where asked, put in the Campaign tab, the plan's lines
-    shown. bench.planning comes from another branch: here a stand-in module records the call."""
+    shown. bench.acquisition.planning comes from another branch: here a stand-in module records the call."""
     import sys
     import types
 
@@ -334,7 +334,7 @@ def test_plan_experiments_calls_the_planner_with_the_connected_bench(window, qtb
         calls.append((bench, settings, probe_dir, progress))
         return _FakePlan()
 
-    monkeypatch.setitem(sys.modules, "hilbench.bench.planning",
+    monkeypatch.setitem(sys.modules, "hilbench.bench.acquisition.planning",
                         types.SimpleNamespace(plan_experiments=plan_experiments))
     assert not window.start_plan(str(tmp_path / "plan.toml"))  # not connected: refused in words
     assert "connect to a device" in window.messages[-1][1]
@@ -360,6 +360,6 @@ def test_plan_experiments_calls_the_planner_with_the_connected_bench(window, qtb
 def test_without_the_planner_the_button_says_why(window, monkeypatch):
     import sys
 
-    monkeypatch.setitem(sys.modules, "hilbench.bench.planning", None)  # import fails
+    monkeypatch.setitem(sys.modules, "hilbench.bench.acquisition.planning", None)  # import fails
     assert not window.start_plan("plan.toml")
     assert "not available" in window.messages[-1][1]

@@ -8,7 +8,7 @@ slide the other way: the displacement from that turning point to the next break-
 presliding loop, twice the presliding distance for a Maxwell-slip (Masing) contact.
 
 :func:`analyse_probe` reads the run file back (measured current and position) and returns the break-away current
-of each direction and the presliding distance; it knows nothing of the plan (:mod:`bench.planning`).
+of each direction and the presliding distance; it knows nothing of the plan (:mod:`bench.acquisition.planning`).
 """
 
 from __future__ import annotations

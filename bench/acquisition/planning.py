@@ -4,7 +4,8 @@
     print("\\n".join(plan.lines()))
     plan.write("plan.toml")            # hilbench campaign plan.toml plays it as is
 
-The probe (:mod:`bench.breakaway_probe`) is played through the ordinary runner, so its run files are kept like any
+The probe (:mod:`~bench.acquisition.breakaway_probe`) is played through the ordinary runner, so its run files are
+kept like any
 other. Its peak current starts at a fifth of the current limit and grows by half until the motor slides both
 ways with a peak at least :data:`PEAK_OVER_BREAKAWAY` times its break-away (long enough slides for the fit of
 the sliding current, J and b), never above :data:`LIMIT_SHARE` of the current limit.
@@ -33,9 +34,9 @@ from pathlib import Path
 
 import numpy as np
 
+from hilbench.bench.acquisition.breakaway_probe import BreakawayProbe, ProbeError, ProbeResult, analyse_probe
 from hilbench.bench.acquisition.protocols import Chirp, Identification, Presliding, Protocol, SteppedSine
 from hilbench.bench.acquisition.runner import Bench, DeviceSettings, Progress
-from hilbench.bench.breakaway_probe import BreakawayProbe, ProbeError, ProbeResult, analyse_probe
 from hilbench.bench.errors import BenchError
 
 #: Largest share of the current limit any planned current (probe or protocol) reaches.
