@@ -483,7 +483,7 @@ class PositionPeriodic(Term):
         return _harmonic_parameters(fit, self.name, nl, axis)
 
     def plant(self, fit, nl):
-        from hilbench.firmware_sim.plant import Cogging
+        from hilbench.firmware_sim.engine.plant import Cogging
 
         c = fit.term_coef(self.name)
         return {"cogging": tuple(Cogging(float(k), float(np.hypot(c[2 * i], c[2 * i + 1])),
