@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from hilbench import __version__
-from hilbench.bench.campaign import INDEX_NAME
+from hilbench.bench.acquisition.campaign import INDEX_NAME
 from hilbench.bench.campaign_analysis.steps import STEPS, StepSettings, steps_for
 from hilbench.bench.campaign_analysis.table import ResultsFolder, row_key
 from hilbench.bench.errors import BenchError

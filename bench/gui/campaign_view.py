@@ -87,7 +87,7 @@ class CampaignView(QtWidgets.QWidget):
 
     def load(self) -> bool:
         """Parse and validate the campaign file; problems are shown with file and line."""
-        from hilbench.bench.campaign import load_campaign, read_index
+        from hilbench.bench.acquisition.campaign import load_campaign, read_index
 
         path = self.path_edit.text().strip()
         try:
@@ -138,7 +138,7 @@ class CampaignView(QtWidgets.QWidget):
         self.abort_button.setEnabled(running)
 
     def show_progress(self, item) -> None:
-        """One :class:`bench.campaign.CampaignProgress` (GUI thread)."""
+        """One :class:`bench.acquisition.campaign.CampaignProgress` (GUI thread)."""
         row = self._rows.get(item.key)
         if row is None:
             return

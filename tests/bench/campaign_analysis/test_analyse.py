@@ -18,9 +18,7 @@ from hilbench.bench.campaign_analysis.engine import MAX_CHUNK, analyse, chunk
 from hilbench.bench.campaign_analysis.steps import StepSettings, identify_step
 from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
 from hilbench.bench.cli import main
-from hilbench.firmware_sim.friction_models import DC_MOTOR_BREAKAWAY, DC_MOTOR_INERTIA
-
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
+from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_BREAKAWAY, DC_MOTOR_INERTIA
 
 quiet = {"progress": False, "say": lambda _line: None}
 

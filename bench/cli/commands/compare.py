@@ -1,0 +1,114 @@
+"""``hilbench compare RUN --validate RUN2``: every friction family fitted on one run, scored on another."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+#: Published models a comparison can add as a row: J (kg), Fv (N*s/m), Fc (N), offset (N). EMPS: Janot,
+#: Gautier, Brunot 2019, IDIM-LS on DATA_EMPS (docs/compare.md).
+OUTPUTS = ("compare.md", "compare.json", "compare_hysteresis.png", "compare_time.png", "models")
+PUBLISHED = {"emps": ("EMPS published (IDIM-LS)", 95.1089, 203.5034, 20.3935, -3.1648)}
+
+
+def register(subparsers) -> None:
+    from hilbench.analysis.models.families import FAMILIES
+    from hilbench.bench.analysis_input import add_record_options
+
+    parser = subparsers.add_parser(
+        "compare",
+        help="fit every friction family on RUN and compare them on the validation run",
+        description="Fit Coulomb+viscous, Stribeck, Dahl, LuGre, Maxwell-slip, GMS and the continuous hysteresis "
+        "model on RUN; report on RUN2 the torque error, the segmented simulation error, the parameter count "
+        "and the fit time, as a Markdown table, JSON and plots (docs/compare.md).",
+    )
+    parser.add_argument("run", help="training run file (.h5) with 't', 'position' and 'torque' channels")
+    parser.add_argument("--validate", required=True, metavar="RUN2.h5", help="validation run (same axis)")
+    parser.add_argument("-o", "--output", dest="out", required=True, metavar="DIR",
+                        help="output folder: compare.md, compare.json, compare_*.png, models/FAMILY.json")
+    parser.add_argument("--families", default=",".join(FAMILIES),
+                        help=f"comma-separated subset (default all: {','.join(FAMILIES)})")
+    parser.add_argument("--published", choices=sorted(PUBLISHED), action="append", default=[],
+                        help="add a published model as a row (emps: Janot et al. 2019)")
+    parser.add_argument("--segment", type=float, default=1.0,
+                        help="restart interval of the segmented simulation, s (default 1)")
+    parser.add_argument("--max-evaluations", type=int, default=40,
+                        help="output-error refinement budget per family (default 40)")
+    parser.add_argument("--torque-channel", default=None,
+                        help="channel holding the drive torque or force (default: torque if present, else "
+                        "torque_cmd, as identify; a *_cmd channel is held over the next interval)")
+    parser.add_argument("--torque-timing", choices=("auto", "hold_previous", "hold_next", "instant"),
+                        default="auto", help="what torque sample k means (as in hilbench identify)")
+    add_record_options(parser)
+    parser.set_defaults(func=run)
+
+
+def _load(path: str, args):
+    """The run through the one loader: (torque, RunData, timing, record)."""
+    from hilbench.analysis.models.families import RunData
+    from hilbench.bench.analysis_input import load
+    from hilbench.bench.storage import outputs
+
+    rec = load(path, args)
+    outputs.say(f"{path}: torque timing of {rec.torque_channel}: {rec.timing} ({rec.timing_origin})", level=2)
+    run = RunData.from_arrays(rec.name, rec.axis, rec.sample_rate, rec.position, rec.torque, rec.timing)
+    return rec.torque, run, rec.timing, rec
+
+
+def run(args) -> int:
+    from hilbench.analysis.errors import AnalysisError
+    from hilbench.analysis.models.compare import compare, document, markdown_table
+    from hilbench.analysis.models.compare_plots import write_plots
+    from hilbench.analysis.models.families import FAMILIES, published_plant
+    from hilbench.analysis.models.model_file import family_document
+    from hilbench.bench.errors import BenchError
+    from hilbench.bench.storage import outputs
+
+    families = tuple(f.strip() for f in args.families.split(",") if f.strip())
+    bad = [f for f in families if f not in FAMILIES]
+    if bad or not families:
+        raise BenchError(f"unknown famil{'y' if len(bad) == 1 else 'ies'} {', '.join(bad) or '(none)'}; "
+                         f"choose from {', '.join(FAMILIES)}")
+    if not args.segment > 0:
+        raise BenchError(f"--segment must be > 0 s, got {args.segment}")
+    if args.max_evaluations < 1:
+        raise BenchError(f"--max-evaluations must be >= 1, got {args.max_evaluations}")
+    out = Path(args.out)
+    outputs.refuse_inputs({"--output": out, **{f"--output {out / name}": out / name for name in OUTPUTS}},
+                          [args.run, args.validate])
+    train_torque, train, timing, train_rec = _load(args.run, args)
+    _, val, _, val_rec = _load(args.validate, args)
+    if val.axis != train.axis:
+        raise AnalysisError(f"validation run axis {val.axis!r} differs from the training run's {train.axis!r}")
+    published = {}
+    for key in args.published:
+        name, *values = PUBLISHED[key]
+        if train.axis != "linear":
+            raise BenchError(f"--published {key} is a linear-axis model; {args.run} is {train.axis}")
+        published[name] = published_plant(*values)
+    result = compare(train, val, timing=timing, train_position=train.x, train_torque=train_torque,
+                     families=families, segment=args.segment,
+                     max_nfev=args.max_evaluations, published=published)
+    out.mkdir(parents=True, exist_ok=True)
+    table = markdown_table(result)
+    outputs.write_text(out / "compare.md", table)
+    data = {"train": {"file": str(Path(args.run).resolve()), "samples": int(train.x.size),
+                      "sample_rate_hz": train.fs, "torque_channel": train_rec.torque_channel, "torque_timing": timing,
+                      "incomplete": train_rec.incomplete},
+            "validation": {"file": str(Path(args.validate).resolve()), "samples": int(val.x.size),
+                           "sample_rate_hz": val.fs, "incomplete": val_rec.incomplete}}
+    outputs.write_json(out / "compare.json", document(result, data), indent=2, allow_nan=False)
+    (out / "models").mkdir(exist_ok=True)
+    written = []
+    for row in result.rows:  # one model file per fitted family (schema hilbench.friction-model/2)
+        if row.fit is not None:
+            figures = {f"train_{k}": v for k, v in row.train.items()} | {
+                f"validation_{k}": v for k, v in row.validation.items()} | {"fit_time_s": row.fit_time_s}
+            doc = family_document(row.fit, method="compare", data=data, figures=figures,
+                                  settings={"segment_s": args.segment, "max_evaluations": args.max_evaluations})
+            outputs.write_json(out / "models" / f"{row.name}.json", doc, indent=2, allow_nan=False)
+            written.append(f"{row.name}.json")
+    print(table, end="")
+    for p in write_plots(result, out):
+        print(f"plot: {p}")
+    print(f"-> {out / 'compare.md'}, {out / 'compare.json'}, {out / 'models'}/ ({', '.join(written) or 'no model'})")
+    return 0
