@@ -1,14 +1,13 @@
 """Presliding on the simulated device over six noise seeds (issue 29's done-when): 2^16 counts/rev, 10 mA rms current
-noise, the protocol's gentle integral-led loop (kp 100, ki 3e4, kd 0.5), its default reference (a virgin ramp to 4 d,
-then -3, 2, -1 d at 2 d/s). The dither bias of the loop is kept out by the measurement, not modelled: the edge-pinned points
-(the instants the count changes, where the position is exact) and the dwells at count edges, whose force is the mean
-over the dither (docs/presliding.md, "Edge-pinned points" and "Loop gains").
-
-Truth: the DC-motor preset's 16 elements, sum(k) = 3019 N*m/rad and its virgin curve, by the independent stop
-operators of tests/truth. Targets: sum(k) within 2 %, the virgin curve within 1 % RMS of sum W over the ramp.
-Measured on seeds 0-5: virgin 0.52-0.64 %, sum(k) -0.08 to +0.54 % (+- 1.2 %), each branch's extreme force within
-0.78 % of sum W. A shorter reference (4, -3 d) gives the same sum(k) but fewer dwells for the edge NNLS: its virgin
-curve reached 1.06 % on seed 2. About 13 s per seed (lockstep device and analysis): seeds 1-5 are marked slow."""
+noise, the protocol's gentle integral-led loop (kp 100, ki 3e4, kd 0.5), its default reference (a virgin ramp to 4
+d, then -3, 2, -1 d at 2 d/s). The dither bias of the loop is kept out by the measurement, not modelled: the edge-
+pinned points (the instants the count changes, where the position is exact) and the dwells at count edges, whose
+force is the mean over the dither (docs/presliding.md, "Edge-pinned points" and "Loop gains"). Truth: the DC-motor
+preset's 16 elements, sum(k) = 3019 N*m/rad and its virgin curve, by the independent stop operators of tests/truth.
+Targets: sum(k) within 2 %, the virgin curve within 1 % RMS of sum W over the ramp. Measured on seeds 0-5: virgin
+0.52-0.64 %, sum(k) -0.08 to +0.54 % (+- 1.2 %), each branch's extreme force within 0.78 % of sum W. A shorter
+reference (4, -3 d) gives the same sum(k) but fewer dwells for the edge NNLS: its virgin curve reached 1.06 % on
+seed 2. About 13 s per seed (lockstep device and analysis): seeds 1-5 are marked slow."""
 
 from __future__ import annotations
 

@@ -21,7 +21,7 @@ from hilbench.bench.cli import main
 from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH
 from tests.drivers.second_stack import SecondStackDrive
 
-pytestmark = pytest.mark.drives
+pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
 
 
 @pytest.fixture

@@ -20,7 +20,7 @@ from hilbench.firmware_sim.devices.cia402_drive import SimCia402Drive
 from hilbench.firmware_sim.devices.sim_config import load_sim_config
 from tests.drivers.test_cia402_drive_objects import _pair, eds_variant
 
-pytestmark = pytest.mark.drives
+pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
 DOC = Path(__file__).resolve().parents[2] / "docs" / "drives.md"
 
 

@@ -28,7 +28,7 @@ from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH, SimCia402Drive
 from hilbench.firmware_sim.devices.sim_config import load_sim_config
 from tests.drivers.cia402_runs import run_on_sim
 
-pytestmark = pytest.mark.drives
+pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
 STEP = SteppedSine(frequencies=[5.0], amplitudes=[15.0], settle_periods=1, measure_periods=1, sample_rate=1000)
 
 
