@@ -168,10 +168,11 @@ def test_every_help_text_is_plain_text():
 
 #: options through which a command names what it writes
 OUTPUT_OPTIONS = {"-o", "--output", "--json", "--plot", "--plots", "--report"}
-#: commands that write but never replace: `campaign` resumes a folder (--resume) and refuses another campaign's
-NEVER_REPLACES = {"campaign"}
+#: commands that write but never replace: `campaign` resumes a folder (--resume) and refuses another campaign's;
+#: `analyse` adds rows to its results table, keyed by run content, settings and version (resume is its default)
+NEVER_REPLACES = {"campaign", "analyse"}
 #: analysis commands another engineer owns that still replace their outputs without --overwrite (issue 28)
-STILL_REPLACE_SILENTLY = {"afrf", "compare", "residual", "skeleton", "paper", "analyse", "drift"}
+STILL_REPLACE_SILENTLY = {"compare", "residual"}
 
 
 def _leaf_commands(parser, path=()):
@@ -219,6 +220,30 @@ def test_identify_and_show_refuse_an_existing_json_without_overwrite(run_file, t
         assert json.loads(out.read_text())
         assert main([*argv, "--json", "-", "-q"]) == 0  # standard output is no file to protect
         capsys.readouterr()
+
+
+@pytest.mark.device_free
+def test_the_analysis_commands_refuse_an_existing_output_before_reading_anything(tmp_path, capsys):
+    """afrf, skeleton, paper and drift replaced their outputs silently (issue 28): each now refuses in one line
+    naming --overwrite before it reads an input (the run named here does not even exist), and nothing is lost."""
+    mine = tmp_path / "mine.json"
+    mine.write_text("mine\n")
+    (tmp_path / "paper").mkdir()
+    (tmp_path / "paper" / "summary.json").write_text("mine\n")
+    (tmp_path / "results").mkdir()
+    (tmp_path / "results" / "results.parquet").write_text("not read\n")
+    (tmp_path / "results" / "drift").mkdir()
+    (tmp_path / "results" / "drift" / "drift.json").write_text("mine\n")
+    missing = str(tmp_path / "no-such-run.h5")
+    for argv, kept in ((["afrf", missing, "--json", str(mine)], mine),
+                       (["afrf", missing, "--plot", str(mine)], mine),
+                       (["skeleton", missing, "--json", str(mine)], mine),
+                       (["paper", "-o", str(tmp_path / "paper"), "--quick"], tmp_path / "paper" / "summary.json"),
+                       (["drift", str(tmp_path / "results")], tmp_path / "results" / "drift" / "drift.json")):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err and "--overwrite" in err and str(kept) in err, (argv, err)
+        assert kept.read_text() == "mine\n"
 
 
 def test_demo_refuses_a_used_folder_without_overwrite(tmp_path, capsys):

@@ -38,6 +38,7 @@ def register(subparsers) -> None:
     parser.add_argument("--measure-periods", type=int, default=10, help="measured periods (default 10)")
     parser.add_argument("--workers", type=int, help="processes (default: all cores)")
     parser.add_argument("--json", metavar="OUT.json", help="write the AFRF as JSON ('-': stdout)")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --json or --plot file")
     parser.add_argument("--plot", metavar="OUT.png", help="write the paper-style figure")
     add_record_options(parser)
     add_memory_option(parser)
@@ -129,6 +130,8 @@ def run(args) -> int:
     if (args.run is None) == (args.model is None):
         raise ValueError("give either a stepped-sine RUN.h5 or --model (not both)")
     outputs.refuse_inputs({"--json": args.json, "--plot": args.plot}, [args.run])
+    for option, target in (("--json", args.json), ("--plot", args.plot)):
+        outputs.refuse_existing(option, target, args.overwrite)
     if args.run:
         result = _measured(args)
         if result.settings.get("incomplete"):

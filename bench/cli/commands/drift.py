@@ -22,6 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--penalty", type=float, default=None, help="PELT penalty on the standardised residual "
                    "(default 3 ln n)")
     p.add_argument("--no-page", action="store_true", help="do not write the campaign pages")
+    p.add_argument("--overwrite", action="store_true", help="replace an earlier drift report in the output folder")
     p.set_defaults(func=run)
 
 
@@ -38,6 +39,7 @@ def run(args: argparse.Namespace) -> int:
     if not table.is_file():
         raise BenchError(f"{args.results}: no {TABLE_NAME} (run hilbench analyse first)")
     out = args.output or table.parent / "drift"
+    outputs.refuse_existing("-o", out / "drift.json", args.overwrite)
     outputs.refuse_inputs({"-o": out}, [table])
     try:
         t = pq.read_table(table)

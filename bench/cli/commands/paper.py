@@ -22,6 +22,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--quick", action="store_true", help="smaller grid (fewer levels and frequencies)")
     parser.add_argument("--json", metavar="PATH", help="also copy summary.json to PATH")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace the figures and summaries of an earlier reproduction in DIR, and --json")
     parser.set_defaults(func=run)
 
 
@@ -33,6 +35,11 @@ def run(args: argparse.Namespace) -> int:
     out: Path = args.out
     if out.exists() and not out.is_dir():
         raise BenchError(f"{out} exists and is not a folder")
+    from hilbench.bench.storage import outputs
+
+    # the summary is written last: its presence says DIR holds a whole earlier reproduction
+    outputs.refuse_existing("-o", out / "summary.json", args.overwrite)
+    outputs.refuse_existing("--json", args.json, args.overwrite)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     result = reproduce(
@@ -42,6 +49,6 @@ def run(args: argparse.Namespace) -> int:
     result.seconds["figures"] = time.perf_counter() - t0 - sum(result.seconds.values())
     md, js = write_summary(result, out)
     if args.json:
-        Path(args.json).write_text(js.read_text())
+        outputs.write_text(args.json, js.read_text())
     print(f"wrote {len(figures)} figures, {md} and {js} in {time.perf_counter() - t0:.1f} s")
     return 0

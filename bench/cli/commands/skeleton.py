@@ -45,6 +45,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "plain median (the paper's pooling); see hilbench.analysis.skeleton.forcevib.compose",
     )
     parser.add_argument("--json", metavar="OUT.json", help="write the composed curves as JSON ('-': stdout)")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --json or --plot file")
     parser.add_argument("--plot", metavar="OUT.png", help="write the skeleton plot")
     parser.add_argument("--torque-channel", default=None, metavar="NAME",
                         help="force channel (default: torque if present, else torque_cmd; as identify)")
@@ -77,6 +78,8 @@ def run(args: argparse.Namespace) -> int:
     from hilbench.bench.storage import outputs
 
     outputs.refuse_inputs({"--json": args.json, "--plot": args.plot}, args.runs)
+    for option, target in (("--json", args.json), ("--plot", args.plot)):
+        outputs.refuse_existing(option, target, args.overwrite)
     check_count(args.bins, "--bins", 1, MAX_BINS, "log-spaced bins per skeleton curve")
     settings = SkeletonSettings(mass=args.mass, spring=args.spring, method=args.method, fb=args.fb, fc=args.fc,
                                 band=tuple(args.band) if args.band else None, bins=args.bins, compose=args.compose)
