@@ -282,12 +282,6 @@ class MainWindow(QtWidgets.QMainWindow):
         and put in the Campaign tab. Runs in the run thread, like a protocol."""
         import importlib
 
-        from hilbench.bench.gui.protocol_panel import planning_unavailable
-
-        why = planning_unavailable()
-        if why:
-            self.show_message(f"Plan experiments: {why}", error=True)
-            return False
         if self.running:
             self.show_message("a run is already in progress", error=True)
             return False

@@ -20,17 +20,6 @@ TITLES = {"identification": "Identification", "chirp": "Chirp", "stepped_sine": 
           "presliding": "Presliding"}
 
 
-def planning_unavailable() -> str:
-    """"" when ``acquisition.planning.plan_experiments`` (``hilbench plan``) is installed, else why not (one line)."""
-    import importlib
-
-    try:
-        module = importlib.import_module("hilbench.bench.acquisition.planning")
-    except ImportError:
-        return "not available: hilbench.bench.acquisition.planning is not part of this installation yet"
-    return "" if hasattr(module, "plan_experiments") else "not available: plan_experiments does not exist yet"
-
-
 def default_values(cls: type[Protocol]) -> dict[str, Any]:
     """Each field's dataclass default."""
     out = {}
@@ -301,8 +290,7 @@ class ProtocolPanel(QtWidgets.QGroupBox):
         self.abort_button.setToolTip("stop the run after the current block; the file is marked aborted")
         self.abort_button.clicked.connect(self.abort_requested)
         self.plan_button = QtWidgets.QPushButton("Plan experiments...")
-        why = planning_unavailable()
-        self.plan_button.setToolTip(why or "probe the motor's break-away on the connected device (a few seconds, "
+        self.plan_button.setToolTip("probe the motor's break-away on the connected device (a few seconds, "
                                            "within the device settings' limits) and write a campaign sized from it "
                                            "(hilbench plan)")
         self.plan_button.clicked.connect(self._on_plan)
@@ -430,7 +418,7 @@ class ProtocolPanel(QtWidgets.QGroupBox):
         self.start_button.setEnabled(not running)
         self.pause_button.setEnabled(running)
         self.abort_button.setEnabled(running)
-        self.plan_button.setEnabled(not running and not planning_unavailable())
+        self.plan_button.setEnabled(not running)
         if not running:
             self.pause_button.blockSignals(True)
             self.pause_button.setChecked(False)
