@@ -4,8 +4,8 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.stamp-install
-C_SRC  := $(wildcard firmware_sim/*.c firmware_sim/*.h firmware/core/*.[ch] firmware/targets/host/*.[ch] firmware/targets/plant/*.[ch]) \
-          firmware_sim/plant_build.py firmware/targets/host/core_build.py
+C_SRC  := $(wildcard firmware_sim/engine/*.c firmware_sim/engine/*.h firmware/core/*.[ch] firmware/targets/host/*.[ch] firmware/targets/plant/*.[ch]) \
+          firmware_sim/engine/plant_build.py firmware/targets/host/core_build.py
 PKG    := $(wildcard hilbench/*.py)
 export QT_QPA_PLATFORM ?= offscreen
 
@@ -19,13 +19,13 @@ $(BIN)/python:
 
 $(STAMP): $(BIN)/python pyproject.toml setup.py $(C_SRC) $(PKG)
 	$(BIN)/python -m pip install --quiet -e ".[test]"
-	$(BIN)/python -c "import hilbench.firmware_sim._plant, hilbench.firmware_sim._fwcore"  # C extensions built
+	$(BIN)/python -c "import hilbench.firmware_sim.engine._plant, hilbench.firmware_sim.devices._fwcore"  # C extensions built
 	touch $@
 
 setup: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/hilbench demo -o demo-out
+	$(BIN)/hilbench demo -o demo-out --overwrite
 
 # The emulated Cortex-M target (tests marked `target`) needs a cross compiler, newlib and QEMU. They are
 # installed from Debian packages when missing and we may (root with apt-get); otherwise those tests skip
@@ -70,4 +70,4 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 
 clean:
-	rm -rf $(VENV) build *.egg-info firmware_sim/_plant*.so firmware_sim/_plant.c firmware_sim/_fwcore* firmware/build demo-out
+	rm -rf $(VENV) build *.egg-info firmware_sim/engine/_plant*.so firmware_sim/engine/_plant.c firmware_sim/devices/_fwcore* firmware/build demo-out

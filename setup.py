@@ -15,6 +15,11 @@ for sub in SUBPACKAGES:
     package_dir[f"hilbench.{sub}"] = sub
     packages += [f"hilbench.{sub}"] + [f"hilbench.{sub}.{name}" for name in find_packages(sub)]
 
+# The examples the docs tell a user to run (examples/*.toml, *.py) ship as hilbench.examples; `hilbench examples`
+# copies them out of an installed wheel.
+package_dir["hilbench.examples"] = "examples"
+packages.append("hilbench.examples")
+
 setup(packages=packages, package_dir=package_dir,
-      cffi_modules=["firmware_sim/plant_build.py:ffibuilder",
+      cffi_modules=["firmware_sim/engine/plant_build.py:ffibuilder",
                     "firmware/targets/host/core_build.py:ffibuilder"])

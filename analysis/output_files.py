@@ -1,6 +1,6 @@
 """Where outputs are written: never onto an input of the running command, and an existing file is replaced only by an
-atomic rename of a complete new one. The one implementation of these rules: every command (``bench.outputs``) and
-every analysis report (figures, summaries) writes through it.
+atomic rename of a complete new one. The one implementation of these rules: every command
+(``bench.storage.outputs``) and every analysis report (figures, summaries) writes through it.
 
 - :func:`atomic_path` yields a temporary file beside the target; the target is replaced by ``os.replace`` only
   after the writer returned and the data reached the disk (``fsync``). A failure on the way (disk full, a bad
@@ -26,7 +26,7 @@ from typing import Any
 
 from hilbench.analysis.errors import AnalysisError
 
-#: 2: say every file written on standard error (the CLI sets it from -q/-v, as bench.outputs.verbosity)
+#: 2: say every file written on standard error (the CLI sets it from -q/-v, as bench.storage.outputs.verbosity)
 verbosity = 1
 
 

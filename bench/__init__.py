@@ -6,7 +6,7 @@
 # The compensated-reference protocol (position mode, docs/compensation.md) lives in its own module and adds itself to
 # protocols.PROTOCOLS. Importing it here, where any import of a bench module starts, gives every user the whole
 # table without protocols.py importing compensation.py (which imports protocols.py: a cycle).
-import hilbench.bench.compensation  # noqa: E402,F401
+import hilbench.bench.acquisition.compensation  # noqa: E402,F401
 from hilbench import __version__
 
 __all__ = ["__version__"]

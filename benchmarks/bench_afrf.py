@@ -35,7 +35,7 @@ def run(quick: bool = False) -> list[dict]:
         settle_schedule,
         simulate_afrf_models,
     )
-    from hilbench.firmware_sim.friction_models import PAPER_D, PAPER_H, paper_system
+    from hilbench.firmware_sim.engine.friction_models import PAPER_D, PAPER_H, paper_system
 
     models = {"original": paper_system(spring=0.0), "coulomb": coulomb_system(1.5),
               "equivalent": closed_form_equivalent(PAPER_H, PAPER_D)}

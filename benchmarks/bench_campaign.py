@@ -6,6 +6,7 @@ analysed by ``hilbench analyse`` serially and on a LocalCluster of 2 worker proc
 from __future__ import annotations
 
 import os
+import resource
 import tempfile
 from pathlib import Path
 
@@ -16,6 +17,12 @@ from hilbench.bench.campaign_analysis.steps import StepSettings, identify_step
 from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
 
 FAULT_RUN = "id7-1.h5"
+
+
+def _cpu() -> float:
+    """CPU seconds of this process and of its reaped children (the local cluster's workers, once closed)."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
 def _dies(path: str, settings: StepSettings) -> dict:
@@ -30,8 +37,13 @@ def run(quick: bool = False) -> list[dict]:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "campaign"
         write_campaign(folder, SyntheticCampaign(runs=n, duration=2.0, seed=3), fail_runs=(4,))
+        load_before = os.getloadavg()[0]  # the machine is shared: the figures mean little under others' load
+        cpu0 = _cpu()
         serial = analyse([folder], Path(tmp) / "serial", serial=True, **quiet)
+        cpu1 = _cpu()
         cluster = analyse([folder], Path(tmp) / "cluster", workers=2, dashboard=False, **quiet)
+        cpu2 = _cpu()
+        load_after = os.getloadavg()[0]
         identical = pq.read_table(serial.table).equals(pq.read_table(cluster.table))
         faults = analyse([folder], Path(tmp) / "faults", workers=2, dashboard=False, functions={"identify": _dies},
                          **quiet)
@@ -52,6 +64,17 @@ def run(quick: bool = False) -> list[dict]:
          "baseline_name": "serial start-up", "baseline_value": serial.startup_time,
          "ratio": cluster.startup_time / serial.startup_time if serial.startup_time else None,
          "target": None, "ok": None},
+        # the CPU both spent: less sensitive to other jobs than the wall times; 2 * serial / cluster is the best
+        # speedup two idle cores could give with this much work
+        {"name": "analyse_cpu_cluster", "value": cpu2 - cpu1, "unit": "s", "baseline_name": "serial cpu",
+         "baseline_value": cpu1 - cpu0, "ratio": (cpu2 - cpu1) / (cpu1 - cpu0), "target": None, "ok": None},
+        {"name": "analyse_speedup_bound_2_idle_cores", "value": 2 * (cpu1 - cpu0) / (cpu2 - cpu1), "unit": "x",
+         "baseline_name": "2 * serial cpu / cluster cpu", "baseline_value": None, "ratio": None,
+         "target": ">= 1.7x", "ok": None},
+        {"name": "analyse_load_average_1min", "value": load_after, "unit": "processes",
+         "baseline_name": "before the serial run", "baseline_value": load_before,
+         "ratio": load_after / load_before if load_before else None, "target": "< 2 for a clean figure",
+         "ok": None},
         {"name": "analyse_parquet_tables_identical", "value": float(identical), "unit": "bool", "baseline_name": None,
          "baseline_value": None, "ratio": None, "target": "1 (serial == cluster)", "ok": identical},
         {"name": "analyse_faults_rows_failed", "value": float(len(failed)), "unit": "rows",

@@ -82,7 +82,7 @@ class SimDrive:
             import canopen
 
             from hilbench.drivers import cia402 as c
-            from hilbench.firmware_sim.cia402_drive import EDS_PATH
+            from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH
 
             net = canopen.Network()
             net.connect(interface="udp_multicast", channel=self.group, port=self.port, hop_limit=0)

@@ -63,7 +63,7 @@ def identification_errors(path: Path) -> tuple[float, float]:
     from hilbench.analysis.models.friction_model import FrictionModel
     from hilbench.analysis.record import on_host_time
     from hilbench.analysis.runfile import host_sampled
-    from hilbench.firmware_sim.sim_config import load_sim_config
+    from hilbench.firmware_sim.devices.sim_config import load_sim_config
 
     with h5py.File(path) as f:
         s = f["samples"]

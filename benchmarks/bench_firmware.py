@@ -44,7 +44,7 @@ def _stream_blocks(n: int, max_block: int):
 
 def ns_per_sample_c(n: int, sim) -> float:
     from hilbench.drivers import protocol as p
-    from hilbench.firmware_sim.core_c import CoreDevice
+    from hilbench.firmware_sim.devices.core_c import CoreDevice
 
     dev = CoreDevice(sim, "lockstep", max_block=512)
     frames = [p.encode_frame(b) for b in _stream_blocks(n, 512)]
@@ -65,13 +65,13 @@ def ns_per_sample_reference(n: int, sim) -> float:
     """The baseline: the same device work as a plain Python/numpy loop (no state machine), ns per sample.
 
     Setpoint frames are decoded by the Python codec (COBS, CRC-32), the C plant runs each block through
-    ``firmware_sim.plant.Plant`` (the same plant the core drives), the limits are checked with numpy
+    ``firmware_sim.engine.plant.Plant`` (the same plant the core drives), the limits are checked with numpy
     (over-current, over-speed over a 1 ms window, position window) and the sample blocks are encoded by the
     Python codec. This is what the removed Python firmware did per block, without its bookkeeping, so the
     ratio is a lower bound of the C core's gain over it.
     """
     from hilbench.drivers import protocol as p
-    from hilbench.firmware_sim.plant import Plant
+    from hilbench.firmware_sim.engine.plant import Plant
 
     rate, cpr, limit, v_max = 10000, 4096, 5.0, 1e4
     plant = Plant(sim.plant_for(limit, 0.2, cpr), 1.0 / rate, sim.substeps_at(rate), "current")
@@ -157,7 +157,7 @@ def m4_highest_realtime_rate(image, label: str, seconds: float = 2.0, repeats: i
 
 
 def run(quick: bool = False) -> list[dict]:
-    from hilbench.firmware_sim.sim_config import load_sim_config, sim_config_from_dict
+    from hilbench.firmware_sim.devices.sim_config import load_sim_config, sim_config_from_dict
 
     n = 6000 if quick else 60000
     rows = []

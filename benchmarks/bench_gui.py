@@ -32,9 +32,9 @@ def _measure(decimate: bool, duration: float, runs_dir: str) -> dict:
     import numpy as np
     from PySide6 import QtCore, QtTest, QtWidgets
 
+    from hilbench.bench.acquisition.protocols import Identification
+    from hilbench.bench.acquisition.runner import DeviceSettings
     from hilbench.bench.gui.main_window import MainWindow
-    from hilbench.bench.protocols import Identification
-    from hilbench.bench.runner import DeviceSettings
 
     app = QtWidgets.QApplication.instance() or QtWidgets.QApplication([])
     window = MainWindow(runs_dir=runs_dir, timeout=2.0)

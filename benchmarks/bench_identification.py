@@ -13,8 +13,8 @@ from scipy import signal
 from hilbench.analysis.identification.maxwell_fit import LipSettings, fit_lip
 from hilbench.analysis.identification.output_error import simulation_error
 from hilbench.analysis.identification.paper_baseline import fit_paper
-from hilbench.firmware_sim.friction_models import dc_motor
-from hilbench.firmware_sim.plant import simulate
+from hilbench.firmware_sim.engine.friction_models import dc_motor
+from hilbench.firmware_sim.engine.plant import simulate
 
 
 def _excitation(n: int, fs: float, seed: int) -> np.ndarray:

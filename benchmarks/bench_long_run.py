@@ -86,9 +86,9 @@ def record(path: Path, duration: float, fs: float = FS, seed: int = 0) -> int:
     generated in blocks of 10 s (the plant continues from its state); returns the sample count."""
     import numpy as np
 
-    from hilbench.bench.protocols import Identification
-    from hilbench.firmware_sim.friction_models import dc_motor
-    from hilbench.firmware_sim.plant import Plant
+    from hilbench.bench.acquisition.protocols import Identification
+    from hilbench.firmware_sim.engine.friction_models import dc_motor
+    from hilbench.firmware_sim.engine.plant import Plant
 
     u = Identification(duration=duration, sample_rate=int(fs), seed=seed).setpoints()
     p = dc_motor().replace(counts_per_rev=2**20, seed=seed)

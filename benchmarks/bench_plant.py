@@ -9,8 +9,8 @@ import time
 
 import numpy as np
 
-from hilbench.firmware_sim.friction_models import DC_MOTOR_BREAKAWAY, DC_MOTOR_D, dc_motor
-from hilbench.firmware_sim.plant import GMS, Hysteresis, LuGre, Plant, PlantParams
+from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_BREAKAWAY, DC_MOTOR_D, dc_motor
+from hilbench.firmware_sim.engine.plant import GMS, Hysteresis, LuGre, Plant, PlantParams
 from tests.firmware_sim.reference import reference_simulate
 
 

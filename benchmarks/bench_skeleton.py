@@ -46,8 +46,8 @@ print(json.dumps({"elapsed": elapsed, "t_hilbert": t_hilbert, "peak": peak, "bas
 
 def _chirp_record(fs: float, duration: float, sweep_to: float = 2.0, G: float = 5.0):
     """Paper's Maxwell-slip system (C plant) under G*sin(pi*a*t^2), a = sweep_to/duration Hz/s."""
-    from hilbench.firmware_sim.friction_models import paper_system
-    from hilbench.firmware_sim.plant import simulate
+    from hilbench.firmware_sim.engine.friction_models import paper_system
+    from hilbench.firmware_sim.engine.plant import simulate
 
     dt = 1.0 / fs
     t = np.arange(int(round(duration * fs))) * dt

@@ -36,7 +36,7 @@ def measure(rate: int, seconds: float) -> dict:
 
     with open_device("sim://?pacing=realtime") as amp:
         amp.configure(p.Config(sample_rate=rate, current_limit=3.0, torque_constant=0.2,
-                               watchdog_timeout=0.5))  # the bench's default (bench.runner.DeviceSettings)
+                               watchdog_timeout=0.5))  # the bench's default (bench.acquisition.runner.DeviceSettings)
         amp.arm()
         # idle baseline: connected and armed, heartbeats only
         stop, idle_rtt = threading.Event(), []

@@ -11,16 +11,16 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.patches import FancyArrowPatch, FancyBboxPatch  # noqa: E402
 
 BOXES = {  # name: (x, y, w, h, lines)
-    "bench": (0.5, 6.2, 9.0, 2.3, ["bench/", "acquisition: protocols, excitations, runner, campaigns, compensation",
-                                   "import: importers (CSV, MAT, EMPS, HSM150, Mnich)",
-                                   "CLI: cli.py, commands/ (thin adapters)   GUI: gui/ (thin adapters)"]),
+    "bench": (0.5, 6.2, 9.0, 2.3, ["bench/", "acquisition/: protocols, excitations, runner, campaigns, compensation",
+                                   "storage/: importers (CSV, MAT, EMPS, HSM150, Mnich), output files",
+                                   "cli/: main.py, commands/   gui/   campaign_analysis/ (thin adapters)"]),
     "drivers": (0.5, 2.6, 4.2, 2.6, ["drivers/", "device interface (device.py)", "open_device(url): sim, serial,",
                                      "can, canopen (CiA 402), odrive", "wire protocol, links, host cycle"]),
     "analysis": (5.3, 2.6, 4.2, 2.6, ["analysis/", "runfile/: schema, writer, reader", "record.py: load_record",
                                       "metrics.py: error vocabulary", "identification, models, skeleton, afrf,",
                                       "residual, presliding, compensation"]),
-    "firmware_sim": (2.9, 0.1, 4.2, 1.7, ["firmware_sim/", "C plant (plant.c, plant.py): the one engine",
-                                          "simulated devices: own process, on a pty or CAN bus"]),
+    "firmware_sim": (2.9, 0.1, 4.2, 1.7, ["firmware_sim/", "engine/: the C plant (plant.c, plant.py), drift",
+                                          "devices/: simulated peers, own process, pty or CAN"]),
 }
 ARROWS = [("bench", "drivers", "uses"), ("bench", "analysis", "uses"), ("analysis", "firmware_sim", "simulates with"),
           ("firmware_sim", "drivers", "protocol definitions only")]

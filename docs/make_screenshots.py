@@ -1,9 +1,10 @@
 """Regenerate the GUI screenshots in docs/: ``python docs/make_screenshots.py [--out docs]``.
 
-Runs the real operator window offscreen against the simulated device (``sim://``): a short identification
-run (screenshot during the run), then the run browser on the file it wrote, with the identification
-analysis (screenshots of the channels and of the analysis). Nothing is staged: what the PNGs show is what
-the GUI shows.
+Runs the real operator window offscreen, at 1280x800 (the smallest screen the layout is made for),
+against the simulated device (``sim://``): a short identification run (screenshot during the run), then
+the run browser on the file it wrote, with the identification analysis (screenshots of the channels and
+of the analysis), then the device-settings tab and the campaign tab. Nothing is staged: what the PNGs show
+is what the GUI shows.
 """
 
 from __future__ import annotations
@@ -17,7 +18,8 @@ from pathlib import Path
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
-SHOTS = ("gui-live-run.png", "gui-run-browser.png", "gui-analysis.png")
+SHOTS = ("gui-live-run.png", "gui-run-browser.png", "gui-analysis.png", "gui-device-settings.png",
+         "gui-campaign.png")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -45,14 +47,15 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as runs:
         window = MainWindow(runs_dir=runs)
-        window.resize(1600, 950)
+        window.resize(1280, 800)
         window.show()
         try:
             window.connect_device("sim://")
             if not spin(lambda: window.connected, 20):
                 print(f"make_screenshots: cannot connect: {window.messages[-1][1]}", file=sys.stderr)
                 return 1
-            # 0.5 s device watchdog: a busy shared machine can starve the host of 0.1 s (the default)
+            # 0.5 s device watchdog (the default; set here in case a config file lowers it): a busy shared machine
+            # can starve the host of 0.1 s
             window.protocol.device_form.set_value("watchdog_timeout", "0.5")
             form = window.protocol.select("identification")
             for key, value in {"duration": "5", "amplitude": "8", "period": "1", "cutoff": "100"}.items():
@@ -79,6 +82,13 @@ def main(argv: list[str] | None = None) -> int:
                 return 1
             spin(lambda: False, 0.3)
             window.grab().save(str(args.out / SHOTS[2]))
+            window.protocol.tabs.setCurrentIndex(1)
+            spin(lambda: False, 0.3)
+            window.grab().save(str(args.out / SHOTS[3]))
+            window.protocol.tabs.setCurrentIndex(0)
+            window.tabs.setCurrentWidget(window.campaign)
+            spin(lambda: False, 0.3)
+            window.grab().save(str(args.out / SHOTS[4]))
         finally:
             window.shutdown()
     for name in SHOTS:

@@ -5,7 +5,7 @@ python-can's ``udp_multicast`` and ``socketcan`` buses read a kernel socket. Its
 where every member of the group sees the SYNC, the RPDO and both TPDOs. A process descheduled for longer
 than that loses frames, and a lost TPDO is a lost sample. Measured here with two CPU hogs on two cores
 and no realtime priority: 1 889 to 3 672 of 15 000 TPDOs lost in each of five 15 s runs at the default
-buffer (docs/drives.md). The simulated devices make the same request for their end (firmware_sim/bus_buffer.py).
+buffer (docs/drives.md). The simulated devices make the same request for their end (firmware_sim/devices/bus_buffer.py).
 """
 
 from __future__ import annotations

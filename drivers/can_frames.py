@@ -8,7 +8,7 @@ with a traceback. A real CAN controller drops a damaged frame and counts it; thi
 
 Only decoding failures are dropped: python-can raises them with the decoder's exception as the cause.
 A failure of the socket itself (the interface went down) keeps propagating, as it must.
-The simulated devices do the same for their end (``firmware_sim/bus_frames.py``).
+The simulated devices do the same for their end (``firmware_sim/devices/bus_frames.py``).
 """
 
 from __future__ import annotations

@@ -17,8 +17,13 @@ Set-up (``configure``): NMT pre-operational; SDO: mode 10 (checked against 0x650
 cycle period 0x1006, max torque 0x6072 from the host's current limit, producer heartbeat 0x1017, the host
 as heartbeat consumer 0x1016 (timeout = the watchdog timeout), lost-communication reaction 0x6007 = fault;
 PDO mapping by SDO; NMT operational; the host starts its own heartbeat. ``arm`` walks the CiA 402 state
-machine to operation enabled (fault reset first if needed). EMCY messages latch a fault host-side with the
-code's text; ``estop`` sends quick stop.
+machine to operation enabled (fault reset first if needed), with 0x6071 = 0 by SDO and in one RPDO first; the
+run's first sample is checked for motion the host did not command. EMCY messages latch a fault host-side with
+the code's text; ``estop`` sends quick stop.
+
+What the drive says is used, not assumed: the encoder resolution 0x608F (adopted), the factor objects for the
+units of 0x6064 and 0x606C (0x6091-0x6094 where present), the SYNC and EMCY COB-IDs (0x1005, 0x1014); 0x60C2 gets
+the cycle period where the drive has it. docs/drives.md lists every object the host assumes.
 """
 
 from __future__ import annotations
@@ -56,6 +61,8 @@ BLOCK_PERIOD = 0.02         # s between sample blocks handed to the caller
 #: SYNCs a stream allows the drive before its TPDO must report "operation enabled" (CiA 301 lets a drive apply
 #: the controlword after sampling, and a drive may take cycles to close its loops): configurable, bounded.
 ENABLE_CYCLES = 4  # an enable latency of 3 SYNCs, reported one SYNC late by a sample-then-apply drive
+REST_SPEED = 0.01           # of the velocity limit: a first sample faster than this is motion the host did not command
+REST_TORQUE = 0.05          # of the rated torque: likewise for the first sample's torque actual 0x6077
 OWNER_LISTEN = 0.3          # s the host listens, sending nothing, for another host's traffic before its first SDO
 
 #: The objects the host maps into PDOs and their CiA 402 data types (canopen.objectdictionary codes): an EDS
@@ -99,6 +106,7 @@ class CanopenDrive(HostClockedDevice):
         self.interface, self.channel, self.bus_kwargs = interface, channel, dict(bus_kwargs)
         self._skipped: list[str] = []  # optional objects the drive lacks, said once in the run events
         self._restore: dict[tuple[int, int | None], int] = {}  # objects to put back on close
+        self._check_rest = False  # set by configure: the next stream's first sample is checked for motion
         od = _check_eds(eds, node_id)  # before the bus is even opened
         import can
 
@@ -240,10 +248,13 @@ class CanopenDrive(HostClockedDevice):
         inc = int(self._read(c.ENCODER_RESOLUTION, 1, "encoder increments"))
         revs = int(self._read(c.ENCODER_RESOLUTION, 2, "motor revolutions"))
         self.counts_per_rev = inc // max(revs, 1)
+        self._units()
+        self._cob_ids()
         # the drive samples at each SYNC: the analysis resamples on host_time (analysis/record.py)
         self._info = {"protocol": "CiA 402 over CANopen", "url": self.name, "sample_times": "host_time",
                       "device_type": f"0x{device_type:08X}", "supported_modes": f"0x{supported:08X}",
-                      "rated_torque_Nm": self.rated_torque, "encoder_counts_per_rev": self.counts_per_rev}
+                      "rated_torque_Nm": self.rated_torque, "encoder_counts_per_rev": self.counts_per_rev,
+                      "units": self._adopted[0].removeprefix("units adopted from the drive: ")}
         try:
             self._info["model"] = str(self._read(c.DEVICE_NAME, what="device name"))
         except (CommandRefusedError, KeyError):
@@ -253,6 +264,53 @@ class CanopenDrive(HostClockedDevice):
                 self._info[key] = int(self._read(c.IDENTITY, sub, key))
             except (CommandRefusedError, KeyError):
                 pass
+
+    def _read_optional(self, index: int, sub: int | None = None, what: str = "") -> int | None:
+        """An optional object's value, None where the EDS or the drive lacks it."""
+        if not self._has(index, sub):
+            return None
+        try:
+            return int(self._read(index, sub, what))
+        except CommandRefusedError:  # SDO abort: the drive lacks it
+            return None
+
+    def _pair(self, index: int, what: str) -> tuple[int, int] | None:
+        one, two = self._read_optional(index, 1, what), self._read_optional(index, 2, what)
+        return (one, two) if one and two else None  # a zero is no ratio: the object is not in use
+
+    def _units(self) -> None:
+        """Position and velocity units from what the drive says: 0x608F, and the factor objects where present
+        (0x6093 position factor, else 0x6091 gear ratio with 0x6092 feed constant; 0x6094 velocity encoder
+        factor, else the velocity is in position units per second). One line says what was adopted."""
+        gear, feed = self._pair(c.GEAR_RATIO, "gear ratio"), self._pair(c.FEED_CONSTANT, "feed constant")
+        factor = self._pair(c.POSITION_FACTOR, "position factor")
+        velocity = self._pair(c.VELOCITY_ENCODER_FACTOR, "velocity encoder factor")
+        self.position_factor = c.increments_per_unit(self.counts_per_rev, gear, feed, factor)  # increments/unit
+        self.velocity_factor = velocity[0] / velocity[1] if velocity else self.position_factor  # (inc/s)/unit
+        if factor:
+            how = f"position factor 0x6093 = {factor[0]}/{factor[1]}"
+        elif gear and feed:
+            how = f"gear ratio 0x6091 = {gear[0]}/{gear[1]}, feed constant 0x6092 = {feed[0]}/{feed[1]}"
+        else:
+            how = "no factor objects: 0x6064 in increments"
+        vel = f"velocity encoder factor 0x6094 = {velocity[0]}/{velocity[1]}" if velocity else \
+            "0x606C in position units/s"
+        self._adopted = [f"units adopted from the drive: encoder 0x608F = {self.counts_per_rev} increments/rev; "
+                         f"{how} ({self.position_factor:.6g} increments per position unit); {vel}"]
+
+    def _cob_ids(self) -> None:
+        """The SYNC and EMCY COB-IDs the drive uses (0x1005, 0x1014), where it has them; CiA 301 defaults else."""
+        sync = self._read_optional(c.SYNC_COB_ID, what="COB-ID SYNC")
+        self.sync_id = sync & 0x7FF if sync is not None else 0x80
+        emcy = self._read_optional(c.EMCY_COB_ID, what="COB-ID EMCY")
+        self.emcy_id = None if emcy is not None and emcy >> 31 else (emcy & 0x7FF if emcy is not None
+                                                                      else 0x80 + self.node_id)
+        if self.emcy_id is not None and self.emcy_id != 0x80 + self.node_id:  # canopen listens on the default
+            self.network.subscribe(self.emcy_id, self.node.emcy.on_emcy)
+        if self.sync_id != 0x80 or self.emcy_id != 0x80 + self.node_id:
+            emcy_text = "none (0x1014 bit 31)" if self.emcy_id is None else f"0x{self.emcy_id:03X}"
+            self._adopted.append(f"COB-IDs from the drive: SYNC 0x{self.sync_id:03X} (0x1005), EMCY {emcy_text} "
+                                 f"(0x1014)")
 
     def info(self) -> dict:
         return dict(self._info)
@@ -293,17 +351,22 @@ class CanopenDrive(HostClockedDevice):
     # ------------------------------------------------------------------ Device API
     def configure(self, config: p.Config) -> None:
         self._check_config(config)
-        if config.counts_per_rev != self.counts_per_rev:
-            raise ConfigError(f"counts_per_rev {config.counts_per_rev} differs from the drive's encoder resolution "
-                              f"0x608F = {self.counts_per_rev} increments/rev")
+        if config.counts_per_rev != self.counts_per_rev:  # the drive knows its encoder: adopted, and said
+            self._notes.append(f"CANopen node {self.node_id}: counts_per_rev {config.counts_per_rev} replaced by "
+                               f"the drive's encoder resolution 0x608F = {self.counts_per_rev} increments/rev")
+            config.counts_per_rev = self.counts_per_rev
         node = self.node
         node.nmt.state = "PRE-OPERATIONAL"
         self._write(c.MODES_OF_OPERATION, c.MODE_CST, what="modes of operation")
         self._write(c.COMM_CYCLE_PERIOD, round(1e6 / config.sample_rate), what="communication cycle period")
+        value, power = c.interpolation_period(1.0 / config.sample_rate)
+        self._write_optional(c.INTERPOLATION_PERIOD, value, 1, "interpolation time period value")
+        self._write_optional(c.INTERPOLATION_PERIOD, power, 2, "interpolation time index")
         max_pm = c.max_torque_permille(config.current_limit, config.torque_constant, self.rated_torque)
         self._write(c.MAX_TORQUE, max_pm, what="max torque")
         # the drive's own limits, where it has the objects; the host also watches them every cycle
-        low, high = c.position_limit_increments(config.position_min, config.position_max, self.counts_per_rev)
+        low, high = c.position_limit_increments(config.position_min, config.position_max,
+                                                self.counts_per_rev / self.position_factor)  # position units
         self._write_optional(c.SOFTWARE_POSITION_LIMIT, low, 1, "software position limit, min")
         self._write_optional(c.SOFTWARE_POSITION_LIMIT, high, 2, "software position limit, max")
         self._write_optional(c.MAX_MOTOR_SPEED, c.max_motor_speed_rpm(config.velocity_limit), what="max motor speed")
@@ -318,6 +381,9 @@ class CanopenDrive(HostClockedDevice):
         self._wait_nmt("OPERATIONAL")
         self.config = config
         self.calibration = Calibration(config.torque_constant, self.counts_per_rev, config.ratio)
+        # the run's first sample is checked for motion the host did not command (not a resume's: the runner
+        # configures once per run and arms again after a pause)
+        self._check_rest = True
 
     def _map_pdos(self) -> None:
         node = self.node
@@ -395,15 +461,35 @@ class CanopenDrive(HostClockedDevice):
             raise DeviceFaultError(f"CANopen node {self.node_id} is in fault ({self.fault_text()}); "
                                    f"clear it with `hilbench fault clear --device URL` first")
         self._estop_requested = False
-        # zero torque before the enable transition, every time: a CST drive applies 0x6071 as soon as operation
-        # is enabled, and a killed run may have left a torque there
-        self._write(c.TARGET_TORQUE, 0, what="target torque")
+        self._zero_torque()
         self._walk_to(c.State.OPERATION_ENABLED, (c.Command.SHUTDOWN, c.Command.SWITCH_ON,
                                                   c.Command.ENABLE_OPERATION))
         display = int(self._read(c.MODES_DISPLAY, what="modes of operation display"))
         if display != c.MODE_CST:
             self.disarm()
             raise CommandRefusedError(f"CANopen node {self.node_id} runs mode {display}, not CST (10)")
+
+    def _zero_torque(self) -> None:
+        """Zero torque before the enable transition, every time: a CST drive applies 0x6071 as soon as operation
+        is enabled, and a killed run may have left a torque there, in the object or in a received RPDO. So 0x6071
+        = 0 by SDO, and one RPDO (shutdown, zero torque) that replaces whatever RPDO the drive holds."""
+        self._write(c.TARGET_TORQUE, 0, what="target torque")
+        self.network.send_message(self._rpdo.cob_id, _pdo_format(self._rpdo).pack(int(c.Command.SHUTDOWN), 0))
+
+    def _uncommanded(self, t1: np.ndarray, t2: np.ndarray) -> str:
+        """Why the run's first sample shows motion the host did not command ('' when it is at rest). Sample 0 is
+        taken at the first SYNC, before the first commanded torque acts: its speed and its torque are the drive's
+        own. Limits: 1 % of the velocity limit, 5 % of the rated torque (well above a resting encoder's and
+        current sensor's noise)."""
+        speed = abs(float(t2["velocity"][0])) * self.velocity_factor * 2 * math.pi / self.counts_per_rev
+        torque = abs(float(c.permille_to_torque(t1["torque"][0], self.rated_torque)))
+        speed_limit = REST_SPEED * self.config.velocity_limit
+        torque_limit = REST_TORQUE * self.rated_torque
+        if speed <= speed_limit and torque <= torque_limit:
+            return ""
+        return (f"UNFIT: uncommanded motion at the start of the run: the first sample shows {speed:.4g} rad/s "
+                f"(limit {speed_limit:.4g}) and {torque:.4g} N*m (limit {torque_limit:.4g}) at the motor before any "
+                f"commanded torque acted (a stale target torque in the drive, or an axis still moving)")
 
     def clear_faults(self) -> None:
         """Fault reset (controlword bit 7), then back to switch on disabled; forgets the latched EMCY."""
@@ -462,11 +548,11 @@ class CanopenDrive(HostClockedDevice):
         frame["torque"] = pm
         tx[:, 0, :4] = frame.view(np.uint8).reshape(n, 4)
         spec = CanCycleSpec(self.interface, self.channel, self.bus_kwargs, float(rate),
-                            (self._rpdo.cob_id, 0x80), (rpdo_fmt.size, 0),
+                            (self._rpdo.cob_id, self.sync_id), (rpdo_fmt.size, 0),
                             (self._tpdo1.cob_id, self._tpdo2.cob_id),
                             (rpdo_fmt.pack(int(c.Command.QUICK_STOP), 0), b""),
                             (rpdo_fmt.pack(int(c.Command.SWITCH_ON), 0), b""),  # zero torque, operation disabled
-                            echo_id=0x80,  # host_time: when SYNC k was on the bus
+                            echo_id=self.sync_id,  # host_time: when SYNC k was on the bus
                             guards=self._guards(cfg))
         dt1 = np.dtype([("status", "<u2"), ("torque", "<i2")])
         dt2 = np.dtype([("position", "<i4"), ("velocity", "<i4")])
@@ -495,6 +581,11 @@ class CanopenDrive(HostClockedDevice):
                 if ready > done:
                     t1 = arrays["rx"][0, done:ready, :4].copy().view(dt1).ravel()
                     t2 = arrays["rx"][1, done:ready, :8].copy().view(dt2).ravel()
+                    if self._check_rest and done == 0:
+                        self._check_rest = False
+                        moving = self._uncommanded(t1, t2)
+                        if moving:
+                            self._notes.append(moving)
                     states = [c.state_of(int(w)) for w in t1["status"]]
                     enabled = np.array([s is c.State.OPERATION_ENABLED for s in states])
                     if enabled_at is None:  # the enable handshake: a drive may report "enabled" a few SYNCs late
@@ -580,10 +671,12 @@ class CanopenDrive(HostClockedDevice):
     def _block(self, a: int, b: int, pm: np.ndarray, t1: np.ndarray, t2: np.ndarray, host_time: np.ndarray,
                unwrap: CountUnwrapper) -> CycleSamples:
         cal = self.calibration
-        counts = unwrap(t2["position"])
+        counts = unwrap(t2["position"])  # position units
+        if self.position_factor != 1.0:  # to encoder increments, to the nearest one
+            counts = np.rint(counts * self.position_factor).astype(np.int64)
         torque = c.permille_to_torque(t1["torque"], self.rated_torque) * cal.ratio
         torque_cmd = c.permille_to_torque(pm[a:b], self.rated_torque) * cal.ratio
-        velocity = t2["velocity"] * (2 * math.pi / (self.counts_per_rev * cal.ratio))
+        velocity = t2["velocity"] * (self.velocity_factor * 2 * math.pi / (self.counts_per_rev * cal.ratio))
         self._last_status, self._last_cmd = int(t1["status"][-1]), float(cal.current(torque_cmd[-1]))
         return CycleSamples(np.arange(a, b, dtype=np.int64), host_time[a:b].copy(), counts,
                             cal.current(torque_cmd), cal.current(torque), torque_cmd, torque,
@@ -593,15 +686,17 @@ class CanopenDrive(HostClockedDevice):
         """The host's own check of the position window and the velocity limit on every TPDO2 (position and
         velocity actual, increments and increments/s at the motor shaft, as the hilbench device checks them)."""
         scale = self.counts_per_rev / (2 * math.pi)  # increments per rad at the motor
+        pos, vel = scale / self.position_factor, scale / self.velocity_factor  # the drive's units per rad (/s)
         out = []
         if math.isfinite(cfg.position_min) or math.isfinite(cfg.position_max):
-            out.append(Guard("POSITION_WINDOW", 1, 0, "<i", cfg.position_min * scale, cfg.position_max * scale))
-        out.append(Guard("OVER_SPEED", 1, 4, "<i", -cfg.velocity_limit * scale, cfg.velocity_limit * scale))
+            out.append(Guard("POSITION_WINDOW", 1, 0, "<i", cfg.position_min * pos, cfg.position_max * pos))
+        out.append(Guard("OVER_SPEED", 1, 4, "<i", -cfg.velocity_limit * vel, cfg.velocity_limit * vel))
         return tuple(out)
 
     def _limit_line(self, guard: Guard, row: int, arrays: dict) -> str:
         raw = int(arrays["rx"][1, row, guard.offset:guard.offset + 4].view("<i4")[0])
-        rad = raw * 2 * math.pi / self.counts_per_rev
+        factor = self.position_factor if guard.name == "POSITION_WINDOW" else self.velocity_factor
+        rad = raw * factor * 2 * math.pi / self.counts_per_rev
         cfg = self.config
         if guard.name == "POSITION_WINDOW":
             what = (f"position {rad:.6g} rad outside the window [{cfg.position_min:.6g}, {cfg.position_max:.6g}] "
@@ -660,7 +755,7 @@ class CanopenDrive(HostClockedDevice):
 
     def run_events(self) -> list[tuple[str, str]]:
         out = super().run_events()
-        out += [("info", f"CANopen node {self.node_id}: {line}") for line in self._skipped]
+        out += [("info", f"CANopen node {self.node_id}: {line}") for line in self._adopted + self._skipped]
         out += [("info", line) for line in dict.fromkeys(self._notes)]
         self._notes.clear()
         dropped = self.malformed.count + self._malformed_cycle

@@ -16,8 +16,10 @@ import numpy as np
 DEVICE_TYPE = 0x1000
 ERROR_REGISTER = 0x1001
 ERROR_HISTORY = 0x1003        # pre-defined error field: sub 0 count, sub 1.. newest first (code | info << 16)
+SYNC_COB_ID = 0x1005          # bits 0..10: the SYNC's CAN id (default 0x80)
 COMM_CYCLE_PERIOD = 0x1006    # us
 DEVICE_NAME = 0x1008
+EMCY_COB_ID = 0x1014          # bits 0..10: the EMCY's CAN id (default 0x80 + node); bit 31 set: no EMCY
 CONSUMER_HEARTBEAT = 0x1016   # sub 1: (node << 16) | time_ms
 PRODUCER_HEARTBEAT = 0x1017   # ms
 IDENTITY = 0x1018
@@ -38,6 +40,11 @@ TORQUE_ACTUAL = 0x6077        # per mille of rated torque
 SOFTWARE_POSITION_LIMIT = 0x607D  # sub 1 min, sub 2 max, INTEGER32 increments
 MAX_MOTOR_SPEED = 0x6080      # UNSIGNED32, rpm
 ENCODER_RESOLUTION = 0x608F   # sub 1 increments per sub 2 motor revolutions
+GEAR_RATIO = 0x6091           # sub 1 motor revolutions per sub 2 shaft revolutions
+FEED_CONSTANT = 0x6092        # sub 1 feed (position units) per sub 2 shaft revolutions
+POSITION_FACTOR = 0x6093      # sub 1 numerator / sub 2 divisor: increments per position unit
+VELOCITY_ENCODER_FACTOR = 0x6094  # sub 1 numerator / sub 2 divisor: increments/s per velocity unit
+INTERPOLATION_PERIOD = 0x60C2  # sub 1 value (UNSIGNED8), sub 2 index (INTEGER8): value * 10**index s
 SUPPORTED_MODES = 0x6502
 
 PROFILE_402 = 402
@@ -183,6 +190,31 @@ def position_limit_increments(position_min: float, position_max: float, counts_p
 def max_motor_speed_rpm(velocity_limit: float) -> int:
     """0x6080 (UNSIGNED32, rpm) from a velocity limit in rad/s at the motor shaft, rounded up."""
     return int(min(math.ceil(velocity_limit * 60.0 / (2 * math.pi)), 2**32 - 1))
+
+
+def interpolation_period(period: float) -> tuple[int, int]:
+    """0x60C2 sub 1 and sub 2 for a cycle period in s: the value (1..255) and the power of ten (-128..63) with
+    value * 10**index == period, the index as large as it can be (1 ms: (1, -3); 0.5 ms: (5, -4))."""
+    for index in range(2, -10, -1):
+        value = round(period / 10.0**index)
+        if 1 <= value <= 255 and math.isclose(value * 10.0**index, period, rel_tol=1e-9):
+            return value, index
+    raise ValueError(f"a cycle period of {period} s has no 0x60C2 form (value 1..255 times a power of ten)")
+
+
+def increments_per_unit(encoder: float, gear: tuple[int, int] | None = None, feed: tuple[int, int] | None = None,
+                        factor: tuple[int, int] | None = None) -> float:
+    """Encoder increments per position unit of 0x6064 (CiA 402 factor group).
+
+    ``encoder``: increments per motor revolution (0x608F); ``gear``: motor revolutions per shaft revolution
+    (0x6091 sub 1, sub 2); ``feed``: position units per shaft revolution (0x6092 sub 1, sub 2); ``factor``: the
+    position factor 0x6093 (numerator, divisor), which states the ratio directly and takes precedence. Without
+    them a position unit is an increment."""
+    if factor is not None:
+        return factor[0] / factor[1]
+    if gear is not None and feed is not None:
+        return encoder * (gear[0] / gear[1]) / (feed[0] / feed[1])
+    return 1.0
 
 
 #: Error codes (CiA 301 table and CiA 402 annex): code -> text

@@ -2,8 +2,9 @@
 
     .venv/bin/python examples/residual_emps.py [OUT_DIR]
 
-EMPS ships with the repository (tests/data/emps/, Janot, Gautier and Brunot 2019); HSM150 is read from
-$HILBENCH_REAL_DATA/hsm150/ and left out, with a note, when that variable is not set.
+EMPS ships with the repository (tests/data/emps/, Janot, Gautier and Brunot 2019; from an installed wheel:
+$HILBENCH_REAL_DATA/emps/); HSM150 is read from $HILBENCH_REAL_DATA/hsm150/. Each is left out, with a note, when
+it is not found.
 
 EMPS starts from the benchmark's reference model (mass, Coulomb, viscous, offset) and uses the IDIM-LS
 filter band (cutoff 40 Hz ~ the decimate anti-alias band, decimation 10). HSM150 trains on repeats 1 and 2
@@ -24,11 +25,26 @@ from hilbench.analysis.reproductions.emps import PUBLISHED, fit_idim, idim_obser
 from hilbench.analysis.residual import EMPS_START, prepare_run, residual_loop
 from hilbench.analysis.residual.report import write_json, write_report
 
+#: EMPS in a source tree; copied out of an installed wheel (`hilbench examples`) the script has no tests/ beside it
+#: and reads $HILBENCH_REAL_DATA/emps/ instead, as HSM150
 EMPS = Path(__file__).resolve().parent.parent / "tests" / "data" / "emps"
 
 
+def emps_folder() -> Path | None:
+    """The folder holding DATA_EMPS.mat: the source tree's, else $HILBENCH_REAL_DATA/emps (None: neither)."""
+    root = os.environ.get("HILBENCH_REAL_DATA")
+    for folder in (EMPS, Path(root) / "emps" if root else None):
+        if folder is not None and (folder / "DATA_EMPS.mat").is_file():
+            return folder
+    return None
+
+
 def emps(out: Path) -> None:
-    a, b = load_emps(EMPS / "DATA_EMPS.mat"), load_emps(EMPS / "DATA_EMPS_PULSES.mat")
+    folder = emps_folder()
+    if folder is None:
+        print("EMPS: skipped (not in a source tree: set HILBENCH_REAL_DATA to the folder holding emps/DATA_EMPS.mat)")
+        return
+    a, b = load_emps(folder / "DATA_EMPS.mat"), load_emps(folder / "DATA_EMPS_PULSES.mat")
     fs = 1.0 / (a.t[1] - a.t[0])
     kw = {"axis": "linear", "cutoff": 40.0, "decimation": 10}
     result = residual_loop(prepare_run(a.qm, a.force, fs, name="DATA_EMPS", **kw),

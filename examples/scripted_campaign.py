@@ -10,8 +10,8 @@ from pathlib import Path
 from hilbench.analysis.identification.identify import identify
 from hilbench.analysis.identification.maxwell_fit import LipSettings
 from hilbench.analysis.record import load_record
-from hilbench.bench.protocols import Identification
-from hilbench.bench.runner import Bench
+from hilbench.bench.acquisition.protocols import Identification
+from hilbench.bench.acquisition.runner import Bench
 
 
 def main(out: Path) -> None:

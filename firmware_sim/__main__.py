@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from hilbench.firmware_sim.bus_buffer import widen_device_buffer
+from hilbench.firmware_sim.devices.bus_buffer import widen_device_buffer
 
 PACINGS = ("realtime", "lockstep")
 #: Node ids each kind of simulated device can take: the hilbench protocol's 4-bit node; CiA 402 1..126 (127 is
@@ -103,7 +103,7 @@ def watch_parent(pid: int, stop, grace: float = 2.0, period: float = 0.25) -> No
 def _serve_drive(args, sim) -> int:
     import threading
 
-    from hilbench.firmware_sim import cia402_drive, odrive_sim
+    from hilbench.firmware_sim.devices import cia402_drive, odrive_sim
 
     stop = threading.Event()
     if args.parent_pid is not None:
@@ -118,9 +118,9 @@ def main(argv: list[str] | None = None, prog: str = "python -m hilbench.firmware
     args = build_parser(prog).parse_args(argv)
     import can
 
-    from hilbench.firmware_sim.core_c import CoreDevice
-    from hilbench.firmware_sim.device import CanTransport, PtyTransport, serve
-    from hilbench.firmware_sim.sim_config import load_sim_config
+    from hilbench.firmware_sim.devices.core_c import CoreDevice
+    from hilbench.firmware_sim.devices.device import CanTransport, PtyTransport, serve
+    from hilbench.firmware_sim.devices.sim_config import load_sim_config
 
     try:
         sim = load_sim_config(args.config, seed=args.seed)

@@ -17,7 +17,7 @@ PROTOCOL_DEFINITIONS = ("hilbench.drivers.protocol", "hilbench.drivers.cia402", 
 
 @dataclass(frozen=True)
 class Edge:
-    source: str  # importing module, e.g. hilbench.bench.commands.identify
+    source: str  # importing module, e.g. hilbench.bench.cli.commands.identify
     target: str  # imported module (or name under it), e.g. hilbench.analysis.record
     where: str  # file:line
 
@@ -79,11 +79,20 @@ def violations(all_edges: list[Edge]) -> list[str]:
                 bad.append(f"{e} (a simulated device never imports bench or analysis)")
             if _under(t, "hilbench.drivers") and not any(_under(t, p) for p in PROTOCOL_DEFINITIONS):
                 bad.append(f"{e} (a simulated device shares only protocol definitions with drivers)")
-        cli = _under(t, "hilbench.bench.commands") or _under(t, "hilbench.bench.cli")
+        cli = _under(t, "hilbench.bench.cli.commands") or _under(t, "hilbench.bench.cli")
         if _under(s, "hilbench.bench.gui") and cli:
             bad.append(f"{e} (the GUI is an adapter over the analyses, never over the CLI)")
-        if (_under(s, "hilbench.bench.commands") and _under(t, "hilbench.bench.commands")
-                and not _under(t, s) and s != "hilbench.bench.commands"):
+        # The layout's layers: the CLI and the GUI are adapters on top; acquisition (protocols, runner, campaigns) sits
+        # on storage (imports, output files); the engine (the C plant) sits under the simulated devices.
+        lower = ("hilbench.bench.acquisition", "hilbench.bench.storage", "hilbench.bench.campaign_analysis")
+        if any(_under(s, p) for p in lower) and (cli or _under(t, "hilbench.bench.gui")):
+            bad.append(f"{e} (acquisition, storage and campaign analysis never import the CLI or the GUI)")
+        if _under(s, "hilbench.bench.storage") and _under(t, "hilbench.bench.acquisition"):
+            bad.append(f"{e} (storage never imports acquisition)")
+        if _under(s, "hilbench.firmware_sim.engine") and _under(t, "hilbench.firmware_sim.devices"):
+            bad.append(f"{e} (the simulation engine never imports the simulated devices)")
+        if (_under(s, "hilbench.bench.cli.commands") and _under(t, "hilbench.bench.cli.commands")
+                and not _under(t, s) and s != "hilbench.bench.cli.commands"):
             bad.append(f"{e} (CLI commands never import each other)")
     return bad
 

@@ -29,14 +29,19 @@ def test_the_reading_sees_function_level_and_relative_imports(tmp_path):
 
 
 @pytest.mark.parametrize(("where", "text", "rule"), [
-    ("drivers/device.py", "from hilbench.bench import runner", "drivers never imports"),
-    ("drivers/links.py", "def f():\n    import hilbench.firmware_sim.plant\n", "drivers never imports"),
-    ("analysis/metrics.py", "def f():\n    from hilbench.bench.outputs import say\n", "analysis never imports"),
+    ("drivers/device.py", "from hilbench.bench.acquisition import runner", "drivers never imports"),
+    ("drivers/links.py", "def f():\n    import hilbench.firmware_sim.engine.plant\n", "drivers never imports"),
+    ("analysis/metrics.py", "def f():\n    from hilbench.bench.storage.outputs import say\n", "analysis never imports"),
     ("analysis/record.py", "from hilbench.drivers import device", "analysis never imports"),
-    ("firmware_sim/device.py", "from hilbench.drivers.amplifier import Amplifier", "only protocol definitions"),
-    ("firmware_sim/plant.py", "def f():\n    from hilbench.analysis import record\n", "simulated device never"),
-    ("bench/gui/analyses.py", "def f():\n    from hilbench.bench.commands.identify import run\n", "the GUI is an"),
-    ("bench/commands/show.py", "from hilbench.bench.commands.identify import run", "never import each other"),
+    ("firmware_sim/devices/device.py", "from hilbench.drivers.amplifier import Amplifier", "only protocol definitions"),
+    ("firmware_sim/engine/plant.py", "def f():\n    from hilbench.analysis import record\n", "simulated device never"),
+    ("bench/gui/analyses.py", "def f():\n    from hilbench.bench.cli.commands.identify import run\n", "the GUI is an"),
+    ("bench/cli/commands/show.py", "from hilbench.bench.cli.commands.identify import run", "never import each other"),
+    ("bench/acquisition/runner.py", "def f():\n    from hilbench.bench.cli import main\n", "never import the CLI"),
+    ("bench/storage/importers.py", "from hilbench.bench.gui import app", "never import the CLI or the GUI"),
+    ("bench/campaign_analysis/engine.py", "from hilbench.bench.cli.commands import run", "never import the CLI"),
+    ("bench/storage/outputs.py", "from hilbench.bench.acquisition.runner import Bench", "storage never imports"),
+    ("firmware_sim/engine/drift.py", "from hilbench.firmware_sim.devices import device", "engine never imports"),
 ])
 def test_a_planted_violating_import_is_caught(tmp_path, where, text, rule):
     tree = tmp_path / "tree"  # the real module with the planted line (the rules are judged import by import)

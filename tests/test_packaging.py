@@ -10,6 +10,7 @@ from the wheel, which the test checks.
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -61,17 +62,18 @@ def test_wheel_holds_one_namespace_and_the_package_data(installed):
     names = zipfile.ZipFile(installed["wheel"]).namelist()
     top = {n.split("/")[0] for n in names}
     assert {t for t in top if not t.endswith(".dist-info")} == {"hilbench"}, top
-    for needed in ("hilbench/firmware_sim/plant.c", "hilbench/firmware_sim/plant.h",
-                   "hilbench/firmware_sim/default_sim.toml", "hilbench/__main__.py"):
+    for needed in ("hilbench/firmware_sim/engine/plant.c", "hilbench/firmware_sim/engine/plant.h",
+                   "hilbench/firmware_sim/devices/default_sim.toml", "hilbench/firmware_sim/devices/hb_cia402.eds",
+                   "hilbench/__main__.py"):
         assert needed in names, needed
-    assert any(n.startswith("hilbench/firmware_sim/_plant") and n.endswith(".so") for n in names)
+    assert any(n.startswith("hilbench/firmware_sim/engine/_plant") and n.endswith(".so") for n in names)
 
 
 def test_installed_wheel_is_what_runs_and_nothing_generic_is_importable(installed):
     import json
 
     probe = (
-        "import importlib.util, json, sys, hilbench, hilbench.firmware_sim._plant as p\n"
+        "import importlib.util, json, sys, hilbench, hilbench.firmware_sim.engine._plant as p\n"
         f"generic = {GENERIC!r}\n"
         "print(json.dumps({'hilbench': hilbench.__file__, 'plant': p.__file__,\n"
         "  'generic': [g for g in generic if importlib.util.find_spec(g) is not None],\n"
@@ -141,3 +143,22 @@ def test_every_python_example_of_the_readme_and_docs_runs_from_the_wheel(install
         res = subprocess.run([str(installed["py"]), "-c", code], cwd=work, env=installed["env"], capture_output=True,
                              text=True, timeout=600)
         assert res.returncode == 0, f"{doc.name}:\n{code}\n{res.stderr[-2000:]}"
+
+
+def test_every_example_file_a_doc_names_ships_and_runs_from_the_wheel(installed, tmp_path):
+    """Issue 28: docs/cli.md pointed at examples/presliding_sim.toml, which the wheel did not ship. Every
+    examples/NAME the README and docs name is in the wheel, `hilbench examples -o examples` puts it where the
+    docs' commands look, and the presliding command of docs/cli.md runs with it (lockstep, shorter)."""
+    text = "\n".join(p.read_text(encoding="utf-8") for p in [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))])
+    named = set(re.findall(r"examples/([A-Za-z0-9_.-]+\.(?:toml|py))", text))
+    assert "presliding_sim.toml" in named, named
+    wheel = set(zipfile.ZipFile(installed["wheel"]).namelist())
+    exe, env = str(installed["venv"] / "bin" / "hilbench"), installed["env"]
+    out = _run([exe, "examples", "-o", "examples"], tmp_path, env).stdout
+    assert "example files in examples" in out
+    for name in sorted(named):
+        assert f"hilbench/examples/{name}" in wheel, name
+        assert (tmp_path / "examples" / name).is_file(), name
+    _run([exe, "run", "presliding", "--counts-per-rev", "65536", "--amplitudes", "2", "1", "--quiet", "--device",
+          "sim://?config=examples/presliding_sim.toml&pacing=lockstep", "-o", "presliding.h5"], tmp_path, env)
+    assert (tmp_path / "presliding.h5").is_file()

@@ -13,7 +13,7 @@ P integer this is exactly rFFT bin k*P, so whole periods of other harmonics leak
 
 Sources of an AFRF:
 
-- :func:`simulate_afrf`: stepped sine on a :class:`firmware_sim.plant.PlantParams` model with the C engine,
+- :func:`simulate_afrf`: stepped sine on a :class:`firmware_sim.engine.plant.PlantParams` model with the C engine,
   one independent simulation per (amplitude, frequency) cell, parallel over processes. The sample rate is
   chosen per frequency (``samples_per_period``), since the plant's dt is free.
 - :func:`afrf_from_run`: a measured stepped-sine run file (``hilbench run`` with the ``stepped_sine``
@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
-from hilbench.firmware_sim.plant import PlantParameterError, PlantParams, simulate, stiffest_eigenvalue
+from hilbench.firmware_sim.engine.plant import PlantParameterError, PlantParams, simulate, stiffest_eigenvalue
 
 #: Relative tolerance on "the window holds a whole number of periods" (n*f/fs within this of an integer).
 WHOLE_PERIOD_TOL = 1e-6
@@ -176,6 +176,7 @@ class AfrfResult:
         amplitude_unit, displacement_unit, drive_unit: unit strings.
         label: what was measured or simulated.
         settings: how (JSON-able).
+        warnings: one line per thing the input cannot support (e.g. no amplitude reaches break-away).
     """
 
     amplitudes: np.ndarray
@@ -188,6 +189,7 @@ class AfrfResult:
     drive_unit: str = "N*m"
     label: str = ""
     settings: dict = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)  # what the input cannot support (one line each)
 
     @property
     def magnitudes(self) -> np.ndarray:
@@ -219,6 +221,7 @@ class AfrfResult:
             "drive_unit": self.drive_unit,
             "convergence": clean(self.convergence),
             "settings": self.settings,
+            "warnings": list(self.warnings),
             "shape": "magnitude[amplitude][frequency][harmonic-1]",
         }
 
@@ -468,101 +471,12 @@ def simulate_afrf(params: PlantParams, amplitudes: Sequence[float], frequencies:
 # ---- measured runs ---------------------------------------------------------------------------------------
 
 
-@dataclass
-class SteppedSineRun:
-    """What an AFRF needs from a stepped-sine run file.
-
-    Attributes:
-        path: the file. fs: sample rate, Hz. windows: the ``step_windows`` structured array (per step:
-        frequency played and requested, Hz; amplitude, setpoint unit; settle_start/stop and
-        measure_start/stop sample indices, stop exclusive). position: shape (n,), rad (m). torque: shape
-        (n,), N*m (N), or None. mode: ``current`` or ``velocity``. axis: ``rotary`` or ``linear``.
-    """
-
-    path: Path
-    fs: float
-    windows: np.ndarray
-    position: np.ndarray
-    torque: np.ndarray | None
-    mode: str
-    axis: str
-    incomplete: str | None = None  # why the record is incomplete (only when allow_incomplete let it through)
-
-
-def read_stepped_sine_run(path: str | Path, allow_incomplete: bool = False) -> SteppedSineRun:
-    """Read a stepped-sine run file through the one loader (:func:`hilbench.analysis.record.load_record`).
-    Raises :class:`AnalysisError` for a missing, foreign, damaged or (unless ``allow_incomplete``) incomplete
-    file, a run without ``step_windows`` or without a position channel."""
-    from hilbench.analysis.record import load_record
-
-    run = load_record(path, need_torque=False, channels=("torque",), protocol_arrays=("step_windows",),
-                      allow_incomplete=allow_incomplete)
-    windows = run.protocol_arrays.get("step_windows")
-    need = ("frequency", "amplitude", "measure_start", "measure_stop")
-    if windows is None or windows.dtype.names is None or not all(n in windows.dtype.names for n in need):
-        raise AnalysisError(f"{run.path}: no step windows (/protocol/step_windows); an AFRF needs a stepped-sine "
-                            f"run (protocol {run.protocol_name or 'unknown'!r})")
-    if windows.size == 0:
-        raise AnalysisError(f"{run.path}: the step_windows table is empty")
-    params = run.protocol_params
-    mode = params.get("mode") or params.get("params", {}).get("mode") or "current"
-    return SteppedSineRun(run.path, run.sample_rate, windows, np.asarray(run.position, float),
-                          run.channels.get("torque"), str(mode), run.axis, run.incomplete)
-
-
 def afrf_from_run(path: str | Path, n_harmonics: int = 3, allow_incomplete: bool = False) -> AfrfResult:
-    """AFRF of a measured stepped-sine run: harmonics of ``position`` over each step's measure window.
+    """AFRF of a measured stepped-sine run file (:func:`hilbench.analysis.afrf.analyse` on the record read whole;
+    :mod:`hilbench.analysis.afrf.steps` documents the grid, the units and the errors)."""
+    from hilbench.analysis.afrf import AfrfSettings, analyse, load
 
-    The grid is the run's amplitudes x requested frequencies; the reported frequency is the played one
-    (snapped to whole periods by the bench). Steps the file does not hold completely (an aborted or
-    crashed run) are NaN. Amplitudes are the setpoint's (A in current mode, rad/s in velocity mode); the
-    torque channel's first harmonic is in ``drive`` (N*m).
-
-    Raises:
-        AnalysisError: bad file, no step windows, no complete step, a window with fewer than one whole
-            period or not whole periods.
-    """
-    run = read_stepped_sine_run(path, allow_incomplete)
-    w = run.windows
-    amps = np.unique(w["amplitude"])
-    req = w["frequency_requested"] if "frequency_requested" in w.dtype.names else w["frequency"]
-    freqs_req = np.unique(req)
-    shape = (amps.size, freqs_req.size)
-    response = np.full(shape + (n_harmonics,), np.nan + 0j)
-    drive = np.full(shape, np.nan + 0j)
-    conv = np.full(shape, np.nan)
-    played = np.full(shape, np.nan)
-    complete = 0
-    for row, f_req in zip(w, req, strict=True):
-        i = int(np.searchsorted(amps, row["amplitude"]))
-        j = int(np.searchsorted(freqs_req, f_req))
-        a, b, f = int(row["measure_start"]), int(row["measure_stop"]), float(row["frequency"])
-        played[i, j] = f
-        if b <= a:
-            raise AnalysisError(f"{run.path}: step at {f:g} Hz, amplitude {row['amplitude']:g} has an empty "
-                                "measure window")
-        if b > run.position.size:
-            continue
-        x = run.position[a:b]
-        try:
-            response[i, j] = harmonic_phasors(x, run.fs, f, n_harmonics)
-            conv[i, j] = period_convergence(x, run.fs, f, n_harmonics)
-        except AnalysisError as exc:
-            raise AnalysisError(f"{run.path}: step at {f:g} Hz, amplitude {row['amplitude']:g}: {exc}") from None
-        if run.torque is not None and b <= run.torque.size:
-            drive[i, j] = harmonic_phasors(run.torque[a:b], run.fs, f, 1, detrend=False)[0]
-        complete += 1
-    if complete == 0:
-        raise AnalysisError(f"{run.path}: no step's measure window is complete in the file "
-                            f"({run.position.size} samples)")
-    linear = run.axis == "linear"
-    return AfrfResult(
-        amplitudes=amps, frequencies=np.nanmean(played, axis=0), response=response, drive=drive,
-        convergence=conv, amplitude_unit="A" if run.mode == "current" else ("m/s" if linear else "rad/s"),
-        displacement_unit="m" if linear else "rad", drive_unit="N" if linear else "N*m",
-        label=run.path.name, settings={"source": str(run.path), "mode": run.mode, "sample_rate": run.fs,
-                                               "incomplete": run.incomplete},
-    )
+    return analyse(load(path, allow_incomplete=allow_incomplete), AfrfSettings(n_harmonics=n_harmonics))
 
 
 # ---- figure ----------------------------------------------------------------------------------------------

@@ -22,7 +22,7 @@ import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.models.families import substeps_for
-from hilbench.firmware_sim.plant import Plant, PlantParams
+from hilbench.firmware_sim.engine.plant import Plant, PlantParams
 
 
 @dataclass(frozen=True)

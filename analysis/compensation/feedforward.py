@@ -30,7 +30,7 @@ from hilbench.analysis.models.families import substeps_for
 from hilbench.analysis.models.friction_model import AXES
 from hilbench.analysis.models.model_file import READABLE as MODEL_SCHEMAS
 from hilbench.analysis.models.model_file import check_name, check_plant, load_document, read_family, read_model
-from hilbench.firmware_sim.plant import Plant, PlantParameterError, PlantParams
+from hilbench.firmware_sim.engine.plant import Plant, PlantParameterError, PlantParams
 
 COMPARE_SCHEMA = "hilbench.compare/1"
 

@@ -217,7 +217,7 @@ class StopCarry:
 
     def window(self, w: Window) -> np.ndarray:
         """Deflections at every sample of the window, (w.x.size, m)."""
-        from hilbench.firmware_sim.plant import stop_operator
+        from hilbench.firmware_sim.engine.plant import stop_operator
 
         s = stop_operator(w.x, self.deltas, initial=self.state)
         if w.n is None or w.b < w.n:

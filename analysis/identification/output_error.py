@@ -1,4 +1,4 @@
-"""Output-error (simulation-error) evaluation and refinement with the C engine (firmware_sim.plant).
+"""Output-error (simulation-error) evaluation and refinement with the C engine (firmware_sim.engine.plant).
 
 The model is driven open-loop by the measured torque, held over each sample (the plant's input
 convention; hilbench.analysis.identification.regressors.held_torque converts other timings), from the measured initial
@@ -30,7 +30,7 @@ MAX_SUBSTEPS = 100_000
 
 def stable_substeps(model: FrictionModel, dt: float) -> int:
     """RK4 sub-steps that keep |lambda|*h at 80 % of the engine's stability radius."""
-    from hilbench.firmware_sim.plant import RK4_STABLE_RADIUS, stiffest_eigenvalue
+    from hilbench.firmware_sim.engine.plant import RK4_STABLE_RADIUS, stiffest_eigenvalue
 
     try:
         lam = stiffest_eigenvalue(model.plant_params())
@@ -65,7 +65,7 @@ def simulate_position(
     substeps: int | None = None,
 ) -> np.ndarray:
     """Simulated position theta_sim[k] (rad or m), shape (n,), of the model under the torque record."""
-    from hilbench.firmware_sim.plant import Plant, PlantParameterError
+    from hilbench.firmware_sim.engine.plant import Plant, PlantParameterError
 
     dt = 1.0 / fs
     u = held_torque(torque, timing)
@@ -102,7 +102,7 @@ def path_deflections(position: np.ndarray, deltas: np.ndarray, indices: np.ndarr
     """Stop-operator deflections S_Delta_j[x](k) of the path from relaxed elements, at the sample ``indices``
     (increasing), shape (len(indices), len(deltas)), in the units of x. Evaluated in chunks of at most
     ``CHUNK_VALUES`` values: the full (n, N) array of a long record would not fit in memory."""
-    from hilbench.firmware_sim.plant import stop_operator
+    from hilbench.firmware_sim.engine.plant import stop_operator
 
     x = np.asarray(position, float)
     d = np.asarray(deltas, float)
@@ -141,7 +141,7 @@ def segmented_simulation_error(
     deflections S_Delta_i[x](k0), the stop operators of the measured path from relaxed elements (the
     Maxwell-slip state is a function of the path alone). NRMSE = rms(x - sim)/std(x) over the whole record.
     """
-    from hilbench.firmware_sim.plant import Plant, PlantParameterError
+    from hilbench.firmware_sim.engine.plant import Plant, PlantParameterError
 
     x = np.asarray(position, float)
     if not segment > 0:
@@ -311,7 +311,7 @@ def simulation_error_chunks(model: FrictionModel, source, fs: float, *, timing: 
     block from its own state, so the simulation is the one-call simulation bit for bit; nothing of the record's
     length is kept."""
     from hilbench.analysis.identification.chunked import BLOCK, windows
-    from hilbench.firmware_sim.plant import Plant, PlantParameterError
+    from hilbench.firmware_sim.engine.plant import Plant, PlantParameterError
 
     dt = 1.0 / fs
     spread = _Spread()
@@ -335,7 +335,7 @@ def segmented_simulation_error_chunks(model: FrictionModel, source, fs: float, *
     each window reaches the filter's margin beyond its block, so the restart velocity is the whole-record
     low-pass's to e^-40 of its start-up transient, and the deflections are the stop operator carried exactly."""
     from hilbench.analysis.identification.chunked import BLOCK, StopCarry, default_margin, windows
-    from hilbench.firmware_sim.plant import Plant, PlantParameterError
+    from hilbench.firmware_sim.engine.plant import Plant, PlantParameterError
 
     if not segment > 0:
         raise AnalysisError(f"segment must be positive, got {segment} s")
@@ -421,7 +421,7 @@ def refine_output_error_chunks(model: FrictionModel, source, fs: float, *, timin
     Standard errors are sigma^2 (J^T J)^-1, inflated by n/n_eff as in the array version (the residual's
     autocorrelation accumulated block by block)."""
     from hilbench.analysis.identification.chunked import BLOCK, windows
-    from hilbench.firmware_sim.plant import Plant, PlantParameterError
+    from hilbench.firmware_sim.engine.plant import Plant, PlantParameterError
 
     dt = 1.0 / fs
     pk = _Packing(model)

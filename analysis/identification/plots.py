@@ -18,14 +18,16 @@ from hilbench.analysis.identification.identify import Identification
 from hilbench.analysis.models.friction_model import AXES
 
 MEASURED = {"color": "0.15", "lw": 1.4}
+#: dots per model in the whole-record panel of the hysteresis figure
+MAX_DOTS = 3000
 MODEL_STYLES = ({"color": "tab:orange", "lw": 1.0, "ls": "--"}, {"color": "tab:blue", "lw": 1.0, "ls": ":"})
 
 
-def _figure(width: float, height: float, rows: int = 1, cols: int = 1, **kw):
+def _figure(width: float, height: float, rows: int = 1, cols: int = 1, layout: str | None = None, **kw):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(width, height))
+    fig = Figure(figsize=(width, height), layout=layout)
     FigureCanvasAgg(fig)
     return fig, fig.subplots(rows, cols, squeeze=False, **kw)
 
@@ -62,25 +64,52 @@ def hysteresis_figure(position: np.ndarray, measured: np.ndarray, models: Sequen
                       units: dict, title: str, path: str | Path, t: np.ndarray | None = None,
                       window: float = 1.0) -> Path:
     """Friction (``units['torque']``) against displacement (``units['position']``), measured against one or two
-    models, all shape (n,) on the same rows; ``t`` (s) picks the zoom window (:func:`busiest_window`)."""
+    models, all shape (n,) on the same rows; ``t`` (s) picks the zoom window (:func:`busiest_window`).
+
+    Left, the whole record: thousands of overlaid cycles drawn as lines are a solid blot, so the measured friction
+    is drawn as a sample density (grey, log scale) and each model as dots of at most MAX_DOTS samples, evenly
+    spaced. Right, the window with the most reversals, every sample as lines."""
+    from matplotlib.colors import LogNorm
+
+    from hilbench.analysis.figure_style import engineering, plain_numbers
+
     x = np.asarray(position, float)
-    fig, ax = _figure(12, 4.6, 1, 2)
+    y = np.asarray(measured, float)
+    fx, xu = engineering(units["position"], x)
+    fy, yu = engineering(units["torque"], np.r_[y, *[np.asarray(m, float) for _, m in models]])
+    fig, ax = _figure(12, 5.0, 1, 2)
     ax = ax[0]
     t = np.arange(x.size, dtype=float) if t is None else np.asarray(t, float)
     i0, i1 = busiest_window(t, x, window)
-    for a, sl, what, lw in ((ax[0], slice(None), "whole record", 0.5),
-                            (ax[1], slice(i0, i1), f"t = {t[i0]:.3g} .. {t[i1 - 1]:.3g} s (most reversals)", 1.0)):
-        a.plot(x[sl], np.asarray(measured, float)[sl], label="measured (torque - J*acceleration)",
-               **{**MEASURED, "lw": 1.4 * lw})
-        for (label, y), style in zip(models, MODEL_STYLES, strict=False):
-            a.plot(x[sl], np.asarray(y, float)[sl], label=label, **{**style, "lw": lw})
-        a.set_xlabel(f"displacement ({units['position']})")
-        a.set_ylabel(f"friction ({units['torque']})")
-        a.set_title(what, fontsize=10)
+    finite = np.isfinite(x) & np.isfinite(y)
+    if finite.sum() > 1 and np.ptp(x[finite]) > 0 and np.ptp(y[finite]) > 0:
+        ax[0].hist2d(fx * x[finite], fy * y[finite], bins=(100, 60), cmap="Greys", norm=LogNorm(), rasterized=True)
+        ax[0].plot([], [], ls="none", marker="s", ms=7, color="0.45", label="measured: samples per cell (log)")
+    # the models as dots of every step-th sample (at most MAX_DOTS): lines through thousands of cycles are a blot
+    step = max(1, x.size // MAX_DOTS)
+    for (label, m), style in zip(models, MODEL_STYLES, strict=False):
+        ax[0].plot(fx * x[::step], fy * np.asarray(m, float)[::step], ls="none", marker=".", ms=1.5, alpha=0.35,
+                   color=style["color"], rasterized=True, label=f"{label}, every {step}th sample" if step > 1 else
+                   label)
+    ax[0].set_title("whole record: measured as sample density (grey, log scale), model as dots", fontsize=9)
+    sl = slice(i0, i1)
+    ax[1].plot(fx * x[sl], fy * y[sl], label="measured (torque - J*acceleration)", **MEASURED)
+    for (label, m), style in zip(models, MODEL_STYLES, strict=False):
+        ax[1].plot(fx * x[sl], fy * np.asarray(m, float)[sl], label=label, **style)
+    ax[1].set_title(f"t = {t[i0]:.3g} .. {t[i1 - 1]:.3g} s (the {window:g} s with the most reversals), every sample",
+                    fontsize=9)
+    for a in ax:
+        a.set_xlabel(f"displacement ({xu})")
+        a.set_ylabel(f"friction ({yu})")
         a.grid(True, alpha=0.3)
-    handles, labels = ax[1].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=9, frameon=False)
-    fig.subplots_adjust(bottom=0.2)
+        plain_numbers(a)
+    handles, labels = [], []
+    for a in ax:
+        h, lab = a.get_legend_handles_labels()
+        handles += h
+        labels += lab
+    fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=9, frameon=False)
+    fig.subplots_adjust(bottom=0.24, wspace=0.25)
     fig.suptitle(title)
     paths: list[Path] = []
     _save(fig, Path(path), paths)
@@ -105,7 +134,10 @@ def _identification_hysteresis(result: Identification, c: dict, u: dict, title: 
 
 
 def write_plots(result: Identification, directory: str | Path) -> list[Path]:
-    """Write the figures into ``directory`` (created); returns the file paths."""
+    """Write the figures into ``directory`` (created); returns the file paths. Small values are drawn in
+    engineering units (mrad, mN*m), legends sit outside the data."""
+    from hilbench.analysis.figure_style import engineering, plain_numbers
+
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
     m = result.model
@@ -115,15 +147,17 @@ def write_plots(result: Identification, directory: str | Path) -> list[Path]:
     lo = float(m.ms_delta.min()) / 10 if m.ms_delta.size else 1e-6
     hi = float(m.ms_delta.max()) * 3 if m.ms_delta.size else 1.0
     x = np.geomspace(lo, hi, 400)
+    fx, xu = engineering(u["position"], x)
+    fy, yu = engineering(u["torque"], m.virgin_curve(x))
     fig, ax = _figure(7, 4.5)
     ax = ax[0, 0]
-    ax.semilogx(x, m.virgin_curve(x), "k", lw=2, label="virgin curve")
+    ax.semilogx(fx * x, fy * m.virgin_curve(x), "k", lw=2, label="virgin curve")
     for i, curve in enumerate(m.element_curves(x).T):
-        ax.semilogx(x, curve, lw=0.8, label=f"{m.ms_delta.size} elements" if i == 0 else None)
-    ax.set_xlabel(f"displacement from reversal / 2 ({u['position']})")
-    ax.set_ylabel(f"friction ({u['torque']})")
+        ax.semilogx(fx * x, fy * curve, lw=0.8, label=f"{m.ms_delta.size} elements" if i == 0 else None)
+    ax.set_xlabel(f"displacement from reversal / 2 ({xu})")
+    ax.set_ylabel(f"friction ({yu})")
     ax.set_title(f"Identified virgin curve ({m.ms_delta.size} elements, {result.method})")
-    ax.legend()
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     ax.grid(True, which="both", alpha=0.3)
     _save(fig, out / "virgin_curve.png", paths)
 
@@ -131,42 +165,50 @@ def write_plots(result: Identification, directory: str | Path) -> list[Path]:
         t_rows = np.asarray(c["t_rows"], float)
         meas, pred = np.asarray(c["torque_filtered"]), np.asarray(c["torque_predicted"])
         i0, i1 = busiest_window(t_rows, np.asarray(c["position"])[np.searchsorted(c["t"], t_rows)], 2.0)
-        fig, axes = _figure(10, 8.5, 3, 1)
+        ft, tu = engineering(u["torque"], meas)
+        fp, pu = engineering(u["position"], c["position"])
+        fig, axes = _figure(11, 8.5, 3, 1)
         axes = axes[:, 0]
         zoom = slice(i0, i1)
-        axes[0].plot(t_rows[zoom], meas[zoom], label="measured (filtered)", **MEASURED)
-        axes[0].plot(t_rows[zoom], pred[zoom], label="model", **MODEL_STYLES[0])
-        axes[0].set_ylabel(f"torque ({u['torque']})")
+        axes[0].plot(t_rows[zoom], ft * meas[zoom], label="measured (filtered)", **MEASURED)
+        axes[0].plot(t_rows[zoom], ft * pred[zoom], label="model", **MODEL_STYLES[0])
+        axes[0].set_ylabel(f"torque ({tu})")
         axes[0].set_title(f"{prefix} run: torque, {t_rows[i0]:.3g} .. {t_rows[i1 - 1]:.3g} s (the window with the "
                           "most reversals)", fontsize=10)
         err = meas - pred
+        fe, eu = engineering(u["torque"], err)
         rms = float(np.sqrt(np.mean(err**2)))
-        axes[1].plot(t_rows, err, color="0.35", lw=0.5, label="measured - model")
-        axes[1].axhline(rms, color="tab:red", lw=0.8, ls="--", label=f"+-rms {rms:.3g} {u['torque']}")
-        axes[1].axhline(-rms, color="tab:red", lw=0.8, ls="--")
+        axes[1].plot(t_rows, fe * err, color="0.35", lw=0.5, label="measured - model")
+        axes[1].axhline(fe * rms, color="tab:red", lw=0.8, ls="--", label=f"+-rms {fe * rms:.3g} {eu}")
+        axes[1].axhline(-fe * rms, color="tab:red", lw=0.8, ls="--")
         axes[1].axvspan(t_rows[i0], t_rows[i1 - 1], color="tab:orange", alpha=0.12)
-        axes[1].set_ylabel(f"torque error ({u['torque']})")
+        axes[1].set_ylabel(f"torque error ({eu})")
         axes[1].set_title("equation error over the whole run (shaded: the window above)", fontsize=10)
-        axes[2].plot(c["t"], c["position"], label="measured", **MEASURED)
-        axes[2].plot(c["t"], c["position_sim"], label="simulated (open loop)", **MODEL_STYLES[0])
-        axes[2].set_ylabel(f"position ({u['position']})")
+        axes[2].plot(c["t"], fp * np.asarray(c["position"]), label="measured", **MEASURED)
+        axes[2].plot(c["t"], fp * np.asarray(c["position_sim"]), label="simulated (open loop)", **MODEL_STYLES[0])
+        axes[2].set_ylabel(f"position ({pu})")
         axes[2].set_title("simulation error: the model driven by the measured torque", fontsize=10)
         for a in axes:
             a.set_xlabel("time (s)")
-            a.legend(loc="upper right", fontsize=8)
+            a.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
             a.grid(True, alpha=0.3)
+            plain_numbers(a)
         fig.tight_layout()
         _save(fig, out / f"{prefix}_fit.png", paths)
 
-        fig, axes = _figure(9, 3.5, 1, 2)
+        # constrained layout: the right panel's y label keeps clear of the left panel's ticks
+        fig, axes = _figure(10, 3.8, 1, 2, layout="constrained")
         axes = axes[0]
-        axes[0].hist(err, bins=80, color="0.3")
-        axes[0].set_xlabel(f"torque residual ({u['torque']})")
-        axes[1].hist(np.asarray(c["position"]) - np.asarray(c["position_sim"]), bins=80, color="0.3")
-        axes[1].set_xlabel(f"position residual ({u['position']})")
+        axes[0].hist(fe * err, bins=80, color="0.3")
+        axes[0].set_xlabel(f"torque residual, measured - model ({eu})")
+        perr = np.asarray(c["position"]) - np.asarray(c["position_sim"])
+        fq, qu = engineering(u["position"], perr)
+        axes[1].hist(fq * perr, bins=80, color="0.3")
+        axes[1].set_xlabel(f"position residual, measured - simulated ({qu})")
         for a in axes:
             a.set_ylabel("count (samples)")
-        fig.suptitle(f"{prefix} residuals")
+            plain_numbers(a)
+        fig.suptitle(f"{prefix} run: residual histograms")
         _save(fig, out / f"{prefix}_residuals.png", paths)
 
         paths.append(_identification_hysteresis(

@@ -4,7 +4,7 @@ Model (rotary: rad, N*m; linear: m, N):
 
     J*theta'' + sum_i k_i*S_Delta_i[theta] + b*theta' + Fc*sign(theta') + c0 + K*theta = tau
 
-S_Delta is the stop operator (science.md §1), computed by the C engine (firmware_sim.plant).
+S_Delta is the stop operator (science.md §1), computed by the C engine (firmware_sim.engine.plant).
 
 Filtering (documented choice: *filtered formulation*, not integrated): one zero-phase low-pass L
 (Butterworth, forward-backward) is applied to tau and to every regressor column. Because L is linear
@@ -207,7 +207,7 @@ def triangle_average(x: np.ndarray, rows: np.ndarray) -> np.ndarray:
 
 def stop_columns(position: np.ndarray, deltas: np.ndarray, data: FilteredData) -> np.ndarray:
     """Filtered, triangle-averaged stop-operator regressors L[S_Delta_j[theta]] at the rows, (r, m)."""
-    from hilbench.firmware_sim.plant import stop_operator
+    from hilbench.firmware_sim.engine.plant import stop_operator
 
     if np.size(deltas) == 0:
         return np.empty((data.rows.size, 0))

@@ -33,7 +33,7 @@ from hilbench.analysis.models.families import (
     fit_family,
     maxwell_slip_start,
 )
-from hilbench.firmware_sim.plant import PlantParameterError, PlantParams
+from hilbench.firmware_sim.engine.plant import PlantParameterError, PlantParams
 
 SCHEMA = "hilbench.compare/1"
 

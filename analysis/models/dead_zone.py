@@ -4,7 +4,7 @@ The paper's discretised Maxwell-slip model has no damping below its smallest sli
 sticks there. This is the dead-zone of the equivalent damping, an artefact of the discretisation. The paper
 expected a continuous model to remove it. This module runs the paper's skeleton procedure on the paper's
 mass-spring system (m = 1 kg, k = 50 N/m, h = 1.64 N, d = 0.656 m) twice: once with the 16-element
-Maxwell-slip friction, once with the continuous virgin-curve hysteresis (firmware_sim.plant.Hysteresis).
+Maxwell-slip friction, once with the continuous virgin-curve hysteresis (firmware_sim.engine.plant.Hysteresis).
 The procedure is the same chirps, ForceVib and composition (``analysis.reproductions.paper``). The module then
 builds the continuous model's equivalent (describing form) and compares its AFRF with the original's
 (docs/compare.md, "Skeleton and AFRF of the continuous model").
@@ -27,8 +27,8 @@ from hilbench.analysis.reproductions.paper import (
 from hilbench.analysis.skeleton.equivalent import equivalent_params
 from hilbench.analysis.skeleton.forcevib import compose
 from hilbench.analysis.skeleton.skeleton_fit import fit_skeleton_monotone
-from hilbench.firmware_sim.friction_models import PAPER_D, PAPER_H, PAPER_MASS, PAPER_SPRING, paper_system
-from hilbench.firmware_sim.plant import Hysteresis, PlantParams
+from hilbench.firmware_sim.engine.friction_models import PAPER_D, PAPER_H, PAPER_MASS, PAPER_SPRING, paper_system
+from hilbench.firmware_sim.engine.plant import Hysteresis, PlantParams
 
 DEAD_ZONE_LEVEL = 0.05  # N: the chirp that stays below the 16-element model's smallest slip displacement
 #: Bins below this amplitude (m) are the skeleton method's noise floor at G = 0.05 for both models (E ~ 1e-8 J,

@@ -48,7 +48,7 @@ from hilbench.analysis.identification.regressors import (
     zero_phase_lowpass,
 )
 from hilbench.analysis.models.friction_model import AXES, check_axis
-from hilbench.firmware_sim.plant import (
+from hilbench.firmware_sim.engine.plant import (
     GMS,
     RK4_STABLE_RADIUS,
     Hysteresis,

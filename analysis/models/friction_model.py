@@ -73,8 +73,8 @@ class FrictionModel:
         return self.ms_stiffness * np.clip(x[..., None], -self.ms_delta, self.ms_delta)
 
     def plant_params(self, **effects):
-        """:class:`firmware_sim.plant.PlantParams` of this model (torque_constant 1: input is torque)."""
-        from hilbench.firmware_sim.plant import PlantParams
+        """:class:`firmware_sim.engine.plant.PlantParams` of this model (torque_constant 1: input is torque)."""
+        from hilbench.firmware_sim.engine.plant import PlantParams
 
         keep = (self.ms_stiffness > 0) & (self.ms_delta > 0)
         k = self.ms_stiffness[keep]

@@ -83,7 +83,7 @@ def family_document(fit, *, method: str, settings: dict, figures: dict, data: di
 @dataclass
 class FamilyModel:
     """A model file read back: the family, its parameters with standard errors (None: none exists) and units,
-    and the plant (``firmware_sim.plant.PlantParams``) that simulates it."""
+    and the plant (``firmware_sim.engine.plant.PlantParams``) that simulates it."""
 
     family: str
     axis: str
@@ -152,8 +152,8 @@ def check_number(value, where: str, minimum: float | None = None, positive: bool
 
 def check_numbers(value, where: str, minimum: float | None = None, nullable: bool = False) -> list:
     """A JSON list of numbers (each as :func:`check_number`; ``None`` allowed when ``nullable``), at most
-    ``firmware_sim.plant.MAX_ELEMENTS`` long (the C plant's element limit)."""
-    from hilbench.firmware_sim.plant import MAX_ELEMENTS
+    ``firmware_sim.engine.plant.MAX_ELEMENTS`` long (the C plant's element limit)."""
+    from hilbench.firmware_sim.engine.plant import MAX_ELEMENTS
 
     if not isinstance(value, list):
         raise AnalysisError(f"{where} must be a list of numbers, got {_short(value)}")
@@ -223,7 +223,7 @@ _PLANT_NULLABLE = {"viscous_neg", "coulomb_neg", "static", "restoring_table", "d
 
 
 def check_plant(plant, where: str) -> None:
-    """Types and signs of a plant block (``firmware_sim.plant.PlantParams.to_dict``) before it is rebuilt:
+    """Types and signs of a plant block (``firmware_sim.engine.plant.PlantParams.to_dict``) before it is rebuilt:
     numbers where numbers belong (``"inf"`` only where to_dict writes it), no negative element stiffness or
     slip force, stiffnesses and slip forces of the same length; the plant checks the rest when it is built."""
     if not isinstance(plant, dict):
@@ -270,7 +270,7 @@ def check_family(family, where: str) -> str:
 
 def read_family(path: str | Path) -> tuple[FamilyModel, dict]:
     """Read any model file (version 1 or 2, any family); returns the model and the whole document."""
-    from hilbench.firmware_sim.plant import PlantParameterError, PlantParams
+    from hilbench.firmware_sim.engine.plant import PlantParameterError, PlantParams
 
     doc = _load(path)
     family = check_family(doc.get("family", "maxwell_slip"), str(path))

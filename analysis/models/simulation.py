@@ -1,4 +1,4 @@
-"""Simulating models with the one C engine (``firmware_sim.plant``).
+"""Simulating models with the one C engine (``firmware_sim.engine.plant``).
 
 analysis simulates identified and equivalent models with the same engine the simulated device runs.
 """
@@ -9,8 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hilbench.firmware_sim.friction_models import dc_motor, paper_system
-from hilbench.firmware_sim.plant import PlantOutput, PlantParams, simulate
+from hilbench.firmware_sim.engine.friction_models import dc_motor, paper_system
+from hilbench.firmware_sim.engine.plant import PlantOutput, PlantParams, simulate
 
 __all__ = ["ChirpRun", "PlantParams", "chirp_force", "dc_motor", "paper_system", "simulate", "simulate_chirp"]
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import io
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -58,6 +58,7 @@ class PreslidingResult:
     extremes: np.ndarray | None = None  # each turning point's extreme force (reversals.extreme_forces)
     edge_rolling: RollingFit | None = None  # the shape with a free exponent fitted to the edge-pinned virgin ramp
     edge_rolling_fixed: RollingFit | None = None  # the same with the rolling-friction exponent 2 (the baseline)
+    warnings: list[str] = field(default_factory=list)  # what the input cannot support (one line each)
 
     @property
     def units(self) -> dict[str, str]:
@@ -103,11 +104,24 @@ def analyse(t: np.ndarray, x: np.ndarray, force: np.ndarray, fs: float, axis: st
     first averaged in blocks (:func:`block_means`). AnalysisError for unusable input (e.g. no reversal)."""
     step = position_resolution(np.asarray(x, float))  # of the samples as recorded, before any averaging
     raw = np.asarray(force, float)
-    edges, edge_fit, edge_why, edge_rolling, edge_fixed = _edge_fit(np.asarray(x, float), raw, step, axis,
-                                                                    settings, max(1, math.ceil(MIN_EXCURSION_S * fs)))
+    edge = _edge_fit(np.asarray(x, float), raw, step, axis, settings, max(1, math.ceil(MIN_EXCURSION_S * fs)))
     window = max(1, round(EXTREME_WINDOW_S * fs))
     t, x, force, block = block_means(t, x, force, max_samples)
-    fs = fs / block
+    return analyse_blocks(t, x, force, fs / block, block, step, axis, settings, edge,
+                          lambda rev: extreme_forces(raw, rev * block + block // 2, window),
+                          counts_per_rev=counts_per_rev, hysteresis=hysteresis, fraction=fraction,
+                          replicates=replicates, seed=seed)
+
+
+def analyse_blocks(t: np.ndarray, x: np.ndarray, force: np.ndarray, fs: float, block: int, step: float, axis: str,
+                   settings: PreslidingSettings | None, edge: tuple, extremes_of, *,
+                   counts_per_rev: float | None = None, hysteresis: float | None = None,
+                   fraction: float = DEFAULT_FRACTION, replicates: int = 20, seed: int = 0) -> PreslidingResult:
+    """:func:`analyse` from the block-averaged record (t, x, force at ``fs`` = the raw rate / ``block``) and what
+    it read from the raw samples: the position ``step``, ``edge`` (:func:`_edge_fit`'s tuple) and
+    ``extremes_of(reversals)``, each turning point's extreme force (:func:`extreme_forces` on the raw force).
+    Whole arrays (:func:`analyse`) and a record read chunk by chunk (:mod:`~.streamed`) meet here."""
+    edges, edge_fit, edge_why, edge_rolling, edge_fixed = edge
     if hysteresis is None:
         hysteresis = HYSTERESIS_STEPS * step
     rev = find_reversals(x, hysteresis)
@@ -127,7 +141,7 @@ def analyse(t: np.ndarray, x: np.ndarray, force: np.ndarray, fs: float, axis: st
         rolling, why = None, str(exc)
     res = resolution(fit, x, force, travels, counts_per_rev, fraction, step=step, rolling=rolling,
                      edge_rolling=edge_rolling, edge_fixed=edge_fixed)
-    extremes = extreme_forces(raw, rev * block + block // 2, window)
+    extremes = extremes_of(rev)
     return PreslidingResult(t, x, force, axis, fit, rev, travels[:-1], check,
                             quantities(fit.model, fraction), unc, res, fraction, block, rolling, why,
                             edges, edge_fit, edge_why, extremes, edge_rolling, edge_fixed)
@@ -278,21 +292,24 @@ def figures(result: PreslidingResult) -> dict:
     ``virgin`` (measured virgin ramp against the model's virgin curve, with x_p)."""
     from matplotlib.figure import Figure
 
+    from hilbench.analysis.figure_style import scaled_axis
+
     u = result.units
-    xl, fl = f"displacement x ({u['position']})", f"force F ({u['torque']})"
     r0 = int(result.reversals[0])
-    fig = Figure(figsize=(7.5, 5.5))
+    fig = Figure(figsize=(7.5, 6.2), layout="constrained")
     ax = fig.add_subplot()
     ax.plot(result.x[r0:], result.force[r0:], lw=0.6, color="0.55", label="measured: nested loops")
     ax.plot(result.x[: r0 + 1], result.force[: r0 + 1], lw=1.6, color="tab:blue", label="measured: virgin ramp")
     ax.plot(result.x, result.fit.simulated, lw=0.7, ls="--", color="tab:red",
             label="model: force simulated from the measured displacement")
     ax.plot(result.x[result.reversals], result.force[result.reversals], "k.", ms=5, label="reversal points")
-    ax.set(xlabel=xl, ylabel=fl, title="presliding force against displacement")
-    ax.legend(fontsize=7, loc="lower right")
+    xu = scaled_axis(ax.xaxis, u["position"], result.x)
+    fu = scaled_axis(ax.yaxis, u["torque"], result.force)
+    ax.set(xlabel=f"displacement x ({xu})", ylabel=f"force F ({fu})", title="presliding force against displacement")
+    fig.legend(*ax.get_legend_handles_labels(), fontsize=9, loc="outside lower center", ncol=2, frameon=False)
     ax.grid(alpha=0.3)
     loops = fig
-    fig = Figure(figsize=(11.5, 4.8))
+    fig = Figure(figsize=(12, 6.4), layout="constrained")
     ax, zoom = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.6, 1]})
     sgn = 1.0 if result.x[r0] > result.x[0] else -1.0
     s = sgn * (result.x[: r0 + 1] - result.x[0])
@@ -315,12 +332,20 @@ def figures(result: PreslidingResult) -> dict:
                 label="parametric virgin curve h(1-(d/(d+x))^2) on the samples")
     xp = result.quantities["presliding_distance"]
     ax.axvline(xp, color="k", ls=":", label=f"x_p({result.fraction:g}) = {xp:.3g} {u['position']}")
-    ax.set(xlabel=f"travel from the relaxed state ({u['position']})", ylabel=f"force change ({u['torque']})",
-           title="virgin curve")
-    ax.legend(fontsize=7)
+    xu = scaled_axis(ax.xaxis, u["position"], s)
+    fu = scaled_axis(ax.yaxis, u["torque"], result.force - result.force[0])
+    ax.set(xlabel=f"travel from the relaxed state ({xu})", ylabel=f"force change ({fu})", title="virgin curve")
     ax.grid(alpha=0.3)
     _initial_slopes(zoom, result, s, sgn)
-    fig.tight_layout()
+    zoom.set_xlabel(f"travel ({scaled_axis(zoom.xaxis, u['position'], [zoom.get_xlim()[1]])}; grey: count edges)")
+    zoom.set_ylabel(f"force change ({scaled_axis(zoom.yaxis, u['torque'], result.force - result.force[0])})")
+    # one legend for both panels, below them, at a readable size
+    handles, labels = ax.get_legend_handles_labels()
+    for h, label in zip(*zoom.get_legend_handles_labels(), strict=True):
+        if label not in labels:
+            handles.append(h)
+            labels.append(label)
+    fig.legend(handles, labels, fontsize=8.5, loc="outside lower center", ncol=2, frameon=False)
     return {"loops": loops, "virgin": fig}
 
 
@@ -367,6 +392,4 @@ def _initial_slopes(ax, result: PreslidingResult, s: np.ndarray, sgn: float) -> 
         ax.axvline((n - 0.5) * step, color="0.8", lw=0.6)
     ax.set(xlim=(0, span), ylim=(0, 1.05 * top), xlabel=f"travel ({u['position']}; grey: count edges)",
            ylabel=f"force change ({u['torque']})", title="the first position steps: sum(k) is the slope at 0")
-    ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 0))
-    ax.legend(fontsize=6, loc="lower right")
     ax.grid(alpha=0.3)

@@ -52,7 +52,7 @@ class PreslidingFit:
 
 def _columns(x: np.ndarray, fs: float, deltas: np.ndarray, s: PreslidingSettings) -> tuple[np.ndarray, list[str]]:
     """Design matrix (n, p) on the raw samples and the names of its non-element columns (elements last)."""
-    from hilbench.firmware_sim.plant import stop_operator
+    from hilbench.firmware_sim.engine.plant import stop_operator
 
     v = np.gradient(x) * fs
     cols, names = [], []
@@ -82,7 +82,7 @@ def _nnls(a: np.ndarray, y: np.ndarray) -> np.ndarray:
 def model_force(model: FrictionModel, x: np.ndarray, fs: float) -> np.ndarray:
     """Force (N or N*m) a model produces along the displacement x (m or rad, shape (n,)) sampled at fs (Hz):
     sum k_i*S_Delta_i[x] (elements relaxed at x[0]) + b*x' + Fc*sign(x') + c0 + J*x'' (central differences)."""
-    from hilbench.firmware_sim.plant import stop_operator
+    from hilbench.firmware_sim.engine.plant import stop_operator
 
     x = np.asarray(x, float)
     v = np.gradient(x) * fs

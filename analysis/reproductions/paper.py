@@ -35,8 +35,8 @@ from hilbench.analysis.skeleton.skeleton_fit import (
     fit_paper_restoring,
     fit_skeleton_monotone,
 )
-from hilbench.firmware_sim.friction_models import PAPER_D, PAPER_H, dc_motor, paper_system
-from hilbench.firmware_sim.plant import PlantParams, simulate
+from hilbench.firmware_sim.engine.friction_models import PAPER_D, PAPER_H, dc_motor, paper_system
+from hilbench.firmware_sim.engine.plant import PlantParams, simulate
 
 #: Settings the paper's text lost (digits 0/1) and that we had to choose; shown in the summary.
 INFERRED = {

@@ -23,8 +23,8 @@ from hilbench.analysis.reproductions.paper import (
     virgin_closed_form,
 )
 from hilbench.analysis.skeleton.equivalent import describing_function
-from hilbench.firmware_sim.friction_models import PAPER_D, PAPER_H, maxwell_virgin_curve, virgin_curve
-from hilbench.firmware_sim.plant import stop_operator
+from hilbench.firmware_sim.engine.friction_models import PAPER_D, PAPER_H, maxwell_virgin_curve, virgin_curve
+from hilbench.firmware_sim.engine.plant import stop_operator
 
 DPI = 100
 
@@ -258,17 +258,21 @@ def fig11(study: Study, out: Path) -> list[Path]:
         err = np.pi * r.damping_force * r.amplitude / e16 - 1
         rate = np.abs(inst.dA) * 2 * np.pi / (r.amplitude * np.abs(r.omega))
     t = r.t
-    fig, ax = plt.subplots(figsize=(9, 3.8))
-    ax.plot(t[ok & ~r.valid], 100 * err[ok & ~r.valid], ",", color="0.7", label="invalid (ends, COI)")
-    ax.plot(t[r.valid], 100 * err[r.valid], ",", color="b", label="valid samples")
+    fig, ax = plt.subplots(figsize=(9, 4.3))
+    ax.plot(t[ok & ~r.valid], 100 * err[ok & ~r.valid], ",", color="0.7", label="energy error: invalid (ends, COI)")
+    ax.plot(t[r.valid], 100 * err[r.valid], ",", color="b", label="energy error: valid samples")
     ax.set_ylim(-50, 50)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("energy per cycle error vs 16-element closed form (%)", fontsize=8)
     tw = ax.twinx()
-    tw.plot(t[r.valid], 100 * rate[r.valid], "r,")
+    tw.plot(t[r.valid], 100 * rate[r.valid], "r,", label="amplitude change per cycle (right axis)")
     tw.set_ylabel("|dA/dt|/(A*f): amplitude change per cycle (%)", color="r", fontsize=8)
     tw.set_ylim(0, 60)
-    ax.legend(loc="upper left", fontsize=7, markerscale=20)
+    # below the axes: inside, it covered the samples it names
+    handles = ax.get_legend_handles_labels()[0] + tw.get_legend_handles_labels()[0]
+    fig.legend(handles, [h.get_label() for h in handles], loc="lower center", ncol=3, fontsize=8, markerscale=20,
+               frameon=False)
+    fig.subplots_adjust(bottom=0.25)
     ax.grid(alpha=0.3)
     ax.set_title("G = 5: error grows where the amplitude changes fast and at the ends of the chirp")
     return [p11, _save(fig, out / "fig11b_chirp_ends.png")]

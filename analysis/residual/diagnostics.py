@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hilbench.analysis.identification.regressors import effective_sample_count, position_resolution
+from hilbench.analysis.residual.candidates import stribeck_top
 from hilbench.analysis.residual.rundata import RunData
 
 ALPHA = 1e-3
@@ -412,7 +413,9 @@ def run_diagnostics(s: Signals, alpha: float = ALPHA, min_effect: float = MIN_EF
     slope = np.polyfit(v, e, 1)[0] if np.ptp(v) > 0 else 0.0
     reg("velocity", v, one, ("viscous",), lambda: f"residual grows with velocity ({slope:+.3g} per unit velocity)")
     speed = np.abs(s.velocity_fast)
-    scales = np.percentile(speed, [10, 25, 50]) + 1e-12
+    # the scales stop where the Stribeck candidate's grid does (candidates.stribeck_top): a record that cruises
+    # (a stroke-limited sweep, median speed 3.5 rad/s) has no "low speed" at its median
+    scales = np.minimum(np.percentile(speed, [10, 25, 50]), stribeck_top(speed)) + 1e-12
     sgn = np.sign(s.velocity_fast)
     low = np.column_stack([sgn * np.exp(-((speed / vs) ** 2)) for vs in scales])
     reg("low_speed", low, np.column_stack([one, v]), ("stribeck",),

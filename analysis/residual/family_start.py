@@ -49,7 +49,7 @@ class FamilyFriction(Term):
 
     def _force(self, run: RunData, nl: dict) -> np.ndarray:
         from hilbench.analysis.models.families import substeps_for
-        from hilbench.firmware_sim.plant import Plant
+        from hilbench.firmware_sim.engine.plant import Plant
 
         plant = nl["_plant"]
         xf, v = _path(run)
@@ -112,7 +112,7 @@ def refine_on_equation_error(builder, params: dict, run: RunData, max_nfev: int 
     from scipy.optimize import least_squares
 
     from hilbench.analysis.models.families import substeps_for
-    from hilbench.firmware_sim.plant import Plant, PlantParameterError
+    from hilbench.firmware_sim.engine.plant import Plant, PlantParameterError
 
     names = [n for n in builder.names if n not in LINEAR]
     xf, v = _path(run)

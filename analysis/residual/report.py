@@ -42,11 +42,18 @@ def plot_diagnostics(s: Signals, diags: dict[str, Diagnostic], title: str, path:
     import matplotlib
 
     matplotlib.use("Agg")
+    import textwrap
+
     import matplotlib.pyplot as plt
+
+    from hilbench.analysis.figure_style import scaled_axis
 
     e = s.residual
     tu, pu = units["torque"], units["position"]
     fig, ax = plt.subplots(3, 3, figsize=(14, 10))
+
+    def wrapped(text: str) -> str:  # a long diagnostic title on two lines, never cut mid-sentence
+        return "\n".join(textwrap.wrap(text, 70)[:2])
     scatter = dict(s=2, alpha=0.3, color="tab:blue", rasterized=True)
 
     def panel(a, x, label, diag):
@@ -54,7 +61,7 @@ def plot_diagnostics(s: Signals, diags: dict[str, Diagnostic], title: str, path:
         bx, by = _binned(x, e)
         a.plot(bx, by, color="tab:red", lw=1.5, label="bin mean")
         a.set_xlabel(label)
-        a.set_ylabel(f"residual ({tu})")
+        a.set_ylabel(f"residual ({scaled_axis(a.yaxis, tu, e)})")  # mN*m for small residuals
         if diag is not None:
             d = diags[diag]
             a.set_title(f"{diag}: F={d.statistic:.3g}, p={d.p_value:.2g}, effect {100 * d.effect:.1f} %", fontsize=8)
@@ -73,7 +80,7 @@ def plot_diagnostics(s: Signals, diags: dict[str, Diagnostic], title: str, path:
         a.set_xlabel("order (cycles/rev)" if s.axis == "rotary" else "spatial frequency (1/m)")
     a.set_ylabel("variance explained (%)")
     d = diags["angle_spectrum"]
-    a.set_title(f"angle spectrum: {d.description}"[:70], fontsize=8)
+    a.set_title(wrapped(f"angle spectrum: {d.description}"), fontsize=8)
     a = ax[2, 0]
     spec = diags["time_spectrum"].detail.get("spectrum")
     if spec is not None:
@@ -82,7 +89,7 @@ def plot_diagnostics(s: Signals, diags: dict[str, Diagnostic], title: str, path:
         a.legend(fontsize=7)
     a.set_xlabel("frequency (Hz)")
     a.set_ylabel(f"PSD ({tu}^2/Hz)")
-    a.set_title(f"time spectrum: {diags['time_spectrum'].description}"[:70], fontsize=8)
+    a.set_title(wrapped(f"time spectrum: {diags['time_spectrum'].description}"), fontsize=8)
     a = ax[2, 1]
     for mask, lab in ((s.velocity_fast > 0, "v > 0"), (s.velocity_fast < 0, "v < 0")):
         if mask.sum() > 10:
@@ -90,7 +97,7 @@ def plot_diagnostics(s: Signals, diags: dict[str, Diagnostic], title: str, path:
             a.plot(bx, by, marker=".", label=lab)
     a.legend(fontsize=7)
     a.set_xlabel(f"speed |v| ({pu}/s)")
-    a.set_ylabel(f"mean residual ({tu})")
+    a.set_ylabel(f"mean residual ({scaled_axis(a.yaxis, tu, e)})")
     d = diags["direction"]
     a.set_title(f"direction: F={d.statistic:.3g}, p={d.p_value:.2g}", fontsize=8)
     a = ax[2, 2]

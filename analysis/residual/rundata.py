@@ -98,7 +98,7 @@ class RunData:
 
     def stop_raw(self, deltas: np.ndarray) -> np.ndarray:
         """Unfiltered stop-operator deflections at full rate for the thresholds ``deltas``, shape (n, m)."""
-        from hilbench.firmware_sim.plant import stop_operator
+        from hilbench.firmware_sim.engine.plant import stop_operator
 
         d = np.asarray(deltas, float)
         return self.cached(("stop_raw", d.tobytes()), lambda: stop_operator(self.position, d))

@@ -296,6 +296,39 @@ def _local_thresholds(setting: Setting, train: list[RunData]) -> Setting:
     return Setting(setting.fixed_inertia, th, setting.delay)
 
 
+SPRING_MARGIN = 1.5  # the spring element is added when the excursion exceeds the grid's top by this factor
+
+
+def with_spring_element(thresholds: np.ndarray, train: list[RunData]) -> np.ndarray:
+    """The threshold grid plus one element as wide as the training runs' largest excursion from their start (the loop
+    adds it when the start model wants an element wider than its grid, :func:`_grid_truncated`).
+
+    The grid ends at half the largest travel between reversals: an element wider than that never slips after a
+    reversal. It still acts, as a linear spring k*(theta - theta_0), and the Maxwell-slip family contains it (the
+    element with Delta >= every excursion: the stop operator starts relaxed at the run's first sample and never
+    clips). Without it a training record that hardly slides (the default bench's identification run of seed 3:
+    1.6 mrad of travel against a 0.5 mrad presliding distance) left its elements' spring force in the residual
+    (62 % of it, the ``position`` diagnostic), and the loop took it for an offset drift (issue 29). Its W = k*Delta
+    is a lower bound of that element's slip force."""
+    reach = max(float(np.max(np.abs(r.position - r.position[0]))) for r in train)
+    if reach > SPRING_MARGIN * float(thresholds[-1]):
+        return np.append(thresholds, reach)
+    return thresholds
+
+
+TRUNCATED_SHARE = 0.05  # the grid's widest element carrying this share of the break-away wants a wider one
+
+
+def _grid_truncated(fit: Fit, thresholds: np.ndarray, diags: dict[str, Diagnostic]) -> bool:
+    """Whether the start model wants an element wider than its grid: its widest element carries at least
+    TRUNCATED_SHARE of the break-away force, or its residual still correlates with position (the ``position``
+    diagnostic points to the Maxwell-slip family, which is already in the model). On the matrix's records that slide
+    the widest element carries at most 0.5 % (3 mN*m); on a spring that never slips, all of it."""
+    c = fit.term_coef("maxwell_slip")
+    breakaway = float(c[0] + c[1:] @ thresholds)
+    return bool(c[-1] * thresholds[-1] >= TRUNCATED_SHARE * breakaway > 0 or diags["position"].significant)
+
+
 def _with(model: list, term: Term, nl: dict) -> list:
     return [(t, n) for t, n in model if t.name not in term.replaces] + [(term, nl)]
 
@@ -460,8 +493,14 @@ def residual_loop(
         get_term(n)
 
     fit0 = fit_model(model, train, setting)
-    errors0 = _errors(fit0, model, train, validation, setting, opts)
     diags0 = run_diagnostics(Signals.from_runs(train, fit0.residual), opts.alpha, opts.min_effect)
+    if "maxwell_slip" in start and _grid_truncated(fit0, thresholds, diags0):
+        wider = with_spring_element(thresholds, train)
+        if wider.size > thresholds.size:
+            setting = Setting(opts.fixed_inertia, wider)
+            fit0 = fit_model(model, train, setting)
+            diags0 = run_diagnostics(Signals.from_runs(train, fit0.residual), opts.alpha, opts.min_effect)
+    errors0 = _errors(fit0, model, train, validation, setting, opts)
     fit, diags, errors = fit0, diags0, errors0
     effects, rounds, tried = [], [], {}
     while len(effects) < opts.max_effects:

@@ -1,6 +1,6 @@
 """Simulation error of a fitted residual-loop model in position and velocity, with the one C engine.
 
-The model (every term's plant parameters, ``Term.plant``) is simulated by ``firmware_sim.plant`` under
+The model (every term's plant parameters, ``Term.plant``) is simulated by ``firmware_sim.engine.plant`` under
 the run's measured torque (torque_constant 1: the input is the torque). A friction system integrates
 every torque error into a drifting position, so a whole-run open-loop simulation of a closed-loop or
 long run says little. The run is therefore cut into windows of ``window`` s; each window starts from
@@ -26,8 +26,8 @@ MAX_SUBSTEPS = 64
 
 
 def plant_params(fit: Fit):
-    """:class:`firmware_sim.plant.PlantParams` of a fitted model (torque_constant 1)."""
-    from hilbench.firmware_sim.plant import PlantParams
+    """:class:`firmware_sim.engine.plant.PlantParams` of a fitted model (torque_constant 1)."""
+    from hilbench.firmware_sim.engine.plant import PlantParams
 
     fields: dict = {}
     coulomb_others = 0.0  # Coulomb levels of the terms that set no direction-dependent level (both directions)
@@ -59,7 +59,7 @@ def plant_params(fit: Fit):
 def simulation_error(fit: Fit, run: RunData, window: float = 1.0) -> dict:
     """Windowed simulation error {position_nrmse, velocity_nrmse} of ``fit`` on ``run`` (None if the model
     cannot be simulated; then ``simulation_note`` says why)."""
-    from hilbench.firmware_sim.plant import Plant, PlantParameterError, stiffest_eigenvalue
+    from hilbench.firmware_sim.engine.plant import Plant, PlantParameterError, stiffest_eigenvalue
 
     try:
         params = plant_params(fit)

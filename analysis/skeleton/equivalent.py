@@ -41,7 +41,7 @@ from scipy.linalg import solve_triangular
 from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.skeleton.forcevib import SkeletonCurves
 from hilbench.analysis.skeleton.skeleton_fit import MonotoneSkeleton, PaperFit, fit_skeleton_monotone
-from hilbench.firmware_sim.plant import RK4_STABLE_RADIUS, PlantParams, stiffest_eigenvalue
+from hilbench.firmware_sim.engine.plant import RK4_STABLE_RADIUS, PlantParams, stiffest_eigenvalue
 
 FORMS = ("describing", "direct")
 #: Gauss-Legendre nodes on [0, pi/2] for the describing-function integral.

@@ -117,9 +117,8 @@ def _as_signal(name: str, a, n: int | None = None) -> np.ndarray:
     return arr
 
 
-def spectral_extent(x: np.ndarray, fs: float) -> tuple[float, float, float]:
-    """Frequencies (Hz) at the 0.1 % and 99.9 % quantiles of the detrended energy spectrum of x, widened by
-    one octave each side (f_lo/2, 2*f_hi), and the frequency of the spectral peak."""
+def detrended_energy(x: np.ndarray) -> np.ndarray:
+    """Energy spectrum |rFFT|^2 of x after removing its least-squares line (DC bin zeroed), shape (n//2 + 1,)."""
     n = x.size
     idx = np.arange(n)
     xd = x - np.polyval(np.polyfit(idx, x, 1), idx) if n > 2 else x - x.mean()
@@ -127,6 +126,11 @@ def spectral_extent(x: np.ndarray, fs: float) -> tuple[float, float, float]:
         raise AnalysisError("signal is constant: no oscillation to analyse")
     energy = np.abs(sfft.rfft(xd)) ** 2
     energy[0] = 0.0
+    return energy
+
+
+def extent_of_energy(energy: np.ndarray, fs: float, n: int) -> tuple[float, float, float]:
+    """:func:`spectral_extent` from an energy spectrum on the grid k*fs/n (n: the transform's length)."""
     total = energy.sum()
     if not total > 0:
         raise AnalysisError("signal is constant: no oscillation to analyse")
@@ -137,13 +141,25 @@ def spectral_extent(x: np.ndarray, fs: float) -> tuple[float, float, float]:
     return float(f_lo), float(min(f_hi, fs / 2)), float(f[np.argmax(energy)])
 
 
+def spectral_extent(x: np.ndarray, fs: float) -> tuple[float, float, float]:
+    """Frequencies (Hz) at the 0.1 % and 99.9 % quantiles of the detrended energy spectrum of x, widened by
+    one octave each side (f_lo/2, 2*f_hi), and the frequency of the spectral peak."""
+    return extent_of_energy(detrended_energy(x), fs, x.size)
+
+
 def default_band(x: np.ndarray, fs: float, fb: float, fc: float, coi: float) -> tuple[float, float]:
     """Wavelet analysis band (Hz): ``spectral_extent`` of x, no lower than the frequency whose wavelet
     (+-coi time-widths) fits in the record, no higher than what fs resolves with the wavelet's bandwidth."""
-    t_rec = x.size / fs
+    return band_of_extent(x.size, fs, spectral_extent(x, fs), fb, fc, coi)
+
+
+def band_of_extent(n: int, fs: float, extent: tuple[float, float, float], fb: float, fc: float, coi: float
+                   ) -> tuple[float, float]:
+    """:func:`default_band` of a record of ``n`` samples whose :func:`spectral_extent` is ``extent``."""
+    t_rec = n / fs
     f_floor = 2.0 * coi * fc * math.sqrt(fb / 2.0) / t_rec
     f_ceil = 0.45 * fs / (1.0 + 6.0 * relative_bandwidth(fb, fc))
-    f_lo, f_hi, f_peak = spectral_extent(x, fs)
+    f_lo, f_hi, f_peak = extent
     if f_floor > min(f_hi / 2.0, f_peak):
         raise AnalysisError(
             f"record of {t_rec:.4g} s is too short for cmor{fb}-{fc}: below {f_floor:.4g} Hz its wavelet "
@@ -160,11 +176,24 @@ def default_band(x: np.ndarray, fs: float, fb: float, fc: float, coi: float) -> 
     return float(f_lo), float(f_hi)
 
 
-def _pick_hop(n: int, fs: float, scales: np.ndarray, fb: float, fc: float) -> int:
+def _hop(fs: float, scales: np.ndarray, fb: float, fc: float) -> int:
+    """Columns of the |W| map are ``hop`` samples apart: a power of two, at most a quarter of the narrowest
+    wavelet's time width and one period of the band's top frequency (with its bandwidth)."""
     sig_min = float(time_width(scales.min(), fb)) * fs
     f_top = fc / scales.min() * (1.0 + 6.0 * relative_bandwidth(fb, fc))
     hop_max = max(1, min(int(sig_min / 4.0), int(fs / f_top)))
-    hop = 1 << int(math.floor(math.log2(hop_max)))
+    return 1 << int(math.floor(math.log2(hop_max)))
+
+
+def map_cells(n: int, fs: float, band: tuple[float, float], fb: float = DEFAULT_FB, fc: float = DEFAULT_FC,
+              voices: int = 16) -> int:
+    """Cells of the |W| map of a cwt analysis of ``n`` samples at ``fs`` in ``band`` (what bounds its memory)."""
+    scales = scale_grid(band[0], band[1], fc, voices)
+    return (n // _hop(fs, scales, fb, fc) + 1) * scales.size
+
+
+def _pick_hop(n: int, fs: float, scales: np.ndarray, fb: float, fc: float) -> int:
+    hop = _hop(fs, scales, fb, fc)
     if (n // hop + 1) * scales.size > MAX_MAP_CELLS:
         raise AnalysisError(
             f"band up to {fc / scales.min():.4g} Hz is too wide for a record of {n} samples; "

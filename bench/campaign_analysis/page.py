@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from hilbench.bench import outputs
+from hilbench.bench.storage import outputs
 
 #: (column, header) of the runs table; a parameter is shown with its standard error
 RUN_COLUMNS = [("key", "run"), ("repeat", "repeat"), ("start_time", "start (UTC)"), ("status", "status"),

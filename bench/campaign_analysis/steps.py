@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 
 #: step -> protocols whose runs it can analyse (a run gets the steps its protocol supports)
-PROTOCOLS_OF_STEP = {"identify": ("identification", "chirp")}
+PROTOCOLS_OF_STEP = {"identify": ("identification", "chirp"), "compare": ("identification", "chirp"),
+                     "residual": ("identification", "chirp"), "presliding": ("presliding",)}
 STEPS_DONE = tuple(PROTOCOLS_OF_STEP)
 
 #: result columns of the steps: name -> (Arrow type name, unit). Common columns: engine.BASE_COLUMNS.
@@ -30,6 +31,14 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "train_torque_nrmse": ("float64", "1"), "validation_torque_nrmse": ("float64", "1"),
     "validation_position_nrmse": ("float64", "1"), "validation_position_nrmse_segmented": ("float64", "1"),
     "verdict": ("string", ""),
+    # compare: the family with the lowest validation torque NRMSE; residual: the terms of the final model
+    "model": ("string", ""), "validation_torque_nrmse_start": ("float64", "1"),
+    # presliding: the quantities of docs/presliding.md with their standard uncertainties (axis units: rotary
+    # N*m, N*m/rad, rad; linear N, N/m, m) and the force simulated from the displacement against the measured one
+    "presliding_breakaway": ("float64", "N*m"), "presliding_breakaway_se": ("float64", "N*m"),
+    "initial_stiffness": ("float64", "N*m/rad"), "initial_stiffness_se": ("float64", "N*m/rad"),
+    "presliding_distance": ("float64", "rad"), "presliding_distance_se": ("float64", "rad"),
+    "validation_force_relative_error": ("float64", "1"),
     "temperature_mean": ("float64", "degC"), "sliding_distance": ("float64", "rad"),
     "samples": ("int64", "1"), "duration": ("float64", "s"),
 }
@@ -48,6 +57,9 @@ class StepSettings:
     coulomb: bool = False
     offset: bool = False
     validation_fraction: float = 0.3
+    compare_families: tuple[str, ...] = ("coulomb_viscous", "stribeck", "maxwell_slip")
+    residual_start: tuple[str, ...] = ("inertia", "maxwell_slip")
+    presliding_replicates: int = 20
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -74,9 +86,22 @@ def _breakaway_se(model) -> float:
     return float(np.sqrt(np.sum((se * np.asarray(model.ms_delta)) ** 2)))
 
 
+def _split(rec, fraction: float):
+    """(head, tail or None) of a record's arrays: fitted on the head, validated on the held-out tail."""
+    from hilbench.analysis.identification.identify import RunArrays
+
+    arrays = rec.arrays()
+    cut = int(round(arrays.t.size * (1 - fraction)))
+    head = RunArrays(arrays.t[:cut], arrays.torque[:cut], arrays.position[:cut], arrays.axis, arrays.name)
+    if fraction <= 0:
+        return head, None
+    return head, RunArrays(arrays.t[cut:] - arrays.t[cut], arrays.torque[cut:], arrays.position[cut:], arrays.axis,
+                           arrays.name + " (tail)")
+
+
 def identify_step(path: str, settings: StepSettings) -> dict[str, Any]:
     """Identify the friction model of one run (fit on the head, validate on the held-out tail)."""
-    from hilbench.analysis.identification.identify import RunArrays, identify
+    from hilbench.analysis.identification.identify import identify
     from hilbench.analysis.identification.maxwell_fit import LipSettings
     from hilbench.analysis.record import load_record
     from hilbench.bench.verdict import judge
@@ -84,12 +109,7 @@ def identify_step(path: str, settings: StepSettings) -> dict[str, Any]:
     rec = load_record(path, channels=("temperature",))  # the one loader: an aborted or short run is a failed row
     arrays, timing = rec.arrays(), rec.timing
     n = arrays.t.size
-    cut = int(round(n * (1 - settings.validation_fraction)))
-    head = RunArrays(arrays.t[:cut], arrays.torque[:cut], arrays.position[:cut], arrays.axis, arrays.name)
-    tail = None
-    if settings.validation_fraction > 0:
-        tail = RunArrays(arrays.t[cut:] - arrays.t[cut], arrays.torque[cut:], arrays.position[cut:], arrays.axis,
-                         arrays.name + " (tail)")
+    head, tail = _split(rec, settings.validation_fraction)
     lip = LipSettings(n_thresholds=settings.thresholds, coulomb=settings.coulomb, offset=settings.offset,
                       timing=timing)
     res = identify(head, method=settings.method, validate=tail, settings=lip)
@@ -118,7 +138,90 @@ def identify_step(path: str, settings: StepSettings) -> dict[str, Any]:
     return row
 
 
-STEPS: dict[str, Callable[[str, StepSettings], dict[str, Any]]] = {"identify": identify_step}
+def _held_out(path: str, settings: StepSettings, step: str):
+    """The record and its head and tail for a step that needs a validation set (compare, residual)."""
+    from hilbench.analysis.errors import AnalysisError
+    from hilbench.analysis.record import load_record
+
+    if settings.validation_fraction <= 0:
+        raise AnalysisError(f"{step} scores models on the held-out tail: --validation-fraction must be > 0")
+    rec = load_record(path)
+    head, tail = _split(rec, settings.validation_fraction)
+    return rec, head, tail
+
+
+def compare_step(path: str, settings: StepSettings) -> dict[str, Any]:
+    """``hilbench compare`` on one run: every family of ``compare_families`` fitted on the head, scored on the
+    tail; the row is the family with the lowest validation torque NRMSE (a thin adapter: analysis.models has no
+    ``analyse(record, settings)`` front door yet)."""
+    from hilbench.analysis.errors import AnalysisError
+    from hilbench.analysis.models.compare import compare
+    from hilbench.analysis.models.families import RunData
+
+    rec, head, tail = _held_out(path, settings, "compare")
+    train = RunData.from_arrays(rec.name, rec.axis, rec.sample_rate, head.position, head.torque, rec.timing)
+    val = RunData.from_arrays(rec.name + " (tail)", rec.axis, rec.sample_rate, tail.position, tail.torque,
+                              rec.timing)
+    result = compare(train, val, timing=rec.timing, train_position=train.x, train_torque=head.torque,
+                     families=settings.compare_families)
+    scored = [r for r in result.rows if r.error is None and math.isfinite(r.validation["torque_nrmse"])]
+    if not scored:
+        raise AnalysisError("compare: no family could be fitted (" + "; ".join(
+            f"{r.name}: {r.error}" for r in result.rows) + ")")
+    best = min(scored, key=lambda r: r.validation["torque_nrmse"])
+    return {"model": best.name, "train_torque_nrmse": best.train["torque_nrmse"],
+            "validation_torque_nrmse": best.validation["torque_nrmse"],
+            "validation_position_nrmse_segmented": best.validation["position_nrmse_segmented"],
+            "samples": int(rec.t.size), "duration": float(rec.t[-1] - rec.t[0])}
+
+
+def residual_step(path: str, settings: StepSettings) -> dict[str, Any]:
+    """``hilbench residual`` on one run: the residual loop from ``residual_start``, fitted on the head and judged
+    on the tail; the row has the validation torque NRMSE of the start and of the final model and the loop's
+    verdict (a thin adapter: analysis.residual has no ``analyse(record, settings)`` front door yet)."""
+    from hilbench.analysis.residual import LoopOptions, prepare_run, residual_loop
+
+    rec, head, tail = _held_out(path, settings, "residual")
+    runs = [prepare_run(a.position, a.torque, rec.sample_rate, axis=rec.axis, name=a.name, timing=rec.timing)
+            for a in (head, tail)]
+    result = residual_loop(runs[0], [runs[1]], start=settings.residual_start,
+                           options=LoopOptions(record=rec.kind))
+    before, after = result.error_before["validation"], result.error_after["validation"]
+    return {"model": ",".join([*result.start, *result.names_added]),
+            "validation_torque_nrmse_start": before["torque_nrmse"],
+            "validation_torque_nrmse": after["torque_nrmse"],
+            "validation_position_nrmse": after.get("position_nrmse"),
+            "verdict": result.verdict, "samples": int(rec.t.size), "duration": float(rec.t[-1] - rec.t[0])}
+
+
+def presliding_step(path: str, settings: StepSettings) -> dict[str, Any]:
+    """``hilbench presliding`` on one displacement-driven run with the command's defaults (fraction 0.9, 48
+    thresholds, the protocol's inertia, ``presliding_replicates`` bootstrap replicates); the row has the
+    quantities with their standard uncertainties and the relative rms error of the force simulated from the
+    measured displacement (a thin adapter: analysis.presliding has no ``analyse(record, settings)`` front door)."""
+    from hilbench.analysis.errors import AnalysisError
+    from hilbench.analysis.presliding.analyse import analyse
+    from hilbench.analysis.presliding.identify import PreslidingSettings
+    from hilbench.analysis.presliding.report import protocol_inertia
+    from hilbench.analysis.record import load_record
+
+    rec = load_record(path)
+    if rec.kind != "displacement-driven":
+        raise AnalysisError(f"{path}: a {rec.kind} record; presliding needs a displacement-driven one")
+    res = analyse(rec.t, rec.position, rec.torque, rec.sample_rate, rec.axis,
+                  PreslidingSettings(inertia=protocol_inertia(rec.protocol_params, path)),
+                  counts_per_rev=rec.calibration.get("counts_per_rev"), replicates=settings.presliding_replicates)
+    q, e = res.quantities, res.uncertainties
+    row: dict[str, Any] = {"validation_force_relative_error": res.fit.relative_rms, "samples": int(rec.t.size),
+                           "duration": float(rec.t[-1] - rec.t[0])}
+    for name, column in (("breakaway", "presliding_breakaway"), ("initial_stiffness", "initial_stiffness"),
+                         ("presliding_distance", "presliding_distance")):
+        row[column], row[f"{column}_se"] = q[name], e[name]
+    return row
+
+
+STEPS: dict[str, Callable[[str, StepSettings], dict[str, Any]]] = {
+    "identify": identify_step, "compare": compare_step, "residual": residual_step, "presliding": presliding_step}
 
 
 def steps_for(protocol: str, wanted: tuple[str, ...]) -> list[str]:

@@ -3,7 +3,8 @@
 Layout of a results folder::
 
     results.parquet          the compacted table (sorted by campaign, run key, step)
-    parts/<hash>-<step>.parquet   one row each, written as results arrive (atomic rename)
+    parts/<campaign>-<run>-<step>-<settings>-<n>.parquet   the rows of one task (a chunk of runs) each, written
+                                                           as results arrive (atomic rename)
 
 Only the client writes. Every part is complete or absent (written beside, then renamed), so a client killed
 at any moment leaves a folder whose rows are all good: a rerun reads ``results.parquet`` and the parts,
@@ -13,6 +14,7 @@ run file, step, settings hash, hilbench version): a changed file, setting or ver
 
 from __future__ import annotations
 
+import hashlib
 import os
 import uuid
 from collections.abc import Iterable
@@ -94,11 +96,14 @@ class ResultsFolder:
                 rows[row_key(row)] = row
         return list(rows.values())
 
-    def add(self, row: dict[str, Any]) -> Path:
-        """Write one row as its own part (atomic)."""
+    def add(self, rows: list[dict[str, Any]]) -> Path:
+        """Write rows (the results of one task) as one part (atomic). One part per row cost 17 ms of the
+        client's time per run, as much as a tenth of a short run's analysis."""
         self.parts.mkdir(parents=True, exist_ok=True)
-        target = self.parts / f"{row['campaign']}-{row['key']}-{row['step']}-{row['settings_hash'][:8]}.parquet"
-        _write_atomic(to_table([row]), target)
+        first = rows[0]
+        keys = hashlib.sha256(repr(sorted(repr(row_key(r)) for r in rows)).encode()).hexdigest()[:8]
+        target = self.parts / f"{first['campaign']}-{first['key']}-{first['step']}-{keys}-{len(rows)}.parquet"
+        _write_atomic(to_table(rows), target)
         return target
 
     def compact(self, current: set[tuple] | None = None) -> Path:

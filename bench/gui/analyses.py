@@ -39,6 +39,8 @@ class AnalysisResult:
     numbers: list[tuple[str, str, str]]  # (quantity, value, unit)
     figures: list[Figure]
     warnings: list[str] = field(default_factory=list)
+    #: an identification's model file document (``hilbench identify``'s JSON), for "Save model..."
+    model_document: dict | None = None
 
 
 #: analysis name -> (module, attribute) entry points it needs
@@ -115,7 +117,75 @@ def identification(run, options: dict | None = None) -> AnalysisResult:
         Figure("virgin curve", f"displacement ({u['ms_delta']})", f"friction ({u['coulomb']})",
                [("sum k_i clip(x, Delta_i)", x, m.virgin_curve(x))]),
     ]
-    return AnalysisResult(TITLES["identification"], numbers, figures, list(fit.warnings))
+    return AnalysisResult(TITLES["identification"], numbers, figures, list(fit.warnings),
+                          model_document=identification_document(res, run))
+
+
+def identification_document(res, record) -> dict:
+    """The model file ``hilbench identify RUN --json`` writes for this identification (docs/model-file.md):
+    the same document builder, the same ``data.train`` entry (the GUI reads the record whole)."""
+    from pathlib import Path
+
+    from hilbench.analysis.models.model_file import model_document
+
+    data = {"train": {"file": str(Path(record.path).resolve()), "samples": record.n_samples,
+                      "sample_rate_hz": record.arrays().fs, "axis": record.axis, "read": "whole",
+                      "torque_channel": record.torque_channel, "torque_timing": record.timing,
+                      "incomplete": record.incomplete}}
+    return model_document(res.model, method=res.method, settings=res.settings, figures=res.figures, data=data)
+
+
+def save_model(document: dict, target: str, inputs: list[str]) -> str:
+    """Write ``document`` (:func:`identification_document`) to ``target`` as ``hilbench identify --json`` does
+    (indented, strict JSON, replaced atomically); refuses to write over one of ``inputs`` (the run file).
+    Returns the path written."""
+    from pathlib import Path
+
+    from hilbench.bench.storage import outputs
+
+    target = str(target).strip()
+    if not target:
+        raise BenchError("choose a model file name (.json)")
+    if any(Path(target).resolve() == Path(i).resolve() for i in inputs if i):
+        raise BenchError(f"{target} is the run file being analysed; choose another name for the model")
+    outputs.write_json(target, document, indent=2, allow_nan=False)
+    return target
+
+
+def model_start(path: str) -> tuple[list, str]:
+    """Start entries of the residual loop from a model file (``hilbench identify`` or ``compare``), and a line
+    saying what they are. The file gives the starting model's terms: Maxwell-slip -> inertia, maxwell_slip,
+    viscous (+ coulomb, offset where the file has them); Coulomb+viscous and Stribeck alike (Stribeck with the
+    file's v_s); a stateful family (Dahl, LuGre, GMS, continuous) enters as its friction force along the measured
+    path with the file's parameters (shape fixed, scale fitted), as ``family_start`` builds it after identifying
+    the family itself. The loop refits every linear coefficient (J, b, k_i, ...) on the run."""
+    from dataclasses import replace
+
+    from hilbench.analysis.models.model_file import read_family
+    from hilbench.analysis.residual.family_start import STATEFUL
+
+    model, _doc = read_family(path)
+    p, name = model.parameters, os.path.basename(str(path))
+    if model.family in STATEFUL:
+        plant = replace(model.plant, viscous=0.0, viscous_neg=None, torque_offset=0.0)  # the loop's own terms
+        static = float(p.get("coulomb", 0.0) + p.get("static_excess", 0.0)) if "coulomb" in p else \
+            float(p.get("h", 0.0))
+        if not static > 0:
+            raise BenchError(f"{name}: the {model.family} model has no friction level; nothing to start from")
+        ident = {"parameters": p, "std_errors": model.std_errors, "units": model.units}
+        start = ["inertia", (f"family_{model.family}", {"_plant": plant, "_static": static, "_identified": ident}),
+                 "viscous"]
+        return start, f"start: the {model.family} friction of {name} (shape fixed), inertia, viscous"
+    if model.family == "maxwell_slip":
+        start = ["inertia", "maxwell_slip", "viscous"]
+    elif model.family == "stribeck":
+        start = ["inertia", "coulomb", ("stribeck", {"v_s": float(p["stribeck_velocity"])}), "viscous"]
+    else:  # coulomb_viscous
+        start = ["inertia", "coulomb", "viscous"]
+    if p.get("offset") or p.get("torque_offset"):
+        start.append("offset")
+    names = ", ".join(e if isinstance(e, str) else e[0] for e in start)
+    return start, f"start: the terms of the {model.family} model in {name} ({names}), refitted on this run"
 
 
 def skeleton(run, options: dict | None = None) -> AnalysisResult:
@@ -148,7 +218,10 @@ def skeleton(run, options: dict | None = None) -> AnalysisResult:
         Figure("damping force skeleton", f"velocity amplitude V ({pos_unit}/s)", f"F_d ({tq_unit})",
                [("c_eq V", v, fd)], scatter=True),
     ]
-    return AnalysisResult(TITLES["skeleton"], numbers, figures)
+    from hilbench.analysis.skeleton import not_chirp_warning  # a non-chirp run gives F_k of -2e4 N*m (issue 28)
+
+    line = not_chirp_warning(os.path.basename(run.path), run.protocol_name)
+    return AnalysisResult(TITLES["skeleton"], numbers, figures, [line] if line else [])
 
 
 def afrf(run, options: dict | None = None) -> AnalysisResult:
@@ -172,7 +245,7 @@ def afrf(run, options: dict | None = None) -> AnalysisResult:
     why = res.settings.get("incomplete")
     name = os.path.basename(run.path)
     warnings = [f"INCOMPLETE RECORD {name}: {why} (analysed with --allow-incomplete)"] if why else []
-    return AnalysisResult(TITLES["afrf"], numbers, figures, warnings)
+    return AnalysisResult(TITLES["afrf"], numbers, figures, warnings + list(res.warnings))
 
 
 def residual(run, options: dict | None = None) -> AnalysisResult:
@@ -184,7 +257,13 @@ def residual(run, options: dict | None = None) -> AnalysisResult:
 
     data = prepare_run(run.position, run.torque, run.sample_rate, axis=run.axis, name=os.path.basename(run.path),
                        timing=run.timing)
-    res = residual_loop(data)
+    start_file = (options or {}).get("start_model")
+    if start_file:
+        start, said = model_start(start_file)
+        res = residual_loop(data, start=start)
+    else:
+        said = ""
+        res = residual_loop(data)
     numbers = [("verdict", str(res.verdict), ""), ("validation", str(res.validation_mode), ""),
                ("start model", ", ".join(res.start), ""),
                ("effects added", ", ".join(res.names_added) or "none", "")]
@@ -198,12 +277,12 @@ def residual(run, options: dict | None = None) -> AnalysisResult:
                       [("before", *_thin(sb.time, sb.residual)), ("after", *_thin(sa.time, sa.residual))]),
                Figure("residual against velocity", f"velocity ({run.unit('position')}/s)", f"residual ({tq})",
                       [("after", *_thin(sa.velocity, sa.residual))], scatter=True)]
-    return AnalysisResult(TITLES["residual"], numbers, figures)
+    return AnalysisResult(TITLES["residual"], numbers, figures, [said] if said else [])
 
 
 def presliding(run, options: dict | None = None) -> AnalysisResult:
     """The presliding analysis (``analysis.presliding.analyse.analyse``) of a displacement-driven run, with the
-    numbers ``hilbench presliding`` writes (bench/commands/presliding.report): the quantities with their
+    numbers ``hilbench presliding`` writes (bench/cli/commands/presliding.report): the quantities with their
     uncertainties, the edge-pinned sum(k), the memory checks, the reversal forces; the resolution verdicts as
     warnings. ``options['replicates']``: bootstrap replicates (default 8)."""
     analyse = _entry("presliding")
@@ -234,10 +313,11 @@ def presliding(run, options: dict | None = None) -> AnalysisResult:
             numbers.append((f"shape exponent p (edge points, {label})",
                             f"{pr['exponent']:.4g} +- {pr['exponent_std_uncertainty']:.2g}", "1"))
     c, v = doc["checks"], doc["validation"]
+    # the departures are fractions of the largest virgin force: said in the quantity, so the unit column stays narrow
     numbers += [("model force rms error (force from displacement)", f"{v['force_rms_error']:.4g}", v["unit"]),
-                ("Masing rule departure, max", f"{c['masing_max']:.3g}", "1 (of the largest virgin force)"),
-                ("wiping-out departure, max", f"{c['wiping_out_max']:.3g}", "1 (of the largest virgin force)"),
-                ("loop closure departure, max", f"{c['closure_max']:.3g}", "1 (of the largest virgin force)")]
+                ("Masing rule departure, max (of the largest virgin force)", f"{c['masing_max']:.3g}", "1"),
+                ("wiping-out departure, max (of the largest virgin force)", f"{c['wiping_out_max']:.3g}", "1"),
+                ("loop closure departure, max (of the largest virgin force)", f"{c['closure_max']:.3g}", "1")]
     pos, tq = res.units["position"], res.units["torque"]
     for row in doc["reversals"]:
         numbers.append((f"reversal {row['n']}: x, extreme force", f"{row['x']:.5g}, {row['force_extreme']:.5g}",
@@ -253,7 +333,11 @@ def presliding(run, options: dict | None = None) -> AnalysisResult:
     if res.edge_rolling is not None:
         virgin.curves.append((f"parametric on the edge points ({res.edge_rolling.exponent_text()})", grid,
                               res.edge_rolling.virgin_curve(grid)))
-    return AnalysisResult(TITLES["presliding"], numbers, [loops, virgin], list(res.resolution.lines))
+    from hilbench.analysis.presliding import reversal_warning
+
+    few = reversal_warning(res)
+    return AnalysisResult(TITLES["presliding"], numbers, [loops, virgin], list(res.resolution.lines) + ([few] if few
+                                                                                                      else []))
 
 
 ANALYSES: dict[str, Callable] = {"identification": identification, "skeleton": skeleton, "afrf": afrf,

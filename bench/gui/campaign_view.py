@@ -1,15 +1,23 @@
 """Campaign view: load a campaign TOML, see its planned runs, play it on the connected device with per-run
-progress, and resume an interrupted one (runs whose file says ``completed`` are skipped)."""
+progress, and resume an interrupted one (runs whose file says ``completed`` are skipped). Its Results tab shows
+an analysed campaign (``hilbench analyse``): the runs table and the drift charts of ``hilbench drift``."""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
 from hilbench.bench.gui.worker import one_line
 
 COLUMNS = ("run", "protocol", "duration (s)", "state", "progress")
+#: the results table: (header, column of results.parquet, scale to the shown unit); identify rows,
+#: numbered in start order
+RESULT_COLUMNS = (("#", "order", 1.0), ("run", "key", None), ("repeat", "repeat", None), ("status", "status", None),
+                  ("J (kg*m^2)", "inertia", 1.0), ("break-away (N*m)", "breakaway", 1.0),
+                  ("b (N*m*s/rad)", "viscous", 1.0), ("validation torque NRMSE (%)", "validation_torque_nrmse", 100.0),
+                  ("winding (degC)", "temperature_mean", 1.0), ("verdict / reason", "verdict", None))
 
 
 class CampaignView(QtWidgets.QWidget):
@@ -59,11 +67,17 @@ class CampaignView(QtWidgets.QWidget):
         row2.addWidget(self.resume_box)
         row2.addWidget(self.start_button)
         row2.addWidget(self.abort_button)
-        layout = QtWidgets.QVBoxLayout(self)
+        plan = QtWidgets.QWidget()
+        layout = QtWidgets.QVBoxLayout(plan)
         layout.addLayout(row1)
         layout.addLayout(row2)
         layout.addWidget(self.status)
         layout.addWidget(self.table, 1)
+        self.results = CampaignResults()
+        self.tabs = QtWidgets.QTabWidget()
+        self.tabs.addTab(plan, "Plan and run")
+        self.tabs.addTab(self.results, "Results")
+        QtWidgets.QVBoxLayout(self).addWidget(self.tabs)
 
     def _browse(self) -> None:
         path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Campaign file", "", "TOML (*.toml)")
@@ -73,7 +87,7 @@ class CampaignView(QtWidgets.QWidget):
 
     def load(self) -> bool:
         """Parse and validate the campaign file; problems are shown with file and line."""
-        from hilbench.bench.campaign import load_campaign, read_index
+        from hilbench.bench.acquisition.campaign import load_campaign, read_index
 
         path = self.path_edit.text().strip()
         try:
@@ -124,7 +138,7 @@ class CampaignView(QtWidgets.QWidget):
         self.abort_button.setEnabled(running)
 
     def show_progress(self, item) -> None:
-        """One :class:`bench.campaign.CampaignProgress` (GUI thread)."""
+        """One :class:`bench.acquisition.campaign.CampaignProgress` (GUI thread)."""
         row = self._rows.get(item.key)
         if row is None:
             return
@@ -140,3 +154,126 @@ class CampaignView(QtWidgets.QWidget):
         self.set_running(False)
         colour = "#c00000" if error else "#008000"
         self.status.setText(f"<span style='color:{colour}'>{text}</span>")
+
+
+class CampaignResults(QtWidgets.QWidget):
+    """An analysed campaign: the identify rows of ``RESULTS/results.parquet`` as a table, and for the chosen
+    parameter the drift charts of ``hilbench drift`` (analysis.drift.monitor with its defaults; the baseline
+    is the first 50 runs, or the first half of a shorter campaign): the value with its standard error and the
+    baseline fit, the EWMA with its limits, the CUSUM with h, and the change points as vertical lines."""
+
+    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+        import pyqtgraph as pg
+
+        super().__init__(parent)
+        self.rows: list[dict[str, Any]] = []
+        self.drift = None
+        self.path_edit = QtWidgets.QLineEdit()
+        self.path_edit.setPlaceholderText("results folder of hilbench analyse (or its results.parquet)")
+        self.load_button = QtWidgets.QPushButton("Load results")
+        self.load_button.clicked.connect(self.load)
+        self.parameter = QtWidgets.QComboBox()
+        self.parameter.addItems(["breakaway", "viscous", "inertia"])
+        self.parameter.currentTextChanged.connect(lambda _name: self.show_drift())
+        self.status = QtWidgets.QLabel("")
+        self.status.setWordWrap(True)
+        self.table = QtWidgets.QTableWidget(0, len(RESULT_COLUMNS))
+        self.table.setHorizontalHeaderLabels([c[0] for c in RESULT_COLUMNS])
+        self.table.verticalHeader().setVisible(False)
+        self.table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
+        self.table.setSortingEnabled(True)
+        self.plots = {key: pg.PlotWidget(title=title) for key, title in
+                      (("value", "parameter +- standard error"), ("ewma", "EWMA of z"), ("cusum", "CUSUM of z"))}
+        for key, plot in self.plots.items():
+            plot.setLabel("bottom", "run (start order)")
+            if key != "value":
+                plot.setXLink(self.plots["value"])
+        top = QtWidgets.QHBoxLayout()
+        top.addWidget(self.path_edit, 1)
+        top.addWidget(self.load_button)
+        top.addWidget(QtWidgets.QLabel("parameter"))
+        top.addWidget(self.parameter)
+        charts = QtWidgets.QWidget()
+        chart_layout = QtWidgets.QVBoxLayout(charts)
+        for plot in self.plots.values():
+            chart_layout.addWidget(plot)
+        split = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
+        split.addWidget(self.table)
+        split.addWidget(charts)
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.addLayout(top)
+        layout.addWidget(self.status)
+        layout.addWidget(split, 1)
+
+    def load(self) -> bool:
+        """Read the table; a missing or unreadable file is said in the status line."""
+        import pyarrow.parquet as pq
+
+        from hilbench.bench.campaign_analysis.table import TABLE_NAME
+
+        path = Path(self.path_edit.text().strip())
+        table = path if path.suffix == ".parquet" else path / TABLE_NAME
+        try:
+            rows = [r for r in pq.read_table(table).to_pylist() if r.get("step") == "identify"]
+        except Exception as exc:
+            self.status.setText(f"<span style='color:#c00000'>{table}: {one_line(exc)}</span>")
+            return False
+        rows.sort(key=lambda r: (str(r.get("start_time")), str(r.get("campaign")), str(r.get("key"))))
+        self.rows = rows
+        self._fill_table()
+        return self.show_drift()
+
+    def _fill_table(self) -> None:
+        self.table.setSortingEnabled(False)
+        self.table.setRowCount(len(self.rows))
+        for i, row in enumerate(self.rows):
+            for j, (_header, column, scale) in enumerate(RESULT_COLUMNS):
+                value = i + 1 if column == "order" else row.get(column)  # start order: sort back to it
+                if column == "verdict" and row.get("status") != "ok":
+                    value = row.get("error")
+                item = QtWidgets.QTableWidgetItem()
+                if scale is not None and value is not None:
+                    item.setData(QtCore.Qt.ItemDataRole.DisplayRole, float(f"{value * scale:.6g}"))
+                else:
+                    item.setText("" if value is None else str(value))
+                self.table.setItem(i, j, item)
+        self.table.setSortingEnabled(True)
+        self.table.sortByColumn(0, QtCore.Qt.SortOrder.AscendingOrder)
+
+    def show_drift(self) -> bool:
+        """The drift charts of the chosen parameter; too few runs or no spread is said in the status line."""
+        import numpy as np
+        import pyqtgraph as pg
+
+        from hilbench.analysis.drift.monitor import DriftSettings, monitor
+
+        for plot in self.plots.values():
+            plot.clear()
+        name = self.parameter.currentText()
+        ok = sum(r.get("status") == "ok" for r in self.rows)
+        base = min(DriftSettings.baseline, max(3, ok // 2))
+        try:
+            self.drift = monitor(self.rows, DriftSettings(parameters=(name,), baseline=base))
+        except Exception as exc:
+            self.drift = None
+            self.status.setText(f"{len(self.rows)} runs; no drift charts: {one_line(exc)}")
+            return False
+        s = self.drift.series[name]
+        x = np.arange(s.value.size, dtype=float)
+        value = self.plots["value"]
+        value.addItem(pg.ErrorBarItem(x=x, y=s.value, height=2 * np.nan_to_num(s.se), pen="#888"))
+        value.plot(x, s.value, pen=None, symbol="o", symbolSize=5, name=name)
+        value.plot(x, s.fitted, pen=pg.mkPen("#d62728", width=2), name="baseline fit")
+        self.plots["ewma"].plot(x, s.ewma, pen=pg.mkPen("#1f77b4", width=2), name="EWMA")
+        for sign in (1, -1):
+            self.plots["ewma"].plot(x, sign * s.ewma_limit, pen=pg.mkPen("#d62728", style=QtCore.Qt.PenStyle.DashLine))
+        self.plots["cusum"].plot(x, s.cusum_hi, pen=pg.mkPen("#1f77b4", width=2), name="CUSUM +")
+        self.plots["cusum"].plot(x, s.cusum_lo, pen=pg.mkPen("#2ca02c", width=2), name="CUSUM -")
+        self.plots["cusum"].addItem(pg.InfiniteLine(self.drift.settings.cusum_h, angle=0, pen="#d62728"))
+        for cp in s.change_points:
+            for plot in self.plots.values():
+                plot.addItem(pg.InfiniteLine(cp, angle=90, pen=pg.mkPen("#ff7f0e", width=2)))
+        points = ", ".join(self.drift.runs[cp] for cp in s.change_points) or "none"
+        self.status.setText(f"{len(self.rows)} runs ({ok} ok), baseline the first {base}; {name}: change points "
+                            f"at {points}; EWMA alarms {len(s.ewma_alarms)}, CUSUM alarms {len(s.cusum_alarms)}")
+        return True

@@ -56,6 +56,9 @@ class ConnectionPanel(QtWidgets.QGroupBox):
         super().__init__("Device", parent)
         self.url_box = QtWidgets.QComboBox()
         self.url_box.setEditable(True)
+        # the longest URL listed must not widen the fixed-width panel: the box shows 10 characters, scrolls the rest
+        self.url_box.setSizeAdjustPolicy(QtWidgets.QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)
+        self.url_box.setMinimumContentsLength(10)
         self.url_box.setToolTip("sim:// (simulated bench), serial:///dev/ttyUSB0?baud=2000000, "
                                 "can://socketcan/can0?node=1; host-clocked drives: "
                                 "canopen://socketcan/can0?node=1&eds=FILE (CiA 402), "
@@ -77,6 +80,7 @@ class ConnectionPanel(QtWidgets.QGroupBox):
         self.config_label.setWordWrap(True)
         self.state_label = QtWidgets.QLabel("disconnected")
         self.state_label.setObjectName("state")
+        self.state_label.setWordWrap(True)  # a long state wraps; it never widens the panel
         self.faults_label = QtWidgets.QLabel("-")
         self.faults_label.setWordWrap(True)
         self.clear_button = QtWidgets.QPushButton("Clear faults")
@@ -165,10 +169,10 @@ class ConnectionPanel(QtWidgets.QGroupBox):
 
     def show_state(self, state: DeviceState) -> None:
         armed = state.state in ("ARMED", "STREAMING")
-        colour = "#c00000" if state.faults else ("#d08000" if armed else "#008000")
+        colour, verdict = state_colour(state)
         detail = f" {state.detail}" if state.detail else ""
         self.state_label.setText(f"<b style='color:{colour}'>{state.state}</b>{detail}"
-                                 f"{'  (power stage ON)' if armed else ''}  sample {state.index}, "
+                                 f"{'  (power stage ON)' if armed else ''}  {verdict}<br>sample {state.index}, "
                                  f"current {state.current_applied:.3g} A")
         if state.faults:
             self.faults_label.setText(f"<b style='color:#c00000'>{', '.join(state.faults)}</b>")
@@ -196,6 +200,25 @@ class ConnectionPanel(QtWidgets.QGroupBox):
         """A connection attempt failed: allow another one."""
         if not self.connected:
             self.show_disconnected("connection failed (see the message above)")
+
+
+#: link counters that count lost or damaged traffic (the others count frames sent and received)
+LINK_ERRORS = ("crc", "dropped", "lost", "duplicate", "overrun", "error")
+GREEN, AMBER, RED, NEUTRAL = "#008000", "#b06000", "#c00000", "#404040"
+
+
+def state_colour(state: DeviceState) -> tuple[str, str]:
+    """(colour of the state word, a short verdict in words). Green only for healthy and ready: no fault, no lost
+    or damaged link traffic, power stage off. A latched fault is red; a power stage that is on (ARMED, STREAMING)
+    amber; UNCONFIGURED and DISARMED are states, not health, so the word is neutral and the verdict says ready."""
+    if state.faults:
+        return RED, f"<span style='color:{RED}'>fault: clear it before a run</span>"
+    if state.state in ("ARMED", "STREAMING"):
+        return AMBER, ""
+    errors = sum(v for k, v in state.counters.items() if any(w in k for w in LINK_ERRORS))
+    if errors:
+        return NEUTRAL, f"<span style='color:{AMBER}'>{errors} link errors (see the counters)</span>"
+    return NEUTRAL, f"<span style='color:{GREEN}'>ready</span>"
 
 
 def identity_text(ident: dict) -> str:

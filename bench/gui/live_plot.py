@@ -59,6 +59,8 @@ class LivePlot(QtWidgets.QWidget):
             plot = self.graphics.addPlot(row=row, col=0)
             plot.setLabel("left", title, units=None)
             plot.getAxis("left").setLabel(f"{title} ({unit})")
+            for side in ("left", "bottom"):  # the unit is the label's: never "position (rad) (x0.001)"
+                plot.getAxis(side).enableAutoSIPrefix(False)
             # no grid: an AxisItem with grid lines spans the plot area, so every curve update would repaint
             # (and re-render the tick labels of) all axes
             plot.setClipToView(True)
@@ -69,7 +71,7 @@ class LivePlot(QtWidgets.QWidget):
             plot.getAxis("left").setWidth(70)  # fixed: a new tick label width never re-lays out the plots
             plot.disableAutoRange()
             if len(traces) > 1:
-                plot.addLegend(offset=(5, 5))
+                plot.addLegend(offset=(5, 5), labelTextColor="k")
             for name, colour in traces:
                 self.curves[name] = plot.plot(pen=pg.mkPen(colour, width=1), name=name)
             self.plots.append(plot)

@@ -18,11 +18,14 @@ from hilbench.bench.gui.connection_panel import ConnectionPanel, identity_text
 from hilbench.bench.gui.live_plot import LivePlot
 from hilbench.bench.gui.protocol_panel import ProtocolPanel
 from hilbench.bench.gui.run_browser import RunBrowser
-from hilbench.bench.gui.worker import DeviceWorker, EStopLine, RunWorker
+from hilbench.bench.gui.worker import DeviceWorker, EStopLine, RunWorker, one_line
 from hilbench.drivers.device import refusal
 
 #: signals from worker threads always reach the GUI thread through its event queue
 QUEUED = QtCore.Qt.ConnectionType.QueuedConnection
+#: side panel widths, px: fixed, so a long status text wraps instead of pushing the centre around; with the
+#: centre they fit a 1280 px wide screen
+PANEL_WIDTHS = {"Device": 290, "Protocol": 330}
 ESTOP_STYLE = ("QPushButton { background: #d00000; color: white; font-size: 20px; font-weight: bold; "
                "border: 3px solid #800000; border-radius: 8px; padding: 12px 28px; }"
                "QPushButton:pressed { background: #800000; }")
@@ -100,12 +103,15 @@ class MainWindow(QtWidgets.QMainWindow):
             dock = QtWidgets.QDockWidget(panel.title(), self)
             dock.setObjectName(panel.title())
             dock.setWidget(panel)
+            panel.setFixedWidth(PANEL_WIDTHS.get(panel.title(), 300))
             panel.setTitle("")  # the dock's title bar names it
             dock.setFeatures(QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetMovable
                              | QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetFloatable)
             self.addDockWidget(area, dock)
+        for tabs in (self.tabs, self.protocol.tabs, self.browser.tabs):
+            tabs.currentChanged.connect(lambda _index: self._clear_error())
         self.statusBar().showMessage("not connected")
-        self.resize(1500, 900)
+        self.resize(1280, 800)
 
         # wiring
         self.connection.connect_requested.connect(self.connect_device)
@@ -118,6 +124,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.protocol.start_requested.connect(self.start_run)
         self.protocol.pause_requested.connect(self.pause_run)
         self.protocol.abort_requested.connect(self.abort_run)
+        self.protocol.plan_requested.connect(self.start_plan)
         self.browser.message.connect(self.show_message)
         self.campaign.message.connect(self.show_message)
         self.campaign.start_requested.connect(self.start_campaign)
@@ -132,6 +139,13 @@ class MainWindow(QtWidgets.QMainWindow):
         colour = "#c00000" if error else "#202020"
         self.banner.setText(f"<span style='color:{colour}'>{'Error: ' if error else ''}{text}</span>")
         self.statusBar().showMessage(text, 0 if error else 15000)
+
+    def _clear_error(self) -> None:
+        """A red error belongs to what the operator was doing; moving to another tab clears it (it stays in
+        ``self.messages``)."""
+        if self.messages and self.messages[-1][2]:
+            self.banner.setText("")
+            self.statusBar().clearMessage()
 
     # ------------------------------------------------------------------ device
     @property
@@ -222,7 +236,7 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def start_run(self, protocol, out: str, operator: str = "", notes: str = "", settings=None) -> bool:
         """Run ``protocol`` on the connected bench in a worker thread, logging to ``out``; ``settings``
-        (:class:`bench.runner.DeviceSettings`) replace the bench's device settings first."""
+        (:class:`bench.acquisition.runner.DeviceSettings`) replace the bench's device settings first."""
         if self.running:
             self.show_message("a run is already in progress", error=True)
             return False
@@ -242,7 +256,7 @@ class MainWindow(QtWidgets.QMainWindow):
         return True
 
     def start_campaign(self, campaign, out_dir: str, resume: bool) -> bool:
-        from hilbench.bench.campaign import run_campaign
+        from hilbench.bench.acquisition.campaign import run_campaign
 
         if self.running:
             self.show_message("a run is already in progress", error=True)
@@ -261,6 +275,51 @@ class MainWindow(QtWidgets.QMainWindow):
                                                                   bench=bench))
         self._start_worker(worker, "campaign")
         return True
+
+    def start_plan(self, target: str) -> bool:
+        """``hilbench plan`` from the window: a break-away probe on the connected device (run files in
+        ``runs/plan-probe-<time>/``, drawn live), then the campaign sized from it, written to ``target`` (TOML)
+        and put in the Campaign tab. Runs in the run thread, like a protocol."""
+        import importlib
+
+        if self.running:
+            self.show_message("a run is already in progress", error=True)
+            return False
+        bench = self.device.bench
+        if bench is None or not self.connected:
+            self.show_message("connect to a device before planning experiments (the plan probes the motor)",
+                              error=True)
+            return False
+        if not str(target).strip():
+            self.show_message("choose a campaign file (.toml) for the plan", error=True)
+            return False
+        settings = self.protocol.settings if self.protocol.validate() is not None else bench.settings
+        plan_experiments = importlib.import_module("hilbench.bench.acquisition.planning").plan_experiments
+        probe_dir = self.runs_dir / f"plan-probe-{time.strftime('%Y%m%d-%H%M%S')}"
+        self.current_out = str(probe_dir)
+        self.plan_target = str(target)
+        worker = RunWorker(lambda progress, control: plan_experiments(bench, settings, probe_dir=probe_dir,
+                                                                      progress=progress))
+        self._start_worker(worker, "plan")
+        self.show_message(f"planning: break-away probe on {self.device.url} (runs in {probe_dir})")
+        return True
+
+    def _plan_done(self, plan) -> None:
+        try:
+            plan.write(self.plan_target)
+        except Exception as exc:  # a bad name or a full disk: said, the plan's lines still shown
+            self.show_message(f"the plan could not be written to {self.plan_target}: {one_line(exc)}", error=True)
+            return
+        self.protocol.show_finished("plan written")
+        self.plan_lines = plan.lines()
+        # the campaign tab shows the planned runs; the plan's lines (probe findings, each run sized) are the
+        # banner's tooltip: several lines would not fit the banner row
+        self.campaign.path_edit.setText(self.plan_target)
+        self.campaign.load()
+        self.tabs.setCurrentWidget(self.campaign)
+        self.show_message(f"plan written to {self.plan_target} ({len(plan.runs)} runs), loaded in the Campaign tab "
+                          f"(hover here for the plan)")
+        self.banner.setToolTip("\n".join(self.plan_lines))
 
     def pause_run(self, paused: bool) -> None:
         if self.run_worker is None:
@@ -315,6 +374,9 @@ class MainWindow(QtWidgets.QMainWindow):
             self.campaign.show_finished(text, error=states.count("completed") != len(states))
             self.protocol.show_finished("campaign finished")
             self.show_message(text)
+            return
+        if kind == "plan":
+            self._plan_done(result)
             return
         self.last_result = result
         self.protocol.show_finished(f"{result.status}: {result.samples} samples")

@@ -11,7 +11,8 @@ from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
-from hilbench.bench.protocols import PROTOCOLS, ParameterSpec, Protocol, ProtocolError, make_protocol
+from hilbench.bench.acquisition.protocols import PROTOCOLS, ParameterSpec, Protocol, ProtocolError, make_protocol
+from hilbench.bench.gui.elided_label import ElidedLabel
 
 #: forms build the setpoints (to run their checks) up to this many samples; longer runs are checked at start
 CHECK_SETPOINTS_UP_TO = 600_000
@@ -60,7 +61,7 @@ def planned_samples(protocol: Protocol) -> tuple[int, int]:
     form can check every keystroke of a one-hour run without freezing): ``duration*sample_rate`` or, for
     a stepped sine, whole periods ``(settle + measure)/f`` per (amplitude, frequency) step."""
     fs = protocol.sample_rate
-    if hasattr(protocol, "frequencies"):  # as bench.excitations.stepped_sine snaps each step
+    if hasattr(protocol, "frequencies"):  # as bench.acquisition.excitations.stepped_sine snaps each step
         g = math.gcd(protocol.settle_periods, protocol.measure_periods)
         blocks = protocol.settle_periods // g + protocol.measure_periods // g
         per_amplitude = sum(blocks * max(1, int(round(g * fs / f))) for f in protocol.frequencies)
@@ -153,12 +154,12 @@ class DeviceSettingsForm(QtWidgets.QWidget):
     changed = QtCore.Signal()
 
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
-        from hilbench.bench.device_options import DEVICE_OPTIONS
-        from hilbench.bench.runner import DeviceSettings
+        from hilbench.bench.acquisition.device_options import DEVICE_OPTIONS
+        from hilbench.bench.acquisition.runner import DeviceSettings
 
         super().__init__(parent)
+        from hilbench.bench.acquisition.user_config import default_settings
         from hilbench.bench.errors import BenchError
-        from hilbench.bench.user_config import default_settings
 
         try:  # the config file's [settings] (docs/cli.md); a bad file is reported by the CLI, not here
             configured = default_settings()
@@ -195,8 +196,8 @@ class DeviceSettingsForm(QtWidgets.QWidget):
         self.fields[name].setText(value if isinstance(value, str) else format_value(value))
 
     def settings(self):
-        """A :class:`bench.runner.DeviceSettings`; raises ProtocolError naming a bad field."""
-        from hilbench.bench.runner import DeviceSettings
+        """A :class:`bench.acquisition.runner.DeviceSettings`; raises ProtocolError naming a bad field."""
+        from hilbench.bench.acquisition.runner import DeviceSettings
 
         values: dict[str, Any] = {}
         for name, edit in self.fields.items():
@@ -230,13 +231,19 @@ class ProtocolPanel(QtWidgets.QGroupBox):
     :meth:`show_progress` and :meth:`show_finished`."""
 
     start_requested = QtCore.Signal(object, str, str, str, object)  # protocol, out, operator, notes, settings
+    plan_requested = QtCore.Signal(str)  # the campaign TOML the plan goes to
     pause_requested = QtCore.Signal(bool)
     abort_requested = QtCore.Signal()
 
     def __init__(self, parent: QtWidgets.QWidget | None = None, runs_dir: str | Path = "runs") -> None:
         super().__init__("Protocol", parent)
         self.runs_dir = Path(runs_dir)
+        # two tabs that fit a narrow side panel (five did not: three hid behind scroll arrows); the protocol is
+        # chosen in a list above its form
         self.tabs = QtWidgets.QTabWidget()
+        self.tabs.tabBar().setUsesScrollButtons(False)
+        self.protocol_box = QtWidgets.QComboBox()
+        self.stack = QtWidgets.QStackedWidget()
         self.forms: dict[str, ProtocolForm] = {}
         for name, cls in PROTOCOLS.items():
             form = ProtocolForm(cls)
@@ -244,19 +251,30 @@ class ProtocolPanel(QtWidgets.QGroupBox):
             scroll = QtWidgets.QScrollArea()
             scroll.setWidget(form)
             scroll.setWidgetResizable(True)
-            self.tabs.addTab(scroll, TITLES.get(name, name))
+            self.protocol_box.addItem(TITLES.get(name, name), name)
+            self.stack.addWidget(scroll)
             self.forms[name] = form
+        page = QtWidgets.QWidget()
+        page_layout = QtWidgets.QVBoxLayout(page)
+        page_layout.setContentsMargins(2, 4, 2, 2)
+        page_layout.addWidget(self.protocol_box)
+        page_layout.addWidget(self.stack, 1)
+        self.tabs.addTab(page, "Protocol")
         self.device_form = DeviceSettingsForm()
         self.device_form.changed.connect(self.validate)
         scroll = QtWidgets.QScrollArea()
         scroll.setWidget(self.device_form)
         scroll.setWidgetResizable(True)
         self.tabs.addTab(scroll, "Device settings")
-        self.tabs.currentChanged.connect(self._on_tab)
+        self.protocol_box.currentIndexChanged.connect(self._on_protocol)
+        self.tabs.currentChanged.connect(lambda _i: self.validate())
         self.summary = QtWidgets.QLabel("")
         self.summary.setWordWrap(True)
         self.out_edit = QtWidgets.QLineEdit()
-        self.out_edit.setToolTip("run file to write (HDF5); a new name is proposed after every run")
+        # the line edit shows the end of a long path; the label under it shows its start and end (elided in the
+        # middle) and the tooltip the whole path
+        self.out_label = ElidedLabel("")
+        self.out_edit.textChanged.connect(self._show_out)
         browse = QtWidgets.QPushButton("...")
         browse.setFixedWidth(30)
         browse.clicked.connect(self._browse)
@@ -271,6 +289,11 @@ class ProtocolPanel(QtWidgets.QGroupBox):
         self.abort_button = QtWidgets.QPushButton("Abort")
         self.abort_button.setToolTip("stop the run after the current block; the file is marked aborted")
         self.abort_button.clicked.connect(self.abort_requested)
+        self.plan_button = QtWidgets.QPushButton("Plan experiments...")
+        self.plan_button.setToolTip("probe the motor's break-away on the connected device (a few seconds, "
+                                           "within the device settings' limits) and write a campaign sized from it "
+                                           "(hilbench plan)")
+        self.plan_button.clicked.connect(self._on_plan)
         self.progress = QtWidgets.QProgressBar()
         self.progress.setRange(0, 1000)
         self.progress.setFormat("idle")
@@ -283,6 +306,7 @@ class ProtocolPanel(QtWidgets.QGroupBox):
         out_row.addWidget(browse)
         meta = QtWidgets.QFormLayout()
         meta.addRow("Output", out_row)
+        meta.addRow("", self.out_label)
         meta.addRow("Operator", self.operator_edit)
         meta.addRow("Notes", self.notes_edit)
         buttons = QtWidgets.QHBoxLayout()
@@ -293,32 +317,35 @@ class ProtocolPanel(QtWidgets.QGroupBox):
         layout.addWidget(self.summary)
         layout.addLayout(meta)
         layout.addLayout(buttons)
+        layout.addWidget(self.plan_button)
         layout.addWidget(self.progress)
         layout.addWidget(self.eta_label)
         self._new_out_name()
         self.set_running(False)
         self.validate()
 
-    def _on_tab(self, index: int) -> None:
-        if index < len(self.forms):
-            self._protocol_index = index
-            self._new_out_name()
-            self.device_form.recommend(PROTOCOLS[self.current_name])
+    def _on_protocol(self, index: int) -> None:
+        self.stack.setCurrentIndex(index)
+        self._new_out_name()
+        self.device_form.recommend(PROTOCOLS[self.current_name])
         self.validate()
 
-    _protocol_index = 0
+    def _show_out(self, text: str) -> None:
+        self.out_edit.setToolTip(f"run file to write (HDF5); a new name is proposed after every run:\n{text}")
+        self.out_label.set_full_text(text)
 
     @property
     def current_name(self) -> str:
-        """The protocol of the last protocol tab shown (the device-settings tab keeps it)."""
-        return list(self.forms)[self._protocol_index]
+        """The protocol chosen in the list (the device-settings tab keeps it)."""
+        return list(self.forms)[max(0, self.protocol_box.currentIndex())]
 
     @property
     def current_form(self) -> ProtocolForm:
         return self.forms[self.current_name]
 
     def select(self, name: str) -> ProtocolForm:
-        self.tabs.setCurrentIndex(list(self.forms).index(name))
+        self.tabs.setCurrentIndex(0)
+        self.protocol_box.setCurrentIndex(list(self.forms).index(name))
         return self.forms[name]
 
     def _new_out_name(self) -> None:
@@ -371,6 +398,12 @@ class ProtocolPanel(QtWidgets.QGroupBox):
             return
         self.start_requested.emit(protocol, out, self.operator_edit.text(), self.notes_edit.text(), self.settings)
 
+    def _on_plan(self) -> None:
+        path, _ = QtWidgets.QFileDialog.getSaveFileName(self, "Campaign file for the plan",
+                                                        str(self.runs_dir / "plan.toml"), "campaign files (*.toml)")
+        if path:
+            self.plan_requested.emit(path)
+
     def _on_pause(self, paused: bool) -> None:
         self.pause_button.setText("Resume" if paused else "Pause")
         self.pause_requested.emit(paused)
@@ -380,11 +413,12 @@ class ProtocolPanel(QtWidgets.QGroupBox):
 
     def set_running(self, running: bool) -> None:
         self._running = running
-        self.tabs.setEnabled(not running)
+        self.tabs.setEnabled(not running)  # the protocol list and both forms
         self.out_edit.setEnabled(not running)
         self.start_button.setEnabled(not running)
         self.pause_button.setEnabled(running)
         self.abort_button.setEnabled(running)
+        self.plan_button.setEnabled(not running)
         if not running:
             self.pause_button.blockSignals(True)
             self.pause_button.setChecked(False)

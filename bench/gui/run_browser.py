@@ -3,6 +3,7 @@ identification, skeleton, AFRF and residual analyses off the GUI thread."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -10,9 +11,40 @@ import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from hilbench.bench.gui import analyses
+from hilbench.bench.gui.elided_label import ElidedLabel
 from hilbench.bench.gui.worker import one_line
 
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
+#: analysis curves: the measurement dark and solid, a model orange and dashed, anything else from COLOURS with a
+#: line style of its own, so no two curves of a plot differ by colour alone
+MEASURED_PEN = {"color": "#202020", "width": 1}
+MODEL_PEN = {"color": "#ff7f0e", "width": 1, "style": QtCore.Qt.PenStyle.DashLine}
+STYLES = (QtCore.Qt.PenStyle.SolidLine, QtCore.Qt.PenStyle.DashLine, QtCore.Qt.PenStyle.DotLine,
+          QtCore.Qt.PenStyle.DashDotLine)
+#: a value longer than this goes above the table (wrapped), not into a cell
+LONG_VALUE = 28
+_UNIT = re.compile(r"^(.*)\(([^()]+)\)\s*$")
+
+
+def curve_pen(label: str, index: int) -> dict:
+    """The pen of analysis curve number ``index`` named ``label`` (see MEASURED_PEN, MODEL_PEN)."""
+    if label.startswith("measured"):
+        return MEASURED_PEN
+    if label.startswith("model"):
+        return MODEL_PEN
+    return {"color": COLOURS[index % len(COLOURS)], "width": 1, "style": STYLES[index % len(STYLES)]}
+
+
+def scaled_label(label: str, values) -> tuple[float, str]:
+    """(factor, label) drawing ``values`` of an axis labelled ``name (unit)`` in an engineering unit (mrad,
+    mN*m): pyqtgraph would otherwise write "position (rad) (x0.001)"."""
+    from hilbench.analysis.figure_style import engineering
+
+    m = _UNIT.match(label)
+    if not m:
+        return 1.0, label
+    factor, unit = engineering(m.group(2), values)
+    return factor, f"{m.group(1).rstrip()} ({unit})"
 
 
 class AnalysisWorker(QtCore.QThread):
@@ -68,7 +100,12 @@ class RunBrowser(QtWidgets.QWidget):
         self.follow_box.setToolTip("re-read a file that is still being written (SWMR) once a second")
         self.follow_box.toggled.connect(self._on_follow)
         self.files = QtWidgets.QListWidget()
-        self.files.itemActivated.connect(lambda item: self.open(item.data(QtCore.Qt.ItemDataRole.UserRole)))
+        # a long file name is elided in the middle (its time stamp stays readable), whole in the tooltip
+        self.files.setTextElideMode(QtCore.Qt.TextElideMode.ElideMiddle)
+        self.files.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        # one click opens a run (Enter too); a double click would open it twice
+        self.files.itemClicked.connect(lambda item: self.open(item.data(QtCore.Qt.ItemDataRole.UserRole)))
+        self.files.itemActivated.connect(self._activated)
         refresh = QtWidgets.QPushButton("Refresh list")
         refresh.clicked.connect(self.refresh_files)
 
@@ -104,26 +141,58 @@ class RunBrowser(QtWidgets.QWidget):
         opts = QtWidgets.QHBoxLayout()
         opts.addWidget(QtWidgets.QLabel("J (kg*m^2)"))
         opts.addWidget(self.inertia_edit)
-        opts.addWidget(QtWidgets.QLabel("instantaneous method"))
+        opts.addWidget(QtWidgets.QLabel("method"))
+        self.method_box.setToolTip("instantaneous amplitude and frequency of the skeleton analysis: Hilbert "
+                                   "transform or continuous wavelet transform")
         opts.addWidget(self.method_box)
+        opts.addStretch(1)
+        # the check box on a row of its own: the centre of a 1280 px screen holds no wider row
+        incomplete_row = QtWidgets.QHBoxLayout()
         self.incomplete_box = QtWidgets.QCheckBox("analyse an incomplete run")
         self.incomplete_box.setToolTip("an aborted, crashed or short run, or one its drive marked unfit, is refused "
                                        "unless this is ticked; the result then says the record is incomplete "
                                        "(hilbench ... --allow-incomplete)")
-        opts.addWidget(self.incomplete_box)
-        opts.addStretch(1)
+        incomplete_row.addWidget(self.incomplete_box)
+        incomplete_row.addStretch(1)
+        # the model of an identification, saved as `hilbench identify --json` writes it; a model file as the
+        # residual loop's start (what `hilbench residual --start MODEL.json` does)
+        self.save_model_button = QtWidgets.QPushButton("Save model...")
+        self.save_model_button.setToolTip("write the identified model file (JSON), as hilbench identify RUN --json "
+                                          "MODEL.json does; run an identification first")
+        self.save_model_button.setEnabled(False)
+        self.save_model_button.clicked.connect(self._save_model_dialog)
+        self.start_edit = QtWidgets.QLineEdit("")
+        self.start_edit.setPlaceholderText("residual start: model file (.json); empty: J + Maxwell-slip")
+        self.start_edit.setToolTip("a model file written by an identification (Save model..., hilbench identify) or "
+                                   "hilbench compare: the residual loop starts from its terms")
+        start_browse = QtWidgets.QPushButton("...")
+        start_browse.setFixedWidth(30)
+        start_browse.setToolTip("choose the residual loop's start model file")
+        start_browse.clicked.connect(self._browse_start)
+        model_row = QtWidgets.QHBoxLayout()
+        model_row.addWidget(self.save_model_button)
+        model_row.addWidget(self.start_edit, 1)
+        model_row.addWidget(start_browse)
         self.analysis_status = QtWidgets.QLabel(self._availability_text())
         self.analysis_status.setWordWrap(True)
         self.numbers = QtWidgets.QTableWidget(0, 3)
         self.numbers.setHorizontalHeaderLabels(["quantity", "value", "unit"])
         self.numbers.verticalHeader().setVisible(False)
-        self.numbers.horizontalHeader().setStretchLastSection(True)
+        # the value and unit columns fit their text; the quantity column takes the rest (elided in the middle,
+        # the whole text in the tooltip), so the unit column is always on screen
+        header = self.numbers.horizontalHeader()
+        header.setSectionResizeMode(0, QtWidgets.QHeaderView.ResizeMode.Stretch)
+        header.setSectionResizeMode(1, QtWidgets.QHeaderView.ResizeMode.ResizeToContents)
+        header.setSectionResizeMode(2, QtWidgets.QHeaderView.ResizeMode.ResizeToContents)
+        self.numbers.setTextElideMode(QtCore.Qt.TextElideMode.ElideMiddle)
+        self.numbers.setWordWrap(False)
         self.numbers.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
         self.figures = pg.GraphicsLayoutWidget()
         self.figures.setBackground("w")
 
         left = QtWidgets.QVBoxLayout()
-        left.addWidget(QtWidgets.QLabel(f"Runs in {self.runs_dir}/"))
+        runs_label = ElidedLabel(f"Runs in {self.runs_dir}/")  # a long folder path never widens the window
+        left.addWidget(runs_label)
         left.addWidget(self.files, 1)
         left.addWidget(refresh)
         left.addWidget(QtWidgets.QLabel("Channels"))
@@ -139,11 +208,14 @@ class RunBrowser(QtWidgets.QWidget):
         al = QtWidgets.QVBoxLayout(analysis_tab)
         al.addLayout(buttons)
         al.addLayout(opts)
+        al.addLayout(incomplete_row)
+        al.addLayout(model_row)
         al.addWidget(self.analysis_status)
-        split = QtWidgets.QSplitter(QtCore.Qt.Orientation.Horizontal)
+        # table above the plots: side by side, a 1280 px screen left the table too narrow for its unit column
+        split = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
         split.addWidget(self.numbers)
         split.addWidget(self.figures)
-        split.setSizes([480, 620])
+        split.setSizes([200, 400])
         al.addWidget(split, 1)
         self.tabs = QtWidgets.QTabWidget()
         self.tabs.addTab(data_tab, "Channels")
@@ -157,7 +229,7 @@ class RunBrowser(QtWidgets.QWidget):
         body = QtWidgets.QSplitter(QtCore.Qt.Orientation.Horizontal)
         body.addWidget(left_w)
         body.addWidget(self.tabs)
-        body.setSizes([250, 950])
+        body.setSizes([190, 470])
         layout = QtWidgets.QVBoxLayout(self)
         layout.addLayout(top)
         layout.addWidget(body, 1)
@@ -179,8 +251,14 @@ class RunBrowser(QtWidgets.QWidget):
         paths = sorted(self.runs_dir.glob("*.h5"), key=lambda p: p.stat().st_mtime, reverse=True)
         for p in paths:
             item = QtWidgets.QListWidgetItem(p.name)
+            item.setToolTip(str(p))
             item.setData(QtCore.Qt.ItemDataRole.UserRole, str(p))
             self.files.addItem(item)
+
+    def _activated(self, item: QtWidgets.QListWidgetItem) -> None:
+        path = item.data(QtCore.Qt.ItemDataRole.UserRole)
+        if self.run is None or str(self.run.path) != str(path):  # the click before a double click opened it
+            self.open(path)
 
     def _browse(self) -> None:
         path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Open run file", str(self.runs_dir),
@@ -201,6 +279,8 @@ class RunBrowser(QtWidgets.QWidget):
         except Exception as exc:
             self.message.emit(f"cannot open {path}: {one_line(exc)}", True)
             return False
+        if path != self.path_edit.text():  # the model of another run is not this run's: nothing to save
+            self.save_model_button.setEnabled(False)
         self.close_run()
         self.run = run
         self.path_edit.setText(path)
@@ -272,7 +352,8 @@ class RunBrowser(QtWidgets.QWidget):
                 item = self.plot.addPlot(row=row, col=0)
                 item.showGrid(x=True, y=True, alpha=0.3)
                 item.addLegend(offset=(5, 5), labelTextColor="k")
-                item.getAxis("left").enableAutoSIPrefix(False)  # the unit stays the channel's unit
+                for side in ("left", "bottom"):  # the unit stays the channel's unit: no "(x0.001)"
+                    item.getAxis(side).enableAutoSIPrefix(False)
                 item.setClipToView(True)
                 item.setDownsampling(auto=True, mode="peak")
                 item.setLabel("left", f"{', '.join(members)} ({unit})")
@@ -298,6 +379,8 @@ class RunBrowser(QtWidgets.QWidget):
             return
         options = {"method": self.method_box.currentText(),
                    "allow_incomplete": self.incomplete_box.isChecked()}
+        if self.start_edit.text().strip():
+            options["start_model"] = self.start_edit.text().strip()
         text = self.inertia_edit.text().strip()
         if text:
             try:
@@ -325,6 +408,33 @@ class RunBrowser(QtWidgets.QWidget):
 
     _reopen: str | None = None
 
+    def save_model(self, target: str) -> bool:
+        """Write the last identification's model file to ``target``; a message either way."""
+        doc = self.last_result.model_document if self.last_result is not None else None
+        if doc is None:
+            self.message.emit("run an identification first: there is no model to save", True)
+            return False
+        try:
+            path = analyses.save_model(doc, target, [self.path_edit.text()])
+        except Exception as exc:  # a bad name, a full disk: said in the window
+            self.message.emit(f"cannot save the model: {one_line(exc)}", True)
+            return False
+        self.message.emit(f"model saved to {path}", False)
+        return True
+
+    def _save_model_dialog(self) -> None:
+        run = Path(self.path_edit.text() or "run.h5")
+        default = str(run.with_name(f"{run.stem}-model.json"))
+        path, _ = QtWidgets.QFileDialog.getSaveFileName(self, "Save model", default, "model files (*.json)")
+        if path:
+            self.save_model(path)
+
+    def _browse_start(self) -> None:
+        path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Residual loop: start model", str(self.runs_dir),
+                                                        "model files (*.json);;all files (*)")
+        if path:
+            self.start_edit.setText(path)
+
     def _analysis_failed(self, text: str) -> None:
         self._after_analysis()
         self.analysis_status.setText(f"<span style='color:#c00000'>{text}</span>")
@@ -333,14 +443,19 @@ class RunBrowser(QtWidgets.QWidget):
     def show_result(self, result: analyses.AnalysisResult) -> None:
         self._after_analysis()
         self.last_result = result
+        self.save_model_button.setEnabled(result.model_document is not None)
         warn = "".join(f"<br><span style='color:#d08000'>warning: {w}</span>" for w in result.warnings)
-        self.analysis_status.setText(f"<b>{result.title}</b>{warn}")
-        self.numbers.setRowCount(len(result.numbers))
-        for row, values in enumerate(result.numbers):
+        # a sentence (the residual verdict) is read above the table, wrapped, not cut in a cell
+        long = [(q, v) for q, v, u in result.numbers if len(v) > LONG_VALUE and not u]
+        rows = [r for r in result.numbers if not (len(r[1]) > LONG_VALUE and not r[2])]
+        text = "".join(f"<br>{q}: <b>{v}</b>" for q, v in long)
+        self.analysis_status.setText(f"<b>{result.title}</b>{text}{warn}")
+        self.numbers.setRowCount(len(rows))
+        for row, values in enumerate(rows):
             for col, v in enumerate(values):
-                self.numbers.setItem(row, col, QtWidgets.QTableWidgetItem(v))
-        self.numbers.resizeColumnsToContents()
-        self.numbers.horizontalHeader().setStretchLastSection(True)
+                item = QtWidgets.QTableWidgetItem(v)
+                item.setToolTip(v)
+                self.numbers.setItem(row, col, item)
         if result.title.startswith("Identification"):
             for q, v, _u in result.numbers:
                 if q == "inertia J":
@@ -348,18 +463,24 @@ class RunBrowser(QtWidgets.QWidget):
         self.figures.clear()
         for i, fig in enumerate(result.figures):
             p = self.figures.addPlot(row=i, col=0, title=fig.title)
-            p.setLabel("bottom", fig.xlabel)
-            p.setLabel("left", fig.ylabel)
+            xs = [np.asarray(c[1], float) for c in fig.curves] or [np.zeros(0)]
+            ys = [np.asarray(c[2], float) for c in fig.curves] or [np.zeros(0)]
+            fx, xlabel = scaled_label(fig.xlabel, np.concatenate(xs))
+            fy, ylabel = scaled_label(fig.ylabel, np.concatenate(ys))
+            for side, text in (("bottom", xlabel), ("left", ylabel)):
+                p.getAxis(side).enableAutoSIPrefix(False)  # the unit is in the label, scaled above
+                p.setLabel(side, text)
             p.showGrid(x=True, y=True, alpha=0.3)
             if len(fig.curves) > 1:
-                p.addLegend(offset=(5, 5))
+                p.addLegend(offset=(5, 5), labelTextColor="k")
             for j, (label, x, y) in enumerate(fig.curves):
-                colour = COLOURS[j % len(COLOURS)]
+                pen = curve_pen(label, j)
+                x, y = fx * np.asarray(x, float), fy * np.asarray(y, float)
                 if fig.scatter:
-                    p.plot(x, y, pen=None, symbol="o", symbolSize=3, symbolPen=None, symbolBrush=colour,
+                    p.plot(x, y, pen=None, symbol="o", symbolSize=3, symbolPen=None, symbolBrush=pen["color"],
                            name=label)
                 else:
-                    p.plot(x, y, pen=pg.mkPen(colour), name=label)
+                    p.plot(x, y, pen=pg.mkPen(**pen), name=label)
         self.message.emit(f"{result.title}: done", False)
 
 
@@ -387,8 +508,8 @@ def _entries(values: dict, units: dict[str, str], indent: str = "  ") -> list[st
 
 def describe_run(r) -> list[str]:
     """The metadata pane: one fact per line, units named, dicts spelled out as ``key = value unit``."""
-    from hilbench.bench.device_options import DEVICE_OPTIONS
-    from hilbench.bench.protocols import PROTOCOLS
+    from hilbench.bench.acquisition.device_options import DEVICE_OPTIONS
+    from hilbench.bench.acquisition.protocols import PROTOCOLS
 
     device_units = {k: unit for k, (unit, _text) in DEVICE_OPTIONS.items()}
     device_units.update({"sample_rate": "Hz", "sample_period": "s"})

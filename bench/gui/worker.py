@@ -1,7 +1,7 @@
 """Threads of the GUI: nothing that talks to the device runs in the GUI thread.
 
 - :class:`DeviceWorker` lives in its own QThread: connect, disconnect, status polling, clear faults.
-- :class:`RunWorker` is a QThread whose ``run`` calls :meth:`bench.runner.Bench.run`; sample blocks are
+- :class:`RunWorker` is a QThread whose ``run`` calls :meth:`bench.acquisition.runner.Bench.run`; sample blocks are
   queued and handed to the GUI thread with one Qt signal per batch (never more signals than the GUI takes).
 - :class:`EStopLine` is a dedicated plain thread that only waits for a trigger and calls
   ``amplifier.estop()``: it never waits for the stream, the device thread or the GUI.
@@ -22,9 +22,12 @@ from hilbench.drivers import protocol as wire
 
 
 def one_line(exc: BaseException) -> str:
-    """An exception as one line for the status bar: ``Type: message``."""
+    """An exception as one line of words for the status bar: its message, never its class name (an operator
+    reads "device fault: ESTOP", not "DeviceFaultError: ..."); a message-less exception says so in words."""
     text = " ".join(str(exc).split())
-    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+    if isinstance(exc, KeyError) and text:  # str(KeyError('x')) is just "'x'"
+        return f"missing entry {text}"
+    return text or "an unexpected failure without a message"
 
 
 @dataclass
@@ -62,7 +65,7 @@ def describe_status(status: wire.Status, counters: dict[str, int]) -> DeviceStat
 
 
 class DeviceWorker(QtCore.QObject):
-    """Owns the :class:`bench.runner.Bench`; every slot runs in the device thread.
+    """Owns the :class:`bench.acquisition.runner.Bench`; every slot runs in the device thread.
 
     The bench is shared (read-only reference) with the run thread and the e-stop line; the amplifier is
     thread-safe for status, estop and streaming at once.
@@ -84,7 +87,7 @@ class DeviceWorker(QtCore.QObject):
 
     @QtCore.Slot(str, float)
     def open(self, url: str, timeout: float) -> None:
-        from hilbench.bench.runner import Bench
+        from hilbench.bench.acquisition.runner import Bench
 
         if self.bench is not None:
             self.close()
@@ -168,7 +171,7 @@ class RunWorker(QtCore.QThread):
 
     def __init__(self, job: Callable[[Callable[[Any], None], Any], Any]) -> None:
         super().__init__()
-        from hilbench.bench.runner import RunControl
+        from hilbench.bench.acquisition.runner import RunControl
 
         self.job = job
         self.control = RunControl()

@@ -5,9 +5,9 @@ host target fills. Usage: ``python sim_params.py [SIM.toml] > sim_params.h``."""
 import math
 import sys
 
-from hilbench.firmware_sim.core_c import RATES
-from hilbench.firmware_sim.plant import PlantParameterError, _CParams, ffi, validate
-from hilbench.firmware_sim.sim_config import load_sim_config
+from hilbench.firmware_sim.devices.core_c import RATES
+from hilbench.firmware_sim.devices.sim_config import load_sim_config
+from hilbench.firmware_sim.engine.plant import PlantParameterError, _CParams, ffi, validate
 
 ARRAYS = {"ms_stiffness": "n_elements", "ms_delta": "n_elements", "cogging_order": "n_cogging",
           "cogging_amplitude": "n_cogging", "cogging_phase": "n_cogging", "restoring_x": "n_restoring",

@@ -72,9 +72,9 @@ def test_bad_host_time_is_refused_in_one_line():
 @pytest.fixture(scope="module")
 def runs():
     """The same excitation on the plant, sampled every 1 ms (device-clocked) and with host jitter."""
-    from hilbench.bench import excitations
-    from hilbench.firmware_sim.plant import simulate
-    from hilbench.firmware_sim.sim_config import load_sim_config, substeps_for
+    from hilbench.bench.acquisition import excitations
+    from hilbench.firmware_sim.devices.sim_config import load_sim_config, substeps_for
+    from hilbench.firmware_sim.engine.plant import simulate
 
     sim = load_sim_config()
     params = sim.plant_for(20.0, KT, CPR)

@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 
 from hilbench.analysis.runfile import open_run
-from hilbench.bench.campaign import CampaignError, load_campaign
+from hilbench.bench.acquisition.campaign import CampaignError, load_campaign
+
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 GOOD = """
 [defaults]
@@ -91,8 +93,9 @@ def test_killed_campaign_resumes_to_every_run_completed_once(tmp_path):
     proc.wait(timeout=10)
     with open_run(out / "id-2.h5") as run:
         assert run.status == "crashed"
-    cp = subprocess.run([sys.executable, "-m", "hilbench.bench.cli", "campaign", str(path), "-o", str(out), "--resume",
-                         "--quiet"], capture_output=True, text=True, timeout=120)
+    # (no --quiet: it is the global -q, which prints nothing but errors, and these lines are the result)
+    cp = subprocess.run([sys.executable, "-m", "hilbench.bench.cli", "campaign", str(path), "-o", str(out), "--resume"],
+                        capture_output=True, text=True, timeout=120)
     assert cp.returncode == 0, cp.stderr
     assert "id-1: skipped" in cp.stdout
     runs = json.loads((out / "index.json").read_text())["runs"]
@@ -128,7 +131,7 @@ def test_resume_redoes_a_run_of_another_plan_and_the_report_combines_one_plan(tm
     # against the new reference ("reduction 5.49e+04")
     from hilbench.analysis.compensation.references import point_to_point
     from hilbench.analysis.record import load_record
-    from hilbench.bench.campaign import run_campaign
+    from hilbench.bench.acquisition.campaign import run_campaign
     from tests.bench.test_compensate import _model
 
     model = _model(tmp_path)
@@ -178,7 +181,7 @@ def test_resume_redoes_a_run_of_another_plan_and_the_report_combines_one_plan(tm
 
 def test_each_repeat_plays_its_own_seed_stored_in_its_run_file(tmp_path):
     # all repeats of a campaign played seed 0: the identical input
-    from hilbench.bench.campaign import repeat_seed, run_campaign
+    from hilbench.bench.acquisition.campaign import repeat_seed, run_campaign
 
     text = GOOD.format(duration=0.2).replace("repeats = 2", "repeats = 3\nseed = 7")
     campaign = load_campaign(_write(tmp_path, text))
@@ -198,7 +201,7 @@ def test_each_repeat_plays_its_own_seed_stored_in_its_run_file(tmp_path):
 
 
 def test_an_older_index_entry_without_a_model_hash_is_compared_on_parameters_and_settings(tmp_path):
-    from hilbench.bench.campaign_plan import plan_changes, run_plan
+    from hilbench.bench.acquisition.campaign_plan import plan_changes, run_plan
 
     planned = load_campaign(_write(tmp_path, GOOD.format(duration=1))).runs[1]  # id-2: its own seed now
     plan = run_plan(planned, {})

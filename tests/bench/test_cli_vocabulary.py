@@ -1,6 +1,7 @@
 """Issue 13 item 4: one name for one thing across the CLI; global flags anywhere; a closed pipe ends quietly;
 a default device from HILBENCH_DEVICE or the config file."""
 
+import json
 import os
 import subprocess
 import sys
@@ -8,10 +9,13 @@ from pathlib import Path
 
 import pytest
 
+from hilbench.analysis.runfile import open_run
+from hilbench.bench.acquisition.protocols import PROTOCOLS
+from hilbench.bench.acquisition.user_config import config_path, default_device
 from hilbench.bench.cli import build_parser, main, split_global_flags
-from hilbench.bench.protocols import PROTOCOLS
-from hilbench.bench.user_config import config_path, default_device
 from tests.bench.test_identify_command import _write_run
+
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +91,7 @@ def test_quiet_and_verbose_after_the_subcommand(run_file, tmp_path, capsys):
     assert main(["identify", str(run_file), "--json", str(tmp_path / "m.json"), "-q"]) == 0
     captured = capsys.readouterr()
     assert captured.out == "" and captured.err == ""
-    assert main(["identify", str(run_file), "--json", str(tmp_path / "m.json"), "--verbose"]) == 0
+    assert main(["identify", str(run_file), "--json", str(tmp_path / "m.json"), "--verbose", "--overwrite"]) == 0
     captured = capsys.readouterr()
     assert "verdict:" in captured.out and f"wrote {tmp_path / 'm.json'}" in captured.err
 
@@ -158,3 +162,176 @@ def test_every_help_text_is_plain_text():
     assert len(texts) > 200
     bad = [t for t in texts if "``" in t or ":func:`" in t or ":class:`" in t]
     assert bad == []
+
+
+# -- issue 28 item 4: one quiet, consistent CLI --------------------------------------------------------------------
+
+#: options through which a command names what it writes
+OUTPUT_OPTIONS = {"-o", "--output", "--json", "--plot", "--plots", "--report"}
+#: commands that write but never replace: `campaign` resumes a folder (--resume) and refuses another campaign's;
+#: `analyse` adds rows to its results table, keyed by run content, settings and version (resume is its default)
+NEVER_REPLACES = {"campaign", "analyse"}
+#: analysis commands another engineer owns that still replace their outputs without --overwrite (issue 28)
+STILL_REPLACE_SILENTLY = {"compare", "residual"}
+
+
+def _leaf_commands(parser, path=()):
+    import argparse
+
+    subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    if not subs:
+        yield " ".join(path), parser
+        return
+    seen = set()
+    for name, sub in subs[0].choices.items():
+        if id(sub) not in seen:  # aliases share a parser
+            seen.add(id(sub))
+            yield from _leaf_commands(sub, (*path, name))
+
+
+def _options(parser) -> set[str]:
+    return {o for a in parser._actions for o in a.option_strings}
+
+
+def _writing_commands() -> list:
+    gap = pytest.mark.xfail(strict=True, reason="owned by the analysis CLI (issue 28, item 4 left to its owner)")
+    return [pytest.param(c, marks=gap) if c.split()[0] in STILL_REPLACE_SILENTLY else c
+            for c, p in _leaf_commands(build_parser()) if _options(p) & OUTPUT_OPTIONS and c not in NEVER_REPLACES]
+
+
+@pytest.mark.device_free
+@pytest.mark.parametrize("command", _writing_commands())
+def test_every_command_that_writes_replaces_only_with_overwrite(parser, command):
+    leaf = dict(_leaf_commands(parser))[command]
+    assert "--overwrite" in _options(leaf), f"{command} writes ({sorted(_options(leaf) & OUTPUT_OPTIONS)}) " \
+                                            f"but has no --overwrite"
+
+
+def test_identify_and_show_refuse_an_existing_json_without_overwrite(run_file, tmp_path, capsys):
+    """`identify` rejected --overwrite and silently replaced its JSON while `run` refused without it."""
+    for argv in (["identify", str(run_file), "--thresholds", "8"], ["show", str(run_file)]):
+        out = tmp_path / f"{argv[0]}.json"
+        out.write_text("mine\n")
+        assert main([*argv, "--json", str(out)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err and "--overwrite" in err and str(out) in err
+        assert out.read_text() == "mine\n"  # nothing lost
+        assert main([*argv, "--json", str(out), "--overwrite", "-q"]) == 0
+        assert json.loads(out.read_text())
+        assert main([*argv, "--json", "-", "-q"]) == 0  # standard output is no file to protect
+        capsys.readouterr()
+
+
+@pytest.mark.device_free
+def test_the_analysis_commands_refuse_an_existing_output_before_reading_anything(tmp_path, capsys):
+    """afrf, skeleton, paper and drift replaced their outputs silently (issue 28): each now refuses in one line
+    naming --overwrite before it reads an input (the run named here does not even exist), and nothing is lost."""
+    mine = tmp_path / "mine.json"
+    mine.write_text("mine\n")
+    (tmp_path / "paper").mkdir()
+    (tmp_path / "paper" / "summary.json").write_text("mine\n")
+    (tmp_path / "results").mkdir()
+    (tmp_path / "results" / "results.parquet").write_text("not read\n")
+    (tmp_path / "results" / "drift").mkdir()
+    (tmp_path / "results" / "drift" / "drift.json").write_text("mine\n")
+    missing = str(tmp_path / "no-such-run.h5")
+    for argv, kept in ((["afrf", missing, "--json", str(mine)], mine),
+                       (["afrf", missing, "--plot", str(mine)], mine),
+                       (["skeleton", missing, "--json", str(mine)], mine),
+                       (["paper", "-o", str(tmp_path / "paper"), "--quick"], tmp_path / "paper" / "summary.json"),
+                       (["drift", str(tmp_path / "results")], tmp_path / "results" / "drift" / "drift.json")):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err and "--overwrite" in err and str(kept) in err, (argv, err)
+        assert kept.read_text() == "mine\n"
+
+
+def test_demo_refuses_a_used_folder_without_overwrite(tmp_path, capsys):
+    (tmp_path / "model.json").write_text("{}")
+    assert main(["demo", "-o", str(tmp_path), "--duration", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "model.json of a demo already; use --overwrite" in err and (tmp_path / "model.json").read_text() == "{}"
+
+
+def test_informational_lines_only_with_verbose(tmp_path, capsys):
+    """-q: nothing but errors; the default: results and warnings; -v: also what the command only reports back
+    (here: the torque timing the user declared, echoed by import)."""
+    src = tmp_path / "lab.csv"
+    src.write_text("t,position,torque\n" + "".join(f"{k / 1000},{k * 1e-4},{0.1 * (k % 7)}\n" for k in range(2000)))
+    argv = ["import", "csv", str(src), "--torque-timing", "hold_previous"]
+    assert main([*argv, "-o", str(tmp_path / "a.h5")]) == 0
+    normal = capsys.readouterr().out
+    assert normal.startswith(f"wrote {tmp_path / 'a.h5'}:") and "torque timing" not in normal
+    assert main([*argv, "-o", str(tmp_path / "b.h5"), "-v"]) == 0
+    assert "torque timing: hold_previous (stored in the run file)" in capsys.readouterr().out
+    assert main([*argv, "-o", str(tmp_path / "c.h5"), "-q"]) == 0
+    assert capsys.readouterr().out == ""
+
+
+def test_campaign_and_run_are_silent_with_quiet(tmp_path, capsys):
+    toml = tmp_path / "c.toml"
+    toml.write_text('[defaults]\ndevice = "sim://?pacing=lockstep"\n[[run]]\nname = "c"\nprotocol = "chirp"\n'
+                    'duration = "0.5 s"\ngain = "1 A"\n')
+    assert main(["campaign", str(toml), "-o", str(tmp_path / "camp"), "-q"]) == 0
+    assert main(["run", "chirp", "--duration", "0.5", "--device", "sim://?pacing=lockstep", "-o",
+                 str(tmp_path / "r.h5"), "-q"]) == 0
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err == ""
+    assert main(["run", "chirp", "--duration", "0.5", "--device", "sim://?pacing=lockstep", "-o",
+                 str(tmp_path / "r2.h5")]) == 0  # the printed path is the file written
+    assert capsys.readouterr().out.strip().startswith(f"completed: {tmp_path / 'r2.h5'} (5000 samples")
+
+
+@pytest.mark.device_free
+def test_parameter_errors_name_the_option_not_the_python_name(capsys):
+    """Walk every protocol parameter and device setting of `run`: a value out of range is refused in one line
+    that starts with the option the user typed (--cutoff), never the dataclass field (cutoff = ...)."""
+    from hilbench.bench.acquisition.device_options import DEVICE_OPTIONS
+
+    checked = 0
+    for name, cls in PROTOCOLS.items():
+        for key, spec in cls.specs().items():
+            if spec.kind not in ("float", "int") or spec.maximum is None or key == "sample_rate":
+                continue
+            flag = "--" + key.replace("_", "-")
+            assert main(["run", name, flag, str(spec.maximum * 10 + 10)]) == 2, (name, flag)
+            err = capsys.readouterr().err.strip()
+            assert err.startswith(f"hilbench run: error: {flag} ") and "\n" not in err, err
+            checked += 1
+        for key in ("current_limit", "watchdog_timeout", "torque_constant"):
+            flag = "--" + key.replace("_", "-")
+            assert key in DEVICE_OPTIONS and main(["run", name, flag, "-1"]) == 2
+            err = capsys.readouterr().err.strip()
+            assert err.startswith(f"hilbench run: error: {flag} ") and "\n" not in err, err
+    assert main(["run", "chirp", "--sample-rate", "3000"]) == 2
+    assert capsys.readouterr().err.startswith("hilbench run: error: --sample-rate 3000 Hz")
+    assert checked > 20
+
+
+def test_fault_show_and_clear_use_the_default_device(monkeypatch, capsys):
+    monkeypatch.setenv("HILBENCH_DEVICE", "sim://?pacing=lockstep")
+    assert main(["fault", "show"]) == 0
+    assert capsys.readouterr().out.startswith("faults: none")
+    assert main(["fault", "clear"]) == 0
+    assert "cleared; faults now: none" in capsys.readouterr().out
+
+
+def test_a_watchdog_trip_says_what_tripped_and_which_option_to_raise(tmp_path, monkeypatch, capsys):
+    """Under load the run ended with 'stream ended by the device at sample N: WATCHDOG' and nothing else."""
+    from hilbench.drivers import protocol as wire
+    from hilbench.drivers.amplifier import Amplifier
+    from hilbench.drivers.errors import DeviceFaultError
+
+    def tripped(self, setpoints, *a, **k):  # the device's own words when its watchdog fires
+        raise DeviceFaultError("stream ended by the device at sample 99: WATCHDOG", int(wire.Fault.WATCHDOG))
+        yield
+
+    monkeypatch.setattr(Amplifier, "stream", tripped)
+    out = tmp_path / "w.h5"
+    assert main(["run", "chirp", "--duration", "0.5", "--watchdog-timeout", "0.2", "--device",
+                 "sim://?pacing=lockstep", "-o", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "WATCHDOG" in err and "watchdog tripped" in err
+    assert "0.2 s (--watchdog-timeout)" in err and "raise --watchdog-timeout" in err and "fault clear" in err
+    with open_run(out) as run:  # the run file's fault event carries the same words
+        assert run.status == "aborted" and "raise --watchdog-timeout" in run.events["message"][-1]

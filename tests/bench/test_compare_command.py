@@ -7,10 +7,8 @@ import pytest
 
 from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.cli import main
-from hilbench.firmware_sim.plant import Hysteresis, PlantParams, simulate
+from hilbench.firmware_sim.engine.plant import Hysteresis, PlantParams, simulate
 from tests.analysis.identification.test_identification import random_enveloped
-
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
 
 TRUTH = PlantParams(inertia=0.01, viscous=0.05, hysteresis=Hysteresis(0.3, 2e-3, 64))
 

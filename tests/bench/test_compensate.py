@@ -10,8 +10,10 @@ import pytest
 
 from hilbench.analysis.runfile import RunWriter
 from hilbench.bench import cli
-from hilbench.firmware_sim.friction_models import dc_motor
+from hilbench.firmware_sim.engine.friction_models import dc_motor
 from tests.figure_checks import recording_figures
+
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 SHORT = ["--sample-rate", "1000", "--amplitudes", "1e-3", "1e-2", "--cycles", "1", "--rest", "0.1",
          "--amplitude", "0.01", "--frequency", "1", "--targets", "0.01", "0", "--move-time", "0.2"]
@@ -39,7 +41,7 @@ def no_device(monkeypatch):
         opened.append(args)
         raise AssertionError("a device was opened")
 
-    monkeypatch.setattr("hilbench.bench.runner.Bench.open", refuse)
+    monkeypatch.setattr("hilbench.bench.acquisition.runner.Bench.open", refuse)
     return opened
 
 
@@ -115,7 +117,7 @@ def test_a_compensate_campaign_plays_the_matrix_on_the_device_and_writes_its_rep
     an independent closed form (exact stop operators of tests/truth, J*q'' and b*q' of the reference)."""
     from hilbench.analysis.compensation.references import slow_sine
     from hilbench.analysis.record import load_record
-    from hilbench.bench.campaign import load_campaign, run_campaign
+    from hilbench.bench.acquisition.campaign import load_campaign, run_campaign
     from tests.truth.generator import stop_operator_forces
 
     model = _model(tmp_path)
@@ -159,7 +161,7 @@ tolerance = "2e-4 rad"
 
 
 def test_a_compensate_step_with_a_bad_key_names_its_line(tmp_path):
-    from hilbench.bench.campaign import CampaignError, load_campaign
+    from hilbench.bench.acquisition.campaign import CampaignError, load_campaign
 
     model = _model(tmp_path)
     (tmp_path / "c.toml").write_text(f'[[compensate]]\nmodel = "{model.name}"\nbogus = 1\n')
@@ -208,7 +210,7 @@ def test_the_training_run_of_the_model_is_never_an_output(tmp_path, capsys, no_d
 
 
 def _comparison(tmp_path, row_name):
-    from hilbench.firmware_sim.friction_models import dc_motor
+    from hilbench.firmware_sim.engine.friction_models import dc_motor
 
     units = {"inertia": "kg*m^2", "ms_stiffness": "N*m/rad"}
     plant = dc_motor(8).replace(torque_constant=1.0).to_dict()
@@ -285,7 +287,7 @@ def test_deeply_nested_or_huge_model_files_are_one_line(tmp_path, capsys, no_dev
 
 def test_a_family_file_predicts_on_its_own_plant(tmp_path, capsys, no_device):
     # --predict took the Maxwell-slip plant with next(...): a family file without one ended in StopIteration
-    from hilbench.firmware_sim.friction_models import dc_motor
+    from hilbench.firmware_sim.engine.friction_models import dc_motor
 
     plant = dc_motor(8).replace(torque_constant=1.0).to_dict()
     model = _doc(tmp_path, family="maxwell_slip", plant=plant, schema="hilbench.friction-model/2")
@@ -316,7 +318,7 @@ def test_a_report_plot_that_is_the_model_is_refused(tmp_path, capsys, no_device)
 @pytest.mark.parametrize("name", ["..", "../up", "a.b", "a/b", "-x", 3])
 def test_a_compensate_step_name_is_a_plain_name(tmp_path, name):
     # the step's name is its report folder OUT/<name>/: ".." wrote the report beside OUT, "a.b" split its runs
-    from hilbench.bench.campaign import CampaignError, load_campaign
+    from hilbench.bench.acquisition.campaign import CampaignError, load_campaign
 
     model = _model(tmp_path)
     (tmp_path / "c.toml").write_text(f'[[compensate]]\nname = {json.dumps(name)}\nmodel = "{model.name}"\n')

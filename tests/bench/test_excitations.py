@@ -9,9 +9,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from hilbench.bench import excitations as ex
-
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
+from hilbench.bench.acquisition import excitations as ex
 
 
 def _zero_crossings(t: np.ndarray, u: np.ndarray) -> np.ndarray:

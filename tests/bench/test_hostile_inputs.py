@@ -24,9 +24,11 @@ from hilbench.bench import cli
 from hilbench.bench.cli import main
 from hilbench.bench.errors import BenchError
 from hilbench.drivers.errors import DriverError
-from hilbench.firmware_sim.plant import PlantParameterError
-from hilbench.firmware_sim.sim_config import SimConfigError
+from hilbench.firmware_sim.devices.sim_config import SimConfigError
+from hilbench.firmware_sim.engine.plant import PlantParameterError
 from tests.bench.test_identify_command import _write_run
+
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 OURS = (BenchError, AnalysisError, DriverError, PlantParameterError, SimConfigError)
 # 150 examples each: about 12 s (compensate) and 4 s (sim); HILBENCH_FUZZ_EXAMPLES=1500 for a longer search
@@ -67,7 +69,7 @@ JSON = st.recursive(
 
 
 def _valid_model() -> dict:
-    from hilbench.firmware_sim.friction_models import dc_motor
+    from hilbench.firmware_sim.engine.friction_models import dc_motor
 
     p = dc_motor(4)
     k = np.asarray(p.ms_stiffness)
@@ -78,7 +80,7 @@ def _valid_model() -> dict:
 
 
 def _valid_comparison() -> dict:
-    from hilbench.firmware_sim.friction_models import dc_motor
+    from hilbench.firmware_sim.engine.friction_models import dc_motor
 
     plant = dc_motor(4).replace(torque_constant=1.0).to_dict()
     return {"schema": "hilbench.compare/1", "axis": "rotary",
@@ -134,7 +136,7 @@ def test_random_model_files_end_in_our_errors_only(model_path, monkeypatch, fast
     def reached(*args, **kwargs):
         raise _DeviceReached
 
-    monkeypatch.setattr("hilbench.bench.runner.Bench.open", reached)
+    monkeypatch.setattr("hilbench.bench.acquisition.runner.Bench.open", reached)
     reached_device = []
 
     @FUZZ
@@ -187,7 +189,7 @@ def test_random_sim_arguments_end_in_our_errors_only(tmp_path, monkeypatch, fast
         except _DeviceReached:
             pass
         except BaseException as exc:  # noqa: BLE001
-            if not _ours(exc, "bench/commands/sim.py"):
+            if not _ours(exc, "bench/cli/commands/sim.py"):
                 raise AssertionError(f"{type(exc).__name__} escaped `hilbench sim {' '.join(argv)}`") from exc
 
     check()

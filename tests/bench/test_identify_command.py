@@ -3,17 +3,14 @@
 import json
 
 import numpy as np
-import pytest
 
 from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.cli import main
-from hilbench.firmware_sim.friction_models import dc_motor
-from hilbench.firmware_sim.plant import simulate
+from hilbench.firmware_sim.engine.friction_models import dc_motor
+from hilbench.firmware_sim.engine.plant import simulate
 from tests import real_data
 from tests.analysis.identification.test_identification import random_enveloped
 from tests.figure_checks import recording_figures
-
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
 
 
 def _write_run(path, seed, channels=("sample_index", "t", "torque", "position")):

@@ -13,11 +13,9 @@ import pytest
 from scipy.io import loadmat, savemat
 
 from hilbench.analysis.runfile import open_run
-from hilbench.bench import importers
 from hilbench.bench.cli import main as bench_main
+from hilbench.bench.storage import importers
 from tests import real_data
-
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
 
 EMPS, EMPS_PULSES = real_data.EMPS_TRAIN, real_data.EMPS_TEST
 _HSM_DIR = real_data.real_data("hsm150")

@@ -15,12 +15,10 @@ from scipy.io import savemat
 
 from hilbench.analysis.record import load_record
 from hilbench.analysis.runfile import open_run, run_torque_timing
-from hilbench.bench import importers
 from hilbench.bench.cli import main
+from hilbench.bench.storage import importers
 from tests import real_data
 from tests.bench.test_identify_command import _write_run
-
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
 
 
 def _one_line_error(capsys, argv, *patterns):
@@ -154,7 +152,7 @@ def test_declared_torque_timing_gives_the_device_model(tmp_path, device_run, cap
     path, params, arrays = device_run
     src = _lab_csv(tmp_path / "lab.csv", arrays)
     declared, undeclared = tmp_path / "declared.h5", tmp_path / "undeclared.h5"
-    assert main(["import", "csv", str(src), "-o", str(declared), "--torque-timing", "hold_previous"]) == 0
+    assert main(["import", "csv", str(src), "-o", str(declared), "--torque-timing", "hold_previous", "-v"]) == 0
     assert "torque timing: hold_previous (stored in the run file)" in capsys.readouterr().out
     assert main(["import", "csv", str(src), "-o", str(undeclared)]) == 0
     assert "torque timing: not declared; analyses will assume instant" in capsys.readouterr().out
@@ -206,7 +204,7 @@ def test_gap_is_found_at_import_or_resampled(tmp_path, device_run, capsys):
     assert not (tmp_path / "x.h5").exists()
     out = tmp_path / "resampled.h5"
     assert main(["import", "csv", str(src), "-o", str(out), "--resample", "linear", "--torque-timing",
-                 "hold_previous"]) == 0
+                 "hold_previous", "-v"]) == 0
     assert "resampled: linear interpolation" in capsys.readouterr().out
     with open_run(out) as r:
         t = r.channel("t")

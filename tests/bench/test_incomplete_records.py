@@ -8,12 +8,10 @@ import pytest
 
 from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.cli import main
-from hilbench.firmware_sim.friction_models import dc_motor
-from hilbench.firmware_sim.plant import simulate
+from hilbench.firmware_sim.engine.friction_models import dc_motor
+from hilbench.firmware_sim.engine.plant import simulate
 from tests.analysis.identification.test_identification import random_enveloped
 from tests.bench.test_identify_command import _write_run
-
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
 
 
 def _aborted(path, seed=3, fs=2000.0, n=12_000, planned=40_000):

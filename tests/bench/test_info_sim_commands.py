@@ -4,7 +4,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from hilbench.bench.cli import main
+
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -47,7 +51,8 @@ def test_drivers_never_import_firmware_sim_bench_or_analysis():
 
 
 def test_firmware_imports_only_the_protocol_from_drivers():
-    code = ("import sys, hilbench.firmware_sim.device, hilbench.firmware_sim.core_c, hilbench.firmware_sim.__main__; "
+    code = ("import sys, hilbench.firmware_sim.devices.device, hilbench.firmware_sim.devices.core_c, "
+            "hilbench.firmware_sim.__main__; "
             "print(sorted(m.removeprefix('hilbench.') for m in sys.modules "
             "if m.split('.')[:2] in (['hilbench', 'drivers'], ['hilbench', 'bench'], ['hilbench', 'analysis'])))")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)

@@ -12,12 +12,10 @@ import pytest
 from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.cli import main
 from hilbench.bench.verdict import FAIR_TORQUE_PCT, GOOD_TORQUE_PCT, judge
-from hilbench.firmware_sim.friction_models import dc_motor
-from hilbench.firmware_sim.plant import simulate
+from hilbench.firmware_sim.engine.friction_models import dc_motor
+from hilbench.firmware_sim.engine.plant import simulate
 from tests.analysis.identification.test_identification import random_enveloped
 from tests.bench.test_paper_skeleton_commands import _write_chirp
-
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
 
 FS, N = 2000.0, 16_000
 
@@ -143,7 +141,7 @@ def test_skeleton_bins_bounded_before_allocation(tmp_path, capsys):
 def test_skeleton_never_returns_a_negative_stiffness_silently(tmp_path, capsys):
     # the paper's system without its spring, and --spring subtracting one it does not have: k_eq < 0
     from hilbench.analysis.runfile import RunWriter as Writer
-    from hilbench.firmware_sim.friction_models import paper_system
+    from hilbench.firmware_sim.engine.friction_models import paper_system
 
     p = paper_system(spring=0.0)
     n = int(40 * 1000)

@@ -12,8 +12,6 @@ from hilbench.bench.cli import main
 from hilbench.bench.gui.analyses import identification
 from tests.bench.test_identify_command import _write_run
 
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
-
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):

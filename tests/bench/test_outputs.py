@@ -1,5 +1,6 @@
-"""bench.outputs and the commands that write through it (issue 12 item 3 and the disk-full part of item 4; issue 13:
-``--json -``). An output never overwrites an input; an existing file is replaced only by a complete new one."""
+"""bench.storage.outputs and the commands that write through it (issue 12 item 3 and the disk-full part of item 4;
+issue 13: ``--json -``). An output never overwrites an input; an existing file is replaced only by a complete
+new one."""
 
 import contextlib
 import errno
@@ -14,12 +15,10 @@ import threading
 import pytest
 
 from hilbench.analysis.output_files import OutputError
-from hilbench.bench import outputs
 from hilbench.bench.cli import main
 from hilbench.bench.errors import BenchError
+from hilbench.bench.storage import outputs
 from tests.bench.test_identify_command import _write_run
-
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
 
 
 @pytest.fixture(scope="module")

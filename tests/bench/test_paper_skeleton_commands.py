@@ -8,8 +8,8 @@ import pytest
 from hilbench.analysis.reproductions.paper import maxwell_slip_closed_form
 from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.cli import main
-from hilbench.firmware_sim.friction_models import paper_system
-from hilbench.firmware_sim.plant import simulate
+from hilbench.firmware_sim.engine.friction_models import paper_system
+from hilbench.firmware_sim.engine.plant import simulate
 
 pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
 
@@ -78,6 +78,21 @@ def test_skeleton_cli_errors(tmp_path, capsys):
     [("hold_previous", [1.5, 2.5, 3.0]), ("hold_next", [1.0, 1.5, 2.5]), ("instant", [1.0, 2.0, 3.0])],
 )
 def test_centred_force(timing, expect):
-    from hilbench.bench.commands.skeleton import centred_force
+    from hilbench.analysis.skeleton import centred_force
 
     np.testing.assert_allclose(centred_force(np.array([1.0, 2.0, 3.0]), timing), expect)
+
+
+def test_the_gui_skeleton_warns_on_a_run_that_is_no_chirp(tmp_path):
+    """Issue 28: the browser's skeleton of an identification run said "done" with F_k down to -2e4 N*m; it now
+    carries the warning the CLI prints (the same chirp data filed under the chirp protocol has none)."""
+    from hilbench.analysis.record import load_record
+    from hilbench.bench.gui.analyses import skeleton
+    from tests.analysis.skeleton.test_skeleton_stream import _write_chirp as write
+
+    for protocol in ("identification", "chirp"):
+        path = tmp_path / f"{protocol}.h5"
+        write(path, paper_system(), 5.0, duration=20.0, protocol=protocol)
+        shown = skeleton(load_record(path), {"inertia": 1.0})
+        assert bool(shown.warnings) == (protocol != "chirp"), shown.warnings
+        assert all("not a chirp" in w for w in shown.warnings)

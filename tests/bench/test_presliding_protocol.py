@@ -11,10 +11,12 @@ import h5py
 import numpy as np
 import pytest
 
-from hilbench.bench import excitations
+from hilbench.bench.acquisition import excitations
+from hilbench.bench.acquisition.protocols import Presliding, ProtocolError, make_protocol
+from hilbench.bench.acquisition.runner import Bench, DeviceSettings
 from hilbench.bench.cli import main
-from hilbench.bench.protocols import Presliding, ProtocolError, make_protocol
-from hilbench.bench.runner import Bench, DeviceSettings
+
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 CPR = 1 << 16
 COUNT = 2 * math.pi / CPR  # rad, one encoder count
@@ -85,8 +87,8 @@ def test_bad_parameters_are_refused(values, message):
 @pytest.mark.parametrize("argv, message", [
     (["--amplitudes", "1", "2"], "must not increase"),
     (["--unit", "m"], "m_per_rad > 0"),
-    (["--rate", "-1"], "rate"),
-    (["--position-kp", "-5"], "position_kp"),
+    (["--rate", "-1"], "--rate -1"),
+    (["--position-kp", "-5"], "--position-kp -5.0 A/rad"),  # the option, not the Python field
 ])
 def test_cli_refuses_bad_parameters_in_one_line(argv, message, capsys, tmp_path):
     assert main(["run", "presliding", "-o", str(tmp_path / "x.h5"), *argv]) == 2

@@ -9,12 +9,10 @@ import pytest
 
 from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.cli import main
-from hilbench.firmware_sim.friction_models import dc_motor
-from hilbench.firmware_sim.plant import simulate
+from hilbench.firmware_sim.engine.friction_models import dc_motor
+from hilbench.firmware_sim.engine.plant import simulate
 from tests.analysis.residual.test_residual_loop import FS, excitation
 from tests.figure_checks import recording_figures
-
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
 
 
 def write_run(path, seed: int) -> None:

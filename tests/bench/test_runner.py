@@ -11,9 +11,11 @@ import numpy as np
 import pytest
 
 from hilbench.analysis.runfile import open_run
-from hilbench.bench.protocols import Identification, ProtocolError, SteppedSine
-from hilbench.bench.runner import Bench, DeviceSettings, RunControl
+from hilbench.bench.acquisition.protocols import Identification, ProtocolError, SteppedSine
+from hilbench.bench.acquisition.runner import Bench, DeviceSettings, RunControl
 from hilbench.drivers import protocol as wire
+
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 LOCKSTEP = "sim://?pacing=lockstep"
 
@@ -43,6 +45,21 @@ def test_identification_run_logs_every_sample(bench, tmp_path):
         assert run.device["model"]
     assert events[-1].done == events[-1].total == 10_000
     assert bench.amplifier.status().state == wire.State.DISARMED  # shutdown disarmed
+
+
+def test_progress_contract_done_grows_to_total_in_every_segment(bench, tmp_path):
+    """Issue 28: the scripting API reports progress. Every call has total = the protocol's samples, done grows
+    strictly, the last call of a completed run is done == total, and the blocks' lengths add up to done."""
+    proto = SteppedSine(frequencies=(20.0, 40.0), amplitudes=(1.0, 2.0), settle_periods=2, measure_periods=4)
+    calls = []
+    result = bench.run(proto, tmp_path / "s.h5", progress=lambda p: calls.append((p.done, p.total, p.t.size,
+                                                                                  p.segment, p.n_segments)))
+    assert result.status == "completed" and len(calls) > 4
+    done, total, block, segment, n_segments = (np.array(c) for c in zip(*calls, strict=True))
+    assert np.all(total == proto.n_samples) and np.all(np.diff(done) > 0)
+    assert done[-1] == proto.n_samples == result.samples
+    np.testing.assert_array_equal(np.cumsum(block), done)
+    assert np.all(np.diff(segment) >= 0) and segment[-1] == n_segments[0] - 1 == 3
 
 
 def test_pause_and_resume_between_stepped_sine_steps(bench, tmp_path):
@@ -174,7 +191,7 @@ def _children(pid: int) -> list[int]:
 def test_a_ctrl_c_lost_as_an_exception_still_aborts_through_the_flag():
     """signals_as_interrupt(control=...): SIGINT raises KeyboardInterrupt and sets the abort flag. If code the run
     calls swallows the exception (C code that clears a pending error), the run loop still sees the flag."""
-    from hilbench.bench.runner import RunControl, signals_as_interrupt
+    from hilbench.bench.acquisition.runner import RunControl, signals_as_interrupt
 
     outer = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a foreground process
     try:

@@ -10,12 +10,13 @@ from benchmarks.__main__ import discover
 KEYS = {"name", "value", "unit", "baseline_name", "baseline_value", "ratio", "target", "ok"}
 
 
-#: benchmarks that start no device (pure computation, files, or a Dask cluster): the parallel part of make test
+#: benchmarks that start no device (pure computation, files, or a Dask cluster): the parallel part of make test;
+#: the others start a device and are marked realtime
 DEVICE_FREE = {"bench_afrf", "bench_campaign", "bench_identification", "bench_long_run", "bench_plant",
                "bench_runfile", "bench_skeleton"}
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.device_free) if n in DEVICE_FREE else n
+@pytest.mark.parametrize("name", [n if n in DEVICE_FREE else pytest.param(n, marks=pytest.mark.realtime)
                                   for n in discover()])
 def test_benchmark_runs_quick_and_reports_ratios(name):
     import importlib

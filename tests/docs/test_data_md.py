@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from hilbench.bench.cli import main
-from hilbench.bench.import_units import ALIASES, UNITS
+from hilbench.bench.storage.import_units import ALIASES, UNITS
 
 PAGE = Path(__file__).resolve().parents[2] / "docs" / "data.md"
 BLOCK = re.compile(r"<!-- (?P<kind>file: \S+|python|console) -->\n```[a-z]*\n(?P<body>.*?)```", re.S)

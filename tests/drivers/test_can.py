@@ -10,10 +10,12 @@ import pytest
 from hilbench.drivers import protocol as p
 from hilbench.drivers.device_url import open_device
 from hilbench.drivers.errors import DeviceFaultError, SetpointError
-from hilbench.firmware_sim.core_c import CoreDevice
-from hilbench.firmware_sim.device import CanTransport, serve
-from hilbench.firmware_sim.plant import simulate
-from hilbench.firmware_sim.sim_config import load_sim_config
+from hilbench.firmware_sim.devices.core_c import CoreDevice
+from hilbench.firmware_sim.devices.device import CanTransport, serve
+from hilbench.firmware_sim.devices.sim_config import load_sim_config
+from hilbench.firmware_sim.engine.plant import simulate
+
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 
 @pytest.fixture

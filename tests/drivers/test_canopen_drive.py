@@ -14,8 +14,8 @@ import h5py
 import numpy as np
 import pytest
 
-from hilbench.bench.protocols import Identification
-from hilbench.bench.runner import Bench, DeviceSettings
+from hilbench.bench.acquisition.protocols import Identification
+from hilbench.bench.acquisition.runner import Bench, DeviceSettings
 from hilbench.drivers import cia402 as c
 from hilbench.drivers import protocol as p
 from hilbench.drivers.canopen_drive import CanopenDrive
@@ -27,11 +27,11 @@ from hilbench.drivers.errors import (
     DeviceTimeoutError,
     SampleLossError,
 )
-from hilbench.firmware_sim.cia402_drive import EDS_PATH, SimCia402Drive
-from hilbench.firmware_sim.plant import simulate
-from hilbench.firmware_sim.sim_config import load_sim_config, substeps_for
+from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH, SimCia402Drive
+from hilbench.firmware_sim.devices.sim_config import load_sim_config, substeps_for
+from hilbench.firmware_sim.engine.plant import simulate
 
-pytestmark = pytest.mark.drives
+pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
 KT, RATED, CPR = 0.2, 0.5, 1 << 20  # N*m/A, N*m (EDS 0x6076), counts/rev (EDS 0x608F)
 
 
@@ -246,8 +246,12 @@ def test_configuration_reaches_the_object_dictionary(bus):
         tpdos = {m.cob_id: [v.index for v in m.map] for m in bus.drive._tpdos}
         assert tpdos == {0x180 + 3: [c.STATUSWORD, c.TORQUE_ACTUAL], 0x280 + 3: [c.POSITION_ACTUAL, c.VELOCITY_ACTUAL]}
         assert all(m.trans_type == 1 for m in bus.drive._tpdos)
-        with pytest.raises(ConfigError, match="0x608F"):
-            host.configure(config(counts_per_rev=4096))
+        assert (raw(c.INTERPOLATION_PERIOD, 1), raw(c.INTERPOLATION_PERIOD, 2)) == (5, -4)  # 0.5 ms
+        other = config(counts_per_rev=4096)  # the drive's encoder resolution is adopted, and said (issue #25)
+        host.configure(other)
+        assert other.counts_per_rev == CPR
+        assert any("counts_per_rev 4096 replaced by the drive's encoder resolution 0x608F = 1048576" in line
+                   for _, line in host.run_events())
     finally:
         host.close()
 

@@ -18,13 +18,11 @@ import pytest
 from hilbench.analysis.identification.identify import RunArrays, identify
 from hilbench.analysis.identification.maxwell_fit import LipSettings
 from hilbench.drivers import cia402 as c
-from hilbench.firmware_sim.cia402_drive import EDS_PATH
-from hilbench.firmware_sim.plant import simulate
-from hilbench.firmware_sim.sim_config import load_sim_config, substeps_for
+from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH
+from hilbench.firmware_sim.devices.sim_config import load_sim_config, substeps_for
+from hilbench.firmware_sim.engine.plant import simulate
 
-pytestmark = pytest.mark.drives
-
-
+pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
 def _free_udp_port() -> int:
     return random.randint(40000, 60000)
 
@@ -175,3 +173,46 @@ def test_cli_info_and_one_line_refusal_against_the_drive_process(drive_process, 
         f"hilbench run: error: cannot run identification: {url} cannot run velocity mode "
         f"(it offers current at 1000, 2000 Hz)"]
     assert not out.exists()
+
+
+def test_killed_run_then_fault_show_clear_and_a_new_run_from_the_cli_alone(drive_process, tmp_path):
+    # issue #25: a host killed mid-run leaves the drive in fault (SYNC lost, 0x8250) with the axis spinning; the
+    # CLI alone shows the fault, clears it, and runs again, and the new run starts at rest: the torque was zeroed
+    # before enable and the axis coasted to rest meanwhile (no 'uncommanded motion' flag, first sample still)
+    url, _, _ = drive_process(node=6)
+    # 8 A at 2 Hz swings the axis between about -37 and +37 rad/s (1 A stays stuck in friction)
+    swinging = HOST.replace("np.full(120_000, 1.0)", "8.0 * np.sin(2 * np.pi * 2.0 * np.arange(120_000) / 1000)")
+    host = subprocess.Popen([sys.executable, "-c", swinging, url], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        ready, _, _ = select.select([host.stdout], [], [], 60)
+        assert ready and host.stdout.readline().strip() == "streaming", host.stderr.read() if not ready else ""
+        time.sleep(0.5)
+        os.kill(host.pid, signal.SIGKILL)
+        host.wait(10)
+    finally:
+        if host.poll() is None:
+            host.kill()
+    time.sleep(0.5)  # the drive's SYNC timeout (0.1 s) has fired
+
+    def cli(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "hilbench", *args], capture_output=True, text=True,
+                              timeout=120)
+
+    show = cli("fault", "show", "--device", url)
+    assert show.returncode == 0, show.stderr
+    assert "0x603F error code 0x8250 RPDO timeout" in show.stdout, show.stdout
+    assert "0x1003 error history (1, newest first): 0x8250 RPDO timeout" in show.stdout, show.stdout
+    cleared = cli("fault", "clear", "--device", url)
+    assert cleared.returncode == 0, cleared.stderr
+    assert "cleared; faults now: none" in cleared.stdout, cleared.stdout
+    out = tmp_path / "again.h5"
+    again = cli("run", "identify", "--device", url, "--sample-rate", "1000", "--duration", "1", "--quiet",
+                "-o", str(out))
+    assert again.returncode == 0, again.stderr
+    with h5py.File(out) as f:
+        assert f.attrs["status"] == "completed"
+        velocity, torque = f["samples/velocity"][:3], f["samples/torque"][0]
+        events = [m.decode() for m in f["events"]["message"][:]]
+    assert not any("uncommanded motion" in e for e in events), events
+    assert abs(velocity[0]) < 0.01 * 300.0 and torque == 0.0, (velocity, torque)  # the check's own limits

@@ -15,15 +15,15 @@ import canopen
 import h5py
 import pytest
 
-from hilbench.bench.protocols import SteppedSine
-from hilbench.bench.runner import Bench, DeviceSettings
+from hilbench.bench.acquisition.protocols import SteppedSine
+from hilbench.bench.acquisition.runner import Bench, DeviceSettings
 from hilbench.drivers import cia402 as c
 from hilbench.drivers.canopen_drive import CanopenDrive
 from hilbench.drivers.errors import CommandRefusedError
-from hilbench.firmware_sim.cia402_drive import EDS_PATH, SimCia402Drive
-from hilbench.firmware_sim.sim_config import load_sim_config
+from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH, SimCia402Drive
+from hilbench.firmware_sim.devices.sim_config import load_sim_config
 
-pytestmark = pytest.mark.drives
+pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
 STEPS = SteppedSine(frequencies=[20.0, 40.0, 80.0], amplitudes=[2.0, 2.0, 2.0], settle_periods=1, measure_periods=2,
                     sample_rate=1000)
 

@@ -16,6 +16,8 @@ from hilbench.drivers.amplifier import Amplifier
 from hilbench.drivers.errors import DeviceFaultError
 from hilbench.drivers.links import SerialLink
 
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
+
 ROOT = Path(__file__).resolve().parents[2]
 
 KILLED_HOST = r"""

@@ -22,8 +22,8 @@ import h5py
 import numpy as np
 import pytest
 
-from hilbench.bench.protocols import Identification
-from hilbench.bench.runner import Bench, DeviceSettings
+from hilbench.bench.acquisition.protocols import Identification
+from hilbench.bench.acquisition.runner import Bench, DeviceSettings
 from hilbench.drivers import cia402 as c
 from hilbench.drivers import protocol as p
 from hilbench.drivers.canopen_drive import CanopenDrive
@@ -31,14 +31,12 @@ from hilbench.drivers.device import Capabilities, CycleSamples, Device
 from hilbench.drivers.device_url import check_device_url, open_device
 from hilbench.drivers.errors import ConfigError, DeviceTimeoutError, DeviceURLError, SampleLossError
 from hilbench.drivers.odrive_drive import OdriveDrive
-from hilbench.firmware_sim.cia402_drive import EDS_PATH, SimCia402Drive
-from hilbench.firmware_sim.odrive_sim import TVL_ENDPOINT, SimOdrive
-from hilbench.firmware_sim.sim_config import load_sim_config
+from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH, SimCia402Drive
+from hilbench.firmware_sim.devices.odrive_sim import TVL_ENDPOINT, SimOdrive
+from hilbench.firmware_sim.devices.sim_config import load_sim_config
 from tests.reliability.cli import hilbench, one_line_error
 
-pytestmark = pytest.mark.drives
-
-
+pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
 # ---------------------------------------------------------------- item 5
 def test_an_odrive_that_vanishes_mid_run_is_never_completed(tmp_path):
     channel = uuid.uuid4().hex[:8]
@@ -226,7 +224,7 @@ def test_bad_sim_arguments_are_one_line_exit_2(args, words):
 
 def test_sim_passes_the_drive_behaviours_to_the_simulated_drive():
     from hilbench.bench.cli import build_parser
-    from hilbench.bench.commands.sim import firmware_argv
+    from hilbench.bench.cli.commands.sim import firmware_argv
     from hilbench.firmware_sim.__main__ import build_parser as firmware_parser
 
     args = build_parser().parse_args(["sim", "--canopen", "239.1.2.3", "--interface", "udp_multicast",

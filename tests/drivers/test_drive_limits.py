@@ -18,19 +18,19 @@ import numpy as np
 import pytest
 
 from hilbench.analysis.runfile import open_run
-from hilbench.bench.protocols import Identification
-from hilbench.bench.runner import Bench, DeviceSettings
+from hilbench.bench.acquisition.protocols import Identification
+from hilbench.bench.acquisition.runner import Bench, DeviceSettings
 from hilbench.drivers import cia402 as c
 from hilbench.drivers import odrive_can as o
 from hilbench.drivers import protocol as p
 from hilbench.drivers.canopen_drive import CanopenDrive
 from hilbench.drivers.errors import DeviceFaultError
 from hilbench.drivers.odrive_drive import OdriveDrive
-from hilbench.firmware_sim.cia402_drive import EDS_PATH, SimCia402Drive
-from hilbench.firmware_sim.odrive_sim import TVL_ENDPOINT, SimOdrive
-from hilbench.firmware_sim.sim_config import load_sim_config
+from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH, SimCia402Drive
+from hilbench.firmware_sim.devices.odrive_sim import TVL_ENDPOINT, SimOdrive
+from hilbench.firmware_sim.devices.sim_config import load_sim_config
 
-pytestmark = pytest.mark.drives
+pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
 CPR = 1 << 20
 LIMITS = {"position": {"position_min": -0.001, "position_max": 0.001}, "velocity": {"velocity_limit": 0.5}}
 

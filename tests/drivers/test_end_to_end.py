@@ -10,8 +10,10 @@ from hilbench.drivers.amplifier import Amplifier
 from hilbench.drivers.device_url import open_device
 from hilbench.drivers.errors import CommandRefusedError, ConfigError, DeviceURLError, SetpointError
 from hilbench.drivers.links import SerialLink
-from hilbench.firmware_sim.plant import simulate
-from hilbench.firmware_sim.sim_config import load_sim_config
+from hilbench.firmware_sim.devices.sim_config import load_sim_config
+from hilbench.firmware_sim.engine.plant import simulate
+
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 
 def direct_run(sim_path: str, config: p.Config, setpoints: np.ndarray):

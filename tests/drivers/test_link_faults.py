@@ -14,6 +14,8 @@ from hilbench.drivers.errors import DriverError, LinkClosedError, SampleLossErro
 from hilbench.drivers.fault_injection import FaultyPort
 from hilbench.drivers.links import SerialLink
 
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
+
 
 def frames(n):
     return [p.Heartbeat(i) if i % 3 else p.SetpointBlock(i, np.arange(i % 50, dtype=np.float32))

@@ -18,12 +18,10 @@ from hilbench.drivers import protocol as p
 from hilbench.drivers.device_url import open_device
 from hilbench.drivers.errors import CommandRefusedError, DeviceFaultError, DeviceTimeoutError
 from hilbench.drivers.odrive_drive import OdriveDrive
-from hilbench.firmware_sim.odrive_sim import TVL_ENDPOINT, SimOdrive
-from hilbench.firmware_sim.sim_config import load_sim_config
+from hilbench.firmware_sim.devices.odrive_sim import TVL_ENDPOINT, SimOdrive
+from hilbench.firmware_sim.devices.sim_config import load_sim_config
 
-pytestmark = pytest.mark.drives
-
-
+pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
 def test_ids_and_errors():
     assert o.can_id(3, o.Cmd.SET_INPUT_TORQUE) == 0x06E  # 3 << 5 | 0x0E
     assert o.split_id(0x06E) == (3, 0x0E)

@@ -8,7 +8,7 @@ from scipy.signal import cont2discrete, ss2tf
 
 from hilbench.drivers.protocol import POSITION_GAINS
 
-J, KT = 0.0022, 0.2  # kg*m^2, N*m/A: firmware_sim.friction_models.dc_motor
+J, KT = 0.0022, 0.2  # kg*m^2, N*m/A: firmware_sim.engine.friction_models.dc_motor
 
 
 def largest_pole(fs: float, k: float) -> float:

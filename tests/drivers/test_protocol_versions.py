@@ -15,8 +15,10 @@ from hilbench.drivers import protocol as p
 from hilbench.drivers.amplifier import Amplifier
 from hilbench.drivers.device_url import open_device
 from hilbench.drivers.errors import DriverError, SetpointError
-from hilbench.firmware_sim.core_c import CoreDevice
-from hilbench.firmware_sim.sim_config import load_sim_config
+from hilbench.firmware_sim.devices.core_c import CoreDevice
+from hilbench.firmware_sim.devices.sim_config import load_sim_config
+
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 
 def v1_frame(msg: p.Message) -> bytes:

@@ -4,7 +4,7 @@ implementation independent of the C codec), with time given explicitly in second
 import numpy as np
 
 from hilbench.drivers import protocol as p
-from hilbench.firmware_sim.core_c import CoreDevice
+from hilbench.firmware_sim.devices.core_c import CoreDevice
 
 
 class Host:

@@ -4,16 +4,19 @@ plant run directly: independent implementations of the same protocol and the sam
 import zlib
 
 import numpy as np
+import pytest
 from cobs import cobs
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hilbench.drivers import protocol as p
-from hilbench.firmware_sim._fwcore import ffi, lib
-from hilbench.firmware_sim.core_c import CoreDevice
-from hilbench.firmware_sim.plant import simulate
-from hilbench.firmware_sim.sim_config import sim_config_from_dict
+from hilbench.firmware_sim.devices._fwcore import ffi, lib
+from hilbench.firmware_sim.devices.core_c import CoreDevice
+from hilbench.firmware_sim.devices.sim_config import sim_config_from_dict
+from hilbench.firmware_sim.engine.plant import simulate
 from tests.firmware.host import Host, samples
+
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 SIM = sim_config_from_dict({"device": {"buffer_capacity": 4096},
                             "plant": {"elements": 4, "seed": 3, "noise_current": 0.01, "noise_position": 1e-4,

@@ -12,14 +12,12 @@ import h5py
 import numpy as np
 import pytest
 
-from hilbench.bench.protocols import Identification
-from hilbench.bench.runner import Bench, DeviceSettings
+from hilbench.bench.acquisition.protocols import Identification
+from hilbench.bench.acquisition.runner import Bench, DeviceSettings
 from hilbench.drivers.device_url import open_device
 from tests.firmware import qemu_target
 
-pytestmark = pytest.mark.target
-
-
+pytestmark = [pytest.mark.target, pytest.mark.usefixtures("starts_devices")]  # starts a device
 @pytest.fixture(scope="module")
 def lockstep_image():
     why = qemu_target.missing_tools()

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from hilbench.firmware_sim.plant import stop_operator
+from hilbench.firmware_sim.engine.plant import stop_operator
 
 
 def sine_loop(k: np.ndarray, w: np.ndarray, amplitude: float, n: int = 100_000) -> tuple[float, float]:

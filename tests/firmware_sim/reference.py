@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from hilbench.firmware_sim.plant import MODES, PlantOutput, PlantParams, validate
+from hilbench.firmware_sim.engine.plant import MODES, PlantOutput, PlantParams, validate
 
 _MASK = (1 << 64) - 1
 _TWO_PI = 6.283185307179586
@@ -250,7 +250,7 @@ def _friction_terms(p: PlantParams) -> tuple:
 
 def reference_simulate(params: PlantParams, u, dt: float, substeps: int = 1, mode: str = "current",
                        theta0: float = 0.0, omega0: float = 0.0) -> PlantOutput:
-    """Pure-Python simulation with the semantics of :func:`firmware_sim.plant.simulate`."""
+    """Pure-Python simulation with the semantics of :func:`firmware_sim.engine.plant.simulate`."""
     validate(params, dt, substeps, mode)
     p = params
     k, delta, vpos, vneg, fcp, fcn, s_excess, s_vel = _friction_terms(p)
@@ -431,7 +431,7 @@ def reference_simulate(params: PlantParams, u, dt: float, substeps: int = 1, mod
 
 
 def reference_friction_path(params: PlantParams, x, v, dt: float) -> np.ndarray:
-    """Pure-Python twin of :meth:`firmware_sim.plant.Plant.friction_path` from rest, for Maxwell-slip, viscous,
+    """Pure-Python twin of :meth:`firmware_sim.engine.plant.Plant.friction_path` from rest, for Maxwell-slip, viscous,
     Coulomb/Stribeck and the state-variable models (no tables)."""
     p = params
     k, delta, vpos, vneg, fcp, fcn, s_excess, s_vel = _friction_terms(p)
@@ -464,7 +464,7 @@ def reference_friction_path(params: PlantParams, x, v, dt: float) -> np.ndarray:
 
 
 def reference_stop_operator(x, deltas, initial=None) -> np.ndarray:
-    """Pure-Python stop operator with the semantics of :func:`firmware_sim.plant.stop_operator`."""
+    """Pure-Python stop operator with the semantics of :func:`firmware_sim.engine.plant.stop_operator`."""
     x = np.asarray(x, dtype=float)
     d = np.asarray(deltas, dtype=float)
     state = np.zeros(d.size) if initial is None else np.clip(np.asarray(initial, float), -d, d)

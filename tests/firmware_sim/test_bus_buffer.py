@@ -5,7 +5,7 @@ from pathlib import Path
 
 import can
 
-from hilbench.firmware_sim.bus_buffer import DEVICE_RECEIVE_BUFFER, widen_device_buffer
+from hilbench.firmware_sim.devices.bus_buffer import DEVICE_RECEIVE_BUFFER, widen_device_buffer
 
 
 def test_the_device_end_gets_the_buffer_or_the_systems_cap_and_a_virtual_bus_is_left_alone():

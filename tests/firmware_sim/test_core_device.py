@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from hilbench.drivers import protocol as p
-from hilbench.firmware_sim.core_c import CoreDevice
-from hilbench.firmware_sim.sim_config import SimConfigError, load_sim_config, sim_config_from_dict
+from hilbench.firmware_sim.devices.core_c import CoreDevice
+from hilbench.firmware_sim.devices.sim_config import SimConfigError, load_sim_config, sim_config_from_dict
 from tests.firmware.host import Host, samples
 
 SIM = sim_config_from_dict({"device": {"buffer_capacity": 4096},
@@ -148,7 +148,7 @@ def test_sim_config_errors(tmp_path):
     assert load_sim_config(seed=42).plant.seed == 42
 
 
-def test_cli_bad_config_is_one_line(tmp_path):
+def test_cli_bad_config_is_one_line(tmp_path, starts_devices):
     bad = tmp_path / "bad.toml"
     bad.write_text("[plant]\ninertia = -1\n")
     res = subprocess.run([sys.executable, "-m", "hilbench.firmware_sim", "--serial", "--config", str(bad)],

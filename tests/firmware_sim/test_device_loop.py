@@ -1,4 +1,4 @@
-"""The simulated device's loop (``firmware_sim.device.serve``) with a scripted transport: the device process
+"""The simulated device's loop (``firmware_sim.devices.device.serve``) with a scripted transport: the device process
 is descheduled for longer than the watchdog timeout while the host keeps talking. A device hears its host in an
 interrupt, so that stall must not trip the watchdog; a host that really went silent must."""
 
@@ -6,9 +6,9 @@ import threading
 import time
 
 from hilbench.drivers import protocol as p
-from hilbench.firmware_sim.core_c import CoreDevice
-from hilbench.firmware_sim.device import serve
-from hilbench.firmware_sim.sim_config import sim_config_from_dict
+from hilbench.firmware_sim.devices.core_c import CoreDevice
+from hilbench.firmware_sim.devices.device import serve
+from hilbench.firmware_sim.devices.sim_config import sim_config_from_dict
 
 SIM = sim_config_from_dict({"plant": {"elements": 2, "seed": 1}})
 WATCHDOG = 0.1  # s

@@ -1,13 +1,13 @@
-"""Drift laws of the simulated device (firmware_sim.drift) against their closed forms."""
+"""Drift laws of the simulated device (firmware_sim.engine.drift) against their closed forms."""
 
 import math
 
 import numpy as np
 import pytest
 
-from hilbench.firmware_sim.drift import Drift, DriftState, drifted_params, heat, rest, simulate_drifting
-from hilbench.firmware_sim.friction_models import dc_motor
-from hilbench.firmware_sim.plant import PlantParameterError, PlantParams, simulate
+from hilbench.firmware_sim.engine.drift import Drift, DriftState, drifted_params, heat, rest, simulate_drifting
+from hilbench.firmware_sim.engine.friction_models import dc_motor
+from hilbench.firmware_sim.engine.plant import PlantParameterError, PlantParams, simulate
 
 
 def test_constant_current_heats_as_the_first_order_step_response():

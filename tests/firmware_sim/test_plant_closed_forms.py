@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from hilbench.firmware_sim.friction_models import (
+from hilbench.firmware_sim.engine.friction_models import (
     discretise_virgin_curve,
     geometric_breakpoints,
     maxwell_virgin_curve,
     virgin_curve,
 )
-from hilbench.firmware_sim.plant import PlantParams, simulate, stop_operator
+from hilbench.firmware_sim.engine.plant import PlantParams, simulate, stop_operator
 from tests.firmware_sim.loops import sine_loop
 
 H, D = 1.64, 0.656

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from hilbench.firmware_sim.friction_models import dc_motor
-from hilbench.firmware_sim.plant import Cogging, Plant, PlantParams, simulate
+from hilbench.firmware_sim.engine.friction_models import dc_motor
+from hilbench.firmware_sim.engine.plant import Cogging, Plant, PlantParams, simulate
 
 DT = 1e-4
 

@@ -8,8 +8,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hilbench.firmware_sim.friction_models import dc_motor
-from hilbench.firmware_sim.plant import (
+from hilbench.firmware_sim.engine.friction_models import dc_motor
+from hilbench.firmware_sim.engine.plant import (
     GMS,
     Hysteresis,
     LuGre,
@@ -249,7 +249,7 @@ def test_bad_model_parameters_are_refused(change, match):
 def test_simulated_device_config_takes_the_models(tmp_path):
     # the simulated amplifier's TOML builds its plant with PlantParams.from_dict: nested tables select a model,
     # and a bad value is refused with one line naming it
-    from hilbench.firmware_sim.sim_config import SimConfigError, load_sim_config
+    from hilbench.firmware_sim.devices.sim_config import SimConfigError, load_sim_config
 
     base = ('[device]\nmodel = "HB-SIM-1"\nserial = "S"\nbuffer_capacity = 8192\n'
             '[plant]\npreset = "none"\ninertia = 0.0022\nviscous = 0.004\n')

@@ -4,9 +4,9 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hilbench.firmware_sim._plant import ffi, lib
-from hilbench.firmware_sim.friction_models import dc_motor
-from hilbench.firmware_sim.plant import Cogging, Plant, PlantOutput, PlantParams, simulate, stop_operator
+from hilbench.firmware_sim.engine._plant import ffi, lib
+from hilbench.firmware_sim.engine.friction_models import dc_motor
+from hilbench.firmware_sim.engine.plant import Cogging, Plant, PlantOutput, PlantParams, simulate, stop_operator
 from tests.firmware_sim.reference import ReferenceRng, reference_simulate, reference_stop_operator
 
 pos = st.floats(min_value=1e-3, max_value=10.0)

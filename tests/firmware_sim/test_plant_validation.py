@@ -6,8 +6,8 @@ import re
 import numpy as np
 import pytest
 
-from hilbench.firmware_sim.friction_models import dc_motor, paper_system
-from hilbench.firmware_sim.plant import (
+from hilbench.firmware_sim.engine.friction_models import dc_motor, paper_system
+from hilbench.firmware_sim.engine.plant import (
     MAX_ELEMENTS,
     RK4_STABLE_RADIUS,
     Plant,

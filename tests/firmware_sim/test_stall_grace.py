@@ -4,7 +4,7 @@ stall, and a silent host must still trip, at most ``grace`` (plus one wake) late
 import numpy as np
 import pytest
 
-from hilbench.firmware_sim.stall_grace import StallGrace
+from hilbench.firmware_sim.devices.stall_grace import StallGrace
 
 TIMEOUT = 0.1  # s
 

@@ -8,11 +8,13 @@ import time
 import pytest
 
 from hilbench.analysis.runfile import open_run
-from hilbench.bench.protocols import MAX_PROTOCOL_SAMPLES, Identification, ProtocolError
+from hilbench.bench.acquisition.protocols import MAX_PROTOCOL_SAMPLES, Identification, ProtocolError
 from hilbench.drivers import protocol as p
 from hilbench.drivers.amplifier import Amplifier
 from hilbench.drivers.errors import DriverError
 from tests.reliability.cli import hilbench, one_line_error, start
+
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 HEAD = '[defaults]\ndevice = "sim://?pacing=lockstep"\n'
 ONE_RUN = '[[run]]\nname = "a"\nprotocol = "chirp"\nduration = "1 s"\n'

@@ -7,10 +7,12 @@ import numpy as np
 import pytest
 
 from hilbench.drivers import protocol as p
-from hilbench.firmware_sim.core_c import CoreDevice
-from hilbench.firmware_sim.sim_config import sim_config_from_dict
+from hilbench.firmware_sim.devices.core_c import CoreDevice
+from hilbench.firmware_sim.devices.sim_config import sim_config_from_dict
 from tests.firmware.host import Host
 from tests.reliability.wire import Wire
+
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 
 def test_host_gone_with_the_watchdog_off_latches_underrun_and_the_device_lives(simulator):

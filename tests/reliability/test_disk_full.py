@@ -3,8 +3,11 @@ flushed sample intact (bit-identical to the same run on a roomy disk: the lockst
 deterministic) and nothing made up; nothing segfaults; no lock or partial file is left behind."""
 
 import numpy as np
+import pytest
 
 from hilbench.analysis.runfile import open_run
+
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 RUN = ["run", "identify", "--device", "sim://?pacing=lockstep", "--duration", "20", "--quiet"]
 #: real-time pacing, so that a kill lands mid-run (a lockstep run of 20 s can complete between two polls)

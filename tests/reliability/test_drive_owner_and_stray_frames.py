@@ -21,9 +21,7 @@ import pytest
 
 from tests.reliability.cli import hilbench, start, wait_for_samples
 
-pytestmark = pytest.mark.drives
-
-
+pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
 def _drive_process(kind: str, node: int) -> tuple[subprocess.Popen, str, str, int]:
     port = random.randint(40000, 60000)
     group = f"239.{random.randint(1, 254)}.{random.randint(1, 254)}.{random.randint(1, 254)}"
@@ -124,7 +122,7 @@ def test_dropping_counts_only_frames_that_do_not_decode():
     import can
 
     from hilbench.drivers.can_frames import drop_malformed_frames
-    from hilbench.firmware_sim.bus_frames import drop_malformed
+    from hilbench.firmware_sim.devices.bus_frames import drop_malformed
 
     port = random.randint(40000, 60000)
     group = f"239.{random.randint(1, 254)}.{random.randint(1, 254)}.{random.randint(1, 254)}"

@@ -31,15 +31,14 @@ from hilbench.drivers import protocol as p
 from hilbench.drivers.canopen_drive import CanopenDrive
 from hilbench.drivers.device_url import open_device
 from hilbench.drivers.odrive_drive import OdriveDrive
-from hilbench.firmware_sim.cia402_drive import EDS_PATH, SimCia402Drive
-from hilbench.firmware_sim.core_c import CoreDevice
-from hilbench.firmware_sim.device import CanTransport, serve
-from hilbench.firmware_sim.odrive_sim import TVL_ENDPOINT, SimOdrive
-from hilbench.firmware_sim.sim_config import load_sim_config, sim_config_from_dict
+from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH, SimCia402Drive
+from hilbench.firmware_sim.devices.core_c import CoreDevice
+from hilbench.firmware_sim.devices.device import CanTransport, serve
+from hilbench.firmware_sim.devices.odrive_sim import TVL_ENDPOINT, SimOdrive
+from hilbench.firmware_sim.devices.sim_config import load_sim_config, sim_config_from_dict
 from tests.reliability.wire import Wire
 
-pytestmark = pytest.mark.drives
-
+pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
 MARGIN = 0.35  # s of scheduling slack on a shared 2-core machine, on top of each documented timeout
 
 

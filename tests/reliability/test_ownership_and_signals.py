@@ -11,6 +11,8 @@ from hilbench.drivers.errors import PortBusyError
 from tests.reliability.cli import hilbench, one_line_error, start, wait_for_samples
 from tests.reliability.wire import Wire
 
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
+
 
 def test_a_second_program_on_the_port_is_refused_and_the_run_completes(simulator, tmp_path):
     _, pty = simulator(pacing="realtime")

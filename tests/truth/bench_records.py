@@ -16,8 +16,8 @@ from pathlib import Path
 
 _ROOT = Path(__file__).resolve().parents[2]
 # the sources a bench record depends on: the plant, its preset, the simulated device and the protocols
-_SOURCES = ("firmware_sim/plant.c", "firmware_sim/plant.py", "firmware_sim/friction_models.py",
-            "firmware_sim/default_sim.toml", "firmware_sim/device.py", "bench/protocols.py")
+_SOURCES = ("firmware_sim/engine/plant.c", "firmware_sim/engine/plant.py", "firmware_sim/engine/friction_models.py",
+            "firmware_sim/devices/default_sim.toml", "firmware_sim/devices/device.py", "bench/acquisition/protocols.py")
 
 
 @dataclass(frozen=True)

@@ -19,3 +19,16 @@ def test_added_set_equals_the_truth(case):
     # the loop's own time: 10 s records at 1 kHz (issue 14: < 10 s for 30 s); the bench record is 20 s at 10 kHz
     # (reduced to 2 kHz), 14.5 s measured under a load average of 11 on 2 cores
     assert out.seconds < (30.0 if case.startswith("bench-") else 10.0)
+
+
+#: runs that were wrong before issue 29's fixes (docs/residual-blind-matrix.md): a GMS level slope that added
+#: asymmetric_friction beside preload_variation (the truth's stick overshoot and the slip-force form), and a Stribeck
+#: curve missed on a record that hardly slides (the Stribeck grid's top)
+FIXED = (("preload-linear-gms", 1), ("stribeck+lag", 2))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case,seed", FIXED)
+def test_runs_fixed_by_issue_29_stay_right(case, seed):
+    out = run_case(case, seed)
+    assert out.right, f"{case} seed {seed}: added {out.added}, truth {sorted(CASES[case][1])}"

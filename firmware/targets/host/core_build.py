@@ -1,4 +1,4 @@
-"""cffi build script of the host target (``hilbench.firmware_sim._fwcore``): the firmware core
+"""cffi build script of the host target (``hilbench.firmware_sim.devices._fwcore``): the firmware core
 (firmware/core/*.c), the host HAL and the C plant it drives. setup.py names it in ``cffi_modules``."""
 
 import importlib.util
@@ -9,7 +9,7 @@ from cffi import FFI
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[2]
 CORE = ROOT / "firmware" / "core"
-PLANT_DIR = ROOT / "firmware_sim"
+PLANT_DIR = ROOT / "firmware_sim" / "engine"
 
 
 def _plant_cdef() -> str:
@@ -92,12 +92,12 @@ size_t hb_frame_encode(uint8_t type, const uint8_t *payload, size_t n, uint8_t *
 """
 
 SOURCES = [*(f"firmware/core/{name}" for name in ("hb_codec.c", "hb_can.c", "hb_device.c")),
-           "firmware/targets/host/hb_host.c", "firmware/targets/plant/hb_plant_hal.c", "firmware_sim/plant.c"]
+           "firmware/targets/host/hb_host.c", "firmware/targets/plant/hb_plant_hal.c", "firmware_sim/engine/plant.c"]
 
 ffibuilder = FFI()
 ffibuilder.cdef(CDEF)
 ffibuilder.set_source(
-    "hilbench.firmware_sim._fwcore",
+    "hilbench.firmware_sim.devices._fwcore",
     '#include "hb_host.h"',
     sources=SOURCES,
     include_dirs=[str(CORE), str(HERE), str(HERE.parent / "plant"), str(PLANT_DIR)],

@@ -1,5 +1,5 @@
-/* Host target: the firmware core with the C plant (firmware_sim/plant.c) behind its HAL, driven from
- * Python through cffi (hilbench.firmware_sim.core_c). Output bytes and CAN frames are queued here for the
+/* Host target: the firmware core with the C plant (firmware_sim/engine/plant.c) behind its HAL, driven from
+ * Python through cffi (hilbench.firmware_sim.devices.core_c). Output bytes and CAN frames are queued here for the
  * Python transport to send. */
 #ifndef HB_HOST_H
 #define HB_HOST_H

@@ -1,5 +1,5 @@
 /* Plant HAL shared by the targets that simulate the motor (host, QEMU): the C plant
- * (firmware_sim/plant.c) is the motor, the amplifier and the encoder. The target's HAL context starts
+ * (firmware_sim/engine/plant.c) is the motor, the amplifier and the encoder. The target's HAL context starts
  * with an hb_plant_hal, so the core's `hal` pointer is one. */
 #include "hb_plant_hal.h"
 

@@ -1,4 +1,4 @@
-/* The plant behind the HAL: configure, measure and apply on firmware_sim/plant.c. */
+/* The plant behind the HAL: configure, measure and apply on firmware_sim/engine/plant.c. */
 #ifndef HB_PLANT_HAL_H
 #define HB_PLANT_HAL_H
 

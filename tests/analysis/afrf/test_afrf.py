@@ -22,8 +22,8 @@ from hilbench.analysis.afrf.frf import (
     simulate_afrf_models,
 )
 from hilbench.analysis.errors import AnalysisError
-from hilbench.firmware_sim.friction_models import PAPER_D, PAPER_H, paper_system
-from hilbench.firmware_sim.plant import PlantParams
+from hilbench.firmware_sim.engine.friction_models import PAPER_D, PAPER_H, paper_system
+from hilbench.firmware_sim.engine.plant import PlantParams
 
 # ---- harmonics ------------------------------------------------------------------------------------------
 

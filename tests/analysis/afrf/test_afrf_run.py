@@ -12,9 +12,9 @@ from scipy import signal
 from hilbench.analysis import runfile as rf
 from hilbench.analysis.afrf.frf import afrf_from_run
 from hilbench.analysis.errors import AnalysisError
+from hilbench.bench.acquisition.excitations import stepped_sine
 from hilbench.bench.cli import main as bench_main
-from hilbench.bench.excitations import stepped_sine
-from hilbench.firmware_sim.plant import PlantParams, simulate
+from hilbench.firmware_sim.engine.plant import PlantParams, simulate
 
 FS = 1000.0
 M, K, C = 1.0, 50.0, 10.0  # damping rate zeta*w_n = C/(2M) = 5 1/s: a step's transient dies within its settle

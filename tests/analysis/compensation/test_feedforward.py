@@ -20,8 +20,8 @@ from hilbench.analysis.compensation.feedforward import (
 )
 from hilbench.analysis.compensation.references import point_to_point, slow_sine, triangle
 from hilbench.analysis.errors import AnalysisError
-from hilbench.firmware_sim.friction_models import dc_motor
-from hilbench.firmware_sim.plant import GMS, Hysteresis, LuGre, PlantParams, simulate, stiffest_eigenvalue
+from hilbench.firmware_sim.engine.friction_models import dc_motor
+from hilbench.firmware_sim.engine.plant import GMS, Hysteresis, LuGre, PlantParams, simulate, stiffest_eigenvalue
 from tests.truth.generator import Truth, displacement_ode, stop_operator_forces
 
 FS = 2000.0

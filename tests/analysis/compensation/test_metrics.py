@@ -12,7 +12,7 @@ from hilbench.analysis.compensation.feedforward import Compensator, coulomb_at_b
 from hilbench.analysis.compensation.metrics import reversal_glitch, settling_times, tracking_metrics
 from hilbench.analysis.compensation.references import make_reference, point_to_point, slow_sine, triangle
 from hilbench.analysis.errors import AnalysisError
-from hilbench.firmware_sim.friction_models import dc_motor
+from hilbench.firmware_sim.engine.friction_models import dc_motor
 
 
 def test_sine_reference_is_the_closed_form_with_its_reversals():

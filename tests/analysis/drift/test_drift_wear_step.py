@@ -4,7 +4,7 @@ import pytest
 
 from hilbench.analysis.drift.monitor import monitor
 from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign
-from hilbench.firmware_sim.drift import Drift
+from hilbench.firmware_sim.engine.drift import Drift
 from tests.analysis.drift.campaign_rows import campaign_rows
 
 

@@ -18,8 +18,8 @@ from hilbench.analysis.identification.regressors import (
 )
 from hilbench.analysis.models.friction_model import FrictionModel
 from hilbench.analysis.reproductions.paper import maxwell_slip_closed_form
-from hilbench.firmware_sim.friction_models import PAPER_D, PAPER_H, dc_motor, paper_system
-from hilbench.firmware_sim.plant import simulate
+from hilbench.firmware_sim.engine.friction_models import PAPER_D, PAPER_H, dc_motor, paper_system
+from hilbench.firmware_sim.engine.plant import simulate
 
 
 def random_enveloped(n: int, fs: float, seed: int, amplitude: float, period: float = 4.0) -> np.ndarray:
@@ -151,7 +151,7 @@ def test_segmented_simulation_restarts_from_the_measured_state(monkeypatch):
     monkeypatch.setattr(oe, "CHUNK_VALUES", 16 * 2000 + 7)
     e2, sim2 = segmented_simulation_error(truth, out.theta, tau, fs, timing="hold_previous", segment=0.5)
     np.testing.assert_array_equal(sim2, sim)
-    from hilbench.firmware_sim.plant import Plant
+    from hilbench.firmware_sim.engine.plant import Plant
 
     monkeypatch.setattr(Plant, "set_deflections", lambda self, v: None)  # restart with relaxed elements
     e_relaxed, _ = segmented_simulation_error(truth, out.theta, tau, fs, timing="hold_previous", segment=0.5)
@@ -274,7 +274,7 @@ def test_absurdly_stiff_model_gives_a_clear_error():
 
 def test_path_deflections_in_chunks_equal_the_full_stop_operator(monkeypatch):
     import hilbench.analysis.identification.output_error as oe
-    from hilbench.firmware_sim.plant import stop_operator
+    from hilbench.firmware_sim.engine.plant import stop_operator
 
     rng = np.random.default_rng(7)
     x = np.cumsum(rng.normal(scale=1e-3, size=5000))

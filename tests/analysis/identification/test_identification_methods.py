@@ -11,7 +11,7 @@ from hilbench.analysis.identification.output_error import refine_output_error, s
 from hilbench.analysis.identification.paper_baseline import fit_paper
 from hilbench.analysis.models.friction_model import FrictionModel
 from hilbench.analysis.models.model_file import model_document, read_family, read_model, write_model
-from hilbench.firmware_sim.plant import PlantParams, simulate
+from hilbench.firmware_sim.engine.plant import PlantParams, simulate
 from tests.analysis.identification.test_identification import random_enveloped
 
 

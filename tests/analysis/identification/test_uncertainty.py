@@ -2,7 +2,7 @@
 error of each parameter must match the spread of its estimates (ratio 0.8-1.25), and the HAC covariance and block
 length must agree with closed forms.
 
-Monte Carlo: the simulated DC motor (``firmware_sim.friction_models.dc_motor``, 16 Maxwell-slip elements, viscous
+Monte Carlo: the simulated DC motor (``firmware_sim.engine.friction_models.dc_motor``, 16 Maxwell-slip elements, viscous
 friction) with a 0.02 N*m constant load, a 20000-count encoder and 0.02 A rms current-sensor noise; each record
 has its own excitation (uniform noise low-passed at 40 Hz times the three-term square-wave envelope, the paper's
 input, as ``hilbench run identification --seed`` gives) and its own noise seed; 10 s at 1 kHz; identified with
@@ -18,8 +18,8 @@ from scipy import signal
 
 from hilbench.analysis.identification.maxwell_fit import LipSettings, fit_lip
 from hilbench.analysis.identification.uncertainty import block_length, hac_covariance
-from hilbench.firmware_sim.friction_models import dc_motor
-from hilbench.firmware_sim.plant import simulate
+from hilbench.firmware_sim.engine.friction_models import dc_motor
+from hilbench.firmware_sim.engine.plant import simulate
 
 FS, DURATION, RECORDS = 1000.0, 10.0, 50
 KEYS = ("inertia", "coulomb", "viscous", "offset", "breakaway")

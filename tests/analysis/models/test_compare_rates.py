@@ -21,9 +21,9 @@ from hilbench.analysis.models.families import (
     path_plant,
     substeps_for,
 )
-from hilbench.bench.protocols import Identification
-from hilbench.firmware_sim.friction_models import DC_MOTOR_INERTIA, dc_motor
-from hilbench.firmware_sim.plant import LuGre, PlantParams, simulate
+from hilbench.bench.acquisition.protocols import Identification
+from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_INERTIA, dc_motor
+from hilbench.firmware_sim.engine.plant import LuGre, PlantParams, simulate
 
 FS = 10_000.0
 

@@ -16,7 +16,7 @@ from hilbench.analysis.models.families import (
     segmented_position,
     stribeck_start,
 )
-from hilbench.firmware_sim.plant import Hysteresis, LuGre, PlantParams, simulate
+from hilbench.firmware_sim.engine.plant import Hysteresis, LuGre, PlantParams, simulate
 from tests.analysis.identification.test_identification import random_enveloped
 
 FS = 1000.0
@@ -111,7 +111,7 @@ def test_emps_coulomb_viscous_matches_the_published_model():
     if d is None:
         pytest.skip("EMPS data not found: set HILBENCH_REAL_DATA to a folder holding emps/DATA_EMPS.mat")
     from hilbench.analysis.models.families import published_plant
-    from hilbench.bench.importers import load_emps
+    from hilbench.bench.storage.importers import load_emps
 
     runs = [load_emps(d / f) for f in ("DATA_EMPS.mat", "DATA_EMPS_PULSES.mat")]
     tr, va = (RunData.from_arrays(r.protocol_name, "linear", r.sample_rate, r.samples["position"],

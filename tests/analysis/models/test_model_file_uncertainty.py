@@ -17,7 +17,7 @@ import pytest
 from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.models.families import RunData, fit_family
 from hilbench.analysis.models.model_file import SCHEMA, family_document, read_family, read_model, write_model
-from hilbench.firmware_sim.plant import PlantParams, simulate
+from hilbench.firmware_sim.engine.plant import PlantParams, simulate
 from tests.analysis.identification.test_identification import random_enveloped
 
 FS = 1000.0

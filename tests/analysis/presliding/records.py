@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hilbench.firmware_sim.friction_models import dc_motor
+from hilbench.firmware_sim.engine.friction_models import dc_motor
 from tests.truth.generator import Truth, _Friction, stop_operator_forces
 
 #: turning points of the nested sequence, in units of the scale (the paper's Fig. 1 sequence, nested deeper)

@@ -11,7 +11,7 @@ from hilbench.analysis.presliding.analyse import analyse
 from hilbench.analysis.presliding.identify import PreslidingSettings, fit_presliding, model_force
 from hilbench.analysis.presliding.quantities import bootstrap, presliding_distance
 from hilbench.analysis.presliding.reversals import find_reversals
-from hilbench.firmware_sim.friction_models import DC_MOTOR_D, maxwell_virgin_curve
+from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_D, maxwell_virgin_curve
 from tests.analysis.presliding.records import dc_elements, maxwell_force, smooth_path
 
 FS = 1000.0  # Hz

@@ -8,7 +8,7 @@ import pytest
 
 from hilbench.analysis.presliding.parametric import fit_rolling
 from hilbench.analysis.presliding.reversals import find_reversals
-from hilbench.firmware_sim.friction_models import DC_MOTOR_D
+from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_D
 from tests.analysis.presliding.records import dc_elements, maxwell_force, smooth_path
 
 FS = 1000.0  # Hz
@@ -106,7 +106,7 @@ def test_the_free_exponent_uncertainties_match_the_scatter_over_noise_draws():
 
 
 def test_on_the_edges_of_the_dc_discretisation_a_free_exponent_brings_sum_k_within_2_percent():
-    """The DC-motor preset's exact Maxwell-slip polygon (firmware_sim.friction_models) read at the count edges of
+    """The DC-motor preset's exact Maxwell-slip polygon (firmware_sim.engine.friction_models) read at the count edges of
     2^16 counts/rev up to 4d, as a perfect edge-pinned ramp. Six of its 16 breakpoints lie below the first edge,
     so sum(k) is an extrapolation: held at p = 2 the shape gives -2.8 %, a free p (1.70) +1.1 %."""
     k, w = dc_elements()

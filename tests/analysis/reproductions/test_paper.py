@@ -8,8 +8,8 @@ import pytest
 from hilbench.analysis.reproductions.paper import afrf_db_error, maxwell_slip_closed_form, virgin_closed_form
 from hilbench.analysis.reproductions.paper_figures import FIGURES
 from hilbench.bench.cli import main
-from hilbench.firmware_sim.friction_models import paper_system
-from hilbench.firmware_sim.plant import stop_operator
+from hilbench.firmware_sim.engine.friction_models import paper_system
+from hilbench.firmware_sim.engine.plant import stop_operator
 from tests.figure_checks import recording_figures
 
 

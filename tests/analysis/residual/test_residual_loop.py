@@ -1,6 +1,6 @@
 """The residual loop finds an undeclared effect blind (and none when there is none).
 
-Simulated runs: ``firmware_sim.friction_models.dc_motor()`` with its viscous term removed (so the plant is
+Simulated runs: ``firmware_sim.engine.friction_models.dc_motor()`` with its viscous term removed (so the plant is
 exactly the starting model, inertia + Maxwell-slip), plus ONE injected effect; 20000-count encoder,
 position noise 0.05 mrad, 15 s at 1 kHz. Excitation as in the paper (science.md §6): uniform noise
 low-passed at 40 Hz times the first three terms of a square wave (period 5 s), peak 6 N*m. Each case
@@ -21,8 +21,8 @@ import pytest
 from scipy import signal
 
 from hilbench.analysis.residual import NO_EFFECT, LoopOptions, prepare_run, residual_loop
-from hilbench.firmware_sim.friction_models import DC_MOTOR_INERTIA, dc_motor
-from hilbench.firmware_sim.plant import Cogging, simulate
+from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_INERTIA, dc_motor
+from hilbench.firmware_sim.engine.plant import Cogging, simulate
 
 FS = 1000.0
 DURATION = 15.0

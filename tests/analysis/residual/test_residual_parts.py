@@ -113,8 +113,8 @@ def test_block_average_keeps_a_held_torque_exact():
     # A torque held sample by sample at 10 kHz and constant over blocks of 5 is, after block_average, exactly
     # the held input at 2 kHz, and the position is the plant's at the block edges (hold_next: start of block).
     from hilbench.analysis.residual.rundata import block_average
-    from hilbench.firmware_sim.friction_models import dc_motor
-    from hilbench.firmware_sim.plant import simulate
+    from hilbench.firmware_sim.engine.friction_models import dc_motor
+    from hilbench.firmware_sim.engine.plant import simulate
 
     u2k = np.random.default_rng(0).uniform(-8, 8, 400)
     u10k = np.repeat(u2k, 5)

@@ -17,8 +17,8 @@ from hilbench.analysis.skeleton.equivalent import (
 )
 from hilbench.analysis.skeleton.forcevib import compose
 from hilbench.analysis.skeleton.skeleton_fit import PaperFit, fit_skeleton_monotone
-from hilbench.firmware_sim.friction_models import paper_system
-from hilbench.firmware_sim.plant import simulate
+from hilbench.firmware_sim.engine.friction_models import paper_system
+from hilbench.firmware_sim.engine.plant import simulate
 
 GRID = np.concatenate([[0.0], np.geomspace(1e-3, 10.0, 200)])
 

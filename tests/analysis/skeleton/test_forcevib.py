@@ -100,8 +100,8 @@ H, D = 1.64, 0.656          # virgin curve (science.md §2)
 
 
 def _paper_runs(levels, a=0.05, T=40.0, n_elements=16):
-    plant = pytest.importorskip("hilbench.firmware_sim.plant")
-    models = pytest.importorskip("hilbench.firmware_sim.friction_models")
+    plant = pytest.importorskip("hilbench.firmware_sim.engine.plant")
+    models = pytest.importorskip("hilbench.firmware_sim.engine.friction_models")
     params = models.paper_system(n_elements)
     dt = 1.0 / FS
     t = np.arange(int(T * FS) + 1) * dt

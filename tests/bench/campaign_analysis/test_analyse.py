@@ -14,13 +14,11 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
-from hilbench.bench.campaign_analysis.engine import analyse
+from hilbench.bench.campaign_analysis.engine import MAX_CHUNK, analyse, chunk
 from hilbench.bench.campaign_analysis.steps import StepSettings, identify_step
 from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
 from hilbench.bench.cli import main
-from hilbench.firmware_sim.friction_models import DC_MOTOR_BREAKAWAY, DC_MOTOR_INERTIA
-
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
+from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_BREAKAWAY, DC_MOTOR_INERTIA
 
 quiet = {"progress": False, "say": lambda _line: None}
 
@@ -97,6 +95,8 @@ def _dies(path: str, settings: StepSettings) -> dict:
 
 def test_cluster_survives_dying_workers_and_matches_serial(campaign, tmp_path):
     serial = {r["key"]: r for r in _rows(analyse([campaign], tmp_path / "serial", serial=True, **quiet).table)}
+    # tasks of one run here (8 runs, 2 workers: engine.chunk); the split of a task of several runs that kills its
+    # workers is measured by benchmarks/bench_campaign.py (200 runs, tasks of 8: exactly the 2 bad rows fail)
     s = analyse([campaign], tmp_path / "cluster", workers=2, dashboard=False, functions={"identify": _dies}, **quiet)
     rows = {r["key"]: r for r in _rows(s.table)}
     assert len(rows) == 8 and s.analysed == 8 and s.failed == 2
@@ -109,6 +109,10 @@ def test_cluster_survives_dying_workers_and_matches_serial(campaign, tmp_path):
         assert rows[key] == serial[key]
 
 
+def _rows_in_parts(parts: Path) -> int:
+    return sum(pq.read_metadata(f).num_rows for f in parts.glob("*.parquet")) if parts.is_dir() else 0
+
+
 def test_a_killed_client_leaves_good_parts_and_a_rerun_analyses_only_the_missing(campaign, tmp_path):
     out = tmp_path / "r"
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[3])}
@@ -116,16 +120,24 @@ def test_a_killed_client_leaves_good_parts_and_a_rerun_analyses_only_the_missing
                              str(out), "--serial"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 60
     parts = out / "parts"
-    while time.monotonic() < deadline and len(list(parts.glob("*.parquet")) if parts.is_dir() else []) < 3:
+    while time.monotonic() < deadline and _rows_in_parts(parts) < 3:  # parts of 2 runs each (8 runs, 1 worker)
         time.sleep(0.01)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
-    done = len(list(parts.glob("*.parquet")))
+    done = _rows_in_parts(parts)
     assert 3 <= done < 8, "the client was to be killed mid-campaign"
     assert not (out / "results.parquet").exists()
     s = analyse([campaign], out, serial=True, **quiet)
     assert (s.skipped, s.analysed) == (done, 8 - done)
     assert len(_rows(s.table)) == 8 and not parts.exists()
+
+
+def test_chunks_balance_the_workers_and_cap_the_task_size():
+    todo = list(range(200))
+    parts = chunk(todo, 2)  # 200 runs, 2 workers: 8 per task, 25 tasks
+    assert [len(p) for p in parts] == [MAX_CHUNK] * 25 and sum(parts, []) == todo
+    assert [len(p) for p in chunk(todo[:20], 2)] == [2] * 10  # at least 4 tasks per worker
+    assert [len(p) for p in chunk(todo[:5], 2)] == [1] * 5
 
 
 def test_cli_bad_input_is_one_line_and_exit_2(campaign, tmp_path, capsys):

@@ -13,8 +13,6 @@ from hilbench.bench.campaign_analysis.page import repeat_summary
 from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
 from hilbench.bench.cli import main
 
-pytestmark = pytest.mark.device_free  # starts no device: runs in make test's parallel part
-
 CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                   "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 

@@ -17,13 +17,11 @@ from PySide6 import QtCore
 
 from hilbench.analysis.runfile import open_run
 from hilbench.bench.gui.main_window import MainWindow
-from hilbench.firmware_sim.cia402_drive import EDS_PATH, SimCia402Drive
-from hilbench.firmware_sim.odrive_sim import TVL_ENDPOINT, SimOdrive
-from hilbench.firmware_sim.sim_config import load_sim_config
+from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH, SimCia402Drive
+from hilbench.firmware_sim.devices.odrive_sim import TVL_ENDPOINT, SimOdrive
+from hilbench.firmware_sim.devices.sim_config import load_sim_config
 
-pytestmark = pytest.mark.drives
-
-
+pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
 @pytest.fixture(scope="module")
 def drives():
     """(canopen URL, odrive URL) of two simulated drives on their own virtual buses."""

@@ -4,9 +4,11 @@ import dataclasses
 
 import pytest
 
+from hilbench.bench.acquisition.protocols import PROTOCOLS
 from hilbench.bench.gui.connection_panel import can_urls
 from hilbench.bench.gui.protocol_panel import ProtocolPanel
-from hilbench.bench.protocols import PROTOCOLS
+
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 
 @pytest.fixture
@@ -114,7 +116,7 @@ def test_excitation_checks_reach_the_form(panel):
 
 
 def test_device_settings_are_checked(panel):
-    from hilbench.bench.runner import DeviceSettings
+    from hilbench.bench.acquisition.runner import DeviceSettings
 
     assert panel.validate() is not None and panel.settings == DeviceSettings()
     panel.device_form.set_value("current_limit", "-1")
@@ -129,8 +131,8 @@ def test_device_settings_are_checked(panel):
 def test_presliding_shows_its_recommended_gains_unless_the_operator_set_them(panel):
     """Choosing presliding puts its RECOMMENDED_SETTINGS in the device form (as `hilbench run` does), leaving the
     others at the defaults; another protocol puts the defaults back; a field the operator typed in is kept."""
-    from hilbench.bench.protocols import Presliding
-    from hilbench.bench.runner import DeviceSettings
+    from hilbench.bench.acquisition.protocols import Presliding
+    from hilbench.bench.acquisition.runner import DeviceSettings
 
     panel.select("presliding")
     settings = panel.device_form.settings()

@@ -10,6 +10,8 @@ import pytest
 from hilbench.bench.gui.connection_panel import ConnectionPanel
 from hilbench.bench.gui.worker import DeviceState
 
+pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
+
 
 def test_counter_names_and_units_are_not_cut_off(qtbot):
     panel = ConnectionPanel()

@@ -1,0 +1,80 @@
+"""``hilbench analyse CAMPAIGN_DIR...``: analyse every run of one or more campaigns into one Parquet table."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from hilbench.bench.analysis_input import whole_number
+
+    p = sub.add_parser(
+        "analyse", help="analyse every run of campaign folders (identify, compare, residual, ...) into one Parquet "
+        "table, in parallel",
+        description="Run the chosen steps on every run of the campaign folders (their index.json) on a Dask "
+        "cluster: one row per run and step in OUT/results.parquet, keyed by the run file's content hash, the "
+        "settings and the hilbench version; rows already there are skipped (--resume, the default). See "
+        "docs/campaign-analysis.md.")
+    p.add_argument("campaigns", nargs="+", type=Path, metavar="CAMPAIGN_DIR", help="campaign folder(s)")
+    p.add_argument("-o", "--output", type=Path, default=None,
+                   help="results folder (default: CAMPAIGN_DIR/analysis with one campaign; required with several)")
+    p.add_argument("--steps", default="identify",
+                   help="comma-separated steps, each run gets those its protocol supports (default identify; "
+                   "available: identify, compare, residual, presliding)")
+    engine = p.add_mutually_exclusive_group()
+    engine.add_argument("--serial", action="store_true", help="run in this process (no cluster)")
+    engine.add_argument("--scheduler", metavar="tcp://HOST:8786", help="use a running Dask scheduler")
+    engine.add_argument("--scheduler-file", metavar="FILE", help="use the Dask scheduler this file names")
+    p.add_argument("--workers", type=whole_number, default=None,
+                   help="worker processes of the local cluster (default: one per core)")
+    resume = p.add_mutually_exclusive_group()
+    resume.add_argument("--resume", dest="resume", action="store_true", default=True,
+                        help="skip rows already in the table (default)")
+    resume.add_argument("--no-resume", dest="resume", action="store_false", help="analyse every run again")
+    p.add_argument("--thresholds", type=whole_number, default=32, help="identify: candidate thresholds (default 32)")
+    p.add_argument("--method", choices=("lip", "oe"), default="lip", help="identify: method (default lip)")
+    p.add_argument("--coulomb", action="store_true", help="identify: add a Coulomb term")
+    p.add_argument("--offset", action="store_true", help="identify: add a torque offset")
+    p.add_argument("--validation-fraction", type=float, default=0.3,
+                   help="identify: tail of each run held out for validation (default 0.3; 0: none)")
+    p.add_argument("--no-dashboard", action="store_true", help="do not start the Dask dashboard (it costs seconds)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from hilbench.bench.acquisition.campaign import INDEX_NAME
+    from hilbench.bench.campaign_analysis.engine import AnalyseError, analyse
+    from hilbench.bench.campaign_analysis.steps import STEPS, StepSettings
+    from hilbench.bench.storage import outputs
+
+    steps = tuple(s.strip() for s in args.steps.split(",") if s.strip())
+    bad = [s for s in steps if s not in STEPS]
+    if bad or not steps:
+        raise AnalyseError(f"--steps: unknown step {bad[0] if bad else '(none)'!r} (available: {', '.join(STEPS)})")
+    if not 0 <= args.validation_fraction < 0.9:
+        raise AnalyseError(f"--validation-fraction must be in [0, 0.9), got {args.validation_fraction}")
+    if args.workers == 0:
+        raise AnalyseError("--workers must be at least 1")
+    for folder in args.campaigns:
+        if not (folder / INDEX_NAME).is_file():
+            raise AnalyseError(f"{folder}: no {INDEX_NAME}; not a campaign folder (hilbench campaign writes one)")
+    if args.output is None:
+        if len(args.campaigns) > 1:
+            raise AnalyseError("several campaigns: give the results folder with -o")
+        args.output = args.campaigns[0] / "analysis"
+    if (args.output / INDEX_NAME).exists():
+        raise AnalyseError(f"{args.output}: is a campaign folder; the results go into a folder of their own")
+    outputs.refuse_inputs({"-o": args.output}, args.campaigns)
+    settings = StepSettings(thresholds=args.thresholds, method=args.method, coulomb=args.coulomb,
+                            offset=args.offset, validation_fraction=args.validation_fraction)
+    summary = analyse(list(args.campaigns), args.output, steps, settings, serial=args.serial, workers=args.workers,
+                      scheduler=args.scheduler, scheduler_file=args.scheduler_file, resume=args.resume,
+                      progress=not args.quiet and outputs.verbosity > 0, say=outputs.say,
+                      verbose=outputs.verbosity > 1, dashboard=not args.no_dashboard)
+    for line in summary.failures:
+        outputs.say(f"failed: {line}")
+    outputs.say(f"{summary.analysed} analysed ({summary.failed} failed), {summary.skipped} already there, "
+                f"{summary.total} rows in all ({summary.wall_time:.1f} s) -> {summary.table}")
+    return 0

@@ -1,0 +1,117 @@
+"""The simulator's TOML configuration: device identity, buffer size and the plant with its injected effects.
+
+See ``firmware_sim/devices/default_sim.toml``. Bad files raise :class:`SimConfigError` with a one-line message.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from hilbench.firmware_sim.engine.friction_models import dc_motor, paper_system
+from hilbench.firmware_sim.engine.plant import (
+    MAX_ELEMENTS,
+    PlantParameterError,
+    PlantParams,
+    stiffest_eigenvalue,
+    validate,
+)
+
+IDENTITY_TEXT_BYTES = 255  # model and serial travel in IDENTITY as strings of at most 255 UTF-8 bytes
+MAX_SUBSTEPS = 10_000  # RK4 sub-steps per sample; beyond it one sample costs more than a realtime tick
+
+DEFAULT_PATH = Path(__file__).with_name("default_sim.toml")
+PRESETS = {"dc_motor": dc_motor, "paper_system": paper_system}
+
+
+class SimConfigError(ValueError):
+    """A simulator configuration file that cannot be used."""
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    plant: PlantParams
+    substeps: int = 0  # 0 = automatic (:func:`substeps_for`)
+    model: str = "HB-SIM-1"
+    serial: str = "SIM-0001"
+    buffer_capacity: int = 8192
+
+    def substeps_at(self, sample_rate: int) -> int:
+        return self.substeps or substeps_for(self.plant, 1.0 / sample_rate)
+
+    def plant_for(self, current_limit: float, torque_constant: float, counts_per_rev: int) -> PlantParams:
+        """The plant a CONFIG runs: the motor takes the host's declared calibration (torque constant,
+        encoder counts/rev) as its nominal values, as a real drive's datasheet values would be; a deviation
+        from them is an injected effect of this file (``torque_constant_error``), never a silent mismatch."""
+        return self.plant.replace(current_limit=current_limit, torque_constant=torque_constant,
+                                  counts_per_rev=int(counts_per_rev))
+
+
+def substeps_for(params: PlantParams, dt: float) -> int:
+    """Fewest RK4 sub-steps per sample that keep the stiffest mode stable: ceil(|lambda|*dt / 2.5)."""
+    from hilbench.firmware_sim.engine.plant import RK4_STABLE_RADIUS
+
+    return max(1, math.ceil(stiffest_eigenvalue(params) * dt / RK4_STABLE_RADIUS * (1 + 1e-12)))
+
+
+def load_sim_config(path: str | Path | None = None, seed: int | None = None) -> SimConfig:
+    """Read a simulator TOML file (the packaged default when ``path`` is None); ``seed`` overrides it."""
+    path = Path(path) if path is not None else DEFAULT_PATH
+    try:
+        data = tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise SimConfigError(f"cannot read simulator config {path}: {exc}") from exc
+    return sim_config_from_dict(data, seed=seed, source=str(path))
+
+
+def sim_config_from_dict(data: dict, seed: int | None = None, source: str = "config") -> SimConfig:
+    unknown = sorted(set(data) - {"device", "plant"})
+    if unknown:
+        raise SimConfigError(f"{source}: unknown section(s) {', '.join(unknown)}")
+    device = dict(data.get("device", {}))
+    plant = dict(data.get("plant", {}))
+    bad = sorted(set(device) - {"model", "serial", "buffer_capacity"})
+    if bad:
+        raise SimConfigError(f"{source}: unknown [device] key(s) {', '.join(bad)}")
+    preset = plant.pop("preset", "dc_motor")
+    elements = plant.pop("elements", 16)
+    substeps = plant.pop("substeps", 0)
+    declared = sorted({"torque_constant", "counts_per_rev"} & set(plant))
+    if declared:
+        raise SimConfigError(f"{source}: [plant] {', '.join(declared)} come from the host's CONFIG (its declared "
+                             f"calibration); inject a deviation with torque_constant_error instead")
+    if seed is not None:
+        plant["seed"] = seed
+    # sizes are checked against their bounds before anything is allocated
+    if isinstance(elements, bool) or not isinstance(elements, int) or not 1 <= elements <= MAX_ELEMENTS:
+        raise SimConfigError(f"{source}: [plant] elements must be a whole number in 1..{MAX_ELEMENTS} "
+                             f"(the plant's limit), got {elements!r}")
+    if isinstance(substeps, bool) or not isinstance(substeps, int) or not 0 <= substeps <= MAX_SUBSTEPS:
+        raise SimConfigError(f"{source}: [plant] substeps must be a whole number in 0..{MAX_SUBSTEPS} "
+                             f"(0 = automatic), got {substeps!r}")
+    capacity = device.get("buffer_capacity", 8192)
+    if isinstance(capacity, bool) or not isinstance(capacity, int) or not 256 <= capacity <= 2**20:
+        raise SimConfigError(f"{source}: buffer_capacity must be a whole number in 256..1048576 samples, "
+                             f"got {capacity!r}")
+    for key in ("model", "serial"):
+        text = device.get(key, "")
+        if not isinstance(text, str) or len(text.encode("utf-8")) > IDENTITY_TEXT_BYTES:
+            raise SimConfigError(f"{source}: [device] {key} must be a string of at most {IDENTITY_TEXT_BYTES} "
+                                 f"UTF-8 bytes (the IDENTITY message's limit)")
+    if preset == "none":
+        values = plant
+    elif preset in PRESETS:
+        values = PRESETS[preset](int(elements)).to_dict()
+        values.update(plant)
+    else:
+        raise SimConfigError(f"{source}: unknown plant preset {preset!r} (use {', '.join(PRESETS)} or none)")
+    try:
+        params = PlantParams.from_dict(values)
+        dt = 1e-4  # validate at 10 kHz; the firmware re-validates at the configured rate
+        validate(params, dt, int(substeps) or substeps_for(params, dt))
+    except (PlantParameterError, TypeError) as exc:
+        raise SimConfigError(f"{source}: bad [plant]: {exc}") from exc
+    return SimConfig(plant=params, substeps=int(substeps), model=str(device.get("model", "HB-SIM-1")),
+                     serial=str(device.get("serial", "SIM-0001")), buffer_capacity=capacity)

@@ -1,0 +1,138 @@
+"""The steps of ``hilbench analyse`` beyond identify: compare and residual. Each is checked against its own
+command (``hilbench compare``, ``hilbench residual``) run on the same run cut into the head it fits and the
+tail it is validated on, written as two run files; and against the plant: the C plant's friction is a
+Maxwell-slip model, so that family must score best and the residual loop must find nothing missing."""
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from hilbench.analysis.runfile import RunWriter
+from hilbench.bench.campaign_analysis.engine import analyse
+from hilbench.bench.campaign_analysis.steps import StepSettings, steps_for
+from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, simulate_runs, write_campaign
+from hilbench.bench.cli import main
+
+pytestmark = pytest.mark.device_free
+
+quiet = {"progress": False, "say": lambda _line: None}
+SETTINGS = StepSettings(compare_families=("coulomb_viscous", "maxwell_slip"))
+
+
+def _head_and_tail(spec: SyntheticCampaign, folder: Path, fraction: float) -> tuple[Path, Path]:
+    """The first run of ``spec`` cut as the steps cut it (round(n*(1-fraction))), as two run files."""
+    run = next(iter(simulate_runs(spec)))
+    n = run.channels["t"].size
+    cut = int(round(n * (1 - fraction)))
+    paths = []
+    for name, rows in (("head", slice(0, cut)), ("tail", slice(cut, n))):
+        channels = {k: np.asarray(v)[rows] for k, v in run.channels.items()}
+        m = channels["t"].size
+        channels["sample_index"], channels["t"] = np.arange(m), np.arange(m) / spec.sample_rate
+        path = folder / f"{name}.h5"
+        with RunWriter(path, sample_rate=spec.sample_rate, channels=[k for k in channels if k != "temperature"],
+                       custom_channels={"temperature": "degC"}, protocol_name="identification",
+                       protocol_params=run.params, device={"model": "synthetic", "serial": "C-plant"}) as w:
+            w.append(channels)
+        paths.append(path)
+    return paths[0], paths[1]
+
+
+def _one_row(spec: SyntheticCampaign, tmp_path: Path, step: str) -> dict:
+    folder = tmp_path / "c"
+    write_campaign(folder, spec)
+    s = analyse([folder], tmp_path / "r", (step,), SETTINGS, serial=True, **quiet)
+    rows = pq.read_table(s.table).to_pylist()
+    assert len(rows) == spec.runs and all(r["step"] == step for r in rows)
+    return rows[0]
+
+
+def test_each_step_runs_on_the_protocols_that_support_it():
+    wanted = ("identify", "compare", "residual", "presliding")
+    assert steps_for("identification", wanted) == list(wanted[:3])
+    assert steps_for("chirp", wanted) == list(wanted[:3])
+    assert steps_for("stepped_sine", wanted) == [] and steps_for("presliding", wanted) == ["presliding"]
+
+
+def test_compare_step_is_hilbench_compare_on_the_head_and_tail(tmp_path):
+    spec = SyntheticCampaign(runs=1, duration=1.5, seed=31)
+    row = _one_row(spec, tmp_path, "compare")
+    assert row["status"] == "ok", row["error"]
+    head, tail = _head_and_tail(spec, tmp_path, SETTINGS.validation_fraction)
+    assert main(["-q", "compare", str(head), "--validate", str(tail), "--families", "coulomb_viscous,maxwell_slip",
+                 "-o", str(tmp_path / "cmp")]) == 0
+    doc = {r["model"]: r for r in json.loads((tmp_path / "cmp" / "compare.json").read_text())["rows"]}
+    # the plant's friction is Maxwell-slip: that family wins, by far, over Coulomb + viscous
+    assert row["model"] == "maxwell_slip"
+    best = doc["maxwell_slip"]
+    assert best["validation"]["torque_nrmse"] < 0.5 * doc["coulomb_viscous"]["validation"]["torque_nrmse"]
+    # same data, same fit: the figures agree to rounding
+    assert row["validation_torque_nrmse"] == pytest.approx(best["validation"]["torque_nrmse"], rel=1e-9)
+    assert row["train_torque_nrmse"] == pytest.approx(best["train"]["torque_nrmse"], rel=1e-9)
+    assert row["validation_position_nrmse_segmented"] == pytest.approx(
+        best["validation"]["position_nrmse_segmented"], rel=1e-9)
+
+
+def test_residual_step_is_hilbench_residual_on_the_head_and_tail(tmp_path):
+    spec = SyntheticCampaign(runs=1, duration=8.0, seed=5)  # the loop needs more moving rows than 1.5 s give
+    row = _one_row(spec, tmp_path, "residual")
+    assert row["status"] == "ok", row["error"]
+    head, tail = _head_and_tail(spec, tmp_path, SETTINGS.validation_fraction)
+    out = tmp_path / "residual.json"
+    assert main(["-q", "residual", str(head), "--validate", str(tail), "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    after = doc["error_after"]["validation"]
+    assert row["validation_torque_nrmse"] == pytest.approx(after["torque_nrmse"], rel=1e-9)
+    assert row["validation_torque_nrmse_start"] == pytest.approx(doc["error_before"]["validation"]["torque_nrmse"],
+                                                                 rel=1e-9)
+    assert row["verdict"] == doc["verdict"]
+    # the plant is inertia + Maxwell-slip (+ current noise): nothing is missing, and the start fits to a few %
+    assert row["model"] == "inertia,maxwell_slip" and row["validation_torque_nrmse"] < 0.05
+
+
+def test_a_run_too_short_for_the_residual_loop_is_a_failed_row_with_the_reason(tmp_path):
+    row = _one_row(SyntheticCampaign(runs=1, duration=1.5, seed=5), tmp_path, "residual")
+    assert row["status"] == "failed" and "too few moving rows" in row["error"]
+
+
+def test_presliding_step_is_hilbench_presliding_and_meets_the_truth(tmp_path):
+    """A displacement-driven linear record (40 Maxwell-slip elements of tests/truth: break-away 40 N, largest
+    element 0.1 mm; nested reversals, 20 mN noise), as tests/bench/test_presliding_command.py builds it, put in a
+    campaign as a presliding run."""
+    from tests.analysis.presliding.records import maxwell_force, smooth_path
+    from tests.truth.generator import elements
+
+    breakaway, largest = 40.0, 0.1e-3
+    k, w = elements(breakaway, largest, 40)
+    x = smooth_path(largest / 4, 40)
+    f = maxwell_force(x, k, w) + 0.02 * np.random.default_rng(3).standard_normal(x.size)
+    csv, folder = tmp_path / "tribo.csv", tmp_path / "c"
+    np.savetxt(csv, np.column_stack([np.arange(x.size) * 1e-3, x * 1e6, f * 1e3]), delimiter=",",
+               header="t,displacement,force", comments="", fmt="%.12g")
+    folder.mkdir()
+    assert main(["-q", "import", "csv", str(csv), "--linear", "--record", "displacement-driven", "--unit", "t=s",
+                 "--unit", "displacement=um", "--unit", "force=mN", "-o", str(folder / "p1.h5")]) == 0
+    (folder / "index.json").write_text(json.dumps({"runs": [
+        {"key": "p1", "name": "p", "repeat": 1, "protocol": "presliding", "file": "p1.h5", "status": "completed"}]}))
+    s = analyse([folder], tmp_path / "r", ("identify", "presliding"), replace(SETTINGS, presliding_replicates=6),
+                serial=True, **quiet)
+    rows = pq.read_table(s.table).to_pylist()
+    assert [r["step"] for r in rows] == ["presliding"]  # identify does not apply to a presliding run
+    row = rows[0]
+    assert row["status"] == "ok", row["error"]
+    assert main(["-q", "presliding", str(folder / "p1.h5"), "-o", str(tmp_path / "cmd"), "--replicates", "6"]) == 0
+    doc = json.loads((tmp_path / "cmd" / "presliding.json").read_text())
+    for name, column in (("breakaway", "presliding_breakaway"), ("initial_stiffness", "initial_stiffness"),
+                         ("presliding_distance", "presliding_distance")):
+        assert row[column] == pytest.approx(doc["quantities"][name]["value"], rel=1e-9)
+        assert row[f"{column}_se"] == pytest.approx(doc["quantities"][name]["std_uncertainty"], rel=1e-9)
+    assert row["validation_force_relative_error"] == pytest.approx(doc["validation"]["force_rms_error_relative"],
+                                                                   rel=1e-9)
+    # the truth: break-away 40 N to 2 %; its virgin curve 40*(1 - (1 - x/P)^2) reaches 90 % at P*(1 - sqrt(0.1))
+    assert row["presliding_breakaway"] == pytest.approx(breakaway, rel=0.02)
+    assert row["presliding_distance"] == pytest.approx(largest * (1 - np.sqrt(0.1)), rel=0.05)
+    assert row["validation_force_relative_error"] < 0.01

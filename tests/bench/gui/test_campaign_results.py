@@ -1,0 +1,83 @@
+"""The campaign view's Results tab: the table and the drift charts of an analysed campaign (offscreen Qt).
+
+The results table is written as ``hilbench analyse`` writes it (bench.campaign_analysis.table), with a
+break-away that steps by +5 % (5 sigma of its scatter) at run 40 of 60 and one failed run."""
+
+from datetime import UTC, datetime, timedelta
+
+import numpy as np
+import pyqtgraph as pg
+import pytest
+
+from hilbench.analysis.drift.monitor import DriftSettings, monitor
+from hilbench.bench.campaign_analysis.table import TABLE_NAME, to_table
+from hilbench.bench.gui.campaign_view import RESULT_COLUMNS, CampaignView
+
+N, STEP_AT, FAILED = 60, 40, 7
+
+
+def _rows() -> list[dict]:
+    rng = np.random.default_rng(4)
+    start = datetime(2026, 1, 5, 8, tzinfo=UTC)
+    rows = []
+    for i in range(N):
+        row = {"campaign": "c", "key": f"id{i + 1}-1", "repeat": 1, "step": "identify", "status": "ok", "error": "",
+               "start_time": (start + timedelta(minutes=5 * i)).isoformat(), "inertia": 2e-4, "inertia_se": 1e-6,
+               "breakaway": (1.0 if i < STEP_AT else 1.05) + 0.01 * rng.standard_normal(), "breakaway_se": 0.01,
+               "viscous": 1e-3 + 1e-5 * rng.standard_normal(), "viscous_se": 1e-5, "validation_torque_nrmse": 0.05,
+               "verdict": "good", "sliding_distance": 10.0, "settings_hash": "s", "content_hash": f"h{i}"}
+        if i == FAILED:
+            row.update(status="failed", error="AnalysisError: no position channel", breakaway=None, verdict=None)
+        rows.append(row)
+    return rows
+
+
+@pytest.fixture
+def results(tmp_path):
+    import pyarrow.parquet as pq
+
+    pq.write_table(to_table(_rows()), tmp_path / TABLE_NAME)
+    return tmp_path
+
+
+@pytest.fixture
+def view(qtbot):
+    v = CampaignView()
+    qtbot.addWidget(v)
+    yield v.results  # the view holds the tab: keep it alive
+
+
+def _column(name: str) -> int:
+    return [c[1] for c in RESULT_COLUMNS].index(name)
+
+
+def test_results_tab_shows_the_runs_table_and_the_drift_charts(view, results):
+    view.path_edit.setText(str(results))
+    assert view.load()
+    table = view.table
+    assert table.rowCount() == N
+    rows = _rows()
+    for i in (0, STEP_AT, N - 1):  # shown in start order, break-away to 6 significant digits
+        assert table.item(i, _column("key")).text() == rows[i]["key"]
+        assert table.item(i, _column("breakaway")).data(0) == pytest.approx(rows[i]["breakaway"], rel=1e-5)
+        assert table.item(i, _column("validation_torque_nrmse")).data(0) == pytest.approx(5.0)  # percent
+    assert table.item(FAILED, _column("status")).text() == "failed"
+    assert "no position channel" in table.item(FAILED, _column("verdict")).text()
+    # the charts are the drift monitor's, with its defaults bar the baseline (the first half of 59 ok runs)
+    truth = monitor(_rows(), DriftSettings(parameters=("breakaway",), baseline=29)).series["breakaway"]
+    points = [i for i in view.plots["value"].listDataItems() if i.opts.get("symbol") == "o"][0]
+    np.testing.assert_array_equal(points.getData()[1], truth.value)
+    ewma = view.plots["ewma"].listDataItems()[0].getData()[1]
+    np.testing.assert_array_equal(ewma[np.isfinite(ewma)], truth.ewma[np.isfinite(truth.ewma)])
+    # the step at run 40 (39 of the 59 ok runs, start order): one change point within +-3 runs, drawn on all charts
+    assert len(truth.change_points) == 1 and abs(truth.change_points[0] - (STEP_AT - 1)) <= 3
+    for plot in view.plots.values():
+        lines = [i for i in plot.items() if isinstance(i, pg.InfiniteLine) and i.angle == 90]
+        assert [line.value() for line in lines] == truth.change_points
+    assert "change points at c/id" in view.status.text()
+
+
+def test_a_missing_results_folder_is_one_line_in_the_status(view, tmp_path):
+    view.path_edit.setText(str(tmp_path / "nowhere"))
+    assert not view.load()
+    assert TABLE_NAME in view.status.text() and view.table.rowCount() == 0

@@ -1,0 +1,204 @@
+"""Issue 28 item 1: `hilbench plan` sizes experiments from a break-away probe on the device.
+
+The done-when test plays the planned campaign on the simulated bench and checks the recorded data, not the plan's
+own numbers: the identification slides both ways, the stepped sine spans break-away, the chirp covers >= 5x in
+displacement amplitude. The probe's findings are checked against the simulated DC motor's parameters
+(firmware_sim.engine.friction_models.dc_motor): break-away sum(W_i) / Kt, J, b and x_p(0.9) of its virgin curve.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from hilbench.analysis.runfile import open_run
+from hilbench.bench.acquisition.breakaway_probe import BreakawayProbe, ProbeResult, smoothed_velocity
+from hilbench.bench.acquisition.excitations import lowpass_uniform_noise, random_enveloped
+from hilbench.bench.acquisition.planning import LIMIT_SHARE, plan_experiments, size_protocols
+from hilbench.bench.acquisition.runner import DeviceSettings
+from hilbench.bench.cli import main
+from hilbench.firmware_sim.engine.friction_models import (
+    DC_MOTOR_BREAKAWAY,
+    DC_MOTOR_INERTIA,
+    DC_MOTOR_TORQUE_CONSTANT,
+    DC_MOTOR_VISCOUS,
+    dc_motor,
+    maxwell_virgin_curve,
+)
+
+LOCKSTEP = "sim://?pacing=lockstep"
+
+
+def _xp(fraction: float = 0.9) -> float:
+    """x_p(f) of the simulated motor's virgin curve: the smallest x with V(x) = f * sum W_i (exact: V is
+    piecewise linear between the element limits, so it is found by interpolation on the breakpoints)."""
+    p = dc_motor()
+    k, w = np.array(p.ms_stiffness), np.array(p.ms_slip)
+    knots = np.concatenate([[0.0], np.sort(w / k)])
+    return float(np.interp(fraction * w.sum(), maxwell_virgin_curve(knots, k, w), knots))
+
+
+@pytest.mark.device_free
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_identification_noise_does_not_shrink_with_the_sample_rate(seed):
+    """The bug: the filter's start transient set the peak the noise is normalised by, so the input's rms fell
+    with the rate (0.26 at 2 kHz, 0.091 at 10 kHz, 0.061 at 20 kHz; the default identification 4.5 A, 1.4 A,
+    0.9 A rms). The normalised noise is now the same process at every rate: its std agrees within 25 % and its
+    peak is not at an end."""
+    stds = []
+    for fs in (2000, 10000, 20000):
+        x = lowpass_uniform_noise(20 * fs, fs, 40.0, seed)
+        stds.append(x.std())
+        k = int(np.argmax(np.abs(x)))
+        assert fs / 40 < k < x.size - fs / 40, f"peak at sample {k} of {x.size}: an edge transient"
+    assert max(stds) / min(stds) < 1.25, stds
+    rms = [np.sqrt(np.mean(random_enveloped(20, fs, amplitude=16.0, period=4.0, seed=seed).u ** 2))
+           for fs in (2000, 10000, 20000)]
+    assert max(rms) / min(rms) < 1.3 and min(rms) > 3.0, rms  # A: about a quarter of the envelope at every rate
+
+
+@pytest.mark.device_free
+def test_probe_profile_ramps_within_its_peak():
+    probe = BreakawayProbe(peak=3.0, ramp_time=1.0, hold=0.2, sample_rate=1000)
+    u = probe.setpoints()
+    ramps = probe.protocol_arrays()["ramps"]
+    assert u.size == probe.n_samples and np.max(np.abs(u)) == pytest.approx(3.0)
+    assert list(ramps["sign"]) == [1, -1, 1]
+    for start, stop, sign in ramps:  # each window: a ramp to sign*peak, then back to 0 A
+        assert sign * u[start + 999] == pytest.approx(3.0 * 999 / 1000) and u[stop - 1] == 0.0
+
+
+@pytest.mark.device_free
+def test_sizing_stays_within_the_current_limit_and_says_what_it_clipped():
+    probe = ProbeResult("probe.h5", 6.0, (3.7, -3.5, 3.5), 1.1e-3, 0.05,
+                        {"positive": 3.8, "negative": -3.8, "inertia_per_kt": 0.011, "viscous_per_kt": 0.02})
+    settings = DeviceSettings(current_limit=6.0)
+    runs, notes = size_protocols(probe, settings, duration=5.0)
+    cap = LIMIT_SHARE * 6.0
+    for name, proto in runs.items():
+        if proto.mode == "current":
+            assert np.max(np.abs(proto.setpoints(settings.current_limit))) <= cap + 1e-9, name
+    assert any("stepped-sine amplitude 2 x sliding current 7.6 A clipped to 5.4 A" in n for n in notes), notes
+    assert any(n.startswith("identification:") for n in notes), notes
+    # within a roomy limit the played identification input drives 5 % of its samples past 1.1 x 3.8 A each way
+    runs, notes = size_protocols(probe, DeviceSettings(current_limit=20.0), duration=5.0)
+    u = runs["identification"].setpoints(20.0)
+    assert min(np.mean(u > 1.1 * 3.8), np.mean(u < -1.1 * 3.8)) == pytest.approx(0.05, abs=0.002)
+    assert np.max(np.abs(u)) <= LIMIT_SHARE * 20.0 and not [n for n in notes if n.startswith("identification")]
+
+
+def test_probe_finds_the_simulated_motors_friction(tmp_path):
+    plan = plan_experiments(LOCKSTEP, DeviceSettings(), probe_dir=tmp_path, duration=5.0)
+    fit, kt = plan.probe.sliding, DC_MOTOR_TORQUE_CONSTANT
+    print(f"probe: {plan.probe.as_dict()}, x_p(0.9) of the virgin curve {_xp():.4g} rad")
+    level = DC_MOTOR_BREAKAWAY / kt  # A
+    assert fit["positive"] == pytest.approx(level, rel=0.03) and fit["negative"] == pytest.approx(-level, rel=0.03)
+    assert fit["inertia_per_kt"] * kt == pytest.approx(DC_MOTOR_INERTIA, rel=0.10)
+    assert fit["viscous_per_kt"] * kt == pytest.approx(DC_MOTOR_VISCOUS, rel=0.25)
+    assert plan.probe.presliding_distance == pytest.approx(_xp(), rel=0.15)
+    for path in plan.probe_runs:  # recorded like any run: completed, within its peak and the limit
+        with open_run(path) as run:
+            assert run.status == "completed" and run.protocol_name == "breakaway_probe"
+            assert np.max(np.abs(run.channel("current_cmd"))) <= LIMIT_SHARE * 20.0
+
+
+def _per_cycle_amplitude(position: np.ndarray, command: np.ndarray) -> np.ndarray:
+    """Half the peak-to-peak displacement over each period of the command (upward zero crossings)."""
+    up = np.flatnonzero((command[:-1] < 0) & (command[1:] >= 0))
+    return np.array([np.ptp(position[a:b]) / 2 for a, b in zip(up[:-1], up[1:], strict=True)])
+
+
+@pytest.mark.slow
+def test_planned_campaign_slides_both_ways_spans_breakaway_and_covers_5x(tmp_path, capsys):
+    toml = tmp_path / "plan.toml"
+    assert main(["plan", "--device", LOCKSTEP, "--duration", "10", "-o", str(toml)]) == 0
+    out = capsys.readouterr().out
+    assert "sliding current (fit of the slides)" in out and f"campaign: {toml}" in out
+    assert main(["campaign", str(toml), "-o", str(tmp_path / "camp"), "--quiet"]) == 0
+    index = json.loads((tmp_path / "camp" / "index.json").read_text())
+    assert [e["status"] for e in index["runs"]] == ["completed"] * 4
+    x_p = _xp()
+
+    with open_run(tmp_path / "camp" / "identification-1.h5") as run:
+        v = smoothed_velocity(np.asarray(run.channel("position")), run.sample_rate, 0.01)
+    # sliding both ways: a presliding displacement (about 1 mrad) at 40 Hz moves at most ~0.3 rad/s
+    assert np.mean(v > 1.0) > 0.02 and np.mean(v < -1.0) > 0.02, (np.mean(v > 1.0), np.mean(v < -1.0))
+
+    with open_run(tmp_path / "camp" / "stepped_sine-1.h5") as run:
+        x = np.asarray(run.channel("position"))
+        steps = run.protocol_array("step_windows")
+    amplitude = steps["amplitude"]
+    p2p = np.array([np.ptp(x[r["measure_start"]:r["measure_stop"]]) for r in steps])
+    low, high = amplitude.min(), amplitude.max()
+    assert low < DC_MOTOR_BREAKAWAY / DC_MOTOR_TORQUE_CONSTANT < high  # A: amplitudes either side
+    # the lowest steps stay in presliding (a Masing loop inside +-x_p), the highest slide far beyond it
+    assert p2p[amplitude == low].max() < 2 * x_p and p2p[amplitude == high].min() > 50 * x_p, (amplitude, p2p)
+
+    with open_run(tmp_path / "camp" / "chirp-1.h5") as run:
+        amps = _per_cycle_amplitude(np.asarray(run.channel("position")), np.asarray(run.channel("current_cmd")))
+    amps = amps[2:]  # the start transient
+    ratio = np.percentile(amps, 95) / np.percentile(amps, 5)
+    print(f"chirp: {amps.size} cycles, amplitude {1e3 * np.percentile(amps, 5):.3g}-"
+          f"{1e3 * np.percentile(amps, 95):.3g} mrad ({ratio:.3g}x)")
+    assert ratio >= 5 and math.isfinite(ratio)
+
+
+@pytest.mark.device_free
+def test_plan_refuses_to_replace_its_output_without_overwrite(tmp_path, capsys):
+    toml = tmp_path / "plan.toml"
+    toml.write_text("# mine\n")
+    assert main(["plan", "--device", LOCKSTEP, "-o", str(toml)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--overwrite" in err
+    assert toml.read_text() == "# mine\n"
+
+
+def test_default_identification_slides_both_ways_on_the_simulated_motor(tmp_path):
+    """The issue's figures: the default identification (seed 0, 10 kHz) peaked at 5.8 A and moved 0.027 rad
+    (seed 1: 17.6 A), the noise's start transient having scaled it down. Now seed 0 is as strong as the others
+    (15.1 A, 3.0 rad, 20 % of the samples sliding each way) on the same 20 A limit."""
+    from hilbench.bench.acquisition.protocols import Identification
+    from hilbench.bench.acquisition.runner import Bench
+
+    with Bench.open(LOCKSTEP) as bench:
+        result = bench.run(Identification(), tmp_path / "id.h5")
+    with open_run(result.path) as run:
+        current = np.asarray(run.channel("current_cmd"))
+        position = np.asarray(run.channel("position"))
+    v = smoothed_velocity(position, 10000, 0.01)
+    assert 12.0 < np.max(np.abs(current)) <= 20.0 and np.ptp(position) > 1.0
+    assert np.mean(v > 1.0) > 0.1 and np.mean(v < -1.0) > 0.1
+
+
+def test_default_stepped_sine_spans_breakaway_on_the_simulated_motor(tmp_path):
+    """The issue: the default stepped sine (0.5 and 2 A) never reached break-away (3.8 A). Its amplitudes are now
+    2 and 5 A: the recorded 2 A steps stay within the presliding loop, the 5 A steps slide."""
+    from hilbench.bench.acquisition.protocols import SteppedSine
+    from hilbench.bench.acquisition.runner import Bench
+
+    proto = SteppedSine(frequencies=(5.0,), settle_periods=3, measure_periods=5)  # the default amplitudes
+    assert proto.amplitudes == (2.0, 5.0)
+    with Bench.open(LOCKSTEP) as bench:
+        result = bench.run(proto, tmp_path / "s.h5")
+    with open_run(result.path) as run:
+        x = np.asarray(run.channel("position"))
+        steps = run.protocol_array("step_windows")
+    p2p = {float(r["amplitude"]): np.ptp(x[r["measure_start"]:r["measure_stop"]]) for r in steps}
+    assert p2p[2.0] < 2 * _xp() < 50 * _xp() < p2p[5.0], p2p
+
+
+def test_no_breakaway_within_the_limit_is_one_line_naming_the_option(tmp_path, capsys):
+    """A current limit below the motor's break-away (3.8 A): the probe grows to 0.9 x 3 A and stops there."""
+    toml = tmp_path / "plan.toml"
+    assert main(["plan", "--device", LOCKSTEP, "--current-limit", "3", "-o", str(toml), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "never slid both ways up to 2.7 A" in err and "--current-limit" in err
+    assert not toml.exists()
+    peaks = []
+    for path in sorted((tmp_path / "plan-probe").glob("probe-*.h5")):
+        with open_run(path) as run:
+            peaks.append(float(np.max(np.abs(run.channel("current_cmd")))))
+    assert peaks == pytest.approx([0.6, 0.9, 1.35, 2.025, 2.7], abs=1e-6)  # A: x1.5 per probe up to the cap
