@@ -122,7 +122,7 @@ def progress_bar(total: int, desc: str, unit: str = "sample"):
     """A tqdm bar on standard error with ETA (silenced by ``--quiet``); call ``.update(n)``, then ``.close()``."""
     from tqdm import tqdm
 
-    from hilbench.bench import outputs
+    from hilbench.bench.storage import outputs
 
     return tqdm(total=total, unit=unit, unit_scale=unit == "sample", desc=desc, file=sys.stderr, dynamic_ncols=True,
                 mininterval=0.5, disable=True if outputs.verbosity == 0 else None)

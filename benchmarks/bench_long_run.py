@@ -136,9 +136,9 @@ def write_run_file(path: Path, duration: float, fs: float, seed: int = 0) -> int
     import numpy as np
 
     from hilbench.analysis.runfile import RunWriter
-    from hilbench.bench.protocols import Identification
-    from hilbench.firmware_sim.friction_models import dc_motor
-    from hilbench.firmware_sim.plant import Plant
+    from hilbench.bench.acquisition.protocols import Identification
+    from hilbench.firmware_sim.engine.friction_models import dc_motor
+    from hilbench.firmware_sim.engine.plant import Plant
 
     u = Identification(duration=duration, sample_rate=int(fs), seed=seed).setpoints()
     p = dc_motor().replace(counts_per_rev=2**20, seed=seed)

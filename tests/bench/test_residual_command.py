@@ -84,8 +84,8 @@ def test_progress_goes_to_a_terminal_and_quiet_silences_it(monkeypatch):
     silences it."""
     import io
 
-    from hilbench.bench import outputs
     from hilbench.bench.analysis_input import progress_bar
+    from hilbench.bench.storage import outputs
 
     class Terminal(io.StringIO):
         def isatty(self):

@@ -50,9 +50,9 @@ def _records(args, budget: int) -> tuple:
     one line, before any sample is read, when even that does not fit."""
     from hilbench.analysis.models.compare import DECIMATED_RATE, cost
     from hilbench.analysis.record import decimated_record, stream_record
-    from hilbench.bench import outputs
     from hilbench.bench.analysis_input import load, mib, read_decimated
     from hilbench.bench.errors import BenchError
+    from hilbench.bench.storage import outputs
 
     opts = {"torque_channel": args.torque_channel, "timing": args.torque_timing or "auto",
             "allow_incomplete": args.allow_incomplete}
@@ -82,9 +82,9 @@ def run(args) -> int:
     from hilbench.analysis.models.compare_plots import report
     from hilbench.analysis.models.families import FAMILIES, published_plant
     from hilbench.analysis.models.model_file import family_document
-    from hilbench.bench import outputs
     from hilbench.bench.analysis_input import memory_budget, progress_bar
     from hilbench.bench.errors import BenchError
+    from hilbench.bench.storage import outputs
 
     families = tuple(f.strip() for f in args.families.split(",") if f.strip())
     bad = [f for f in families if f not in FAMILIES]

@@ -80,9 +80,9 @@ def run(args: argparse.Namespace) -> int:
     from hilbench.analysis.record import decimation_factor
     from hilbench.analysis.residual import record_analysis
     from hilbench.analysis.residual.report import report_dict
-    from hilbench.bench import outputs
     from hilbench.bench.analysis_input import check_cutoff, memory_budget, read_decimated
     from hilbench.bench.errors import BenchError
+    from hilbench.bench.storage import outputs
     from hilbench.bench.verdict import judge
 
     model_file = args.start if args.start.strip().lower().endswith(".json") else None
