@@ -171,8 +171,6 @@ OUTPUT_OPTIONS = {"-o", "--output", "--json", "--plot", "--plots", "--report"}
 #: commands that write but never replace: `campaign` resumes a folder (--resume) and refuses another campaign's;
 #: `analyse` adds rows to its results table, keyed by run content, settings and version (resume is its default)
 NEVER_REPLACES = {"campaign", "analyse"}
-#: analysis commands another engineer owns that still replace their outputs without --overwrite (issue 28)
-STILL_REPLACE_SILENTLY = {"compare", "residual"}
 
 
 def _leaf_commands(parser, path=()):
@@ -194,9 +192,7 @@ def _options(parser) -> set[str]:
 
 
 def _writing_commands() -> list:
-    gap = pytest.mark.xfail(strict=True, reason="owned by the analysis CLI (issue 28, item 4 left to its owner)")
-    return [pytest.param(c, marks=gap) if c.split()[0] in STILL_REPLACE_SILENTLY else c
-            for c, p in _leaf_commands(build_parser()) if _options(p) & OUTPUT_OPTIONS and c not in NEVER_REPLACES]
+    return [c for c, p in _leaf_commands(build_parser()) if _options(p) & OUTPUT_OPTIONS and c not in NEVER_REPLACES]
 
 
 @pytest.mark.device_free
@@ -224,11 +220,13 @@ def test_identify_and_show_refuse_an_existing_json_without_overwrite(run_file, t
 
 @pytest.mark.device_free
 def test_the_analysis_commands_refuse_an_existing_output_before_reading_anything(tmp_path, capsys):
-    """afrf, skeleton, paper and drift replaced their outputs silently (issue 28): each now refuses in one line
-    naming --overwrite before it reads an input (the run named here does not even exist), and nothing is lost."""
+    """afrf, skeleton, residual, compare, paper and drift replaced their outputs silently (issue 28): each refuses in
+    one line naming --overwrite before it reads an input (the run named here does not even exist); nothing is lost."""
     mine = tmp_path / "mine.json"
     mine.write_text("mine\n")
     (tmp_path / "paper").mkdir()
+    (tmp_path / "cmp").mkdir()
+    (tmp_path / "cmp" / "compare.json").write_text("mine\n")
     (tmp_path / "paper" / "summary.json").write_text("mine\n")
     (tmp_path / "results").mkdir()
     (tmp_path / "results" / "results.parquet").write_text("not read\n")
@@ -238,6 +236,9 @@ def test_the_analysis_commands_refuse_an_existing_output_before_reading_anything
     for argv, kept in ((["afrf", missing, "--json", str(mine)], mine),
                        (["afrf", missing, "--plot", str(mine)], mine),
                        (["skeleton", missing, "--json", str(mine)], mine),
+                       (["residual", missing, "--json", str(mine)], mine),
+                       (["compare", missing, "--validate", missing, "-o", str(tmp_path / "cmp")],
+                        tmp_path / "cmp" / "compare.json"),
                        (["paper", "-o", str(tmp_path / "paper"), "--quick"], tmp_path / "paper" / "summary.json"),
                        (["drift", str(tmp_path / "results")], tmp_path / "results" / "drift" / "drift.json")):
         assert main(argv) == 2, argv

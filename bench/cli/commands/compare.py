@@ -26,6 +26,7 @@ def register(subparsers) -> None:
     parser.add_argument("--validate", required=True, metavar="RUN2.h5", help="validation run (same axis)")
     parser.add_argument("-o", "--output", dest="out", required=True, metavar="DIR",
                         help="output folder: compare.md, compare.json, compare_*.png, models/FAMILY.json")
+    parser.add_argument("--overwrite", action="store_true", help="replace an earlier comparison in the output folder")
     parser.add_argument("--families", default=",".join(FAMILIES),
                         help=f"comma-separated subset (default all: {','.join(FAMILIES)})")
     parser.add_argument("--published", choices=sorted(PUBLISHED), action="append", default=[],
@@ -98,6 +99,8 @@ def run(args) -> int:
     out = Path(args.out)
     outputs.refuse_inputs({"--output": out, **{f"--output {out / name}": out / name for name in OUTPUTS}},
                           [args.run, args.validate])
+    # compare.json is written last: its presence says the folder holds a whole earlier comparison
+    outputs.refuse_existing("--output", out / "compare.json", args.overwrite)
     budget = memory_budget(args.memory)
     train_rec, val_rec = _records(args, budget)
     published = {}

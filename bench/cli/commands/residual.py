@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -33,6 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "from unrefitted (docs/residual-report.md)")
     parser.add_argument("--json", required=True, metavar="OUT.json", help="write the JSON report here")
     parser.add_argument("--report", metavar="DIR", help="write diagnostics PNGs and summary.md into DIR")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --json file or --report summary")
     parser.add_argument("--torque-channel", default=None, metavar="NAME",
                         help="torque channel (default: torque if present, else torque_cmd; as identify)")
     parser.add_argument("--torque-timing", "--timing", dest="timing",
@@ -87,6 +89,9 @@ def run(args: argparse.Namespace) -> int:
 
     model_file = args.start if args.start.strip().lower().endswith(".json") else None
     outputs.refuse_inputs({"--json": args.json, "--report": args.report}, [args.run, *args.validate, model_file])
+    outputs.refuse_existing("--json", args.json, args.overwrite)
+    if args.report:
+        outputs.refuse_existing("--report", Path(args.report) / "summary.md", args.overwrite)
     start_model = read_model(model_file) if model_file else (None, None)
     start = tuple(t.strip() for t in args.start.split(",") if t.strip()) if model_file is None else ()
     cands = None if args.candidates is None else tuple(t.strip() for t in args.candidates.split(",") if t.strip())
