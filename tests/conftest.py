@@ -10,7 +10,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 TESTS = Path(__file__).resolve().parent
 #: what a device process looks like on this machine's process table: the simulated devices (sim://, the CiA 402
 #: drive, the ODrive) and the emulated Cortex-M target
-DEVICE_COMMANDS = ("hilbench.firmware_sim", "qemu-system-")
+DEVICE_COMMANDS = ("-m hilbench.firmware_sim", "qemu-system-")
 #: a simulated device in lockstep waits for the host and keeps no clock of its own: nothing in it is timing
 #: sensitive, so a test may start one in the parallel part
 UNPACED = "--pacing lockstep"

@@ -36,7 +36,7 @@ class DriftSettings:
     baseline_runs: tuple[str, ...] = ()  # "campaign/key" or "key"
     significance: float = 3.0          # |coefficient|/standard error to keep a covariate
     ewma_lambda: float = 0.2
-    ewma_limit: float = 3.5            # in sigma of the EWMA
+    ewma_limit: float = 4.0            # in sigma of the EWMA (false alarms: docs/campaign-analysis.md)
     cusum_k: float = 0.5               # in sigma
     cusum_h: float = 8.0               # in sigma
     clip: float = 3.0                  # the charts read z clipped to +-clip (one wild run is not a drift)

@@ -39,10 +39,15 @@ def grid_path(step: float, sequence=(8, -6, 4, -2, 1, -1, 3, -7, 10)) -> np.ndar
     return np.concatenate(parts + [[turns[-1] * step]])
 
 
-def gms_force(x: np.ndarray, breakaway: float, presliding: float, substeps: int = 20) -> np.ndarray:
-    """Force (N) of the truth generator's GMS element set along x (m), quasi-static (slip relaxation at a rate
-    fixed per sample): breaks Masing's rule and wiping-out."""
-    tr = Truth(family="gms", coulomb=breakaway, presliding=presliding, n_elements=20, viscous=0.0, gms_rate=2000.0)
+def gms_force(x: np.ndarray, breakaway: float, presliding: float, substeps: int = 20, stribeck_excess: float = 0.0,
+              stribeck_velocity: float = 2.0) -> np.ndarray:
+    """Force (N) of the truth generator's GMS element set along x (m), one sample per ms (slip relaxation at a rate
+    fixed per sample). With a slip level that depends on speed (``stribeck_excess`` N over the Coulomb level,
+    falling off over ``stribeck_velocity`` m/s) and a path whose speed differs between branches, it breaks Masing's
+    rule and wiping-out; at one speed, or with a constant level, its elements stick and slip at the same forces as
+    Maxwell-slip elements and the rules hold."""
+    tr = Truth(family="gms", coulomb=breakaway, presliding=presliding, n_elements=20, viscous=0.0, gms_rate=2000.0,
+               stribeck_excess=stribeck_excess, stribeck_velocity=stribeck_velocity)
     fr = _Friction(tr)
     z = np.zeros(tr.n_elements)
     out = np.empty(x.size)
