@@ -46,9 +46,9 @@ class AnalysisResult:
 #: analysis name -> (module, attribute) entry points it needs
 ENTRY_POINTS: dict[str, list[tuple[str, str]]] = {
     "identification": [("hilbench.analysis.identification", "analyse")],
-    "skeleton": [("hilbench.analysis.skeleton.forcevib", "forcevib")],
+    "skeleton": [("hilbench.analysis.skeleton", "analyse")],
     "afrf": [("hilbench.analysis.afrf.frf", "afrf_from_run")],
-    "residual": [("hilbench.analysis.residual", "residual_loop"), ("hilbench.analysis.residual", "prepare_run")],
+    "residual": [("hilbench.analysis.residual", "analyse")],
     "presliding": [("hilbench.analysis.presliding.analyse", "analyse")],
 }
 #: analyses that read the file themselves (by path): no other handle of it may be open in this process
@@ -152,76 +152,38 @@ def save_model(document: dict, target: str, inputs: list[str]) -> str:
     return target
 
 
-def model_start(path: str) -> tuple[list, str]:
-    """Start entries of the residual loop from a model file (``hilbench identify`` or ``compare``), and a line
-    saying what they are. The file gives the starting model's terms: Maxwell-slip -> inertia, maxwell_slip,
-    viscous (+ coulomb, offset where the file has them); Coulomb+viscous and Stribeck alike (Stribeck with the
-    file's v_s); a stateful family (Dahl, LuGre, GMS, continuous) enters as its friction force along the measured
-    path with the file's parameters (shape fixed, scale fitted), as ``family_start`` builds it after identifying
-    the family itself. The loop refits every linear coefficient (J, b, k_i, ...) on the run."""
-    from dataclasses import replace
-
-    from hilbench.analysis.models.model_file import read_family
-    from hilbench.analysis.residual.family_start import STATEFUL
-
-    model, _doc = read_family(path)
-    p, name = model.parameters, os.path.basename(str(path))
-    if model.family in STATEFUL:
-        plant = replace(model.plant, viscous=0.0, viscous_neg=None, torque_offset=0.0)  # the loop's own terms
-        static = float(p.get("coulomb", 0.0) + p.get("static_excess", 0.0)) if "coulomb" in p else \
-            float(p.get("h", 0.0))
-        if not static > 0:
-            raise BenchError(f"{name}: the {model.family} model has no friction level; nothing to start from")
-        ident = {"parameters": p, "std_errors": model.std_errors, "units": model.units}
-        start = ["inertia", (f"family_{model.family}", {"_plant": plant, "_static": static, "_identified": ident}),
-                 "viscous"]
-        return start, f"start: the {model.family} friction of {name} (shape fixed), inertia, viscous"
-    if model.family == "maxwell_slip":
-        start = ["inertia", "maxwell_slip", "viscous"]
-    elif model.family == "stribeck":
-        start = ["inertia", "coulomb", ("stribeck", {"v_s": float(p["stribeck_velocity"])}), "viscous"]
-    else:  # coulomb_viscous
-        start = ["inertia", "coulomb", "viscous"]
-    if p.get("offset") or p.get("torque_offset"):
-        start.append("offset")
-    names = ", ".join(e if isinstance(e, str) else e[0] for e in start)
-    return start, f"start: the terms of the {model.family} model in {name} ({names}), refitted on this run"
-
-
 def skeleton(run, options: dict | None = None) -> AnalysisResult:
-    """ForceVib (``hilbench.analysis.skeleton.forcevib.forcevib``) on position and torque; ``options['inertia']`` in
-    kg*m^2 (rotary) or kg (linear) and ``options['method']`` (``hilbert`` or ``cwt``)."""
-    forcevib = _entry("skeleton")
+    """The skeleton of a record by the same call as ``hilbench skeleton`` (``analysis.skeleton.analyse``), with its
+    settings' defaults; ``options['inertia']`` in kg*m^2 (rotary) or kg (linear), ``options['method']`` (``cwt``,
+    the default, or ``hilbert``). The result carries the analysis's warnings (a run that is no chirp, a narrow
+    amplitude range, a stiffness that cannot be)."""
+    analyse = _entry("skeleton")
+    from hilbench.analysis.skeleton import SkeletonSettings
+
     options = options or {}
     inertia = float(options.get("inertia", 0.0))
     if not inertia > 0:
         raise BenchError("skeleton analysis needs the inertia J > 0 (kg*m^2); set it in the browser")
-    x = run.channel("position")
-    f = run.channel("torque")
-    res = forcevib(x - np.mean(x), f, run.sample_rate, inertia, options.get("method", "hilbert"))
-    ok = res.valid
-    if not ok.any():
+    res = analyse([run], SkeletonSettings(mass=inertia, method=options.get("method", "cwt")))
+    c = res.curves
+    if c.amplitude.size == 0:
         raise BenchError("ForceVib found no valid samples in this run (is it a chirp or a sine run?)")
     pos_unit = run.unit("position")
     tq_unit = run.unit("torque")
-    a, fk = _thin(res.amplitude[ok], res.restoring_force[ok])
-    v, fd = _thin(res.velocity_amplitude[ok], res.damping_force[ok])
+    per_run = res.per_run[0] if res.per_run else {}
     numbers = [
-        ("valid samples", f"{int(ok.sum())} of {ok.size}", ""),
-        ("amplitude range", f"{res.amplitude[ok].min():.4g} .. {res.amplitude[ok].max():.4g}", pos_unit),
-        ("median k_eq", f"{np.median(res.stiffness[ok]):.6g}", f"{tq_unit}/{pos_unit}"),
-        ("median c_eq", f"{np.median(res.damping[ok]):.6g}", f"{tq_unit}*s/{pos_unit}"),
+        ("valid samples", str(per_run.get("valid_samples", "")), ""),
+        ("amplitude range", f"{c.amplitude.min():.4g} .. {c.amplitude.max():.4g}", pos_unit),
+        ("median k_eq", f"{np.median(c.stiffness):.6g}", f"{tq_unit}/{pos_unit}"),
+        ("median c_eq", f"{np.median(c.damping):.6g}" if c.damping.size else "n/a", f"{tq_unit}*s/{pos_unit}"),
     ]
     figures = [
         Figure("restoring force skeleton", f"amplitude A ({pos_unit})", f"F_k ({tq_unit})",
-               [("(k_eq - k_lin) A", a, fk)], scatter=True),
+               [("(k_eq - k_lin) A", c.amplitude, c.restoring_force)], scatter=True),
         Figure("damping force skeleton", f"velocity amplitude V ({pos_unit}/s)", f"F_d ({tq_unit})",
-               [("c_eq V", v, fd)], scatter=True),
+               [("c_eq V", c.velocity, c.damping_force)], scatter=True),
     ]
-    from hilbench.analysis.skeleton import not_chirp_warning  # a non-chirp run gives F_k of -2e4 N*m (issue 28)
-
-    line = not_chirp_warning(os.path.basename(run.path), run.protocol_name)
-    return AnalysisResult(TITLES["skeleton"], numbers, figures, [line] if line else [])
+    return AnalysisResult(TITLES["skeleton"], numbers, figures, list(res.warnings))
 
 
 def afrf(run, options: dict | None = None) -> AnalysisResult:
@@ -249,24 +211,29 @@ def afrf(run, options: dict | None = None) -> AnalysisResult:
 
 
 def residual(run, options: dict | None = None) -> AnalysisResult:
-    """Residual loop (``analysis.residual.residual_loop``) on position and torque, blocked
-    cross-validation (no separate validation run)."""
-    residual_loop = _entry("residual")
+    """Residual loop of a record by the same call as ``hilbench residual`` (``analysis.residual.analyse``), blocked
+    cross-validation (no separate validation run). ``options['start_model']``: a model file (``hilbench identify``
+    or compare's maxwell_slip) to start from, unrefitted, as ``residual --start MODEL.json`` does; its own figure is
+    shown as identify reports it."""
     from hilbench.analysis.metrics import percent
-    from hilbench.analysis.residual import prepare_run
+    from hilbench.analysis.models.model_file import read_model
+    from hilbench.analysis.residual import ResidualSettings, analyse
 
-    data = prepare_run(run.position, run.torque, run.sample_rate, axis=run.axis, name=os.path.basename(run.path),
-                       timing=run.timing)
     start_file = (options or {}).get("start_model")
+    settings = ResidualSettings()
     if start_file:
-        start, said = model_start(start_file)
-        res = residual_loop(data, start=start)
-    else:
-        said = ""
-        res = residual_loop(data)
+        model, document = read_model(start_file)
+        settings = ResidualSettings(start=(), start_model=model, start_model_document=document)
+    analysed = analyse(run, settings)
+    res = analysed.loop
     numbers = [("verdict", str(res.verdict), ""), ("validation", str(res.validation_mode), ""),
                ("start model", ", ".join(res.start), ""),
                ("effects added", ", ".join(res.names_added) or "none", "")]
+    if analysed.start_model is not None:  # the start model's own figure, as identify reports it
+        f = analysed.start_model["figures"]
+        where = "validation" if "validation_torque_nrmse" in f else "train"
+        numbers.append((f"start model ({analysed.start_model['source']}): {where} torque NRMSE",
+                        f"{percent(f[f'{where}_torque_nrmse']):.3g}", "%"))
     for label, errors in (("start model", res.error_before), ("final model", res.error_after)):
         v = errors.get("validation") or {}
         if v.get("torque_nrmse") is not None:
@@ -277,7 +244,7 @@ def residual(run, options: dict | None = None) -> AnalysisResult:
                       [("before", *_thin(sb.time, sb.residual)), ("after", *_thin(sa.time, sa.residual))]),
                Figure("residual against velocity", f"velocity ({run.unit('position')}/s)", f"residual ({tq})",
                       [("after", *_thin(sa.velocity, sa.residual))], scatter=True)]
-    return AnalysisResult(TITLES["residual"], numbers, figures, [said] if said else [])
+    return AnalysisResult(TITLES["residual"], numbers, figures)
 
 
 def presliding(run, options: dict | None = None) -> AnalysisResult:

@@ -96,3 +96,10 @@ def test_the_gui_skeleton_warns_on_a_run_that_is_no_chirp(tmp_path):
         shown = skeleton(load_record(path), {"inertia": 1.0})
         assert bool(shown.warnings) == (protocol != "chirp"), shown.warnings
         assert all("not a chirp" in w for w in shown.warnings)
+    # one reading: the browser's skeleton is the command's (same call, same defaults, same curves)
+    assert main(["skeleton", str(path), "--mass", "1.0", "--json", str(tmp_path / "s.json"), "-q"]) == 0
+    doc = json.loads((tmp_path / "s.json").read_text())
+    numbers = {q: v for q, v, _u in shown.numbers}
+    k_med = float(numbers["median k_eq"])
+    assert k_med == pytest.approx(float(np.median(doc["stiffness"])), rel=1e-5)  # shown to 6 digits
+    assert shown.figures[0].curves[0][1].tolist() == pytest.approx(doc["amplitude"], rel=1e-12)

@@ -302,11 +302,19 @@ def test_the_model_is_saved_as_identify_writes_it_and_starts_the_residual_loop(w
     model, _doc = read_model(tmp_path / "gui.json")
     assert model.ms_stiffness.size == len(cli["parameters"]["ms_stiffness"])
 
-    start, said = analyses.model_start(str(tmp_path / "gui.json"))
-    assert start[:3] == ["inertia", "maxwell_slip", "viscous"] and "gui.json" in said
+    # the saved model starts the GUI's residual loop as `hilbench residual --start MODEL.json` does: same call,
+    # same start figure (identify's definition), same verdict
     res = analyses.residual(load_record(str(run)), {"start_model": str(tmp_path / "gui.json")})
-    shown = dict((q, v) for q, v, _u in res.numbers)
-    assert shown["start model"].startswith("inertia, maxwell_slip, viscous") and said in res.warnings
+    shown = {q: v for q, v, _u in res.numbers}
+    assert main(["residual", str(run), "--start", str(tmp_path / "gui.json"), "--json", str(tmp_path / "r.json"),
+                 "-q"]) == 0
+    cli_res = json.loads((tmp_path / "r.json").read_text())
+    start_figure = [v for q, v in shown.items() if q.startswith("start model (") and "torque NRMSE" in q]
+    assert start_figure, shown
+    figs = cli_res["inputs"]["start_model"]["figures"]
+    where = "validation_torque_nrmse" if "validation_torque_nrmse" in figs else "train_torque_nrmse"
+    assert float(start_figure[0]) == pytest.approx(100 * figs[where], rel=5e-3)  # shown to 3 digits
+    assert shown["verdict"] == str(cli_res["verdict"])
 
 
 class _FakePlan:
