@@ -152,8 +152,8 @@ def _held_out(path: str, settings: StepSettings, step: str):
 
 def compare_step(path: str, settings: StepSettings) -> dict[str, Any]:
     """``hilbench compare`` on one run: every family of ``compare_families`` fitted on the head, scored on the
-    tail; the row is the family with the lowest validation torque NRMSE (a thin adapter: analysis.models has no
-    ``analyse(record, settings)`` front door yet)."""
+    tail; the row is the family with the lowest validation torque NRMSE (the calls of ``analysis.models.compare
+    .analyse`` on the head and tail arrays of one record, which that front door takes as two records)."""
     from hilbench.analysis.errors import AnalysisError
     from hilbench.analysis.models.compare import compare
     from hilbench.analysis.models.families import RunData
@@ -178,7 +178,8 @@ def compare_step(path: str, settings: StepSettings) -> dict[str, Any]:
 def residual_step(path: str, settings: StepSettings) -> dict[str, Any]:
     """``hilbench residual`` on one run: the residual loop from ``residual_start``, fitted on the head and judged
     on the tail; the row has the validation torque NRMSE of the start and of the final model and the loop's
-    verdict (a thin adapter: analysis.residual has no ``analyse(record, settings)`` front door yet)."""
+    verdict (the loop ``analysis.residual.analyse`` runs, on the head and tail arrays of one record, which that
+    front door takes as two records)."""
     from hilbench.analysis.residual import LoopOptions, prepare_run, residual_loop
 
     rec, head, tail = _held_out(path, settings, "residual")
@@ -198,7 +199,7 @@ def presliding_step(path: str, settings: StepSettings) -> dict[str, Any]:
     """``hilbench presliding`` on one displacement-driven run with the command's defaults (fraction 0.9, 48
     thresholds, the protocol's inertia, ``presliding_replicates`` bootstrap replicates); the row has the
     quantities with their standard uncertainties and the relative rms error of the force simulated from the
-    measured displacement (a thin adapter: analysis.presliding has no ``analyse(record, settings)`` front door)."""
+    measured displacement (the array analysis that ``analysis.presliding``'s record front door runs)."""
     from hilbench.analysis.errors import AnalysisError
     from hilbench.analysis.presliding.analyse import analyse
     from hilbench.analysis.presliding.identify import PreslidingSettings
