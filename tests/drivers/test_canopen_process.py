@@ -129,9 +129,12 @@ def test_cli_identify_run_against_the_drive_process_recovers_the_plant(drive_pro
         np.testing.assert_array_equal(s["cycle"][:], np.arange(t.size))
         host_time = s["host_time"][:]
         u = f["protocol/setpoints"][:]
-        timing = [e["message"].decode() for e in f["events"][:] if e["kind"] == b"info"]
+        infos = [e["message"].decode() for e in f["events"][:] if e["kind"] == b"info"]
     assert t.size == 15_000 and np.all(np.diff(host_time) > 0)
+    timing = [m for m in infos if m.startswith("host-clocked timing:")]
     assert len(timing) == 1 and timing[0].startswith("host-clocked timing: 15000 cycles at 1000 Hz")
+    # the drive's units, as adopted (0x608F, no factor objects on the simulated drive), said once
+    assert [m for m in infos if "units adopted from the drive" in m], "\n".join(infos)
     # oracle: the C plant run directly on the per-mille commands, 10 sub-samples per cycle (see
     # test_canopen_drive.py): the file must hold exactly its samples
     p = load_sim_config().plant
