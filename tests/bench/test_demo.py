@@ -2,12 +2,8 @@
 
 import json
 
-import pytest
-
 from hilbench.analysis.record import load_record
 from hilbench.bench.cli import main
-
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 
 def test_demo_runs_everything_and_finds_the_undeclared_cogging(tmp_path, capsys):

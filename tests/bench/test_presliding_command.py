@@ -14,8 +14,6 @@ from tests.analysis.presliding.records import dc_elements, maxwell_force, smooth
 from tests.bench.presliding_runs import run_and_analyse
 from tests.truth.generator import elements
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
-
 PRESLIDING = 0.1e-3  # m, the truth's largest element
 BREAKAWAY = 40.0  # N
 

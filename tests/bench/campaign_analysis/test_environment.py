@@ -8,8 +8,6 @@ import pytest
 from hilbench.bench.acquisition.campaign import CampaignError, load_campaign, run_campaign
 from hilbench.bench.campaign_analysis.engine import AnalyseError, _environment
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
-
 TOML = """
 [defaults]
 device = "sim://?pacing=lockstep"

@@ -12,8 +12,6 @@ from hilbench.bench.errors import BenchError
 from hilbench.bench.gui.analyses import ANALYSES, TITLES, availability, presliding
 from tests.bench.presliding_runs import run_and_analyse
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
-
 
 def test_the_presliding_analysis_shows_the_numbers_the_command_writes(tmp_path):
     """A short presliding run on the simulated bench (8 d/s, 2^16 counts/rev), analysed by the browser's function
