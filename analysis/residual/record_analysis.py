@@ -58,6 +58,15 @@ class ResidualAnalysis:
     fixed_inertia: float | None = None  # the settings' J, 0 for a displacement-driven record
     start_model: dict | None = None  # the identified start model and its own figures (identify's definition)
 
+    def start_figure(self) -> tuple[str, float] | None:
+        """The start model's own torque NRMSE (fraction) as identify reports it: ("validation" or "train", value);
+        None when the loop did not start from an identified model."""
+        if self.start_model is None:
+            return None
+        f = self.start_model["figures"]
+        where = "validation" if "validation_torque_nrmse" in f else "train"
+        return where, f[f"{where}_torque_nrmse"]
+
 
 def analysed_samples(n_samples: int, sample_rate: float) -> int:
     """Samples the loop analyses of a record of ``n_samples`` at ``sample_rate`` Hz (after the reduction)."""

@@ -229,11 +229,10 @@ def residual(run, options: dict | None = None) -> AnalysisResult:
     numbers = [("verdict", str(res.verdict), ""), ("validation", str(res.validation_mode), ""),
                ("start model", ", ".join(res.start), ""),
                ("effects added", ", ".join(res.names_added) or "none", "")]
-    if analysed.start_model is not None:  # the start model's own figure, as identify reports it
-        f = analysed.start_model["figures"]
-        where = "validation" if "validation_torque_nrmse" in f else "train"
+    if (figure := analysed.start_figure()) is not None:  # the start model's own figure, as identify reports it
+        where, value = figure
         numbers.append((f"start model ({analysed.start_model['source']}): {where} torque NRMSE",
-                        f"{percent(f[f'{where}_torque_nrmse']):.3g}", "%"))
+                        f"{percent(value):.3g}", "%"))
     for label, errors in (("start model", res.error_before), ("final model", res.error_after)):
         v = errors.get("validation") or {}
         if v.get("torque_nrmse") is not None:

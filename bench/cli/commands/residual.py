@@ -131,11 +131,9 @@ def run(args: argparse.Namespace) -> int:
     channel, timing = rec.torque_channel, rec.timing
     before, after = result.error_before["validation"], result.error_after["validation"]
     pct = lambda v: None if v is None else 100.0 * v  # noqa: E731
-    if res.start_model is not None:  # the start model's own figure, as identify reports it
-        f = res.start_model["figures"]
-        where = "validation" if "validation_torque_nrmse" in f else "train"
-        say(f"start model ({res.start_model['source']}): {where} torque NRMSE "
-            f"{pct(f[f'{where}_torque_nrmse']):.3g} %")
+    if (figure := res.start_figure()) is not None:  # the start model's own figure, as identify reports it
+        where, value = figure
+        say(f"start model ({res.start_model['source']}): {where} torque NRMSE {pct(value):.3g} %")
     if record == "displacement-driven":
         say(f"{result.verdict}; validation force simulated from the measured displacement: NRMSE "
             f"{pct(before['torque_nrmse']):.3g} % -> {pct(after['torque_nrmse']):.3g} % "
