@@ -13,8 +13,6 @@ import pytest
 from hilbench.analysis.runfile import open_run
 from hilbench.bench.acquisition.campaign import CampaignError, load_campaign
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
-
 GOOD = """
 [defaults]
 device = "sim://?pacing=lockstep"
@@ -73,6 +71,7 @@ def test_bad_campaign_from_the_cli_is_one_line_and_exit_2(tmp_path):
     assert not (tmp_path / "c").exists()  # nothing moved
 
 
+@pytest.mark.usefixtures("starts_devices")  # a real-time simulator is killed mid-run: the serial part
 def test_killed_campaign_resumes_to_every_run_completed_once(tmp_path):
     # real-time pacing so the kill lands inside the second run
     path = _write(tmp_path, GOOD.format(duration=2).replace("?pacing=lockstep", ""))

@@ -15,8 +15,6 @@ from hilbench.bench.acquisition.user_config import config_path, default_device
 from hilbench.bench.cli import build_parser, main, split_global_flags
 from tests.bench.test_identify_command import _write_run
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
-
 
 @pytest.fixture(scope="module")
 def parser():

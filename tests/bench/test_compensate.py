@@ -13,8 +13,6 @@ from hilbench.bench import cli
 from hilbench.firmware_sim.engine.friction_models import dc_motor
 from tests.figure_checks import recording_figures
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
-
 SHORT = ["--sample-rate", "1000", "--amplitudes", "1e-3", "1e-2", "--cycles", "1", "--rest", "0.1",
          "--amplitude", "0.01", "--frequency", "1", "--targets", "0.01", "0", "--move-time", "0.2"]
 

@@ -28,8 +28,6 @@ from hilbench.firmware_sim.devices.sim_config import SimConfigError
 from hilbench.firmware_sim.engine.plant import PlantParameterError
 from tests.bench.test_identify_command import _write_run
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
-
 OURS = (BenchError, AnalysisError, DriverError, PlantParameterError, SimConfigError)
 # 150 examples each: about 12 s (compensate) and 4 s (sim); HILBENCH_FUZZ_EXAMPLES=1500 for a longer search
 FUZZ = settings(max_examples=int(os.environ.get("HILBENCH_FUZZ_EXAMPLES", "150")), deadline=None,

@@ -16,8 +16,6 @@ from hilbench.bench.acquisition.protocols import Presliding, ProtocolError, make
 from hilbench.bench.acquisition.runner import Bench, DeviceSettings
 from hilbench.bench.cli import main
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
-
 CPR = 1 << 16
 COUNT = 2 * math.pi / CPR  # rad, one encoder count
 D = 5e-4  # rad, the DC-motor preset's presliding distance

@@ -17,8 +17,6 @@ import pytest
 from hilbench.analysis import runfile as rf
 from hilbench.bench.cli import main as bench_main
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
-
 FS = 10_000.0
 
 WRITER = textwrap.dedent(

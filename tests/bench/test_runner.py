@@ -15,8 +15,6 @@ from hilbench.bench.acquisition.protocols import Identification, ProtocolError, 
 from hilbench.bench.acquisition.runner import Bench, DeviceSettings, RunControl
 from hilbench.drivers import protocol as wire
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
-
 LOCKSTEP = "sim://?pacing=lockstep"
 
 
@@ -140,6 +138,7 @@ def _start_cli_run(tmp_path, duration=30):
     pytest.fail("the run did not start logging within 30 s")
 
 
+@pytest.mark.usefixtures("starts_devices")  # a real-time simulator: the serial part
 def test_ctrl_c_leaves_an_aborted_file_and_a_nonzero_exit(tmp_path):
     proc, out = _start_cli_run(tmp_path)
     proc.send_signal(signal.SIGINT)
@@ -152,6 +151,7 @@ def test_ctrl_c_leaves_an_aborted_file_and_a_nonzero_exit(tmp_path):
         assert "abort" in kinds
 
 
+@pytest.mark.usefixtures("starts_devices")  # a real-time simulator: the serial part
 def test_sigkill_leaves_a_crashed_file_with_every_flushed_sample(tmp_path):
     proc, out = _start_cli_run(tmp_path)
     sims = _children(proc.pid)

@@ -16,8 +16,6 @@ from hilbench.drivers.amplifier import Amplifier
 from hilbench.drivers.errors import DeviceFaultError
 from hilbench.drivers.links import SerialLink
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
-
 ROOT = Path(__file__).resolve().parents[2]
 
 KILLED_HOST = r"""
@@ -42,6 +40,7 @@ def collect(amp, setpoints):
     return blocks, info.value
 
 
+@pytest.mark.usefixtures("starts_devices")  # a real-time simulator: the serial part
 def test_watchdog_after_sigkill_of_the_host(simulator, sim_toml):
     rate, timeout = 1000, 0.2
     _, path = simulator(pacing="realtime", config=sim_toml())
@@ -79,6 +78,7 @@ def test_watchdog_after_sigkill_of_the_host(simulator, sim_toml):
         assert sum(len(b) for b in blocks) == 200
 
 
+@pytest.mark.usefixtures("starts_devices")  # a real-time simulator: the serial part
 def test_estop_from_another_thread_during_stream(simulator, sim_toml):
     _, path = simulator(pacing="realtime", config=sim_toml())
     with Amplifier(SerialLink(path)) as amp:
@@ -189,6 +189,7 @@ def wait_for(link, cls, timeout=3.0):
     raise AssertionError(f"no {cls.__name__} within {timeout} s")
 
 
+@pytest.mark.usefixtures("starts_devices")  # a real-time simulator: the serial part
 def test_buffer_underrun(simulator):
     _, path = simulator(pacing="realtime")
     link = SerialLink(path)
@@ -209,6 +210,7 @@ def test_buffer_underrun(simulator):
         link.close()
 
 
+@pytest.mark.usefixtures("starts_devices")  # a real-time simulator: the serial part
 def test_idle_armed_device_trips_watchdog_without_host_traffic(simulator):
     _, path = simulator(pacing="realtime")
     link = SerialLink(path)
@@ -223,6 +225,7 @@ def test_idle_armed_device_trips_watchdog_without_host_traffic(simulator):
         link.close()
 
 
+@pytest.mark.usefixtures("starts_devices")  # a real-time simulator: the serial part
 def test_new_host_is_not_confused_by_what_a_dead_host_left_unread(simulator):
     # host A never reads: its replies and ~0.6 s of sample blocks pile up in the pty and the device
     _, path = simulator(pacing="realtime")

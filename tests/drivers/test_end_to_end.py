@@ -13,8 +13,6 @@ from hilbench.drivers.links import SerialLink
 from hilbench.firmware_sim.devices.sim_config import load_sim_config
 from hilbench.firmware_sim.engine.plant import simulate
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
-
 
 def direct_run(sim_path: str, config: p.Config, setpoints: np.ndarray):
     """The same plant, run directly in one call (the oracle for the streamed samples)."""

@@ -14,8 +14,6 @@ from hilbench.drivers.errors import DriverError, LinkClosedError, SampleLossErro
 from hilbench.drivers.fault_injection import FaultyPort
 from hilbench.drivers.links import SerialLink
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
-
 
 def frames(n):
     return [p.Heartbeat(i) if i % 3 else p.SetpointBlock(i, np.arange(i % 50, dtype=np.float32))
@@ -144,6 +142,7 @@ def test_stream_with_damage_both_ways_ends_with_a_clear_error_not_a_hang(simulat
         amp.close()
 
 
+@pytest.mark.usefixtures("starts_devices")  # a real-time simulator: the serial part
 def test_pty_closed_mid_stream_gives_a_clear_error_within_1_s(simulator):
     proc, path = simulator(pacing="realtime")
     with Amplifier(SerialLink(path)) as amp:

@@ -18,8 +18,6 @@ from hilbench.drivers.errors import DriverError, SetpointError
 from hilbench.firmware_sim.devices.core_c import CoreDevice
 from hilbench.firmware_sim.devices.sim_config import load_sim_config
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
-
 
 def v1_frame(msg: p.Message) -> bytes:
     """What a v1 host writes: version byte 1, the v1 payloads (empty GET_IDENTITY, 65-byte CONFIG)."""

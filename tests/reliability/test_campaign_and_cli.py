@@ -14,8 +14,6 @@ from hilbench.drivers.amplifier import Amplifier
 from hilbench.drivers.errors import DriverError
 from tests.reliability.cli import hilbench, one_line_error, start
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
-
 HEAD = '[defaults]\ndevice = "sim://?pacing=lockstep"\n'
 ONE_RUN = '[[run]]\nname = "a"\nprotocol = "chirp"\nduration = "1 s"\n'
 
@@ -77,6 +75,7 @@ def test_run_has_no_inertia_option(tmp_path):
     assert proc.returncode == 2 and "unrecognized arguments: --inertia" in proc.stderr
 
 
+@pytest.mark.usefixtures("starts_devices")  # a real-time simulator: the serial part
 def test_a_model_name_over_255_bytes_is_one_line_not_a_dead_simulator(tmp_path):
     cfg = tmp_path / "sim.toml"
     cfg.write_text(f'[device]\nmodel = "{"x" * 256}"\n')
@@ -92,6 +91,7 @@ CAMPAIGN = HEAD + '[[run]]\nname = "id"\nprotocol = "identification"\nrepeats = 
                   'sample_rate = 1000\n'
 
 
+@pytest.mark.usefixtures("starts_devices")  # a real-time simulator: the serial part
 def test_two_resumes_on_one_folder(tmp_path):
     path = tmp_path / "c.toml"
     path.write_text(CAMPAIGN.format(d=60).replace("lockstep", "realtime"))

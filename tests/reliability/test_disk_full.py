@@ -7,8 +7,6 @@ import pytest
 
 from hilbench.analysis.runfile import open_run
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
-
 RUN = ["run", "identify", "--device", "sim://?pacing=lockstep", "--duration", "20", "--quiet"]
 #: real-time pacing, so that a kill lands mid-run (a lockstep run of 20 s can complete between two polls)
 RUN_REALTIME = ["run", "identify", "--device", "sim://", "--duration", "20", "--quiet"]
@@ -46,6 +44,7 @@ def test_run_on_a_filling_disk_ends_failed_with_the_flushed_samples_intact(small
     assert "status     failed" in shown.stdout
 
 
+@pytest.mark.usefixtures("starts_devices")  # a real-time simulator: the serial part
 def test_repair_and_import_on_a_full_disk(small_disk, tmp_path):
     import signal
     import subprocess

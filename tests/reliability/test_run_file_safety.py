@@ -18,8 +18,6 @@ from hilbench.analysis.record import load_record
 from hilbench.analysis.runfile import MAX_SAMPLES, RunFileError, RunWriter, open_run, repair
 from tests.reliability.cli import ENV, hilbench, one_line_error
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
-
 
 def _small_run(path, n=1000, **kw):
     with RunWriter(path, sample_rate=1000.0, channels=("sample_index", "t", "position"), **kw) as w:
@@ -28,6 +26,7 @@ def _small_run(path, n=1000, **kw):
         return r.uid
 
 
+@pytest.mark.usefixtures("starts_devices")  # a real-time simulator: the serial part
 def test_overwrite_that_fails_on_metadata_keeps_the_old_file(tmp_path):
     old = tmp_path / "run.h5"
     uid = _small_run(old)

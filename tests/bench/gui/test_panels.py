@@ -8,8 +8,6 @@ from hilbench.bench.acquisition.protocols import PROTOCOLS
 from hilbench.bench.gui.connection_panel import can_urls
 from hilbench.bench.gui.protocol_panel import ProtocolPanel
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
-
 
 @pytest.fixture
 def panel(qtbot, tmp_path):
