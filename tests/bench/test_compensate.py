@@ -385,3 +385,26 @@ def test_a_compensate_step_name_is_a_plain_name(tmp_path, name):
     (tmp_path / "c.toml").write_text(f'[[compensate]]\nname = {json.dumps(name)}\nmodel = "{model.name}"\n')
     with pytest.raises(CampaignError, match=r"c.toml:2: compensate 1: name .* must use only letters"):
         load_campaign(tmp_path / "c.toml")
+
+
+def test_a_geared_run_tracks_the_load_reference_and_reports_its_setpoint_to_the_live_view(tmp_path):
+    """With ratio 2 the load follows q_ref (the protocol multiplied its setpoints by the ratio and the runner did
+    again: the load moved 2*q_ref, against a feed-forward computed for q_ref). Bench.run's progress blocks carry
+    the setpoint at the load, which the GUI's live view draws against the measured position."""
+    from hilbench.analysis.record import load_record
+    from hilbench.bench.acquisition.compensation import CompensatedReference
+    from hilbench.bench.acquisition.runner import Bench, DeviceSettings
+
+    protocol = CompensatedReference(reference="point_to_point", targets=(0.01, 0.0), move_time=0.2, rest=0.1,
+                                    sample_rate=1000)
+    blocks = []
+    with Bench.open("sim://?pacing=lockstep", DeviceSettings(ratio=2.0)) as bench:
+        result = bench.run(protocol, tmp_path / "p.h5", progress=blocks.append)
+    assert result.status == "completed"
+    ref = protocol.reference_path.position
+    rf = load_record(tmp_path / "p.h5", need_torque=False, channels=("position_cmd",))
+    assert np.max(np.abs(rf.channel("position_cmd") - ref)) < 1e-9  # float32 on the wire
+    # the load reaches the 10 mrad target (measured 10.00 mrad; 20.00 mrad before the fix), within 2 %
+    assert abs(np.max(rf.position) - 0.01) < 2e-4, np.max(rf.position)
+    sent = np.concatenate([b.position_cmd for b in blocks])
+    assert sent.shape == ref.shape and np.max(np.abs(sent - ref)) < 1e-9
