@@ -62,6 +62,7 @@ class LivePlot(QtWidgets.QWidget):
         self.graphics.setBackground("w")
         self.plots: list[pg.PlotItem] = []
         self.curves: dict[str, pg.PlotDataItem] = {}
+        self._legends: dict[str, pg.LegendItem] = {}  # channel -> the legend of its panel
         for row, (title, unit, traces) in enumerate(PANELS):
             plot = self.graphics.addPlot(row=row, col=0)
             plot.setLabel("left", title, units=None)
@@ -77,10 +78,11 @@ class LivePlot(QtWidgets.QWidget):
                 plot.hideAxis("bottom")
             plot.getAxis("left").setWidth(70)  # fixed: a new tick label width never re-lays out the plots
             plot.disableAutoRange()
-            if len(traces) > 1:
-                plot.addLegend(offset=(5, 5), labelTextColor="k")
+            legend_item = plot.addLegend(offset=(5, 5), labelTextColor="k") if len(traces) > 1 else None
             for name, pen, legend in traces:
                 self.curves[name] = plot.plot(pen=pg.mkPen(**pen), name=legend)
+                if legend_item is not None:
+                    self._legends[name] = legend_item
             self.plots.append(plot)
         self.plots[-1].setLabel("bottom", "time before the newest sample (s)")
         self.plots[0].sigXRangeChanged.connect(self._on_range_changed)
@@ -110,6 +112,7 @@ class LivePlot(QtWidgets.QWidget):
         layout.addWidget(self.graphics, 1)
 
         self._y_ranges: list[tuple[float, float] | None] = [None] * len(self.plots)
+        self._in_legend: dict[str, bool] = {}  # channel -> listed in its panel's legend (default: yes)
         self.units = [unit for _, unit, _ in PANELS]  # the unit each y axis shows now (mrad, mN*m, ...)
         self._set_x_window()
         for plot in self.plots:
@@ -231,6 +234,20 @@ class LivePlot(QtWidgets.QWidget):
             axis.setLabel(f"{title} ({shown})")
             self.units[p] = shown
 
+    def _show_in_legend(self, name: str, present: bool) -> None:
+        """The legend names only the traces the run has (no "setpoint" beside a position without one)."""
+        if present == self._in_legend.get(name, True):
+            return
+        self._in_legend[name] = present
+        curve = self.curves[name]
+        legend = self._legends.get(name)
+        if legend is None:
+            return
+        if present:
+            legend.addItem(curve, curve.name())
+        else:
+            legend.removeItem(curve)
+
     def _draw(self, t: np.ndarray, data: np.ndarray, span: list[float] | None) -> None:
         if span is not None and t.size:
             lo, hi = np.searchsorted(t, span[0]), np.searchsorted(t, span[1])
@@ -239,10 +256,12 @@ class LivePlot(QtWidgets.QWidget):
         if self.decimate:
             t, data = minmax_decimate(t, data, self._columns())
         for i, name in enumerate(CHANNELS):
-            if np.isfinite(data[i]).any():
+            present = bool(np.isfinite(data[i]).any())
+            if present:
                 self.curves[name].setData(t, data[i], skipFiniteCheck=True)
             else:  # a channel this run does not have (the position setpoint of a current-mode run)
                 self.curves[name].setData([], [])
+            self._show_in_legend(name, present)
         self.frames += 1
         self._fps_count += 1
         self.frame_drawn.emit()

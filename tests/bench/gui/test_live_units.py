@@ -77,11 +77,26 @@ def test_setpoint_and_measured_differ_in_colour_and_line_style(live):
     assert x is not None and np.allclose(np.nanmax(y), 1.1e-3, rtol=1e-3)
 
 
+def _legend_names(live: LivePlot, title: str) -> list[str]:
+    legend = live.plots[[p[0] for p in PANELS].index(title)].legend
+    return [label.text for _, label in legend.items]
+
+
 def test_a_current_mode_run_draws_no_position_setpoint(live):
     live.append(*_block(1e-3, 0.1, position_cmd=False))
     live.redraw()
     x, _ = live.curves["position_cmd"].getData()
     assert x is None or len(x) == 0
+    assert _legend_names(live, "position") == ["measured"]  # no "setpoint" without one
+    assert _legend_names(live, "current") == ["setpoint", "measured"]
+    live.clear()
+    live.append(*_block(1e-3, 0.1))  # a position-mode run next: the setpoint is back
+    live.redraw()
+    assert sorted(_legend_names(live, "position")) == ["measured", "setpoint"]
+    live.clear()
+    live.append(*_block(1e-3, 0.1, position_cmd=False))
+    live.redraw()
+    assert _legend_names(live, "position") == ["measured"]
     x, y = live.curves["position"].getData()
     assert len(x) > 0 and np.isfinite(y).all()
     assert set(CHANNELS) >= {"position_cmd", "position", "current_cmd", "current_meas"}
