@@ -26,6 +26,13 @@ def _mrad(value: float) -> str:
     return "–" if not math.isfinite(value) else f"{value * 1e3:.4g}"
 
 
+def _factor(x: float) -> str:
+    """A reduction factor (baseline / run) in words: '6.1x smaller' or, below 1, '1.7x larger'."""
+    if not (math.isfinite(x) and x > 0):
+        return "no factor"
+    return f"{x:.3g}x smaller" if x >= 1 else f"{1 / x:.3g}x larger"
+
+
 def summary_line(run: CaseResult, baseline: CaseResult | None) -> str:
     """One line: rms and max tracking error and mean reversal glitch of ``run`` (mrad), against ``baseline`` with
     the reduction factor (baseline / run) when there is one."""
@@ -35,9 +42,9 @@ def summary_line(run: CaseResult, baseline: CaseResult | None) -> str:
         return (f"{head}: rms error {_mrad(m.rms_error)} mrad, max error {_mrad(m.max_error)} mrad, glitch mean "
                 f"{_mrad(m.glitch_mean)} mrad over {m.glitch.size} reversals (no baseline)")
     b, x = baseline.metrics, reduction(run, baseline)
-    parts = [f"{label} {_mrad(getattr(m, name))} vs {_mrad(getattr(b, name))} mrad "
-             f"({x[name + '_x']:.3g}x lower)" for name, label in
-             (("rms_error", "rms error"), ("max_error", "max error"), ("glitch_mean", "glitch mean"))]
+    parts = [f"{label} {_mrad(getattr(m, name))} vs {_mrad(getattr(b, name))} mrad ({_factor(x[name + '_x'])})"
+             for name, label in (("rms_error", "rms error"), ("max_error", "max error"),
+                                 ("glitch_mean", "glitch mean"))]
     return f"{head} against none: " + ", ".join(parts) + f" over {m.glitch.size} reversals"
 
 

@@ -177,6 +177,7 @@ def write_single_report(run: CaseResult, baseline: CaseResult | None, paths: dic
     from hilbench.analysis.compensation.run_report import run_figure
 
     results = [run] if baseline is None else [run, baseline]
+    paths["summary"].parent.mkdir(parents=True, exist_ok=True)  # --predict -o new/p.h5: no run file made it
     outputs.write_json(paths["summary"], json_safe(document(results, settings)), indent=1, allow_nan=False)
     fig = run_figure(run, baseline, title)
     try:

@@ -121,7 +121,7 @@ def test_a_single_run_is_compared_with_its_baseline_on_the_device(tmp_path, caps
     # measured on sim:// in lockstep (16-element truth, this 8-element model): rms 6.1x, glitch 5.7x lower
     assert x["rms_error_x"] > 4 and x["glitch_mean_x"] > 4, x
     summary = out.strip().splitlines()[-1]
-    assert summary.startswith("sine / maxwell_slip against none: rms error ") and "x lower)" in summary
+    assert summary.startswith("sine / maxwell_slip against none: rms error ") and "x smaller)" in summary
     # a second run without --overwrite: one line, exit 2, nothing replaced; also when only the figure is left
     before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
     assert "run.h5 exists; use --overwrite" in _refused(capsys, argv)

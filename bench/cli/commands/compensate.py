@@ -145,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
         gains = PositionGains(settings.position_kp, settings.position_ki, settings.position_kd,
                               settings.position_i_limit, settings.position_d_cutoff)
         results = run_cases(protocols, lambda p, i: predict_case(p, plant, gains, matrix,
-                                                                 settings.counts_per_rev))
+                                                                 settings.counts_per_rev), say=outputs.say)
     else:
         files = [args.out / case_file(c) for c in protocols] if args.matrix else \
             [single["run"], single.get("baseline")][:len(protocols)]
@@ -156,14 +156,14 @@ def run(args: argparse.Namespace) -> int:
             "sample_rate_hz": args.sample_rate, "calibration_check": note}
     if args.matrix:
         for path in write_report(results, args.out, meta):
-            print(f"-> {path}")
+            outputs.say(f"-> {path}")
         return 0
     run, base = results[0], (results[1] if len(results) > 1 else None)
     what = f"prediction (--predict) for {stem.name}" if args.predict else Path(run.run_file).name
     title = f"{what}: {run.reference.kind} reference, feed-forward {run.compensator}" + \
         (" against none (baseline)" if base else "")
     for path in write_single_report(run, base, single, meta, title):
-        print(f"-> {path}")
+        outputs.say(f"-> {path}")
     outputs.say(summary_line(run, base))
     return 0
 
@@ -192,6 +192,7 @@ def _on_device(args, protocols, settings, matrix, files: list[Path]) -> list:
     except ProtocolError as exc:
         raise BenchError(str(exc)) from None
     from hilbench.bench.acquisition.runner import Bench, signals_as_interrupt
+    from hilbench.bench.storage import outputs
 
     with signals_as_interrupt(), Bench.open(args.device, settings) as bench:
         def play(case, i):
@@ -201,7 +202,7 @@ def _on_device(args, protocols, settings, matrix, files: list[Path]) -> list:
                                notes=f"hilbench compensate {p.reference}/{p.compensation}")
             if result.status != "completed":
                 raise BenchError(f"{result.path}: run {result.status}: {result.message}")
-            print(f"run file: {result.path} ({result.samples} samples)")
+            outputs.say(f"run file: {result.path} ({result.samples} samples)")
             return measured_case(case, result.path, matrix)
 
-        return run_cases(protocols, play)
+        return run_cases(protocols, play, say=outputs.say)
