@@ -89,7 +89,7 @@ def hysteresis_figure(position: np.ndarray, measured: np.ndarray, models: Sequen
     step = max(1, x.size // MAX_DOTS)
     for (label, m), style in zip(models, MODEL_STYLES, strict=False):
         ax[0].plot(fx * x[::step], fy * np.asarray(m, float)[::step], ls="none", marker=".", ms=1.5, alpha=0.35,
-                   color=style["color"], rasterized=True, label=f"{label}, every {step}th sample" if step > 1 else
+                   color=style["color"], rasterized=True, label=f"{label}, one sample in {step}" if step > 1 else
                    label)
     ax[0].set_title("whole record: measured as sample density (grey, log scale), model as dots", fontsize=9)
     sl = slice(i0, i1)
@@ -103,6 +103,7 @@ def hysteresis_figure(position: np.ndarray, measured: np.ndarray, models: Sequen
         a.set_ylabel(f"friction ({yu})")
         a.grid(True, alpha=0.3)
         plain_numbers(a)
+        a.locator_params(axis="x", nbins=6)  # at most 7 ticks: signed labels such as "−0.75" touched at 9
     handles, labels = [], []
     for a in ax:
         h, lab = a.get_legend_handles_labels()

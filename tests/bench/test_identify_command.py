@@ -1,6 +1,7 @@
 """``hilbench identify`` end to end on run files written with analysis.runfile (bench uses analysis)."""
 
 import json
+import re
 
 import numpy as np
 
@@ -119,3 +120,20 @@ def test_identify_plots_name_their_runs_and_are_never_replaced_without_overwrite
     assert main(again) == 2 and "validation_hysteresis.png exists" in capsys.readouterr().err
     assert main([*again, "--overwrite"]) == 0
     assert {p.name for p in (tmp_path / "plots").iterdir()} == set(before)
+
+
+def test_the_hysteresis_legend_says_how_many_samples_a_dot_stands_for(tmp_path):
+    # it read "model, every 2th sample"
+    from hilbench.analysis.identification.plots import MAX_DOTS, hysteresis_figure
+
+    n = 3 * MAX_DOTS
+    t = np.arange(n) / 1000.0
+    x = 1e-3 * np.sin(2 * np.pi * t)
+    figures: dict = {}
+    with recording_figures(figures) as seen:
+        hysteresis_figure(x, np.tanh(x / 2e-4), [("model", np.tanh(x / 2.1e-4))], {"position": "rad",
+                          "torque": "N*m"}, "id.h5 (train run): friction", tmp_path / "h.png", t=t)
+    assert seen == {"h.png": []}, seen
+    texts = [t.get_text() for leg in figures["h.png"].legends for t in leg.get_texts()]
+    assert "model, one sample in 3" in texts, texts
+    assert not any(re.search(r"\\d(th|nd|rd|st) sample", t) for t in texts), texts
