@@ -80,19 +80,61 @@ def section_table(results: list[CaseResult]) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: the figures :func:`reduction` compares, as attributes of :class:`Metrics`
+REDUCED = ("rms_error", "max_error", "glitch_mean")
+
+
+def reduction(result: CaseResult, baseline: CaseResult) -> dict[str, float]:
+    """``baseline``'s figure divided by ``result``'s for each of :data:`REDUCED` (a factor, x: > 1 means the
+    feed-forward of ``result`` made it smaller); NaN where ``result``'s figure is 0 or undefined."""
+    out = {}
+    for name in REDUCED:
+        this, base = getattr(result.metrics, name), getattr(baseline.metrics, name)
+        out[f"{name}_x"] = base / this if this > 0 and math.isfinite(base) else math.nan
+    return out
+
+
 def document(results: list[CaseResult], settings: dict) -> dict:
-    """The JSON-able report: settings and, per run, the reference parameters and every metric."""
+    """The JSON-able report: settings and, per run, the reference parameters and every metric; with a ``none``
+    run of the same reference, ``reduction_vs_none`` (:func:`reduction`)."""
+    base = {r.reference.kind: r for r in results if r.compensator == "none"}
     return {"schema": SCHEMA, "settings": settings,
             "runs": [{"reference": r.reference.kind, "reference_parameters": r.reference.params,
                       "feedforward": r.compensator, "run_file": r.run_file, "feedforward_clipped": r.clipped,
-                      "glitch_mean_by_section_rad": section_glitch(r), **r.metrics.summary()} for r in results]}
+                      "glitch_mean_by_section_rad": section_glitch(r), **r.metrics.summary(),
+                      **({"reduction_vs_none": reduction(r, base[r.reference.kind])}
+                         if r.reference.kind in base else {})} for r in results]}
+
+
+def draw_reversals(ax, rows: list[CaseResult], *, before: float = 0.02, styles: dict | None = None,
+                   unit: tuple[float, str] = (1e3, "mrad")) -> None:
+    """Draw on ``ax`` the error of each of ``rows`` around every reversal, aligned at the reversal and signed so
+    that lagging behind the new direction is positive (``unit`` = (factor from rad, name), default mrad, against
+    ms), one colour per feed-forward (or ``styles[name]``, keyword arguments of ``ax.plot``); reversals closer
+    than ``before`` s to the start or three glitch windows to the end are left out."""
+    for colour, r in enumerate(rows):
+        ref, m = r.reference, r.metrics
+        n0 = int(round(before * ref.fs))
+        n1 = int(round(3 * m.window_s * ref.fs))
+        t_ms = np.arange(-n0, n1) / ref.fs * 1e3
+        label = r.compensator
+        style = (styles or {}).get(r.compensator, {"color": f"C{colour}"})
+        for k in m.reversal_index:
+            if k - n0 < 0 or k + n1 > ref.n:
+                continue
+            direction = np.sign(ref.velocity[k])
+            ax.plot(t_ms, direction * r.error[k - n0:k + n1] * unit[0], lw=0.8, alpha=0.6, label=label, **style)
+            label = None
+    ax.axvline(0, color="k", lw=0.5)
+    ax.set_xlabel("time after reversal (ms)")
+    ax.set_ylabel(f"tracking error along the new direction ({unit[1]})")
+    ax.grid(alpha=0.3)
 
 
 def write_plots(results: list[CaseResult], out: Path, *, before: float = 0.02, save=None) -> list[Path]:
-    """``compensation_<reference>.png``: the error around every reversal, aligned at the reversal and signed
-    so that lagging behind the new direction is positive, one colour per feed-forward (mrad against ms).
-    ``save(fig, path)`` writes a figure (default ``fig.savefig(path, dpi=110)``; the bench passes its atomic,
-    input-checked writer)."""
+    """``compensation_<reference>.png``: the error around every reversal (:func:`draw_reversals`), one colour
+    per feed-forward. ``save(fig, path)`` writes a figure (default ``fig.savefig(path, dpi=110)``; the bench
+    passes its atomic, input-checked writer)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -102,25 +144,9 @@ def write_plots(results: list[CaseResult], out: Path, *, before: float = 0.02, s
     for kind in dict.fromkeys(r.reference.kind for r in results):
         rows = [r for r in results if r.reference.kind == kind]
         fig, ax = plt.subplots(figsize=(8, 4.5))
-        for colour, r in enumerate(rows):
-            ref, m = r.reference, r.metrics
-            n0 = int(round(before * ref.fs))
-            n1 = int(round(3 * m.window_s * ref.fs))
-            t_ms = np.arange(-n0, n1) / ref.fs * 1e3
-            label = r.compensator
-            for k in m.reversal_index:
-                if k - n0 < 0 or k + n1 > ref.n:
-                    continue
-                direction = np.sign(ref.velocity[k])
-                ax.plot(t_ms, direction * r.error[k - n0:k + n1] * 1e3, color=f"C{colour}", lw=0.8, alpha=0.6,
-                        label=label)
-                label = None
-        ax.axvline(0, color="k", lw=0.5)
-        ax.set_xlabel("time after reversal (ms)")
-        ax.set_ylabel("tracking error along the new direction (mrad)")
+        draw_reversals(ax, rows, before=before)
         ax.set_title(f"{kind}: error around every reversal")
         ax.legend(title="feed-forward")
-        ax.grid(alpha=0.3)
         fig.tight_layout()
         path = out / f"compensation_{kind}.png"
         if save is None:

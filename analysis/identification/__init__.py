@@ -87,8 +87,10 @@ def analyse_stream(record: Record, source, settings: LipSettings | None = None, 
                            record=record.kind, method=method)
 
 
-def report(result: Identification, out_dir: str | Path, save: Callable | None = None) -> list[Path]:
-    """The identification's figures (virgin curve, fit, residuals, hysteresis per run) as PNGs in ``out_dir``."""
+def report(result: Identification, out_dir: str | Path, save: Callable | None = None,
+           runs: dict[str, str | Path] | None = None) -> list[Path]:
+    """The identification's figures (virgin curve, fit, residuals, hysteresis per run) as PNGs in ``out_dir``;
+    ``runs`` (role "train"/"validation" -> run file) names the runs in the titles."""
     from hilbench.analysis.identification.plots import write_plots
 
-    return write_plots(result, out_dir) if save is None else write_plots(result, out_dir, save=save)
+    return write_plots(result, out_dir, runs) if save is None else write_plots(result, out_dir, runs, save=save)

@@ -89,7 +89,7 @@ def hysteresis_figure(position: np.ndarray, measured: np.ndarray, models: Sequen
     step = max(1, x.size // MAX_DOTS)
     for (label, m), style in zip(models, MODEL_STYLES, strict=False):
         ax[0].plot(fx * x[::step], fy * np.asarray(m, float)[::step], ls="none", marker=".", ms=1.5, alpha=0.35,
-                   color=style["color"], rasterized=True, label=f"{label}, every {step}th sample" if step > 1 else
+                   color=style["color"], rasterized=True, label=f"{label}, one sample in {step}" if step > 1 else
                    label)
     ax[0].set_title("whole record: measured as sample density (grey, log scale), model as dots", fontsize=9)
     sl = slice(i0, i1)
@@ -103,6 +103,7 @@ def hysteresis_figure(position: np.ndarray, measured: np.ndarray, models: Sequen
         a.set_ylabel(f"friction ({yu})")
         a.grid(True, alpha=0.3)
         plain_numbers(a)
+        a.locator_params(axis="x", nbins=6)  # at most 7 ticks: signed labels such as "−0.75" touched at 9
     handles, labels = [], []
     for a in ax:
         h, lab = a.get_legend_handles_labels()
@@ -133,13 +134,35 @@ def _identification_hysteresis(result: Identification, c: dict, u: dict, title: 
                              t=np.asarray(c["t_rows"], float))
 
 
-def write_plots(result: Identification, directory: str | Path) -> list[Path]:
-    """Write the figures into ``directory`` (created); returns the file paths. Small values are drawn in
+#: the figures of each run (``<role>_<figure>.png``) and of the model
+RUN_FIGURES = ("fit", "residuals", "hysteresis")
+MODEL_FIGURES = ("virgin_curve",)
+
+
+def plot_files(directory: str | Path, roles: Sequence[str]) -> list[Path]:
+    """Every file :func:`write_plots` writes into ``directory`` for runs of ``roles`` ("train", "validation"):
+    known before the identification runs, so a command can refuse existing ones first."""
+    out = Path(directory)
+    return [out / f"{name}.png" for name in MODEL_FIGURES] + [out / f"{role}_{name}.png" for role in roles
+                                                              for name in RUN_FIGURES]
+
+
+def run_label(role: str, runs: dict[str, str | Path] | None) -> str:
+    """How a figure title names a run: its file name and its role, ``id.h5 (train run)``; the role alone when
+    the file is not known."""
+    file = (runs or {}).get(role)
+    return f"{Path(file).name} ({role} run)" if file else f"{role} run"
+
+
+def write_plots(result: Identification, directory: str | Path, runs: dict[str, str | Path] | None = None) -> list[Path]:
+    """Write the figures into ``directory`` (created); returns the file paths (:func:`plot_files`). ``runs``
+    maps each role ("train", "validation") to its run file, which the titles name. Small values are drawn in
     engineering units (mrad, mN*m), legends sit outside the data."""
     from hilbench.analysis.figure_style import engineering, plain_numbers
 
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
+    files = {p.stem: p for p in plot_files(out, list(result.curves))}
     m = result.model
     u = AXES[m.axis]
     paths: list[Path] = []
@@ -156,12 +179,14 @@ def write_plots(result: Identification, directory: str | Path) -> list[Path]:
         ax.semilogx(fx * x, fy * curve, lw=0.8, label=f"{m.ms_delta.size} elements" if i == 0 else None)
     ax.set_xlabel(f"displacement from reversal / 2 ({xu})")
     ax.set_ylabel(f"friction ({yu})")
-    ax.set_title(f"Identified virgin curve ({m.ms_delta.size} elements, {result.method})")
+    ax.set_title(f"Identified virgin curve ({m.ms_delta.size} elements, {result.method}), from "
+                 f"{run_label('train', runs)}")
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     ax.grid(True, which="both", alpha=0.3)
-    _save(fig, out / "virgin_curve.png", paths)
+    _save(fig, files["virgin_curve"], paths)
 
     for prefix, c in result.curves.items():
+        label = run_label(prefix, runs)
         t_rows = np.asarray(c["t_rows"], float)
         meas, pred = np.asarray(c["torque_filtered"]), np.asarray(c["torque_predicted"])
         i0, i1 = busiest_window(t_rows, np.asarray(c["position"])[np.searchsorted(c["t"], t_rows)], 2.0)
@@ -173,7 +198,7 @@ def write_plots(result: Identification, directory: str | Path) -> list[Path]:
         axes[0].plot(t_rows[zoom], ft * meas[zoom], label="measured (filtered)", **MEASURED)
         axes[0].plot(t_rows[zoom], ft * pred[zoom], label="model", **MODEL_STYLES[0])
         axes[0].set_ylabel(f"torque ({tu})")
-        axes[0].set_title(f"{prefix} run: torque, {t_rows[i0]:.3g} .. {t_rows[i1 - 1]:.3g} s (the window with the "
+        axes[0].set_title(f"{label}: torque, {t_rows[i0]:.3g} .. {t_rows[i1 - 1]:.3g} s (the window with the "
                           "most reversals)", fontsize=10)
         err = meas - pred
         fe, eu = engineering(u["torque"], err)
@@ -194,7 +219,7 @@ def write_plots(result: Identification, directory: str | Path) -> list[Path]:
             a.grid(True, alpha=0.3)
             plain_numbers(a)
         fig.tight_layout()
-        _save(fig, out / f"{prefix}_fit.png", paths)
+        _save(fig, files[f"{prefix}_fit"], paths)
 
         # constrained layout: the right panel's y label keeps clear of the left panel's ticks
         fig, axes = _figure(10, 3.8, 1, 2, layout="constrained")
@@ -208,10 +233,10 @@ def write_plots(result: Identification, directory: str | Path) -> list[Path]:
         for a in axes:
             a.set_ylabel("count (samples)")
             plain_numbers(a)
-        fig.suptitle(f"{prefix} run: residual histograms")
-        _save(fig, out / f"{prefix}_residuals.png", paths)
+        fig.suptitle(f"{label}: residual histograms")
+        _save(fig, files[f"{prefix}_residuals"], paths)
 
         paths.append(_identification_hysteresis(
-            result, c, u, f"{prefix} run: friction against displacement, measured and model",
-            out / f"{prefix}_hysteresis.png"))
+            result, c, u, f"{label}: friction against displacement, measured and model",
+            files[f"{prefix}_hysteresis"]))
     return paths

@@ -149,8 +149,9 @@ def range_warning(curves: SkeletonCurves, unit: str) -> str | None:
     if ratio >= MIN_AMPLITUDE_RATIO:
         return None
     return (f"the runs cover amplitudes {a.min():.4g} .. {a.max():.4g} {unit} only ({ratio:.2f}x, under "
-            f"{MIN_AMPLITUDE_RATIO:g}x): too narrow a range for a skeleton curve; compose chirps at several --gain "
-            "values (hilbench skeleton RUN1.h5 RUN2.h5 ...), or sweep through the resonance")
+            f"{MIN_AMPLITUDE_RATIO:g}x): too narrow a range for a skeleton curve; `hilbench plan` sizes a chirp "
+            "from the motor (a log sweep above break-away), or compose chirps at several --gain values (hilbench "
+            "skeleton RUN1.h5 RUN2.h5 ...), or sweep through the resonance")
 
 
 def stiffness_warnings(curves: SkeletonCurves, units: dict, spring: float, mass: float) -> list[str]:

@@ -1,8 +1,8 @@
 """The compensated-reference protocol: the device's position loop tracks a reference while the host streams a
 model-based feed-forward current with it (docs/compensation.md).
 
-Setpoints are angles at the encoder (motor) shaft (rad, zero at CONFIG: ratio times the load-side reference);
-:meth:`CompensatedReference.feedforward` is the
+Setpoints are the reference angles at the load (rad, zero at CONFIG); ``Bench.run`` streams them times the ratio to
+the encoder (motor) shaft. :meth:`CompensatedReference.feedforward` is the
 current (A) of the chosen model along the reference, J*q''_ref + F(q_ref) + c0 converted with the
 calibration (``torque_constant``, ``ratio``): ``Bench.run`` binds the protocol to the device settings'
 (:meth:`CompensatedReference.bind`), so it is always the device's; clipped to the current limit.
@@ -181,12 +181,12 @@ class CompensatedReference(Protocol):
         return self.n_samples * BYTES_PER_SAMPLE
 
     def excitation(self, limit: float | None = None) -> excitations.Excitation:
-        """Setpoints: the reference at the encoder (motor) shaft, ratio*q_ref (rad); the run file's
-        ``position_cmd`` is q_ref again, at the load."""
+        """Setpoints: the reference at the load, q_ref (rad), as every position protocol gives them; ``Bench.run``
+        streams ratio*q_ref to the encoder (motor) shaft and logs q_ref as ``position_cmd``. (Multiplying by the
+        ratio here as well moved the load ratio*q_ref against a feed-forward computed for q_ref.)"""
         ref = self.reference_path
-        ratio = self.calibration[1] if self.calibration else 1.0
         return excitations.Excitation("compensated_" + ref.kind, self.mode, float(self.sample_rate),
-                                      ref.position * ratio,
+                                      ref.position,
                                       {"reference": ref.kind, **ref.params, "compensation": self.compensation})
 
     def feedforward(self, limit: float) -> np.ndarray | None:

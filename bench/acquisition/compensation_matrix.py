@@ -157,6 +157,36 @@ def write_report(results: list[CaseResult], out: Path, settings: dict) -> list[P
     return [out / "compensation.md", out / "compensation.json", *plots]
 
 
+def single_outputs(run_file: Path, baseline: bool) -> dict[str, Path]:
+    """What one run (``hilbench compensate`` without --matrix) writes beside its run file ``<stem>.h5``: the
+    baseline run ``<stem>-baseline.h5`` (when ``baseline``), the figure ``<stem>-tracking.png`` and the summary
+    ``<stem>-tracking.json``. Keys: run, baseline, figure, summary."""
+    stem = run_file.stem if run_file.suffix == ".h5" else run_file.name
+    out = {"run": run_file, "baseline": run_file.with_name(stem + "-baseline.h5"),
+           "figure": run_file.with_name(stem + "-tracking.png"), "summary": run_file.with_name(stem + "-tracking.json")}
+    if not baseline:
+        del out["baseline"]
+    return out
+
+
+def write_single_report(run: CaseResult, baseline: CaseResult | None, paths: dict[str, Path], settings: dict,
+                        title: str) -> list[Path]:
+    """The summary (the matrix's JSON document of the run and its baseline) and the figure of one run."""
+    import matplotlib.pyplot as plt
+
+    from hilbench.analysis.compensation.run_report import run_figure
+
+    results = [run] if baseline is None else [run, baseline]
+    paths["summary"].parent.mkdir(parents=True, exist_ok=True)  # --predict -o new/p.h5: no run file made it
+    outputs.write_json(paths["summary"], json_safe(document(results, settings)), indent=1, allow_nan=False)
+    fig = run_figure(run, baseline, title)
+    try:
+        outputs.save_figure(fig, paths["figure"], dpi=110)
+    finally:
+        plt.close(fig)
+    return [paths["summary"], paths["figure"]]
+
+
 def run_cases(protocols: list[Case], play: Callable[[Case, int], CaseResult],
               say: Callable[[str], None] = print) -> list[CaseResult]:
     """Play every case in turn (``play(protocol, index)``), printing one line per case."""

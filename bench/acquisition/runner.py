@@ -140,6 +140,7 @@ class Progress:
     torque: np.ndarray   # N*m
     position: np.ndarray  # rad
     velocity: np.ndarray  # rad/s, backward difference of position (display only; not logged)
+    position_cmd: np.ndarray | None = None  # rad at the load: the position setpoint (position mode only)
 
 
 @dataclass
@@ -361,7 +362,7 @@ class Bench:
                     elapsed = time.monotonic() - t_start
                     eta = elapsed / done * (total - done) if done else math.inf
                     progress(Progress(done, total, eta, seg, len(segments), t, blk.current_cmd,
-                                      blk.current_meas, torque, measured, velocity))
+                                      blk.current_meas, torque, measured, velocity, reference.get("position_cmd")))
                 if n:
                     last_pos = float(measured[-1])
                 if control.aborted:

@@ -14,16 +14,23 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtWidgets
 
+from hilbench.analysis.figure_style import engineering
 from hilbench.bench.gui.display_buffer import RingBuffer, minmax_decimate
 
-#: (plot title, unit, [(channel, pen colour), ...])
+#: a setpoint: grey and dashed, drawn under the measured trace (a colour and a line style of its own)
+SETPOINT = {"color": "#7f7f7f", "width": 1.5, "style": QtCore.Qt.PenStyle.DashLine}
+
+#: (plot title, SI unit, [(channel, pen, legend name or None), ...]); the position setpoint comes only from a
+#: position-mode run (it is NaN, and not drawn, otherwise)
 PANELS = (
-    ("current", "A", (("current_cmd", "#888888"), ("current_meas", "#1f77b4"))),
-    ("torque", "N*m", (("torque", "#d62728"),)),
-    ("position", "rad", (("position", "#2ca02c"),)),
-    ("velocity", "rad/s", (("velocity", "#9467bd"),)),
+    ("current", "A", (("current_cmd", SETPOINT, "setpoint"),
+                      ("current_meas", {"color": "#1f77b4", "width": 1}, "measured"))),
+    ("torque", "N*m", (("torque", {"color": "#d62728", "width": 1}, None),)),
+    ("position", "rad", (("position_cmd", SETPOINT, "setpoint"),
+                         ("position", {"color": "#2ca02c", "width": 1}, "measured"))),
+    ("velocity", "rad/s", (("velocity", {"color": "#9467bd", "width": 1}, None),)),
 )
-CHANNELS = tuple(name for _, _, traces in PANELS for name, _ in traces)
+CHANNELS = tuple(name for _, _, traces in PANELS for name, _, _ in traces)
 
 
 class LivePlot(QtWidgets.QWidget):
@@ -55,12 +62,13 @@ class LivePlot(QtWidgets.QWidget):
         self.graphics.setBackground("w")
         self.plots: list[pg.PlotItem] = []
         self.curves: dict[str, pg.PlotDataItem] = {}
+        self._legends: dict[str, pg.LegendItem] = {}  # channel -> the legend of its panel
         for row, (title, unit, traces) in enumerate(PANELS):
             plot = self.graphics.addPlot(row=row, col=0)
             plot.setLabel("left", title, units=None)
             plot.getAxis("left").setLabel(f"{title} ({unit})")
             for side in ("left", "bottom"):  # the unit is the label's: never "position (rad) (x0.001)"
-                plot.getAxis(side).enableAutoSIPrefix(False)
+                plot.getAxis(side).enableAutoSIPrefix(False)  # engineering units instead: _show_unit
             # no grid: an AxisItem with grid lines spans the plot area, so every curve update would repaint
             # (and re-render the tick labels of) all axes
             plot.setClipToView(True)
@@ -70,10 +78,11 @@ class LivePlot(QtWidgets.QWidget):
                 plot.hideAxis("bottom")
             plot.getAxis("left").setWidth(70)  # fixed: a new tick label width never re-lays out the plots
             plot.disableAutoRange()
-            if len(traces) > 1:
-                plot.addLegend(offset=(5, 5), labelTextColor="k")
-            for name, colour in traces:
-                self.curves[name] = plot.plot(pen=pg.mkPen(colour, width=1), name=name)
+            legend_item = plot.addLegend(offset=(5, 5), labelTextColor="k") if len(traces) > 1 else None
+            for name, pen, legend in traces:
+                self.curves[name] = plot.plot(pen=pg.mkPen(**pen), name=legend)
+                if legend_item is not None:
+                    self._legends[name] = legend_item
             self.plots.append(plot)
         self.plots[-1].setLabel("bottom", "time before the newest sample (s)")
         self.plots[0].sigXRangeChanged.connect(self._on_range_changed)
@@ -103,6 +112,8 @@ class LivePlot(QtWidgets.QWidget):
         layout.addWidget(self.graphics, 1)
 
         self._y_ranges: list[tuple[float, float] | None] = [None] * len(self.plots)
+        self._in_legend: dict[str, bool] = {}  # channel -> listed in its panel's legend (default: yes)
+        self.units = [unit for _, unit, _ in PANELS]  # the unit each y axis shows now (mrad, mN*m, ...)
         self._set_x_window()
         for plot in self.plots:
             plot.setMouseEnabled(x=False, y=False)
@@ -119,6 +130,9 @@ class LivePlot(QtWidgets.QWidget):
         t = np.asarray(t, dtype=float)
         if t.size > 1 and t[-1] > t[0]:
             self._period = (t[-1] - t[0]) / (t.size - 1)
+        missing = [c for c in CHANNELS if values.get(c) is None]  # no position setpoint in current mode
+        if missing:
+            values = {**values, **dict.fromkeys(missing, np.full(t.size, np.nan))}
         self.buffer.append(t, values)
         self._dirty = True
 
@@ -206,6 +220,33 @@ class LivePlot(QtWidgets.QWidget):
             pad = 0.1 * span
             self._y_ranges[p] = (lo - pad, hi + pad)
             self.plots[p].setYRange(lo - pad, hi + pad, padding=0)
+            self._show_unit(p, lo, hi)
+
+    def _show_unit(self, p: int, lo: float, hi: float) -> None:
+        """Label panel ``p``'s y axis in the engineering unit of its data range [lo, hi] (SI): a range under
+        0.1 rad reads "position (mrad)", its ticks scaled by 1000 (the axis's scale: the data stay SI), as the
+        report figures do (analysis/figure_style.py). Changed only with the y range, so it does not flicker."""
+        title, unit, _ = PANELS[p]
+        factor, shown = engineering(unit, [lo, hi])
+        if shown != self.units[p]:
+            axis = self.plots[p].getAxis("left")
+            axis.setScale(factor)
+            axis.setLabel(f"{title} ({shown})")
+            self.units[p] = shown
+
+    def _show_in_legend(self, name: str, present: bool) -> None:
+        """The legend names only the traces the run has (no "setpoint" beside a position without one)."""
+        if present == self._in_legend.get(name, True):
+            return
+        self._in_legend[name] = present
+        curve = self.curves[name]
+        legend = self._legends.get(name)
+        if legend is None:
+            return
+        if present:
+            legend.addItem(curve, curve.name())
+        else:
+            legend.removeItem(curve)
 
     def _draw(self, t: np.ndarray, data: np.ndarray, span: list[float] | None) -> None:
         if span is not None and t.size:
@@ -215,7 +256,12 @@ class LivePlot(QtWidgets.QWidget):
         if self.decimate:
             t, data = minmax_decimate(t, data, self._columns())
         for i, name in enumerate(CHANNELS):
-            self.curves[name].setData(t, data[i], skipFiniteCheck=True)
+            present = bool(np.isfinite(data[i]).any())
+            if present:
+                self.curves[name].setData(t, data[i], skipFiniteCheck=True)
+            else:  # a channel this run does not have (the position setpoint of a current-mode run)
+                self.curves[name].setData([], [])
+            self._show_in_legend(name, present)
         self.frames += 1
         self._fps_count += 1
         self.frame_drawn.emit()

@@ -349,7 +349,7 @@ class MainWindow(QtWidgets.QMainWindow):
                     continue
             self.live.append(item.t, {"current_cmd": item.current_cmd, "current_meas": item.current_meas,
                                       "torque": item.torque, "position": item.position,
-                                      "velocity": item.velocity})
+                                      "velocity": item.velocity, "position_cmd": item.position_cmd})
             last = item
         now = time.monotonic()
         if last is not None and (now - self._last_progress >= 0.1 or last.done == last.total):

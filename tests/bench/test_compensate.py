@@ -79,11 +79,72 @@ def test_a_model_identified_under_another_calibration_is_refused(tmp_path, capsy
     (["--reference", "triangle", "--corner", "5"], "corner"),
     (["--window", "0"], "--window"),
     (["--matrix"], "needs -o/--output"),
-    (["--predict", "-o", "x.h5"], "--predict writes no run file"),
 ])
 def test_bad_options_are_one_line(tmp_path, capsys, no_device, extra, match):
     assert match in _refused(capsys, ["compensate", str(_model(tmp_path)), *extra])
     assert not no_device
+
+
+SINGLE = ["--sample-rate", "1000", "--amplitudes", "1e-3", "1e-2", "--frequency", "1", "--cycles", "1", "--rest",
+          "0.1", "--current-limit", "10"]
+
+
+def test_a_single_run_is_compared_with_its_baseline_on_the_device(tmp_path, capsys):
+    """One `compensate` run also plays the reference without feed-forward beside it and writes a figure and a
+    summary; the summary's figures are recomputed here from the two run files (reference - position)."""
+    from hilbench.analysis.record import load_record
+
+    model = _model(tmp_path)
+    run = tmp_path / "run.h5"
+    argv = ["compensate", str(model), "-o", str(run), "--device", "sim://?pacing=lockstep", *SINGLE]
+    figures: dict = {}
+    with recording_figures(figures) as seen:
+        assert cli.main(argv) == 0
+    out = capsys.readouterr().out
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["model-rotary.json", "run-baseline.h5",
+                                                          "run-tracking.json", "run-tracking.png", "run.h5"]
+    assert seen == {"run-tracking.png": []}, seen  # units on every axis, no overlap, legend off the data
+    title = figures["run-tracking.png"].get_suptitle()
+    assert "run.h5" in title and "maxwell_slip" in title and "none" in title
+    doc = json.loads((tmp_path / "run-tracking.json").read_text())
+    runs = {r["feedforward"]: r for r in doc["runs"]}
+    assert set(runs) == {"maxwell_slip", "none"} and runs["none"]["run_file"] == str(tmp_path / "run-baseline.h5")
+    for name, r in runs.items():  # the oracle: the rms of q_ref - q straight from the run file
+        rf = load_record(r["run_file"], need_torque=False, channels=("position_cmd",))
+        e = rf.channel("position_cmd") - rf.position
+        assert r["rms_error_rad"] == pytest.approx(float(np.sqrt(np.mean(e * e))), rel=1e-12), name
+        assert r["max_error_rad"] == pytest.approx(float(np.max(np.abs(e))), rel=1e-12), name
+    x = runs["maxwell_slip"]["reduction_vs_none"]
+    assert x["rms_error_x"] == pytest.approx(runs["none"]["rms_error_rad"] / runs["maxwell_slip"]["rms_error_rad"])
+    # measured on sim:// in lockstep (16-element truth, this 8-element model): rms 6.1x, glitch 5.7x lower
+    assert x["rms_error_x"] > 4 and x["glitch_mean_x"] > 4, x
+    summary = out.strip().splitlines()[-1]
+    assert summary.startswith("sine / maxwell_slip against none: rms error ") and "x smaller)" in summary
+    # a second run without --overwrite: one line, exit 2, nothing replaced; also when only the figure is left
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    assert "run.h5 exists; use --overwrite" in _refused(capsys, argv)
+    for name in ("run.h5", "run-baseline.h5", "run-tracking.json"):
+        (tmp_path / name).unlink()
+    assert "run-tracking.png exists; use --overwrite" in _refused(capsys, argv)
+    assert (tmp_path / "run-tracking.png").read_bytes() == before["run-tracking.png"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["model-rotary.json", "run-tracking.png"]
+
+
+def test_a_single_prediction_has_its_baseline_and_no_baseline_skips_it(tmp_path, capsys, no_device):
+    model = _model(tmp_path)
+    argv = ["compensate", str(model), "--predict", "-o", str(tmp_path / "p.h5"), *SINGLE]
+    with recording_figures() as seen:
+        assert cli.main(argv) == 0
+    assert seen == {"p-tracking.png": []}, seen
+    assert not (tmp_path / "p.h5").exists() and not (tmp_path / "p-baseline.h5").exists()  # --predict: no run file
+    doc = json.loads((tmp_path / "p-tracking.json").read_text())
+    assert [r["feedforward"] for r in doc["runs"]] == ["maxwell_slip", "none"]
+    assert doc["runs"][0]["reduction_vs_none"]["rms_error_x"] > 1
+    assert "p-tracking.png exists; use --overwrite" in _refused(capsys, argv)
+    assert cli.main([*argv, "--overwrite", "--no-baseline"]) == 0
+    doc = json.loads((tmp_path / "p-tracking.json").read_text())
+    assert [r["feedforward"] for r in doc["runs"]] == ["maxwell_slip"] and "reduction_vs_none" not in doc["runs"][0]
+    assert capsys.readouterr().out.strip().endswith("(no baseline)") and not no_device
 
 
 def test_predicted_matrix_counts_clipped_feedforward(tmp_path, capsys, no_device):
@@ -322,3 +383,26 @@ def test_a_compensate_step_name_is_a_plain_name(tmp_path, name):
     (tmp_path / "c.toml").write_text(f'[[compensate]]\nname = {json.dumps(name)}\nmodel = "{model.name}"\n')
     with pytest.raises(CampaignError, match=r"c.toml:2: compensate 1: name .* must use only letters"):
         load_campaign(tmp_path / "c.toml")
+
+
+def test_a_geared_run_tracks_the_load_reference_and_reports_its_setpoint_to_the_live_view(tmp_path):
+    """With ratio 2 the load follows q_ref (the protocol multiplied its setpoints by the ratio and the runner did
+    again: the load moved 2*q_ref, against a feed-forward computed for q_ref). Bench.run's progress blocks carry
+    the setpoint at the load, which the GUI's live view draws against the measured position."""
+    from hilbench.analysis.record import load_record
+    from hilbench.bench.acquisition.compensation import CompensatedReference
+    from hilbench.bench.acquisition.runner import Bench, DeviceSettings
+
+    protocol = CompensatedReference(reference="point_to_point", targets=(0.01, 0.0), move_time=0.2, rest=0.1,
+                                    sample_rate=1000)
+    blocks = []
+    with Bench.open("sim://?pacing=lockstep", DeviceSettings(ratio=2.0)) as bench:
+        result = bench.run(protocol, tmp_path / "p.h5", progress=blocks.append)
+    assert result.status == "completed"
+    ref = protocol.reference_path.position
+    rf = load_record(tmp_path / "p.h5", need_torque=False, channels=("position_cmd",))
+    assert np.max(np.abs(rf.channel("position_cmd") - ref)) < 1e-9  # float32 on the wire
+    # the load reaches the 10 mrad target (measured 10.00 mrad; 20.00 mrad before the fix), within 2 %
+    assert abs(np.max(rf.position) - 0.01) < 2e-4, np.max(rf.position)
+    sent = np.concatenate([b.position_cmd for b in blocks])
+    assert sent.shape == ref.shape and np.max(np.abs(sent - ref)) < 1e-9

@@ -1,6 +1,7 @@
 """``hilbench identify`` end to end on run files written with analysis.runfile (bench uses analysis)."""
 
 import json
+import re
 
 import numpy as np
 
@@ -87,3 +88,52 @@ def test_identify_imported_emps_with_and_without_maxwell_slip(tmp_path, capsys):
         assert (len(doc["parameters"]["ms_stiffness"]) == 0) == (n == 0)
         assert 90 < doc["parameters"]["inertia"] < 100  # the published M is 95.11 kg
     assert figures[64]["validation_torque_nrmse"] <= figures[0]["validation_torque_nrmse"] < 0.06
+
+
+def test_identify_plots_name_their_runs_and_are_never_replaced_without_overwrite(tmp_path, capsys):
+    # issue 28: `identify --plots DIR` silently replaced the plots in DIR, and the titles said only "train run"
+    _write_run(tmp_path / "a.h5", 1)
+    _write_run(tmp_path / "b.h5", 2)
+    argv = ["identify", str(tmp_path / "a.h5"), "--validate", str(tmp_path / "b.h5"), "--json",
+            str(tmp_path / "m.json"), "--plots", str(tmp_path / "plots"), "--thresholds", "16"]
+    figures: dict = {}
+    with recording_figures(figures):
+        assert main(argv) == 0
+    for name, fig in figures.items():  # every title of the figure, the figure's own and each panel's
+        titles = " ".join([fig.get_suptitle(), *(ax.get_title() for ax in fig.axes)])
+        run = "b.h5 (validation run)" if name.startswith("validation") else "a.h5 (train run)"
+        assert run in titles, (name, titles)
+    before = {p.name: p.read_bytes() for p in (tmp_path / "plots").iterdir()}
+    assert len(before) == 7
+    capsys.readouterr()
+    # a new --json, the same --plots: refused in one line before any work, nothing replaced
+    again = [*argv[:5], str(tmp_path / "m2.json"), *argv[6:]]
+    assert main(again) == 2
+    err = capsys.readouterr().err.strip()
+    assert "virgin_curve.png exists; use --overwrite" in err and "--plots" in err and "\n" not in err
+    assert {p.name: p.read_bytes() for p in (tmp_path / "plots").iterdir()} == before
+    assert not (tmp_path / "m2.json").exists()
+    # one plot of the validation run is enough to refuse
+    for name in before:
+        if name != "validation_hysteresis.png":
+            (tmp_path / "plots" / name).unlink()
+    assert main(again) == 2 and "validation_hysteresis.png exists" in capsys.readouterr().err
+    assert main([*again, "--overwrite"]) == 0
+    assert {p.name for p in (tmp_path / "plots").iterdir()} == set(before)
+
+
+def test_the_hysteresis_legend_says_how_many_samples_a_dot_stands_for(tmp_path):
+    # it read "model, every 2th sample"
+    from hilbench.analysis.identification.plots import MAX_DOTS, hysteresis_figure
+
+    n = 3 * MAX_DOTS
+    t = np.arange(n) / 1000.0
+    x = 1e-3 * np.sin(2 * np.pi * t)
+    figures: dict = {}
+    with recording_figures(figures) as seen:
+        hysteresis_figure(x, np.tanh(x / 2e-4), [("model", np.tanh(x / 2.1e-4))], {"position": "rad",
+                          "torque": "N*m"}, "id.h5 (train run): friction", tmp_path / "h.png", t=t)
+    assert seen == {"h.png": []}, seen
+    texts = [t.get_text() for leg in figures["h.png"].legends for t in leg.get_texts()]
+    assert "model, one sample in 3" in texts, texts
+    assert not any(re.search(r"\\d(th|nd|rd|st) sample", t) for t in texts), texts

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import uuid
 from pathlib import Path
 
 REFERENCE_OPTIONS = {
@@ -26,7 +27,9 @@ def register(subparsers) -> None:
         description="The device's position loop tracks a reference while the host streams the model's "
         "feed-forward current J*q''_ref + F(q_ref) + c0 (converted with the calibration, clipped to the current "
         "limit). MODEL.json is a model file (hilbench identify: none, coulomb, maxwell_slip) or a comparison "
-        "(hilbench compare's compare.json: also every family). --matrix plays every feed-forward against every "
+        "(hilbench compare's compare.json: also every family). A single run also plays the same reference "
+        "without feed-forward (the baseline; --no-baseline skips it) and writes a figure of both tracking errors "
+        "and a summary with the reduction factors. --matrix plays every feed-forward against every "
         "reference and writes compensation.md/.json and error plots around reversals (docs/compensation.md).")
     p.add_argument("model", help="model file (.json) of hilbench identify or hilbench compare")
     p.add_argument("--reference", choices=KINDS, default="sine", help="reference of a single run (default sine)")
@@ -37,12 +40,16 @@ def register(subparsers) -> None:
                    "comparison (default maxwell_slip)")
     p.add_argument("--feedforwards", default=None, help="--matrix: comma-separated subset (default all)")
     p.add_argument("--matrix", action="store_true", help="every feed-forward against every reference")
+    p.add_argument("--no-baseline", action="store_true",
+                   help="single run: do not also play the reference without feed-forward (the baseline run "
+                   "<stem>-baseline.h5 the figure and summary compare against)")
     p.add_argument("--predict", action="store_true",
                    help="no device: simulate the position loop on the model's own Maxwell-slip plant (a "
                    "prediction, not a measurement)")
     p.add_argument("-o", "--output", dest="out", type=Path, default=None,
-                   help="single run: run file (.h5; default runs/compensated-<uid>.h5); --matrix: folder for "
-                   "the runs and the report (required)")
+                   help="single run: run file (.h5; default runs/compensated-<uid>.h5), with <stem>-baseline.h5, "
+                   "<stem>-tracking.png and <stem>-tracking.json beside it (--predict: no run file, only the "
+                   "figure and the summary); --matrix: folder for the runs and the report (required)")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     p.add_argument("--sample-rate", type=int, default=10000, help="device sample rate, Hz (default 10000)")
     p.add_argument("--window", type=float, default=0.05, help="glitch window after each reversal, s (default "
@@ -79,6 +86,7 @@ def _references(args) -> dict[str, dict]:
 def run(args: argparse.Namespace) -> int:
     from hilbench.analysis.compensation.closed_loop import PositionGains
     from hilbench.analysis.compensation.feedforward import load_compensators
+    from hilbench.analysis.compensation.run_report import summary_line
     from hilbench.bench.acquisition.compensation_matrix import (
         MatrixSettings,
         case_file,
@@ -87,7 +95,9 @@ def run(args: argparse.Namespace) -> int:
         named_runs,
         predict_case,
         run_cases,
+        single_outputs,
         write_report,
+        write_single_report,
     )
     from hilbench.bench.acquisition.device_options import settings_from_args
     from hilbench.bench.errors import BenchError
@@ -113,11 +123,16 @@ def run(args: argparse.Namespace) -> int:
         if not args.overwrite and (args.out / "compensation.md").exists():
             raise BenchError(f"{args.out / 'compensation.md'} exists; use --overwrite or another folder")
     else:
-        names = [args.feedforward]
-        if args.out is not None and args.predict:
-            raise BenchError("--predict writes no run file; use --matrix -o DIR for a predicted report")
-        if args.out is not None:
-            outputs.refuse_inputs({"--output": args.out}, inputs)
+        baseline = not args.no_baseline and args.feedforward != "none"  # a run without feed-forward is its own
+        names = [args.feedforward, "none"] if baseline else [args.feedforward]
+        stem = args.out or Path("runs") / f"{'predicted' if args.predict else 'compensated'}-{uuid.uuid4().hex[:8]}.h5"
+        single = single_outputs(stem, baseline)
+        if args.predict:  # no device, no run file: -o names the figure and the summary
+            del single["run"]
+            single.pop("baseline", None)
+        outputs.refuse_inputs({f"--output {p}": p for p in single.values()}, inputs)
+        for path in single.values():
+            outputs.refuse_existing("--output", path, args.overwrite)
     protocols = cases(args.model, _references(args), names, matrix, args.sample_rate)
     if args.matrix and not args.predict:  # every run file of the matrix is an output too
         outputs.refuse_inputs({f"--output {f}": f for f in (args.out / case_file(c) for c in protocols)}, inputs)
@@ -130,16 +145,26 @@ def run(args: argparse.Namespace) -> int:
         gains = PositionGains(settings.position_kp, settings.position_ki, settings.position_kd,
                               settings.position_i_limit, settings.position_d_cutoff)
         results = run_cases(protocols, lambda p, i: predict_case(p, plant, gains, matrix,
-                                                                 settings.counts_per_rev))
+                                                                 settings.counts_per_rev), say=outputs.say)
     else:
-        results = _on_device(args, protocols, settings, matrix)
+        files = [args.out / case_file(c) for c in protocols] if args.matrix else \
+            [single["run"], single.get("baseline")][:len(protocols)]
+        results = _on_device(args, protocols, settings, matrix, files)
+    meta = {"source": source, "model": str(Path(args.model).resolve()), "window_s": args.window,
+            "tolerance_rad": args.tolerance, "current_limit_a": settings.current_limit,
+            "torque_constant_nm_per_a": settings.torque_constant, "ratio": settings.ratio,
+            "sample_rate_hz": args.sample_rate, "calibration_check": note}
     if args.matrix:
-        meta = {"source": source, "model": str(Path(args.model).resolve()), "window_s": args.window,
-                "tolerance_rad": args.tolerance, "current_limit_a": settings.current_limit,
-                "torque_constant_nm_per_a": settings.torque_constant, "ratio": settings.ratio,
-                "sample_rate_hz": args.sample_rate, "calibration_check": note}
         for path in write_report(results, args.out, meta):
-            print(f"-> {path}")
+            outputs.say(f"-> {path}")
+        return 0
+    run, base = results[0], (results[1] if len(results) > 1 else None)
+    what = f"prediction (--predict) for {stem.name}" if args.predict else Path(run.run_file).name
+    title = f"{what}: {run.reference.kind} reference, feed-forward {run.compensator}" + \
+        (" against none (baseline)" if base else "")
+    for path in write_single_report(run, base, single, meta, title):
+        outputs.say(f"-> {path}")
+    outputs.say(summary_line(run, base))
     return 0
 
 
@@ -155,9 +180,10 @@ def predicted_plant(comps: list, model: str):
     raise BenchError(f"--predict simulates one model's plant; {model} offers {', '.join(found) or 'none'}")
 
 
-def _on_device(args, protocols, settings, matrix) -> list:
+def _on_device(args, protocols, settings, matrix, files: list[Path]) -> list:
+    """Play every case on the device, case i into run file ``files[i]``."""
     from hilbench.bench.acquisition.compensation import CompensatedReference
-    from hilbench.bench.acquisition.compensation_matrix import case_file, measured_case, run_cases
+    from hilbench.bench.acquisition.compensation_matrix import measured_case, run_cases
     from hilbench.bench.acquisition.protocols import ProtocolError
     from hilbench.bench.errors import BenchError
 
@@ -166,19 +192,17 @@ def _on_device(args, protocols, settings, matrix) -> list:
     except ProtocolError as exc:
         raise BenchError(str(exc)) from None
     from hilbench.bench.acquisition.runner import Bench, signals_as_interrupt
+    from hilbench.bench.storage import outputs
 
-    folder = args.out if args.matrix else None
     with signals_as_interrupt(), Bench.open(args.device, settings) as bench:
         def play(case, i):
             p = played[i]
-            path = (folder / case_file(case)) if folder else args.out
-            if folder:
-                folder.mkdir(parents=True, exist_ok=True)
-            result = bench.run(p, path, overwrite=args.overwrite,
+            files[i].parent.mkdir(parents=True, exist_ok=True)
+            result = bench.run(p, files[i], overwrite=args.overwrite,
                                notes=f"hilbench compensate {p.reference}/{p.compensation}")
             if result.status != "completed":
                 raise BenchError(f"{result.path}: run {result.status}: {result.message}")
-            print(f"run file: {result.path} ({result.samples} samples)")
+            outputs.say(f"run file: {result.path} ({result.samples} samples)")
             return measured_case(case, result.path, matrix)
 
-        return run_cases(protocols, play)
+        return run_cases(protocols, play, say=outputs.say)

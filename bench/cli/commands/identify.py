@@ -31,7 +31,8 @@ def register(subparsers) -> None:
     )
     parser.add_argument("--json", required=True, metavar="OUT.json", help="model file to write ('-': stdout)")
     parser.add_argument("--plots", metavar="DIR", help="write PNG plots into DIR")
-    parser.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace existing outputs (the --json file, the --plots files)")
     parser.add_argument(
         "--thresholds", type=whole_number, default=64,
         help=f"candidate thresholds (default 64, at most {MAX_THRESHOLDS}; 0: no Maxwell-slip elements)"
@@ -102,6 +103,7 @@ def _streamed(args, budget: int):
 def run(args) -> int:
     from hilbench.analysis.identification import analyse, analyse_stream, report
     from hilbench.analysis.identification.maxwell_fit import LipSettings
+    from hilbench.analysis.identification.plots import plot_files
     from hilbench.analysis.models.friction_model import AXES
     from hilbench.analysis.models.model_file import model_document
     from hilbench.bench.analysis_input import MAX_THRESHOLDS, check_count, check_cutoff, memory_budget
@@ -109,8 +111,11 @@ def run(args) -> int:
     from hilbench.bench.storage import outputs
     from hilbench.bench.verdict import judge
 
-    outputs.refuse_inputs({"--json": args.json, "--plots": args.plots}, [args.run, args.validate])
-    outputs.refuse_existing("--json", args.json, args.overwrite)
+    plots = plot_files(args.plots, ["train", "validation"] if args.validate else ["train"]) if args.plots else []
+    outputs.refuse_inputs({"--json": args.json, "--plots": args.plots, **{f"--plots {p}": p for p in plots}},
+                          [args.run, args.validate])
+    for option, path in (("--json", args.json), *(("--plots", p) for p in plots)):
+        outputs.refuse_existing(option, path, args.overwrite)
     check_count(args.thresholds, "--thresholds", 0, MAX_THRESHOLDS,
                 "candidate thresholds; a model must fit the plant's element limit")
     if args.inertia is not None and not (math.isfinite(args.inertia) and args.inertia >= 0):
@@ -188,7 +193,7 @@ def run(args) -> int:
     say(judge(100 * f[f"{where}_torque_nrmse"], 100 * f[f"{where}_position_nrmse"],
               100 * f[f"{where}_position_nrmse_segmented"], where))
     if args.plots:
-        for p in report(res, args.plots):
+        for p in report(res, args.plots, runs={"train": args.run, "validation": args.validate}):
             say(f"plot: {p}")
     return 0
 
