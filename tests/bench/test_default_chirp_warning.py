@@ -5,11 +5,7 @@ from __future__ import annotations
 
 import json
 
-import pytest
-
 from hilbench.bench.cli import main
-
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 
 
 def test_skeleton_of_the_default_chirp_warns_and_names_hilbench_plan(tmp_path, capsys):
