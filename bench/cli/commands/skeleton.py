@@ -19,8 +19,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("runs", nargs="+", metavar="RUN.h5", help="chirp run files (same axis)")
     parser.add_argument(
         "--mass",
-        type=float,
-        help="inertia J (kg*m^2) or mass (kg); default: the run's declared calibration 'inertia' if present",
+        metavar="J|MODEL.json",
+        help="inertia J (kg*m^2) or mass (kg), or a model file of hilbench identify or compare whose inertia "
+        "is taken; default: the run's declared calibration 'inertia' if present",
     )
     parser.add_argument(
         "--spring", type=float, default=0.0, help="linear spring to subtract, N*m/rad (default 0)"
@@ -72,7 +73,27 @@ def _analyse(args, settings):
         return skeleton.analyse_stream(args.runs, settings, budget=budget, progress=progress, **opts)
 
 
+def _mass(text: str | None) -> float | None:
+    """``--mass``: a number, or a model file whose inertia is used (a device run declares none, and the
+    identification that precedes a chirp has just measured J)."""
+    if text is None:
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        pass
+    from hilbench.analysis.errors import AnalysisError
+    from hilbench.analysis.models.model_file import read_family
+
+    try:
+        model, _ = read_family(text)
+    except AnalysisError as exc:
+        raise AnalysisError(f"--mass {text}: neither a number nor a readable model file ({exc})") from None
+    return float(model.plant.inertia)
+
+
 def run(args: argparse.Namespace) -> int:
+    from hilbench.analysis.figure_style import engineering
     from hilbench.analysis.skeleton import SkeletonSettings
     from hilbench.bench.analysis_input import MAX_BINS, check_count
     from hilbench.bench.storage import outputs
@@ -81,17 +102,20 @@ def run(args: argparse.Namespace) -> int:
     for option, target in (("--json", args.json), ("--plot", args.plot)):
         outputs.refuse_existing(option, target, args.overwrite)
     check_count(args.bins, "--bins", 1, MAX_BINS, "log-spaced bins per skeleton curve")
-    settings = SkeletonSettings(mass=args.mass, spring=args.spring, method=args.method, fb=args.fb, fc=args.fc,
+    settings = SkeletonSettings(mass=_mass(args.mass), spring=args.spring, method=args.method, fb=args.fb, fc=args.fc,
                                 band=tuple(args.band) if args.band else None, bins=args.bins, compose=args.compose)
     result = _analyse(args, settings)
     curves, u = result.curves, result.units
     pos, trq = u["amplitude"], u["restoring_force"]
+    # summary lines in engineering units (mrad for a presliding chirp), like the figure; the JSON stays SI
+    fa, au = engineering(pos, [r["amplitude_max"] for r in result.per_run])
     for r in result.per_run:
-        outputs.say(f"{r['run']}: {r['valid_samples']} valid samples, A {r['amplitude_min']:.4g} .. "
-                    f"{r['amplitude_max']:.4g} {pos}" + ("" if r["read"] == "whole" else f" ({r['read']})"), args.json)
+        outputs.say(f"{r['run']}: {r['valid_samples']} valid samples, A {fa * r['amplitude_min']:.4g} .. "
+                    f"{fa * r['amplitude_max']:.4g} {au}" + ("" if r["read"] == "whole" else f" ({r['read']})"),
+                    args.json)
     outputs.say(
         f"composed {len(result.runs)} runs: {curves.amplitude.size} amplitude bins "
-        f"({curves.amplitude.min():.4g} .. {curves.amplitude.max():.4g} {pos}), k_eq "
+        f"({fa * curves.amplitude.min():.4g} .. {fa * curves.amplitude.max():.4g} {au}), k_eq "
         f"{curves.stiffness.max():.4g} .. {curves.stiffness.min():.4g} {trq}/{pos}", args.json
     )
     for w in result.warnings:
