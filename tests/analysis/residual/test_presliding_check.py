@@ -32,6 +32,9 @@ def test_dahl_stroke_ends_explained_with_a_single_state_presliding(dahl_stroke):
     assert res.model_after["viscous"]["parameters"]["viscous"] == pytest.approx(0.004, rel=0.05)
     # held-out torque error 0.79 % measured (4.03 % from the Maxwell-slip start); the record's noise floor is ~0.5 %
     assert res.error_after["validation"]["torque_rel_pct"] < 1.5
+    from hilbench.analysis.residual.report import markdown_summary
+
+    assert "Presliding check: single-state (dahl) presliding instead of Maxwell-slip" in markdown_summary(res)
 
 
 def test_without_the_check_the_dahl_stroke_is_left_unexplained(dahl_stroke):
