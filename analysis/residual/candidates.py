@@ -318,7 +318,8 @@ class PowerViscous(Term):
     rolling speed as about v^0.7 (Hamrock-Dowson), so the film's shear force eta*v/h grows as about v^0.3, not as v:
     a friction that rises steeply at low sliding speed and flattens at high speed. The coefficient is kept >= 0, so the
     term cannot mimic a Stribeck curve (velocity weakening). The coefficient is the term's force at unit speed
-    (1 rad/s or 1 m/s). Not in the simulated plant (``plant`` maps nothing): the simulation error omits it."""
+    (1 rad/s or 1 m/s). The simulated plant has no such law: ``plant`` raises, so a model with this term reports no
+    simulation error (``simulation_note`` says why) rather than the error of a model without it."""
 
     name, main = "power_viscous", "power_coefficient"
     physics = "sublinear viscous friction c*sign(v)*|v|^n, 0 < n < 1 (shear of an elastohydrodynamic film)"
@@ -338,6 +339,11 @@ class PowerViscous(Term):
         return ({"power_coefficient": float(fit.term_coef(self.name)[0]), "exponent": float(nl["exponent"]),
                  "units": {"power_coefficient": f"{u['torque']} at 1 {u['velocity']}", "exponent": "1"}},
                 {"power_coefficient": float(fit.term_se(self.name)[0]), "exponent": float(se.get("exponent", np.nan))})
+
+    def plant(self, fit, nl):
+        from hilbench.firmware_sim.engine.plant import PlantParameterError
+
+        raise PlantParameterError("the simulated plant has no power-law viscous friction (power_viscous)")
 
 
 class AsymmetricFriction(Term):

@@ -54,3 +54,12 @@ def test_the_term_cannot_mimic_a_stribeck_curve():
     term = REGISTRY["power_viscous"]
     assert np.all(term.lower({"exponent": 0.3}, 1) == 0.0)
     assert all(0.0 < e < 1.0 for e in POWER_EXPONENTS)
+
+
+def test_a_model_with_the_term_reports_no_simulation_error_rather_than_a_wrong_one():
+    """The simulated plant has no power law: the simulated figures of the model after are None, with the reason."""
+    res = residual_loop(_run(1, 0.1, 0.3), _run(2, 0.1, 0.3), start=START, options=LoopOptions(sim_window=1.0))
+    assert res.names_added == ["power_viscous"]
+    assert res.error_before["validation"]["position_nrmse"] is not None
+    after = res.error_after["validation"]
+    assert after["position_nrmse"] is None and "power_viscous" in after["simulation_note"]
