@@ -14,7 +14,9 @@ Each round:
 5. of the kept candidates take the largest gain; a simpler one (fewer parameters) whose gain is at
    least ``parsimony`` x the best is preferred. Add it and repeat until nothing is kept.
 
-Whatever the final residual's diagnostics still flag is reported as unexplained structure.
+Whatever the final residual's diagnostics still flag is reported as unexplained structure. A Maxwell-slip start that
+ends with some is run once more with a single-state (Dahl) presliding in its place, kept on the same held-out
+evidence a candidate needs (``_presliding_check``: Masing's branches against a single-state law's).
 """
 
 from __future__ import annotations
