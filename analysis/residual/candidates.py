@@ -307,6 +307,45 @@ class Stribeck(Term):
         return {"stribeck_excess": float(fit.term_coef(self.name)[0]), "stribeck_velocity": float(nl["v_s"])}
 
 
+#: exponents of the power-law viscous term: 0.2-0.8 (1 is the viscous term itself; elastohydrodynamic theory gives 0.3)
+POWER_EXPONENTS = (0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8)
+
+
+class PowerViscous(Term):
+    """Sublinear velocity strengthening c*sign(v)*|v|^n, 0 < n < 1, beside the linear viscous term.
+
+    Why: in an elastohydrodynamic contact (the balls of a screw or a bearing) the film thickness grows with the
+    rolling speed as about v^0.7 (Hamrock-Dowson), so the film's shear force eta*v/h grows as about v^0.3, not as v:
+    a friction that rises steeply at low sliding speed and flattens at high speed. The coefficient is kept >= 0, so the
+    term cannot mimic a Stribeck curve (velocity weakening). The coefficient is the term's force at unit speed
+    (1 rad/s or 1 m/s). The simulated plant has no such law: ``plant`` raises, so a model with this term reports no
+    simulation error (``simulation_note`` says why) rather than the error of a model without it."""
+
+    name, main = "power_viscous", "power_coefficient"
+    physics = "sublinear viscous friction c*sign(v)*|v|^n, 0 < n < 1 (shear of an elastohydrodynamic film)"
+    refine_key = "exponent"
+
+    def columns(self, run, nl, setting):
+        n = float(nl["exponent"])
+        return run.cached(("power_viscous", n), lambda: run.filt(
+            np.sign(run.velocity_fast) * np.abs(run.velocity_fast) ** n)[:, None])
+
+    def settings(self, runs, diagnostics):
+        return [{"exponent": n} for n in POWER_EXPONENTS]
+
+    def parameters(self, fit, nl, axis):
+        u = _units(axis)
+        se = dict(nl.get("_se", {}))
+        return ({"power_coefficient": float(fit.term_coef(self.name)[0]), "exponent": float(nl["exponent"]),
+                 "units": {"power_coefficient": f"{u['torque']} at 1 {u['velocity']}", "exponent": "1"}},
+                {"power_coefficient": float(fit.term_se(self.name)[0]), "exponent": float(se.get("exponent", np.nan))})
+
+    def plant(self, fit, nl):
+        from hilbench.firmware_sim.engine.plant import PlantParameterError
+
+        raise PlantParameterError("the simulated plant has no power-law viscous friction (power_viscous)")
+
+
 class AsymmetricFriction(Term):
     """Direction-dependent friction. Two ways a friction level can differ between the directions of motion:
 
@@ -724,12 +763,12 @@ def register(term: Term) -> Term:
     return term
 
 
-for _t in (Inertia(), MaxwellSlip(), Coulomb(), Viscous(), Offset(), OffsetDrift(), Stribeck(),
+for _t in (Inertia(), MaxwellSlip(), Coulomb(), Viscous(), Offset(), OffsetDrift(), Stribeck(), PowerViscous(),
            AsymmetricFriction(), PositionPeriodic(), PositionDependentFriction(), PreloadVariation(), Delay(),
            TorqueGain()):
     register(_t)
 
-CANDIDATE_NAMES = ("viscous", "stribeck", "asymmetric_friction", "position_periodic",
+CANDIDATE_NAMES = ("viscous", "stribeck", "power_viscous", "asymmetric_friction", "position_periodic",
                    "position_dependent_friction", "preload_variation", "delay", "torque_gain", "offset_drift")
 
 

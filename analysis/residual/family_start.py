@@ -147,9 +147,15 @@ def refine_on_equation_error(builder, params: dict, run: RunData, max_nfev: int 
     return out, se
 
 
-def family_start(family: str, train: list[RunData]) -> list:
+def family_start(family: str, train: list[RunData], output_error: bool = True) -> list:
     """Start entries (term name, or (name, settings)) for the residual loop from ``family``, identified on the
-    first training run. Raises AnalysisError for an unknown family."""
+    first training run. Raises AnalysisError for an unknown family.
+
+    ``output_error=False`` skips the output-error fit (``families.fit_family``): the family starts from the
+    Maxwell-slip fit's gross-sliding limit (F_c = sum W_i, sigma0 = sum k_i, the same virgin stiffness) and is refined
+    on the loop's equation error only. The loop's presliding check uses it: the output-error fit simulates the whole
+    record per evaluation and took 4-5 minutes on some 10 s records (a stiff sigma0 needing many substeps), the
+    equation-error refinement follows the measured path and takes about a second."""
     from hilbench.analysis.models import families as fam
 
     if family not in fam.FAMILIES:
@@ -164,15 +170,21 @@ def family_start(family: str, train: list[RunData]) -> list:
         return ["inertia", "coulomb", ("stribeck", {"v_s": float(fam.stribeck_start(frun)["stribeck_velocity"])}),
                 "viscous"]
     ms_fit = fam.maxwell_slip_start(frun, run.timing, run.position, run.torque)
-    fitted = fam.fit_family(family, frun, timing=run.timing, position=run.position, torque=run.torque,
-                            ms_fit=ms_fit)
     builder = fam._build_families(ms_fit.model)[family]
-    p, se = refine_on_equation_error(builder, dict(fitted.params), run)
+    if output_error:
+        fitted = fam.fit_family(family, frun, timing=run.timing, position=run.position, torque=run.torque,
+                                ms_fit=ms_fit)
+        p0, se0, units = dict(fitted.params), fitted.std_errors, fitted.units
+    else:
+        base = fam._starts(frun, ms_fit.model)
+        p0 = dict(fam._sliding_starts(frun, ms_fit.model, base).get(family, base[family]))
+        se0 = {}
+        units = {n: fam._unit(run.axis, key) for n, key in zip(builder.names, builder.unit_keys, strict=True)}
+    p, se = refine_on_equation_error(builder, p0, run)
     # the column is the family's friction alone: its viscous term and offset are the loop's own terms
     plant = _friction_only(builder.plant(p))
     static = float(p["coulomb"] + p.get("static_excess", 0.0)) if "coulomb" in p else float(p["h"])
     if not static > 0:
         raise AnalysisError(f"the identified {family} model has no friction level ({static:g}); nothing to start from")
-    ident = {"parameters": p, "std_errors": {**fitted.std_errors, **se}, "units": fitted.units,
-             "output_error_start": fitted.params}
+    ident = {"parameters": p, "std_errors": {**se0, **se}, "units": units, "output_error_start": p0}
     return ["inertia", (f"family_{family}", {"_plant": plant, "_static": static, "_identified": ident}), "viscous"]

@@ -159,6 +159,8 @@ def markdown_summary(result: LoopResult, title: str = "Residual loop", notes: li
     d = report_dict(result)
     lines = [f"# {title}", "", f"**Verdict:** {d['verdict']}", "",
              f"Starting model: `{', '.join(d['start'])}`. Held-out error from: {d['validation_mode']}.", ""]
+    if d.get("presliding_check"):  # the loop changed the start's presliding law (selection._presliding_check)
+        lines += [f"Presliding check: {d['presliding_check']['note']}.", ""]
     lines += ["## Error before and after", "", "| set | metric | before | after |", "|---|---|---|---|"]
     for part in ("train", "validation"):
         keys = (("force_rel_pct", "force_nrmse") if d.get("record") == "displacement-driven" else
