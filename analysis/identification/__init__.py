@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
 
     from hilbench.analysis.identification.identify import Identification
     from hilbench.analysis.identification.maxwell_fit import LipSettings
@@ -87,10 +86,9 @@ def analyse_stream(record: Record, source, settings: LipSettings | None = None, 
                            record=record.kind, method=method)
 
 
-def report(result: Identification, out_dir: str | Path, save: Callable | None = None,
-           runs: dict[str, str | Path] | None = None) -> list[Path]:
+def report(result: Identification, out_dir: str | Path, runs: dict[str, str | Path] | None = None) -> list[Path]:
     """The identification's figures (virgin curve, fit, residuals, hysteresis per run) as PNGs in ``out_dir``;
     ``runs`` (role "train"/"validation" -> run file) names the runs in the titles."""
     from hilbench.analysis.identification.plots import write_plots
 
-    return write_plots(result, out_dir, runs) if save is None else write_plots(result, out_dir, runs, save=save)
+    return write_plots(result, out_dir, runs)
