@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-
     from hilbench.analysis.identification.identify import Identification
     from hilbench.analysis.identification.maxwell_fit import LipSettings
     from hilbench.analysis.record import Record
