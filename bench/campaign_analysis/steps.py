@@ -2,8 +2,9 @@
 
 This is the one adapter between the campaign engine and the analysis packages: a step reads the file itself
 through the one record loader (it runs inside a worker process; hilbench.analysis.record.load_record, so a run
-reads as the CLI and the GUI read it), calls the analysis and flattens its result into the columns of
-:data:`COLUMNS`.
+reads as the CLI and the GUI read it), cuts it into the head it fits and the tail it validates on
+(hilbench.analysis.record_split), calls the analysis package's front door ``analyse`` as the CLI command does, and
+flattens its result into the columns of :data:`COLUMNS`.
 """
 
 from __future__ import annotations
@@ -86,33 +87,19 @@ def _breakaway_se(model) -> float:
     return float(np.sqrt(np.sum((se * np.asarray(model.ms_delta)) ** 2)))
 
 
-def _split(rec, fraction: float):
-    """(head, tail or None) of a record's arrays: fitted on the head, validated on the held-out tail."""
-    from hilbench.analysis.identification.identify import RunArrays
-
-    arrays = rec.arrays()
-    cut = int(round(arrays.t.size * (1 - fraction)))
-    head = RunArrays(arrays.t[:cut], arrays.torque[:cut], arrays.position[:cut], arrays.axis, arrays.name)
-    if fraction <= 0:
-        return head, None
-    return head, RunArrays(arrays.t[cut:] - arrays.t[cut], arrays.torque[cut:], arrays.position[cut:], arrays.axis,
-                           arrays.name + " (tail)")
-
-
 def identify_step(path: str, settings: StepSettings) -> dict[str, Any]:
-    """Identify the friction model of one run (fit on the head, validate on the held-out tail)."""
-    from hilbench.analysis.identification.identify import identify
+    """``hilbench identify`` on one run: ``analysis.identification.analyse`` fitted on the head, validated on the
+    held-out tail (analysis.record_split)."""
+    from hilbench.analysis.identification import analyse
     from hilbench.analysis.identification.maxwell_fit import LipSettings
     from hilbench.analysis.record import load_record
+    from hilbench.analysis.record_split import split
     from hilbench.bench.verdict import judge
 
     rec = load_record(path, channels=("temperature",))  # the one loader: an aborted or short run is a failed row
-    arrays, timing = rec.arrays(), rec.timing
-    n = arrays.t.size
-    head, tail = _split(rec, settings.validation_fraction)
-    lip = LipSettings(n_thresholds=settings.thresholds, coulomb=settings.coulomb, offset=settings.offset,
-                      timing=timing)
-    res = identify(head, method=settings.method, validate=tail, settings=lip)
+    head, tail = split(rec, settings.validation_fraction)
+    lip = LipSettings(n_thresholds=settings.thresholds, coulomb=settings.coulomb, offset=settings.offset)
+    res = analyse(head, lip, method=settings.method, validation=tail)
     m, f, se = res.model, res.figures, res.model.std_errors
     row: dict[str, Any] = {
         "inertia": m.inertia, "inertia_se": se.get("inertia", math.nan),
@@ -125,8 +112,7 @@ def identify_step(path: str, settings: StepSettings) -> dict[str, Any]:
         "validation_torque_nrmse": f.get("validation_torque_nrmse"),
         "validation_position_nrmse": f.get("validation_position_nrmse"),
         "validation_position_nrmse_segmented": f.get("validation_position_nrmse_segmented"),
-        "samples": int(n), "duration": float(arrays.t[-1] - arrays.t[0]),
-        "sliding_distance": sliding_distance(arrays.position, arrays.fs),
+        **_size(rec), "sliding_distance": sliding_distance(rec.position, rec.sample_rate),
     }
     where = "validation" if tail is not None else "train"
     verdict = judge(100 * f[f"{where}_torque_nrmse"], 100 * f[f"{where}_position_nrmse"],
@@ -138,32 +124,32 @@ def identify_step(path: str, settings: StepSettings) -> dict[str, Any]:
     return row
 
 
+def _size(rec) -> dict[str, Any]:
+    return {"samples": int(rec.t.size), "duration": float(rec.t[-1] - rec.t[0])}
+
+
 def _held_out(path: str, settings: StepSettings, step: str):
-    """The record and its head and tail for a step that needs a validation set (compare, residual)."""
+    """The record's head and tail for a step that needs a validation set (compare, residual)."""
     from hilbench.analysis.errors import AnalysisError
     from hilbench.analysis.record import load_record
+    from hilbench.analysis.record_split import split
 
     if settings.validation_fraction <= 0:
         raise AnalysisError(f"{step} scores models on the held-out tail: --validation-fraction must be > 0")
     rec = load_record(path)
-    head, tail = _split(rec, settings.validation_fraction)
+    head, tail = split(rec, settings.validation_fraction)
     return rec, head, tail
 
 
 def compare_step(path: str, settings: StepSettings) -> dict[str, Any]:
-    """``hilbench compare`` on one run: every family of ``compare_families`` fitted on the head, scored on the
-    tail; the row is the family with the lowest validation torque NRMSE (the calls of ``analysis.models.compare
-    .analyse`` on the head and tail arrays of one record, which that front door takes as two records)."""
+    """``hilbench compare`` on one run: ``analysis.models.compare.analyse`` with every family of
+    ``compare_families`` fitted on the head and scored on the tail; the row is the family with the lowest
+    validation torque NRMSE."""
     from hilbench.analysis.errors import AnalysisError
-    from hilbench.analysis.models.compare import compare
-    from hilbench.analysis.models.families import RunData
+    from hilbench.analysis.models.compare import CompareSettings, analyse
 
     rec, head, tail = _held_out(path, settings, "compare")
-    train = RunData.from_arrays(rec.name, rec.axis, rec.sample_rate, head.position, head.torque, rec.timing)
-    val = RunData.from_arrays(rec.name + " (tail)", rec.axis, rec.sample_rate, tail.position, tail.torque,
-                              rec.timing)
-    result = compare(train, val, timing=rec.timing, train_position=train.x, train_torque=head.torque,
-                     families=settings.compare_families)
+    result = analyse(head, tail, CompareSettings(families=settings.compare_families))
     scored = [r for r in result.rows if r.error is None and math.isfinite(r.validation["torque_nrmse"])]
     if not scored:
         raise AnalysisError("compare: no family could be fitted (" + "; ".join(
@@ -171,28 +157,23 @@ def compare_step(path: str, settings: StepSettings) -> dict[str, Any]:
     best = min(scored, key=lambda r: r.validation["torque_nrmse"])
     return {"model": best.name, "train_torque_nrmse": best.train["torque_nrmse"],
             "validation_torque_nrmse": best.validation["torque_nrmse"],
-            "validation_position_nrmse_segmented": best.validation["position_nrmse_segmented"],
-            "samples": int(rec.t.size), "duration": float(rec.t[-1] - rec.t[0])}
+            "validation_position_nrmse_segmented": best.validation["position_nrmse_segmented"], **_size(rec)}
 
 
 def residual_step(path: str, settings: StepSettings) -> dict[str, Any]:
-    """``hilbench residual`` on one run: the residual loop from ``residual_start``, fitted on the head and judged
-    on the tail; the row has the validation torque NRMSE of the start and of the final model and the loop's
-    verdict (the loop ``analysis.residual.analyse`` runs, on the head and tail arrays of one record, which that
-    front door takes as two records)."""
-    from hilbench.analysis.residual import LoopOptions, prepare_run, residual_loop
+    """``hilbench residual`` on one run: ``analysis.residual.analyse`` from ``residual_start``, fitted on the head
+    and judged on the tail; the row has the validation torque NRMSE of the start and of the final model and the
+    loop's verdict."""
+    from hilbench.analysis.residual import ResidualSettings, analyse
 
     rec, head, tail = _held_out(path, settings, "residual")
-    runs = [prepare_run(a.position, a.torque, rec.sample_rate, axis=rec.axis, name=a.name, timing=rec.timing)
-            for a in (head, tail)]
-    result = residual_loop(runs[0], [runs[1]], start=settings.residual_start,
-                           options=LoopOptions(record=rec.kind))
-    before, after = result.error_before["validation"], result.error_after["validation"]
-    return {"model": ",".join([*result.start, *result.names_added]),
+    loop = analyse(head, ResidualSettings(start=settings.residual_start), validation=[tail]).loop
+    before, after = loop.error_before["validation"], loop.error_after["validation"]
+    return {"model": ",".join([*loop.start, *loop.names_added]),
             "validation_torque_nrmse_start": before["torque_nrmse"],
             "validation_torque_nrmse": after["torque_nrmse"],
             "validation_position_nrmse": after.get("position_nrmse"),
-            "verdict": result.verdict, "samples": int(rec.t.size), "duration": float(rec.t[-1] - rec.t[0])}
+            "verdict": loop.verdict, **_size(rec)}
 
 
 def presliding_step(path: str, settings: StepSettings) -> dict[str, Any]:
@@ -213,8 +194,7 @@ def presliding_step(path: str, settings: StepSettings) -> dict[str, Any]:
                   PreslidingSettings(inertia=protocol_inertia(rec.protocol_params, path)),
                   counts_per_rev=rec.calibration.get("counts_per_rev"), replicates=settings.presliding_replicates)
     q, e = res.quantities, res.uncertainties
-    row: dict[str, Any] = {"validation_force_relative_error": res.fit.relative_rms, "samples": int(rec.t.size),
-                           "duration": float(rec.t[-1] - rec.t[0])}
+    row: dict[str, Any] = {"validation_force_relative_error": res.fit.relative_rms, **_size(rec)}
     for name, column in (("breakaway", "presliding_breakaway"), ("initial_stiffness", "initial_stiffness"),
                          ("presliding_distance", "presliding_distance")):
         row[column], row[f"{column}_se"] = q[name], e[name]
