@@ -18,7 +18,8 @@ import numpy as np
 
 #: step -> protocols whose runs it can analyse (a run gets the steps its protocol supports)
 PROTOCOLS_OF_STEP = {"identify": ("identification", "chirp"), "compare": ("identification", "chirp"),
-                     "residual": ("identification", "chirp"), "presliding": ("presliding",)}
+                     "residual": ("identification", "chirp"), "presliding": ("presliding",),
+                     "afrf": ("stepped_sine",), "skeleton": ("chirp",)}
 STEPS_DONE = tuple(PROTOCOLS_OF_STEP)
 
 #: result columns of the steps: name -> (Arrow type name, unit). Common columns: engine.BASE_COLUMNS.
@@ -40,6 +41,20 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "initial_stiffness": ("float64", "N*m/rad"), "initial_stiffness_se": ("float64", "N*m/rad"),
     "presliding_distance": ("float64", "rad"), "presliding_distance_se": ("float64", "rad"),
     "validation_force_relative_error": ("float64", "1"),
+    # afrf: the measured grid's extent, the first-harmonic compliance |X1/T1| (rotary rad/(N*m), linear m/N) at
+    # the lowest frequency of the lowest and of the highest amplitude, the largest |X3|/|X1| and period-to-period
+    # change over the grid
+    "afrf_steps": ("int64", "1"), "afrf_frequency_min": ("float64", "Hz"), "afrf_frequency_max": ("float64", "Hz"),
+    "afrf_compliance_low_amplitude": ("float64", "rad/(N*m)"),
+    "afrf_compliance_high_amplitude": ("float64", "rad/(N*m)"),
+    "afrf_third_harmonic_ratio_max": ("float64", "1"), "afrf_convergence_max": ("float64", "1"),
+    # skeleton: the composed amplitude range (rotary rad, linear m) and the equivalent stiffness k_eq at its
+    # smallest and largest amplitude bins (rotary N*m/rad, linear N/m)
+    "skeleton_bins": ("int64", "1"),
+    "skeleton_amplitude_min": ("float64", "rad"), "skeleton_amplitude_max": ("float64", "rad"),
+    "skeleton_stiffness_low_amplitude": ("float64", "N*m/rad"),
+    "skeleton_stiffness_high_amplitude": ("float64", "N*m/rad"),
+    "warnings": ("string", ""),  # afrf, skeleton: the analysis's warnings, "; "-separated
     "temperature_mean": ("float64", "degC"), "sliding_distance": ("float64", "rad"),
     "samples": ("int64", "1"), "duration": ("float64", "s"),
 }
@@ -61,6 +76,7 @@ class StepSettings:
     compare_families: tuple[str, ...] = ("coulomb_viscous", "stribeck", "maxwell_slip")
     residual_start: tuple[str, ...] = ("inertia", "maxwell_slip")
     presliding_replicates: int = 20
+    skeleton_mass: float | None = None  # J (kg*m^2) or m (kg); None: the run's declared calibration inertia
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -178,21 +194,14 @@ def residual_step(path: str, settings: StepSettings) -> dict[str, Any]:
 
 def presliding_step(path: str, settings: StepSettings) -> dict[str, Any]:
     """``hilbench presliding`` on one displacement-driven run with the command's defaults (fraction 0.9, 48
-    thresholds, the protocol's inertia, ``presliding_replicates`` bootstrap replicates); the row has the
-    quantities with their standard uncertainties and the relative rms error of the force simulated from the
-    measured displacement (the array analysis that ``analysis.presliding``'s record front door runs)."""
-    from hilbench.analysis.errors import AnalysisError
-    from hilbench.analysis.presliding.analyse import analyse
-    from hilbench.analysis.presliding.identify import PreslidingSettings
-    from hilbench.analysis.presliding.report import protocol_inertia
+    thresholds, the protocol's inertia, ``presliding_replicates`` bootstrap replicates): ``analysis.presliding
+    .analyse``; the row has the quantities with their standard uncertainties and the relative rms error of the
+    force simulated from the measured displacement."""
+    from hilbench.analysis import presliding
     from hilbench.analysis.record import load_record
 
     rec = load_record(path)
-    if rec.kind != "displacement-driven":
-        raise AnalysisError(f"{path}: a {rec.kind} record; presliding needs a displacement-driven one")
-    res = analyse(rec.t, rec.position, rec.torque, rec.sample_rate, rec.axis,
-                  PreslidingSettings(inertia=protocol_inertia(rec.protocol_params, path)),
-                  counts_per_rev=rec.calibration.get("counts_per_rev"), replicates=settings.presliding_replicates)
+    res = presliding.analyse(rec, replicates=settings.presliding_replicates)
     q, e = res.quantities, res.uncertainties
     row: dict[str, Any] = {"validation_force_relative_error": res.fit.relative_rms, **_size(rec)}
     for name, column in (("breakaway", "presliding_breakaway"), ("initial_stiffness", "initial_stiffness"),
@@ -201,8 +210,55 @@ def presliding_step(path: str, settings: StepSettings) -> dict[str, Any]:
     return row
 
 
+def afrf_step(path: str, settings: StepSettings) -> dict[str, Any]:
+    """``hilbench afrf RUN.h5`` on one stepped-sine run: ``analysis.afrf.analyse`` on the record its ``load``
+    reads; the row summarises the grid (:data:`COLUMNS`)."""
+    from hilbench.analysis import afrf
+
+    rec = afrf.load(path)
+    res = afrf.analyse(rec)
+    c1, c3 = res.response[..., 0], res.response[..., min(2, res.n_harmonics - 1)]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        compliance = np.abs(c1 / res.drive)
+        third = np.abs(c3) / np.abs(c1) if res.n_harmonics >= 3 else np.full(c1.shape, math.nan)
+    lowest_f = int(np.argmin(res.frequencies))
+    return {"afrf_steps": int(np.isfinite(c1).sum()), "afrf_frequency_min": float(res.frequencies.min()),
+            "afrf_frequency_max": float(res.frequencies.max()),
+            "afrf_compliance_low_amplitude": float(compliance[int(np.argmin(res.amplitudes)), lowest_f]),
+            "afrf_compliance_high_amplitude": float(compliance[int(np.argmax(res.amplitudes)), lowest_f]),
+            "afrf_third_harmonic_ratio_max": _nanmax(third), "afrf_convergence_max": _nanmax(res.convergence),
+            "warnings": "; ".join(res.warnings), **_size(rec)}
+
+
+def skeleton_step(path: str, settings: StepSettings) -> dict[str, Any]:
+    """``hilbench skeleton RUN.h5 [--mass skeleton_mass]`` on one chirp run: ``analysis.skeleton.analyse`` of the
+    record alone (a campaign row is one run; composing several gains is the command's job)."""
+    from hilbench.analysis import skeleton
+    from hilbench.analysis.record import load_record
+
+    rec = load_record(path)
+    res = skeleton.analyse([rec], skeleton.SkeletonSettings(mass=settings.skeleton_mass))
+    a, k = np.asarray(res.curves.amplitude, float), np.asarray(res.curves.stiffness, float)
+    ok = np.isfinite(a) & np.isfinite(k)
+    if not ok.any():
+        from hilbench.analysis.errors import AnalysisError
+
+        raise AnalysisError(f"{path}: no amplitude bin has a skeleton point")
+    a, k = a[ok], k[ok]
+    return {"skeleton_bins": int(a.size), "skeleton_amplitude_min": float(a.min()),
+            "skeleton_amplitude_max": float(a.max()), "skeleton_stiffness_low_amplitude": float(k[np.argmin(a)]),
+            "skeleton_stiffness_high_amplitude": float(k[np.argmax(a)]), "warnings": "; ".join(res.warnings),
+            **_size(rec)}
+
+
+def _nanmax(a: np.ndarray) -> float:
+    a = np.asarray(a, float)
+    return float(np.nanmax(a)) if np.isfinite(a).any() else math.nan
+
+
 STEPS: dict[str, Callable[[str, StepSettings], dict[str, Any]]] = {
-    "identify": identify_step, "compare": compare_step, "residual": residual_step, "presliding": presliding_step}
+    "identify": identify_step, "compare": compare_step, "residual": residual_step, "presliding": presliding_step,
+    "afrf": afrf_step, "skeleton": skeleton_step}
 
 
 def steps_for(protocol: str, wanted: tuple[str, ...]) -> list[str]:
