@@ -87,10 +87,12 @@ def sliding_distance(position: np.ndarray, fs: float) -> float:
     encoder flicker and noise (which add |dx| without any sliding) do not count. Cut-off fs/20."""
     from scipy import signal
 
+    from hilbench.analysis.identification.regressors import lowpass_design
+
     x = np.asarray(position, dtype=float)
     if x.size < 30:
         return float(np.sum(np.abs(np.diff(x))))
-    sos = signal.butter(2, fs / 20, fs=fs, output="sos")
+    sos = lowpass_design(2, fs / 20, fs)[0].copy()
     return float(np.sum(np.abs(np.diff(signal.sosfiltfilt(sos, x)))))
 
 
@@ -267,8 +269,7 @@ def steps_for(protocol: str, wanted: tuple[str, ...]) -> list[str]:
 
 
 def run_meta(path: str) -> dict[str, Any]:
-    """The run file's own identity: run id, start time and operator."""
-    from hilbench.analysis.runfile import open_run
+    """The run file's own identity: run id, start time and operator (its root attributes alone)."""
+    from hilbench.analysis.runfile.identity import run_identity
 
-    with open_run(path) as run:
-        return {"run_id": run.uid, "start_time": str(run.start_time), "operator": str(run.meta.get("operator", ""))}
+    return run_identity(path)
