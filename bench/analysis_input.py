@@ -118,28 +118,17 @@ def mib(nbytes: float) -> str:
     return f"{nbytes / (1 << 20):.0f} MiB"
 
 
-def progress_bar(total: int, desc: str, unit: str = "sample"):
-    """A tqdm bar on standard error with ETA (silenced by ``--quiet``); call ``.update(n)``, then ``.close()``."""
-    from tqdm import tqdm
-
-    from hilbench.bench.storage import outputs
-
-    return tqdm(total=total, unit=unit, unit_scale=unit == "sample", desc=desc, file=sys.stderr, dynamic_ncols=True,
-                mininterval=0.5, disable=True if outputs.verbosity == 0 else None)
-
-
 def read_decimated(path: str, args: argparse.Namespace, read, n_samples: int, timing: str | None = None) -> Record:
     """``read(path, ..., progress=...)`` (a decimating reader such as
     :func:`hilbench.analysis.residual.record_analysis.read`) with the command's loader options and a progress bar
     over the file's ``n_samples``; an incomplete record let through is said on standard error."""
-    bar = progress_bar(n_samples, f"read {path}")
-    try:
+    from hilbench.bench.analysis_progress import progress_bar
+
+    with progress_bar(f"read {path}") as progress:
         rec = read(path, torque_channel=getattr(args, "torque_channel", None),
                    timing=timing or getattr(args, "torque_timing", None) or "auto",
                    allow_incomplete=bool(getattr(args, "allow_incomplete", False)),
-                   progress=lambda done: bar.update(done - bar.n))
-    finally:
-        bar.close()
+                   progress=lambda done: progress(done, n_samples))
     line = rec.incomplete_line()
     if line:
         print(f"warning: {line}", file=sys.stderr)

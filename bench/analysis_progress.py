@@ -1,5 +1,5 @@
-"""A progress bar for the analysis commands: the ``progress(done, total)`` callback the analyses take
-(hilbench.analysis.channel_windows), drawn by tqdm on standard error once the work has lasted 2 s, with the
+"""The progress bar of the analysis commands (the only one): the ``progress(done, total)`` callback the analyses
+take (hilbench.analysis.channel_windows), drawn by tqdm on standard error once the work has lasted 2 s, with the
 count and an ETA; ``-q``/``--quiet`` silences it."""
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ def progress_bar(desc: str, unit: str = "sample") -> Iterator[Callable[[int, int
 
     def update(done: int, total: int) -> None:
         if not bars:
-            bars.append(tqdm(total=total, unit=unit, unit_scale=True, desc=desc, file=sys.stderr,
+            bars.append(tqdm(total=total, unit=unit, unit_scale=unit == "sample", desc=desc, file=sys.stderr,
                              disable=True if outputs.verbosity == 0 else None, delay=DELAY_S,
                              dynamic_ncols=True, mininterval=0.5))
         bar = bars[0]

@@ -20,6 +20,7 @@ equation holds at every row, so thinning only reduces the coupling between neigh
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -65,8 +66,28 @@ def zero_phase_lowpass(x: np.ndarray, fs: float, cutoff: float, order: int = 4) 
     pad = min(edge_samples(fs, cutoff), x.shape[-1] - 1)
     first, last = x[..., :1], x[..., -1:]
     ext = np.concatenate([2 * first - x[..., pad:0:-1], x, 2 * last - x[..., -2 : -pad - 2 : -1]], axis=-1)
+    sos, zi = lowpass_design(order, cutoff, fs)
+    sos = sos.copy()  # sosfilt's typed memoryview needs a writable buffer; the cached design stays read-only
+    # scipy.signal.sosfiltfilt(sos, ext, axis=-1, padtype=None), less its design of zi on every call: the same
+    # arithmetic, bit for bit (tests/analysis/identification/test_lowpass_design.py)
+    zi = zi.reshape(zi.shape[0], *([1] * (ext.ndim - 1)), 2)
+    y, _ = signal.sosfilt(sos, ext, axis=-1, zi=zi * ext[..., :1])
+    y, _ = signal.sosfilt(sos, y[..., ::-1], axis=-1, zi=zi * y[..., -1:])
+    return y[..., ::-1][..., pad : pad + x.shape[-1]]
+
+
+@lru_cache(maxsize=64)
+def lowpass_design(order: int, cutoff: float, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    """(sos, zi): the Butterworth low-pass of ``order`` at ``cutoff`` Hz for ``fs`` Hz and its steady-state initial
+    conditions (scipy.signal.sosfilt_zi), read-only. Cached: designing them took 3.4 + 0.9 ms against 0.4 ms for
+    filtering a 2 s record at 1 kHz, and an identification filters about 24 times with the same few designs."""
+    from scipy import signal
+
     sos = signal.butter(order, cutoff, fs=fs, output="sos")
-    return signal.sosfiltfilt(sos, ext, axis=-1, padtype=None)[..., pad : pad + x.shape[-1]]
+    zi = signal.sosfilt_zi(sos)
+    sos.setflags(write=False)
+    zi.setflags(write=False)
+    return sos, zi
 
 
 def edge_samples(fs: float, cutoff: float) -> int:

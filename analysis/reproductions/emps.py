@@ -21,8 +21,10 @@ IDIM-LS recipe (the paper's Script_IDIM_LS):
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -46,39 +48,84 @@ PARAMETER_NAMES = ("mass", "viscous", "coulomb", "offset")
 PARAMETER_UNITS = ("kg", "N*s/m", "N", "N")
 
 
+#: The variables an EMPS file is read for; ``pulses_N`` is in DATA_EMPS_PULSES.mat only.
+EMPS_VARIABLES = ("t", "qm", "qg", "vir", "gtau", "kp", "kv", "pulses_N")
+
+
 @dataclass(frozen=True)
 class EmpsRecord:
-    """One EMPS .mat file as arrays: t (s), qm (m), vir (V), gtau (N/V); force = gtau*vir (N)."""
+    """One EMPS .mat file as arrays: t (s), qm and qg (m), vir (V), gtau (N/V), kp (1/s), kv (V/(m/s)),
+    pulses (V, the PULSES file only, else None); force = gtau*vir (N)."""
 
     t: np.ndarray
     qm: np.ndarray
     vir: np.ndarray
     gtau: float
     name: str
+    qg: np.ndarray | None = None
+    kp: float = float("nan")
+    kv: float = float("nan")
+    pulses: np.ndarray | None = None
 
     @property
     def force(self) -> np.ndarray:
         return self.gtau * self.vir
 
 
+def parse_emps(mat: Mapping[str, Any], source: str) -> EmpsRecord:
+    """The one EMPS parser: the variables of an EMPS MAT file (as scipy.io.loadmat returns them) checked and
+    converted. Each is a real column vector of one length (scalars for gtau, kp, kv) with finite values; anything
+    else raises :class:`AnalysisError` naming ``source`` and the variable. ``bench import emps`` reads the file with
+    its size bounds and calls this too, so a run file and this module see the same arrays."""
+
+    def real(name: str) -> np.ndarray:
+        a = np.asarray(mat[name])
+        if np.iscomplexobj(a) or (a.dtype.names is not None and {"real", "imag"} <= set(a.dtype.names)):
+            raise AnalysisError(f"{source}: variable {name!r} is complex; hilbench imports real signals only "
+                                "(store its real and imaginary parts as two variables)")
+        return a
+
+    def column(name: str, n: int | None = None) -> np.ndarray:
+        if name not in mat:
+            raise AnalysisError(f"{source}: variable {name!r} is missing")
+        a = real(name)
+        if a.ndim != 2 or 1 not in a.shape:
+            raise AnalysisError(f"{source}: variable {name!r} should be a column vector, has shape {a.shape}")
+        a = a.ravel().astype(float)
+        if n is not None and a.size != n:
+            raise AnalysisError(f"{source}: variable {name!r} has {a.size} samples, expected {n}")
+        bad = ~np.isfinite(a)
+        if bad.any():
+            raise AnalysisError(f"{source}: {name!r} has {int(bad.sum())} non-finite value(s) "
+                                f"(first at sample {int(np.argmax(bad))})")
+        return a
+
+    def scalar(name: str) -> float:
+        if name not in mat or np.asarray(mat[name]).size != 1:
+            raise AnalysisError(f"{source}: scalar {name!r} is missing")
+        return float(real(name).ravel()[0])
+
+    t = column("t")
+    qm, qg, vir = (column(v, t.size) for v in ("qm", "qg", "vir"))
+    gtau, kp, kv = (scalar(v) for v in ("gtau", "kp", "kv"))
+    if not np.isfinite(gtau):
+        raise AnalysisError(f"{source}: 'gtau' is not finite")
+    pulses = column("pulses_N", t.size) if "pulses_N" in mat else None
+    return EmpsRecord(t=t, qm=qm, vir=vir, gtau=gtau, name=Path(source).stem, qg=qg, kp=kp, kv=kv, pulses=pulses)
+
+
 def load_emps(path: str | Path) -> EmpsRecord:
-    """Read DATA_EMPS.mat or DATA_EMPS_PULSES.mat (MAT v5) with scipy.io.loadmat."""
+    """Read DATA_EMPS.mat or DATA_EMPS_PULSES.mat (MAT v5) with scipy.io.loadmat, then :func:`parse_emps`."""
     from scipy.io import loadmat
 
     path = Path(path)
     if not path.is_file():
         raise AnalysisError(f"EMPS file not found: {path}")
-    data = loadmat(str(path))
-    missing = [k for k in ("t", "qm", "vir", "gtau") if k not in data]
-    if missing:
-        raise AnalysisError(f"{path.name}: not an EMPS file, missing variable(s) {', '.join(missing)}")
-    return EmpsRecord(
-        t=np.asarray(data["t"], float).ravel(),
-        qm=np.asarray(data["qm"], float).ravel(),
-        vir=np.asarray(data["vir"], float).ravel(),
-        gtau=float(np.asarray(data["gtau"]).squeeze()),
-        name=path.stem,
-    )
+    try:
+        data = loadmat(str(path), variable_names=EMPS_VARIABLES)
+    except Exception as exc:  # scipy raises ValueError, TypeError, OSError, MatReadError... for bad files
+        raise AnalysisError(f"{path}: not a readable MAT v5 file ({' '.join(str(exc).split())})") from None
+    return parse_emps(data, str(path))
 
 
 def idim_observation(

@@ -181,15 +181,44 @@ def chunk(todo: list[Task], workers: int) -> list[list[Task]]:
     return [todo[i:i + size] for i in range(0, len(todo), size)]
 
 
+#: what the steps import (much of it inside their functions; scipy.signal alone takes seconds): imported once per
+#: process before the first task, by the local cluster's fork server for all its workers
+WORKER_MODULES = ("numpy", "scipy.signal", "scipy.optimize", "scipy.interpolate", "h5py",
+                  "hilbench.analysis.runfile", "hilbench.bench.verdict", "hilbench.bench.analysis_input",
+                  "hilbench.analysis.identification.identify", "hilbench.analysis.identification.maxwell_fit",
+                  "hilbench.analysis.identification.output_error", "hilbench.analysis.record",
+                  "hilbench.bench.campaign_analysis.engine")
+
+
+def start_fork_server() -> None:
+    """Start multiprocessing's fork server now, preloading :data:`WORKER_MODULES`, so that its imports overlap the
+    client's own start (importing distributed, starting the scheduler); in Dask's pre-spawn environment
+    (``OMP_NUM_THREADS=1`` ...) so that each worker's BLAS runs one thread, as a spawned worker's would. A server
+    already running (an earlier analysis in this process) is kept."""
+    import multiprocessing
+    from multiprocessing import forkserver
+
+    import dask
+
+    env = {k: str(v) for k, v in dask.config.get("distributed.nanny.pre-spawn-environ", {}).items()}
+    saved = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)
+    try:
+        multiprocessing.get_context("forkserver").set_forkserver_preload(["distributed", *WORKER_MODULES])
+        forkserver.ensure_running()  # launches the server and returns: it imports while this process goes on
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
 def warm_up() -> None:
-    """Import what the steps need (scipy, h5py, the analysis): once per process, before the first task. The
-    modules import much of this inside their functions; scipy.signal alone takes seconds."""
+    """Import :data:`WORKER_MODULES`."""
     import importlib
 
-    for name in ("scipy.signal", "scipy.optimize", "scipy.interpolate", "h5py", "hilbench.analysis.runfile",
-                 "hilbench.bench.verdict", "hilbench.bench.analysis_input",
-                 "hilbench.analysis.identification.identify", "hilbench.analysis.identification.maxwell_fit",
-                 "hilbench.analysis.identification.output_error", "hilbench.analysis.record"):
+    for name in WORKER_MODULES:
         importlib.import_module(name)
 
 
@@ -242,6 +271,8 @@ def analyse(folders: list[Path], out: Path, steps: tuple[str, ...] = ("identify"
             for part in chunk(todo, 1):
                 record(part, execute_chunk(_items(part), settings, fn))
         elif todo:
+            if not (scheduler or scheduler_file):
+                start_fork_server()
             _on_cluster(todo, settings, fn, record, summary, workers, scheduler, scheduler_file, say, verbose,
                         dashboard, t0)
     finally:
@@ -277,8 +308,14 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
     # a death then counts against that innocent task too: a 200-run benchmark lost a third row that way)
     # profile off: the worker's statistical profiler samples the task's stack every 10 ms and cost 15-25 % of
     # the CPU of a 0.1 s identification (0.104-0.108 s against 0.077-0.091 s per task, measured)
+    # multiprocessing-method forkserver (local cluster only): the workers are forked from a server process that
+    # imported what the steps need once (WORKER_MODULES), so none imports scipy & co. itself (3.5 s of CPU each
+    # when spawned). A fork server, not a fork of this process: this one runs threads (the cluster's event loop
+    # forks), which can deadlock a forked child, and a fork would inherit its BLAS set-up, made before Dask's
+    # pre-spawn environment (OMP_NUM_THREADS=1 ...); start_fork_server starts the server in that environment.
     with dask.config.set({"distributed.scheduler.allowed-failures": 1, "distributed.scheduler.worker-saturation": 1.0,
-                          "distributed.worker.profile.enabled": False, "distributed.admin.tick.limit": "60s"}):
+                          "distributed.worker.profile.enabled": False, "distributed.admin.tick.limit": "60s",
+                          "distributed.worker.multiprocessing-method": "forkserver"}):
         if scheduler or scheduler_file:
             client = Client(scheduler, scheduler_file=scheduler_file, timeout="20s")
         else:
@@ -289,7 +326,7 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
             if dashboard is not None and client.dashboard_link:
                 summary.dashboard = client.dashboard_link
                 say(f"dask dashboard: {client.dashboard_link}")
-            client.run(warm_up)  # every worker imports in parallel before the tasks (and startup_time says how long)
+            client.run(warm_up)  # a remote worker imports before the tasks (a forked one has); startup_time: how long
             summary.startup_time = time.perf_counter() - t0
             n_workers = len(client.scheduler_info()["workers"]) or 1
             futures = as_completed()

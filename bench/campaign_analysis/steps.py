@@ -2,8 +2,9 @@
 
 This is the one adapter between the campaign engine and the analysis packages: a step reads the file itself
 through the one record loader (it runs inside a worker process; hilbench.analysis.record.load_record, so a run
-reads as the CLI and the GUI read it), calls the analysis and flattens its result into the columns of
-:data:`COLUMNS`.
+reads as the CLI and the GUI read it), cuts it into the head it fits and the tail it validates on
+(hilbench.analysis.record_split), calls the analysis package's front door ``analyse`` as the CLI command does, and
+flattens its result into the columns of :data:`COLUMNS`.
 """
 
 from __future__ import annotations
@@ -17,7 +18,8 @@ import numpy as np
 
 #: step -> protocols whose runs it can analyse (a run gets the steps its protocol supports)
 PROTOCOLS_OF_STEP = {"identify": ("identification", "chirp"), "compare": ("identification", "chirp"),
-                     "residual": ("identification", "chirp"), "presliding": ("presliding",)}
+                     "residual": ("identification", "chirp"), "presliding": ("presliding",),
+                     "afrf": ("stepped_sine",), "skeleton": ("chirp",)}
 STEPS_DONE = tuple(PROTOCOLS_OF_STEP)
 
 #: result columns of the steps: name -> (Arrow type name, unit). Common columns: engine.BASE_COLUMNS.
@@ -39,6 +41,20 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "initial_stiffness": ("float64", "N*m/rad"), "initial_stiffness_se": ("float64", "N*m/rad"),
     "presliding_distance": ("float64", "rad"), "presliding_distance_se": ("float64", "rad"),
     "validation_force_relative_error": ("float64", "1"),
+    # afrf: the measured grid's extent, the first-harmonic compliance |X1/T1| (rotary rad/(N*m), linear m/N) at
+    # the lowest frequency of the lowest and of the highest amplitude, the largest |X3|/|X1| and period-to-period
+    # change over the grid
+    "afrf_steps": ("int64", "1"), "afrf_frequency_min": ("float64", "Hz"), "afrf_frequency_max": ("float64", "Hz"),
+    "afrf_compliance_low_amplitude": ("float64", "rad/(N*m)"),
+    "afrf_compliance_high_amplitude": ("float64", "rad/(N*m)"),
+    "afrf_third_harmonic_ratio_max": ("float64", "1"), "afrf_convergence_max": ("float64", "1"),
+    # skeleton: the composed amplitude range (rotary rad, linear m) and the equivalent stiffness k_eq at its
+    # smallest and largest amplitude bins (rotary N*m/rad, linear N/m)
+    "skeleton_bins": ("int64", "1"),
+    "skeleton_amplitude_min": ("float64", "rad"), "skeleton_amplitude_max": ("float64", "rad"),
+    "skeleton_stiffness_low_amplitude": ("float64", "N*m/rad"),
+    "skeleton_stiffness_high_amplitude": ("float64", "N*m/rad"),
+    "warnings": ("string", ""),  # afrf, skeleton: the analysis's warnings, "; "-separated
     "temperature_mean": ("float64", "degC"), "sliding_distance": ("float64", "rad"),
     "samples": ("int64", "1"), "duration": ("float64", "s"),
 }
@@ -60,6 +76,7 @@ class StepSettings:
     compare_families: tuple[str, ...] = ("coulomb_viscous", "stribeck", "maxwell_slip")
     residual_start: tuple[str, ...] = ("inertia", "maxwell_slip")
     presliding_replicates: int = 20
+    skeleton_mass: float | None = None  # J (kg*m^2) or m (kg); None: the run's declared calibration inertia
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -70,10 +87,12 @@ def sliding_distance(position: np.ndarray, fs: float) -> float:
     encoder flicker and noise (which add |dx| without any sliding) do not count. Cut-off fs/20."""
     from scipy import signal
 
+    from hilbench.analysis.identification.regressors import lowpass_design
+
     x = np.asarray(position, dtype=float)
     if x.size < 30:
         return float(np.sum(np.abs(np.diff(x))))
-    sos = signal.butter(2, fs / 20, fs=fs, output="sos")
+    sos = lowpass_design(2, fs / 20, fs)[0].copy()
     return float(np.sum(np.abs(np.diff(signal.sosfiltfilt(sos, x)))))
 
 
@@ -86,33 +105,19 @@ def _breakaway_se(model) -> float:
     return float(np.sqrt(np.sum((se * np.asarray(model.ms_delta)) ** 2)))
 
 
-def _split(rec, fraction: float):
-    """(head, tail or None) of a record's arrays: fitted on the head, validated on the held-out tail."""
-    from hilbench.analysis.identification.identify import RunArrays
-
-    arrays = rec.arrays()
-    cut = int(round(arrays.t.size * (1 - fraction)))
-    head = RunArrays(arrays.t[:cut], arrays.torque[:cut], arrays.position[:cut], arrays.axis, arrays.name)
-    if fraction <= 0:
-        return head, None
-    return head, RunArrays(arrays.t[cut:] - arrays.t[cut], arrays.torque[cut:], arrays.position[cut:], arrays.axis,
-                           arrays.name + " (tail)")
-
-
 def identify_step(path: str, settings: StepSettings) -> dict[str, Any]:
-    """Identify the friction model of one run (fit on the head, validate on the held-out tail)."""
-    from hilbench.analysis.identification.identify import identify
+    """``hilbench identify`` on one run: ``analysis.identification.analyse`` fitted on the head, validated on the
+    held-out tail (analysis.record_split)."""
+    from hilbench.analysis.identification import analyse
     from hilbench.analysis.identification.maxwell_fit import LipSettings
     from hilbench.analysis.record import load_record
+    from hilbench.analysis.record_split import split
     from hilbench.bench.verdict import judge
 
     rec = load_record(path, channels=("temperature",))  # the one loader: an aborted or short run is a failed row
-    arrays, timing = rec.arrays(), rec.timing
-    n = arrays.t.size
-    head, tail = _split(rec, settings.validation_fraction)
-    lip = LipSettings(n_thresholds=settings.thresholds, coulomb=settings.coulomb, offset=settings.offset,
-                      timing=timing)
-    res = identify(head, method=settings.method, validate=tail, settings=lip)
+    head, tail = split(rec, settings.validation_fraction)
+    lip = LipSettings(n_thresholds=settings.thresholds, coulomb=settings.coulomb, offset=settings.offset)
+    res = analyse(head, lip, method=settings.method, validation=tail)
     m, f, se = res.model, res.figures, res.model.std_errors
     row: dict[str, Any] = {
         "inertia": m.inertia, "inertia_se": se.get("inertia", math.nan),
@@ -125,8 +130,7 @@ def identify_step(path: str, settings: StepSettings) -> dict[str, Any]:
         "validation_torque_nrmse": f.get("validation_torque_nrmse"),
         "validation_position_nrmse": f.get("validation_position_nrmse"),
         "validation_position_nrmse_segmented": f.get("validation_position_nrmse_segmented"),
-        "samples": int(n), "duration": float(arrays.t[-1] - arrays.t[0]),
-        "sliding_distance": sliding_distance(arrays.position, arrays.fs),
+        **_size(rec), "sliding_distance": sliding_distance(rec.position, rec.sample_rate),
     }
     where = "validation" if tail is not None else "train"
     verdict = judge(100 * f[f"{where}_torque_nrmse"], 100 * f[f"{where}_position_nrmse"],
@@ -138,32 +142,32 @@ def identify_step(path: str, settings: StepSettings) -> dict[str, Any]:
     return row
 
 
+def _size(rec) -> dict[str, Any]:
+    return {"samples": int(rec.t.size), "duration": float(rec.t[-1] - rec.t[0])}
+
+
 def _held_out(path: str, settings: StepSettings, step: str):
-    """The record and its head and tail for a step that needs a validation set (compare, residual)."""
+    """The record's head and tail for a step that needs a validation set (compare, residual)."""
     from hilbench.analysis.errors import AnalysisError
     from hilbench.analysis.record import load_record
+    from hilbench.analysis.record_split import split
 
     if settings.validation_fraction <= 0:
         raise AnalysisError(f"{step} scores models on the held-out tail: --validation-fraction must be > 0")
     rec = load_record(path)
-    head, tail = _split(rec, settings.validation_fraction)
+    head, tail = split(rec, settings.validation_fraction)
     return rec, head, tail
 
 
 def compare_step(path: str, settings: StepSettings) -> dict[str, Any]:
-    """``hilbench compare`` on one run: every family of ``compare_families`` fitted on the head, scored on the
-    tail; the row is the family with the lowest validation torque NRMSE (the calls of ``analysis.models.compare
-    .analyse`` on the head and tail arrays of one record, which that front door takes as two records)."""
+    """``hilbench compare`` on one run: ``analysis.models.compare.analyse`` with every family of
+    ``compare_families`` fitted on the head and scored on the tail; the row is the family with the lowest
+    validation torque NRMSE."""
     from hilbench.analysis.errors import AnalysisError
-    from hilbench.analysis.models.compare import compare
-    from hilbench.analysis.models.families import RunData
+    from hilbench.analysis.models.compare import CompareSettings, analyse
 
     rec, head, tail = _held_out(path, settings, "compare")
-    train = RunData.from_arrays(rec.name, rec.axis, rec.sample_rate, head.position, head.torque, rec.timing)
-    val = RunData.from_arrays(rec.name + " (tail)", rec.axis, rec.sample_rate, tail.position, tail.torque,
-                              rec.timing)
-    result = compare(train, val, timing=rec.timing, train_position=train.x, train_torque=head.torque,
-                     families=settings.compare_families)
+    result = analyse(head, tail, CompareSettings(families=settings.compare_families))
     scored = [r for r in result.rows if r.error is None and math.isfinite(r.validation["torque_nrmse"])]
     if not scored:
         raise AnalysisError("compare: no family could be fitted (" + "; ".join(
@@ -171,58 +175,92 @@ def compare_step(path: str, settings: StepSettings) -> dict[str, Any]:
     best = min(scored, key=lambda r: r.validation["torque_nrmse"])
     return {"model": best.name, "train_torque_nrmse": best.train["torque_nrmse"],
             "validation_torque_nrmse": best.validation["torque_nrmse"],
-            "validation_position_nrmse_segmented": best.validation["position_nrmse_segmented"],
-            "samples": int(rec.t.size), "duration": float(rec.t[-1] - rec.t[0])}
+            "validation_position_nrmse_segmented": best.validation["position_nrmse_segmented"], **_size(rec)}
 
 
 def residual_step(path: str, settings: StepSettings) -> dict[str, Any]:
-    """``hilbench residual`` on one run: the residual loop from ``residual_start``, fitted on the head and judged
-    on the tail; the row has the validation torque NRMSE of the start and of the final model and the loop's
-    verdict (the loop ``analysis.residual.analyse`` runs, on the head and tail arrays of one record, which that
-    front door takes as two records)."""
-    from hilbench.analysis.residual import LoopOptions, prepare_run, residual_loop
+    """``hilbench residual`` on one run: ``analysis.residual.analyse`` from ``residual_start``, fitted on the head
+    and judged on the tail; the row has the validation torque NRMSE of the start and of the final model and the
+    loop's verdict."""
+    from hilbench.analysis.residual import ResidualSettings, analyse
 
     rec, head, tail = _held_out(path, settings, "residual")
-    runs = [prepare_run(a.position, a.torque, rec.sample_rate, axis=rec.axis, name=a.name, timing=rec.timing)
-            for a in (head, tail)]
-    result = residual_loop(runs[0], [runs[1]], start=settings.residual_start,
-                           options=LoopOptions(record=rec.kind))
-    before, after = result.error_before["validation"], result.error_after["validation"]
-    return {"model": ",".join([*result.start, *result.names_added]),
+    loop = analyse(head, ResidualSettings(start=settings.residual_start), validation=[tail]).loop
+    before, after = loop.error_before["validation"], loop.error_after["validation"]
+    return {"model": ",".join([*loop.start, *loop.names_added]),
             "validation_torque_nrmse_start": before["torque_nrmse"],
             "validation_torque_nrmse": after["torque_nrmse"],
             "validation_position_nrmse": after.get("position_nrmse"),
-            "verdict": result.verdict, "samples": int(rec.t.size), "duration": float(rec.t[-1] - rec.t[0])}
+            "verdict": loop.verdict, **_size(rec)}
 
 
 def presliding_step(path: str, settings: StepSettings) -> dict[str, Any]:
     """``hilbench presliding`` on one displacement-driven run with the command's defaults (fraction 0.9, 48
-    thresholds, the protocol's inertia, ``presliding_replicates`` bootstrap replicates); the row has the
-    quantities with their standard uncertainties and the relative rms error of the force simulated from the
-    measured displacement (the array analysis that ``analysis.presliding``'s record front door runs)."""
-    from hilbench.analysis.errors import AnalysisError
-    from hilbench.analysis.presliding.analyse import analyse
-    from hilbench.analysis.presliding.identify import PreslidingSettings
-    from hilbench.analysis.presliding.report import protocol_inertia
+    thresholds, the protocol's inertia, ``presliding_replicates`` bootstrap replicates): ``analysis.presliding
+    .analyse``; the row has the quantities with their standard uncertainties and the relative rms error of the
+    force simulated from the measured displacement."""
+    from hilbench.analysis import presliding
     from hilbench.analysis.record import load_record
 
     rec = load_record(path)
-    if rec.kind != "displacement-driven":
-        raise AnalysisError(f"{path}: a {rec.kind} record; presliding needs a displacement-driven one")
-    res = analyse(rec.t, rec.position, rec.torque, rec.sample_rate, rec.axis,
-                  PreslidingSettings(inertia=protocol_inertia(rec.protocol_params, path)),
-                  counts_per_rev=rec.calibration.get("counts_per_rev"), replicates=settings.presliding_replicates)
+    res = presliding.analyse(rec, replicates=settings.presliding_replicates)
     q, e = res.quantities, res.uncertainties
-    row: dict[str, Any] = {"validation_force_relative_error": res.fit.relative_rms, "samples": int(rec.t.size),
-                           "duration": float(rec.t[-1] - rec.t[0])}
+    row: dict[str, Any] = {"validation_force_relative_error": res.fit.relative_rms, **_size(rec)}
     for name, column in (("breakaway", "presliding_breakaway"), ("initial_stiffness", "initial_stiffness"),
                          ("presliding_distance", "presliding_distance")):
         row[column], row[f"{column}_se"] = q[name], e[name]
     return row
 
 
+def afrf_step(path: str, settings: StepSettings) -> dict[str, Any]:
+    """``hilbench afrf RUN.h5`` on one stepped-sine run: ``analysis.afrf.analyse`` on the record its ``load``
+    reads; the row summarises the grid (:data:`COLUMNS`)."""
+    from hilbench.analysis import afrf
+
+    rec = afrf.load(path)
+    res = afrf.analyse(rec)
+    c1, c3 = res.response[..., 0], res.response[..., min(2, res.n_harmonics - 1)]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        compliance = np.abs(c1 / res.drive)
+        third = np.abs(c3) / np.abs(c1) if res.n_harmonics >= 3 else np.full(c1.shape, math.nan)
+    lowest_f = int(np.argmin(res.frequencies))
+    return {"afrf_steps": int(np.isfinite(c1).sum()), "afrf_frequency_min": float(res.frequencies.min()),
+            "afrf_frequency_max": float(res.frequencies.max()),
+            "afrf_compliance_low_amplitude": float(compliance[int(np.argmin(res.amplitudes)), lowest_f]),
+            "afrf_compliance_high_amplitude": float(compliance[int(np.argmax(res.amplitudes)), lowest_f]),
+            "afrf_third_harmonic_ratio_max": _nanmax(third), "afrf_convergence_max": _nanmax(res.convergence),
+            "warnings": "; ".join(res.warnings), **_size(rec)}
+
+
+def skeleton_step(path: str, settings: StepSettings) -> dict[str, Any]:
+    """``hilbench skeleton RUN.h5 [--mass skeleton_mass]`` on one chirp run: ``analysis.skeleton.analyse`` of the
+    record alone (a campaign row is one run; composing several gains is the command's job)."""
+    from hilbench.analysis import skeleton
+    from hilbench.analysis.record import load_record
+
+    rec = load_record(path)
+    res = skeleton.analyse([rec], skeleton.SkeletonSettings(mass=settings.skeleton_mass))
+    a, k = np.asarray(res.curves.amplitude, float), np.asarray(res.curves.stiffness, float)
+    ok = np.isfinite(a) & np.isfinite(k)
+    if not ok.any():
+        from hilbench.analysis.errors import AnalysisError
+
+        raise AnalysisError(f"{path}: no amplitude bin has a skeleton point")
+    a, k = a[ok], k[ok]
+    return {"skeleton_bins": int(a.size), "skeleton_amplitude_min": float(a.min()),
+            "skeleton_amplitude_max": float(a.max()), "skeleton_stiffness_low_amplitude": float(k[np.argmin(a)]),
+            "skeleton_stiffness_high_amplitude": float(k[np.argmax(a)]), "warnings": "; ".join(res.warnings),
+            **_size(rec)}
+
+
+def _nanmax(a: np.ndarray) -> float:
+    a = np.asarray(a, float)
+    return float(np.nanmax(a)) if np.isfinite(a).any() else math.nan
+
+
 STEPS: dict[str, Callable[[str, StepSettings], dict[str, Any]]] = {
-    "identify": identify_step, "compare": compare_step, "residual": residual_step, "presliding": presliding_step}
+    "identify": identify_step, "compare": compare_step, "residual": residual_step, "presliding": presliding_step,
+    "afrf": afrf_step, "skeleton": skeleton_step}
 
 
 def steps_for(protocol: str, wanted: tuple[str, ...]) -> list[str]:
@@ -231,8 +269,7 @@ def steps_for(protocol: str, wanted: tuple[str, ...]) -> list[str]:
 
 
 def run_meta(path: str) -> dict[str, Any]:
-    """The run file's own identity: run id, start time and operator."""
-    from hilbench.analysis.runfile import open_run
+    """The run file's own identity: run id, start time and operator (its root attributes alone)."""
+    from hilbench.analysis.runfile.identity import run_identity
 
-    with open_run(path) as run:
-        return {"run_id": run.uid, "start_time": str(run.start_time), "operator": str(run.meta.get("operator", ""))}
+    return run_identity(path)

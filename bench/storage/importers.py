@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from hilbench.analysis.errors import AnalysisError
+from hilbench.analysis.reproductions.emps import EMPS_VARIABLES, parse_emps
 from hilbench.analysis.runfile import CHANNELS, TORQUE_TIMINGS, RunWriter
 from hilbench.bench.errors import BenchError
 from hilbench.bench.storage.import_units import COUNTS, factor_to_si
@@ -164,18 +166,18 @@ def _sample_rate(t: np.ndarray, path: str) -> float:
 def load_emps(path: str | os.PathLike) -> ImportedRun:
     """Load ``DATA_EMPS.mat`` or ``DATA_EMPS_PULSES.mat`` (linear axis, m and N). See the module docstring."""
     path = os.fspath(path)
-    mat = _load_named(path, ("t", "qm", "qg", "vir", "gtau", "kp", "kv", "pulses_N"))
-    t = _column(mat, "t", path)
-    n = t.size
-    qm, qg, vir = (_column(mat, v, path, n) for v in ("qm", "qg", "vir"))
-    gtau, kp, kv = (_scalar(mat, v, path) for v in ("gtau", "kp", "kv"))
+    try:  # the one EMPS parser (analysis.reproductions.emps), on the variables read within the import bounds
+        rec = parse_emps(_load_named(path, EMPS_VARIABLES), path)
+    except AnalysisError as exc:
+        raise ImportDataError(str(exc)) from None
+    t, gtau, kp, kv = rec.t, rec.gtau, rec.kp, rec.kv
     samples = {
-        "sample_index": np.arange(n, dtype=np.int64),
+        "sample_index": np.arange(t.size, dtype=np.int64),
         "t": t,
-        "position": qm,
-        "position_cmd": qg,
-        "torque": gtau * vir,
-        "drive_voltage": vir,
+        "position": rec.qm,
+        "position_cmd": rec.qg,
+        "torque": rec.force,
+        "drive_voltage": rec.vir,
     }
     custom = {"drive_voltage": "V"}
     variables = {
@@ -185,11 +187,10 @@ def load_emps(path: str | os.PathLike) -> ImportedRun:
         "torque": "gtau*vir",
         "drive_voltage": "vir",
     }
-    if "pulses_N" in mat:
-        samples["pulses"] = _column(mat, "pulses_N", path, n)
+    if rec.pulses is not None:
+        samples["pulses"] = rec.pulses
         custom["pulses"] = "V"
         variables["pulses"] = "pulses_N"
-    _check_finite(samples, path, variables)
     fs = _sample_rate(t, path)
     return ImportedRun(
         axis="linear",

@@ -84,7 +84,7 @@ def test_progress_goes_to_a_terminal_and_quiet_silences_it(monkeypatch):
     silences it."""
     import io
 
-    from hilbench.bench.analysis_input import progress_bar
+    from hilbench.bench import analysis_progress
     from hilbench.bench.storage import outputs
 
     class Terminal(io.StringIO):
@@ -92,12 +92,12 @@ def test_progress_goes_to_a_terminal_and_quiet_silences_it(monkeypatch):
             return True
 
     written = {}
+    monkeypatch.setattr(analysis_progress, "DELAY_S", 0.0)  # drawn at once (a real command waits 2 s)
     for verbosity in (1, 0):
         written[verbosity] = Terminal()
         monkeypatch.setattr("sys.stderr", written[verbosity])
         monkeypatch.setattr(outputs, "verbosity", verbosity)
-        bar = progress_bar(1000, "read run.h5")
-        bar.update(500)
-        bar.close()
+        with analysis_progress.progress_bar("read run.h5") as progress:
+            progress(500, 1000)
     assert "read run.h5" in written[1].getvalue() and "500/1.00k" in written[1].getvalue()
     assert written[0].getvalue() == ""

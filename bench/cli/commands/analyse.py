@@ -21,7 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="results folder (default: CAMPAIGN_DIR/analysis with one campaign; required with several)")
     p.add_argument("--steps", default="identify",
                    help="comma-separated steps, each run gets those its protocol supports (default identify; "
-                   "available: identify, compare, residual, presliding)")
+                   "available: identify, compare, residual, presliding, afrf, skeleton)")
     engine = p.add_mutually_exclusive_group()
     engine.add_argument("--serial", action="store_true", help="run in this process (no cluster)")
     engine.add_argument("--scheduler", metavar="tcp://HOST:8786", help="use a running Dask scheduler")
@@ -38,6 +38,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--offset", action="store_true", help="identify: add a torque offset")
     p.add_argument("--validation-fraction", type=float, default=0.3,
                    help="identify: tail of each run held out for validation (default 0.3; 0: none)")
+    p.add_argument("--skeleton-mass", type=float, default=None, metavar="J",
+                   help="skeleton: inertia J (kg*m^2) or mass (kg); default: each run's declared calibration inertia")
     p.add_argument("--no-dashboard", action="store_true", help="do not start the Dask dashboard (it costs seconds)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -68,7 +70,8 @@ def run(args: argparse.Namespace) -> int:
         raise AnalyseError(f"{args.output}: is a campaign folder; the results go into a folder of their own")
     outputs.refuse_inputs({"-o": args.output}, args.campaigns)
     settings = StepSettings(thresholds=args.thresholds, method=args.method, coulomb=args.coulomb,
-                            offset=args.offset, validation_fraction=args.validation_fraction)
+                            offset=args.offset, validation_fraction=args.validation_fraction,
+                            skeleton_mass=args.skeleton_mass)
     summary = analyse(list(args.campaigns), args.output, steps, settings, serial=args.serial, workers=args.workers,
                       scheduler=args.scheduler, scheduler_file=args.scheduler_file, resume=args.resume,
                       progress=not args.quiet and outputs.verbosity > 0, say=outputs.say,

@@ -83,7 +83,8 @@ def run(args) -> int:
     from hilbench.analysis.models.compare_plots import report
     from hilbench.analysis.models.families import FAMILIES, published_plant
     from hilbench.analysis.models.model_file import family_document
-    from hilbench.bench.analysis_input import memory_budget, progress_bar
+    from hilbench.bench.analysis_input import memory_budget
+    from hilbench.bench.analysis_progress import progress_bar
     from hilbench.bench.errors import BenchError
     from hilbench.bench.storage import outputs
 
@@ -111,12 +112,9 @@ def run(args) -> int:
         published[name] = published_plant(*values)
     settings = CompareSettings(families=families, segment=args.segment, max_nfev=args.max_evaluations,
                                published=published)
-    bar = progress_bar(len(families), "compare", unit="family")
-    try:
-        result = analyse(train_rec, val_rec, settings, progress=lambda name: (bar.set_postfix_str(name),
-                                                                               bar.update(1)))
-    finally:
-        bar.close()
+    done = iter(range(1, len(families) + 1))
+    with progress_bar("compare", unit="family") as progress:
+        result = analyse(train_rec, val_rec, settings, progress=lambda _family: progress(next(done), len(families)))
     train, val, timing = result.train, result.validation, train_rec.timing
     out.mkdir(parents=True, exist_ok=True)
     table = markdown_table(result)

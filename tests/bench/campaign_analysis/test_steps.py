@@ -1,6 +1,6 @@
-"""The steps of ``hilbench analyse`` beyond identify: compare and residual. Each is checked against its own
-command (``hilbench compare``, ``hilbench residual``) run on the same run cut into the head it fits and the
-tail it is validated on, written as two run files; and against the plant: the C plant's friction is a
+"""The steps of ``hilbench analyse``: identify, compare and residual are each checked against their own command
+(``hilbench identify``, ``compare``, ``residual``) run on the same run cut into the head it fits and the tail it
+is validated on, written as two run files; and against the plant: the C plant's friction is a
 Maxwell-slip model, so that family must score best and the residual loop must find nothing missing."""
 
 import json
@@ -56,6 +56,22 @@ def test_each_step_runs_on_the_protocols_that_support_it():
     assert steps_for("identification", wanted) == list(wanted[:3])
     assert steps_for("chirp", wanted) == list(wanted[:3])
     assert steps_for("stepped_sine", wanted) == [] and steps_for("presliding", wanted) == ["presliding"]
+
+
+def test_identify_step_is_hilbench_identify_on_the_head_and_tail(tmp_path):
+    spec = SyntheticCampaign(runs=1, duration=1.5, seed=31)
+    row = _one_row(spec, tmp_path, "identify")
+    assert row["status"] == "ok", row["error"]
+    head, tail = _head_and_tail(spec, tmp_path, SETTINGS.validation_fraction)
+    assert main(["-q", "identify", str(head), "--validate", str(tail), "--thresholds", str(SETTINGS.thresholds),
+                 "--json", str(tmp_path / "m.json")]) == 0
+    doc = json.loads((tmp_path / "m.json").read_text())
+    for name in ("inertia", "viscous"):
+        assert row[name] == pytest.approx(doc["parameters"][name], rel=1e-9), name
+    for name in ("train_torque_nrmse", "validation_torque_nrmse", "validation_position_nrmse_segmented"):
+        assert row[name] == pytest.approx(doc["figures"][name], rel=1e-9), name
+    # the plant's friction is Maxwell-slip and the model is fitted on 70 % of the run: the tail reads a few %
+    assert row["validation_torque_nrmse"] < 0.1
 
 
 def test_compare_step_is_hilbench_compare_on_the_head_and_tail(tmp_path):
