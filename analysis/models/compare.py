@@ -177,6 +177,9 @@ COMPARE_BYTES_FIXED = 160 << 20
 #: must pass the presliding mode (186 Hz on the default DC motor), so fs/20 >= 250 Hz. At 2 kHz (a 100 Hz low-pass)
 #: the segmented position error of the presliding families rose from 1.6 % to 5.4 % (docs/long-runs.md)
 DECIMATED_RATE = 5000.0
+#: the shortest span (s) worth comparing when a budget bounds it: a few periods of the identification protocol's
+#: 4 s envelope, and segments enough for the segmented simulation error
+MIN_SPAN_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -193,6 +196,14 @@ class CompareSettings:
 def cost(samples: int) -> int:
     """Estimated peak bytes of :func:`analyse` on ``samples`` (training plus validation)."""
     return COMPARE_BYTES_FIXED + COMPARE_BYTES_PER_SAMPLE * int(samples)
+
+
+def span_samples(budget: int, runs: int = 2) -> int:
+    """The most samples (at the rate compared) each of ``runs`` runs may give :func:`analyse` for its estimated
+    peak (:func:`cost`) to stay within ``budget`` bytes (docs/long-runs.md, "A bounded span")."""
+    from hilbench.analysis.record import bounded_span
+
+    return bounded_span(budget, COMPARE_BYTES_FIXED, COMPARE_BYTES_PER_SAMPLE, runs)
 
 
 def run_data(record) -> RunData:

@@ -29,6 +29,9 @@ if TYPE_CHECKING:
 #: fixed part, from the peaks measured on the default identification runs (docs/long-runs.md), with margin
 LOOP_BYTES_PER_SAMPLE = 2400
 LOOP_BYTES_FIXED = 200 << 20
+#: the shortest span (s at the loop's rate) worth analysing when a budget bounds it: below it the blocked
+#: cross-validation has folds of a fraction of a second
+MIN_SPAN_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -80,13 +83,26 @@ def cost(samples: int) -> int:
     return LOOP_BYTES_FIXED + LOOP_BYTES_PER_SAMPLE * int(samples)
 
 
+def span_samples(budget: int, runs: int) -> int:
+    """The most samples (at the loop's rate) each of ``runs`` runs may give the loop for its estimated peak
+    (:func:`cost`) to stay within ``budget`` bytes; 0 when not even the fixed part fits (docs/long-runs.md,
+    "A bounded span")."""
+    from hilbench.analysis.record import bounded_span
+
+    return bounded_span(budget, LOOP_BYTES_FIXED, LOOP_BYTES_PER_SAMPLE, runs)
+
+
 def read(path: str | Path, *, torque_channel: str | None = None, timing: str = "auto", allow_incomplete: bool = False,
-         chunk: int | None = None, progress: Callable[[int], None] | None = None) -> Record:
-    """The run file as the loop reads it: :func:`hilbench.analysis.record.decimated_record` at :data:`MAX_RATE`."""
+         chunk: int | None = None, progress: Callable[[int], None] | None = None,
+         max_samples: int | None = None) -> Record:
+    """The run file as the loop reads it: :func:`hilbench.analysis.record.decimated_record` at :data:`MAX_RATE`;
+    ``max_samples`` (None: all) bounds the copy to the run's first ``max_samples`` samples at that rate
+    (:func:`span_samples` gives the bound of a memory budget)."""
     from hilbench.analysis.record import STREAM_CHUNK, decimated_record
 
     return decimated_record(path, MAX_RATE, torque_channel=torque_channel, timing=timing,
-                            allow_incomplete=allow_incomplete, chunk=chunk or STREAM_CHUNK, progress=progress)
+                            allow_incomplete=allow_incomplete, chunk=chunk or STREAM_CHUNK, progress=progress,
+                            max_samples=max_samples)
 
 
 def _prepared(record: Record, cutoff: float | None) -> RunData:
