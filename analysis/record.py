@@ -374,6 +374,11 @@ DECIMATED_BYTES_PER_SAMPLE = 24
 SPAN_NOTE = "analysed the first"
 
 
+def mib(nbytes: float) -> str:
+    """Bytes as a whole number of MiB, for the memory budget's one-line messages."""
+    return f"{nbytes / (1 << 20):.0f} MiB"
+
+
 def bounded_span(budget: int, fixed: int, per_sample: int, runs: int) -> int:
     """The most samples each of ``runs`` runs may hold for an analysis whose peak is ``fixed + per_sample * samples``
     bytes (all runs together) to stay within ``budget`` bytes; 0 when not even ``fixed`` fits."""

@@ -129,9 +129,11 @@ def measure(path: Path, analysis: str, mode: str, top: float = 0.0) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def rows(durations: tuple[float, ...] = (60.0, 300.0), fs: float = FS) -> list[dict]:
+def rows(durations: tuple[float, ...] = (60.0, 300.0), fs: float = FS,
+         modes: tuple[str, ...] = ("whole", "stream")) -> list[dict]:
     """Rows (name, value, unit, baseline, ratio) for each analysis, mode and duration; the baseline is the first
-    duration's run read the same way."""
+    duration's run read the same way. A run an analysis refuses (one line, e.g. the skeleton's wavelet map over
+    its bound) is a row with that line as its ``target`` and ``ok`` False."""
     out = []
     kinds = {"afrf": "stepped_sine", "skeleton": "chirp", "presliding": "presliding"}
     with tempfile.TemporaryDirectory() as tmp:
@@ -140,15 +142,23 @@ def rows(durations: tuple[float, ...] = (60.0, 300.0), fs: float = FS) -> list[d
             for duration in durations:
                 path = Path(tmp) / f"{analysis}_{duration:g}.h5"
                 n = record(kinds[analysis], path, duration, fs)
-                for mode in ("whole", "stream"):
+                for mode in modes:
                     # the default chirp sweeps at 0.1 Hz/s; its harmonics and the encoder noise put the spectral
                     # band at ~10x its top frequency, whose wavelet map does not fit MAX_MAP_CELLS past ~2 min
                     top = 0.1 * duration
-                    results[(duration, mode)] = (n, measure(path, analysis, mode, top))
+                    try:
+                        results[(duration, mode)] = (n, measure(path, analysis, mode, top))
+                    except RuntimeError as exc:
+                        results[(duration, mode)] = (n, {"error": str(exc)})
                 path.unlink()
             for (duration, mode), (n, r) in results.items():
                 n0, r0 = results[(durations[0], mode)]
                 tag = f"{analysis}_{mode}_{duration:g}s_{fs / 1e3:g}kHz"
+                if "error" in r or "error" in r0:
+                    out.append({"name": tag, "value": None, "unit": None, "baseline_name": None,
+                                "baseline_value": None, "ratio": None, "ok": False,
+                                "target": f"refused: {r.get('error') or r0.get('error')}"})
+                    continue
                 out.append({"name": f"{tag}_peak_rss", "value": r["peak_rss_mib"], "unit": "MiB",
                             "baseline_name": f"{durations[0]:g} s run", "baseline_value": r0["peak_rss_mib"],
                             "ratio": r["peak_rss_mib"] / r0["peak_rss_mib"], "samples": n})

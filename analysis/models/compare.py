@@ -206,6 +206,30 @@ def span_samples(budget: int, runs: int = 2) -> int:
     return bounded_span(budget, COMPARE_BYTES_FIXED, COMPARE_BYTES_PER_SAMPLE, runs)
 
 
+def reading_plan(headers, budget: int) -> tuple[list[int], int | None] | None:
+    """How :func:`analyse` reads ``headers`` (training and validation records of
+    :func:`hilbench.analysis.record.stream_record`, arrays not loaded) within ``budget`` bytes: None when the
+    whole runs fit at the recorded rate (:func:`cost`); else (the reduction factor of each run: the largest that
+    keeps at least :data:`DECIMATED_RATE`, the bounded span in samples per run at that rate or None when the
+    reduced runs fit whole). Raises :class:`AnalysisError` in one line, before any sample is read, when not even
+    the first :data:`MIN_SPAN_S` s (or the shortest run) of each run fit (docs/long-runs.md, "A bounded span")."""
+    from hilbench.analysis.record import mib
+
+    samples = sum(h.n_samples for h in headers)
+    if cost(samples) <= budget:
+        return None
+    qs = [max(1, int(h.sample_rate // DECIMATED_RATE)) for h in headers]  # the smallest copy the physics allows
+    if cost(sum(h.n_samples // q for h, q in zip(headers, qs, strict=True))) <= budget:
+        return qs, None
+    span = span_samples(budget, len(headers))
+    shortest = min(min(int(MIN_SPAN_S * h.sample_rate / q), h.n_samples // q) for h, q in zip(headers, qs, strict=True))
+    if span < shortest:
+        raise AnalysisError(f"compare on {samples} samples needs about {mib(cost(samples))}, and on the first "
+                            f"{MIN_SPAN_S:g} s of each run reduced to {DECIMATED_RATE:g} Hz about "
+                            f"{mib(cost(shortest * len(headers)))}, over --memory {mib(budget)}: raise --memory")
+    return qs, span
+
+
 def run_data(record) -> RunData:
     """A :class:`hilbench.analysis.record.Record` as the families read it."""
     return RunData.from_arrays(record.name, record.axis, record.sample_rate, record.position, record.torque,

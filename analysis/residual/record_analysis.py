@@ -92,6 +92,29 @@ def span_samples(budget: int, runs: int) -> int:
     return bounded_span(budget, LOOP_BYTES_FIXED, LOOP_BYTES_PER_SAMPLE, runs)
 
 
+def span_for(headers: Sequence[Record], budget: int) -> int | None:
+    """How the loop reads ``headers`` (records of :func:`hilbench.analysis.record.stream_record`, arrays not
+    loaded) within ``budget`` bytes: None when the whole runs fit (:func:`cost`), else the bounded span
+    (:func:`span_samples`, samples per run at the loop's rate). Raises :class:`AnalysisError` in one line, before
+    any sample is read, when not even the first :data:`MIN_SPAN_S` s (or the shortest run) of each run fit."""
+    from hilbench.analysis.record import mib
+
+    samples = sum(analysed_samples(h.n_samples, h.sample_rate) for h in headers)
+    if cost(samples) <= budget:
+        return None
+    from hilbench.analysis.record import decimation_factor
+
+    span = span_samples(budget, len(headers))
+    rates = [h.sample_rate / decimation_factor(h.sample_rate, MAX_RATE) for h in headers]
+    shortest = min(min(int(MIN_SPAN_S * r) for r in rates),
+                   min(analysed_samples(h.n_samples, h.sample_rate) for h in headers))
+    if span < shortest:
+        raise AnalysisError(f"the residual loop on {samples} samples (at most 2 kHz) needs about {mib(cost(samples))}"
+                            f", and on the first {shortest} samples of each run about "
+                            f"{mib(cost(shortest * len(headers)))}, over --memory {mib(budget)}: raise --memory")
+    return span
+
+
 def read(path: str | Path, *, torque_channel: str | None = None, timing: str = "auto", allow_incomplete: bool = False,
          chunk: int | None = None, progress: Callable[[int], None] | None = None,
          max_samples: int | None = None) -> Record:

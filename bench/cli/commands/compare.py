@@ -47,38 +47,27 @@ def register(subparsers) -> None:
 
 def _records(args, budget: int) -> tuple:
     """(train, validation) records: whole when the comparison fits ``budget`` (bytes) at the recorded rate, else
-    reduced by the largest whole factor that keeps at least 5 kHz while reading chunk by chunk (docs/long-runs.md);
-    one line, before any sample is read, when even that does not fit."""
-    from hilbench.analysis.models.compare import DECIMATED_RATE, MIN_SPAN_S, cost, span_samples
-    from hilbench.analysis.record import decimated_record, span_note, stream_record
-    from hilbench.bench.analysis_input import load, mib, read_decimated
-    from hilbench.bench.errors import BenchError
+    reduced by the largest whole factor that keeps at least 5 kHz while reading chunk by chunk, and cut to the
+    first samples of each run that fit when even that does not (``compare.reading_plan``, docs/long-runs.md)."""
+    from hilbench.analysis.models.compare import cost, reading_plan
+    from hilbench.analysis.record import decimated_record, mib, span_note, stream_record
+    from hilbench.bench.analysis_input import load, read_decimated
     from hilbench.bench.storage import outputs
 
     opts = {"torque_channel": args.torque_channel, "timing": args.torque_timing or "auto",
             "allow_incomplete": args.allow_incomplete}
     heads = [stream_record(p, **opts)[0] for p in (args.run, args.validate)]
-    samples = sum(h.n_samples for h in heads)
-    if cost(samples) <= budget:
+    plan = reading_plan(heads, budget)
+    if plan is None:
         recs = tuple(load(p, args) for p in (args.run, args.validate))
     else:
-        # the largest factor that keeps the rate >= DECIMATED_RATE: the smallest copy the physics allows
-        qs = [max(1, int(h.sample_rate // DECIMATED_RATE)) for h in heads]
-        kept = sum(h.n_samples // q for h, q in zip(heads, qs, strict=True))
-        span = None
-        if cost(kept) > budget:  # a bounded span: the first samples of each run that fit (docs/long-runs.md)
-            span = span_samples(budget, len(heads))
-            shortest = min(int(MIN_SPAN_S * h.sample_rate / q) for h, q in zip(heads, qs, strict=True))
-            if span < shortest:
-                raise BenchError(f"compare on {samples} samples needs about {mib(cost(samples))}, and on the first "
-                                 f"{MIN_SPAN_S:g} s of each run reduced to {DECIMATED_RATE:g} Hz about "
-                                 f"{mib(cost(shortest * len(heads)))}, over --memory {mib(budget)}: raise --memory")
+        qs, span = plan
         recs = tuple(read_decimated(p, args, partial(decimated_record, max_rate=h.sample_rate / q, max_samples=span),
                                     h.n_samples)
                      for p, h, q in zip((args.run, args.validate), heads, qs, strict=True))
         how = [n for n in recs[0].notes if n.startswith("decimated") or n == span_note(recs[0])] or ["not reduced"]
-        outputs.say(f"over --memory {mib(budget)} read whole ({mib(cost(samples))}): compared at "
-                    f"{recs[0].sample_rate:g} Hz, read chunk by chunk ({'; '.join(how)})")
+        outputs.say(f"over --memory {mib(budget)} read whole ({mib(cost(sum(h.n_samples for h in heads)))}): "
+                    f"compared at {recs[0].sample_rate:g} Hz, read chunk by chunk ({'; '.join(how)})")
     for p, rec in zip((args.run, args.validate), recs, strict=True):
         outputs.say(f"{p}: torque timing of {rec.torque_channel}: {rec.timing} ({rec.timing_origin})", level=2)
     return recs

@@ -65,33 +65,10 @@ def _headers(args: argparse.Namespace) -> list:
                           allow_incomplete=args.allow_incomplete)[0] for p in [args.run, *args.validate]]
 
 
-def _check_budget(headers: list, budget: int) -> int | None:
-    """The bounded span (samples per run at the loop's rate) when the runs' estimated peak is over ``--memory``,
-    said in one line; None when they fit whole; one line and exit 2, before any sample is read, when not even
-    the shortest span fits (docs/long-runs.md, "A bounded span")."""
-    from hilbench.analysis.residual.record_analysis import MAX_RATE, MIN_SPAN_S, analysed_samples, cost, span_samples
-    from hilbench.bench.analysis_input import mib
-    from hilbench.bench.errors import BenchError
-    from hilbench.bench.storage import outputs
-
-    samples = sum(analysed_samples(h.n_samples, h.sample_rate) for h in headers)
-    if cost(samples) <= budget:
-        return None
-    span = span_samples(budget, len(headers))
-    shortest = int(MIN_SPAN_S * MAX_RATE)
-    if span < shortest:
-        raise BenchError(f"the residual loop on {samples} samples (at most 2 kHz) needs about {mib(cost(samples))}, "
-                         f"and on the first {shortest} samples of each run about "
-                         f"{mib(cost(shortest * len(headers)))}, over --memory {mib(budget)}: raise --memory")
-    outputs.say(f"over --memory {mib(budget)} ({mib(cost(samples))} for the whole runs): the loop analyses the first "
-                f"{span} samples at the loop's rate of each run (a bounded span, docs/long-runs.md)")
-    return span
-
-
 def run(args: argparse.Namespace) -> int:
     from hilbench.analysis.models.families import FAMILIES
     from hilbench.analysis.models.model_file import read_model
-    from hilbench.analysis.record import decimation_factor, span_note
+    from hilbench.analysis.record import decimation_factor, mib, span_note
     from hilbench.analysis.residual import record_analysis
     from hilbench.analysis.residual.report import report_dict
     from hilbench.bench.analysis_input import check_cutoff, memory_budget, read_decimated
@@ -111,7 +88,10 @@ def run(args: argparse.Namespace) -> int:
         raise BenchError(f"--inertia must be finite and >= 0, got {args.inertia}")
     budget = memory_budget(args.memory)
     headers = _headers(args)
-    span = _check_budget(headers, budget)
+    span = record_analysis.span_for(headers, budget)
+    if span is not None:
+        outputs.say(f"over --memory {mib(budget)}: the loop analyses the first {span} samples of each run at its "
+                    "rate (a bounded span, docs/long-runs.md)")
     for h in headers:  # the loop's cutoff applies at the rate it analyses (at most 2 kHz)
         check_cutoff(args.cutoff, h.sample_rate / decimation_factor(h.sample_rate, record_analysis.MAX_RATE))
     recs = [read_decimated(p, args, partial(record_analysis.read, max_samples=span), h.n_samples, timing=args.timing)
