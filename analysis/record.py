@@ -301,11 +301,10 @@ def stream_record(path: str | Path, *, torque_channel: str | None = None, timing
             events=[(str(e["kind"]), str(e["message"])) for e in run.events], n_samples=n)
 
     def chunks():
-        with open_run(path) as r:
-            for start in range(0, n, chunk):
-                stop = min(start + chunk, n)
-                x = numeric(r.channel("position", start, stop), "position", f"{path} (samples from {start})")
-                tau = numeric(r.channel(name, start, stop), name, f"{path} (samples from {start})")
+        from hilbench.analysis.channel_windows import ChannelReader  # the one chunk reader (it imports this module)
+
+        with ChannelReader(path) as r:
+            for _, (x, tau) in r.chunks(("position", name), chunk, stop=n):
                 yield x, tau
 
     return record, chunks

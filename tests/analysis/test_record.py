@@ -175,3 +175,23 @@ def test_a_bounded_span_is_the_reduction_of_the_record_cut_there_and_reads_no_fu
     assert free.n_samples == 10_000 and span_note(free) is None
     with pytest.raises(AnalysisError, match="max_samples must be >= 1"):
         decimated_record(path, 200.0, max_samples=0)
+
+
+def test_a_streamed_record_names_the_chunk_of_a_non_finite_sample(tmp_path):
+    """stream_record reads through the one chunk reader (analysis.channel_windows): a NaN at sample 4321 read in
+    chunks of 1000 is refused in one line naming the chunk's first sample and the index within it."""
+    from hilbench.analysis.record import stream_record
+
+    path = tmp_path / "nan.h5"
+    n = 10_000
+    k = np.arange(n)
+    x = k * 1e-4
+    x[4321] = np.nan
+    with RunWriter(path, sample_rate=1000.0, channels=("sample_index", "t", "torque", "position")) as w:
+        w.append({"sample_index": k, "t": k / 1000.0, "torque": np.cos(k / 50.0), "position": x})
+    rec, source = stream_record(path, chunk=1000)
+    assert rec.n_samples == n and rec.position is None
+    with pytest.raises(AnalysisError, match=r"samples from 4000\): channel 'position' has 1 non-finite value\(s\), "
+                                            r"first at sample 321"):
+        for _ in source():
+            pass
