@@ -10,19 +10,21 @@ Elsewhere than on Linux the benchmark falls back to ``ru_maxrss``.
 - ``stream``: ``identify_chunks`` (the NNLS fit and its figures: equation error, open-loop and segmented
   simulation) reading the file chunk by chunk (the loader's path);
 - ``arrays``: ``identify`` on the whole record loaded as arrays (the array API);
-- ``residual``: the residual loop (``analysis.residual.record_analysis``: the run file read chunk by chunk and reduced
-  to 2 kHz, then the loop with blocked cross-validation);
-- ``compare``: the seven families (``analysis.models.compare.analyse``) on the run file read chunk by chunk and
-  reduced to 5 kHz (``compare.DECIMATED_RATE``), scored on a second run of another seed;
-- ``afrf``, ``skeleton``, ``presliding``: listed in :data:`HOOKS` when their streamed entry points exist (another
-  branch builds them); a missing one is reported as not measured.
+- ``identify``, ``residual``, ``compare``: each as its command reads and analyses a run file with ``--memory 2G``
+  (:data:`BUDGET`), validated on a second run of another seed: ``identify`` whole when its arrays fit, else
+  streamed (``analyse_stream``); ``residual`` reduced to 2 kHz and ``compare`` to 5 kHz while reading, each cut to
+  the bounded span that fits the budget (``record_analysis.span_for``, ``compare.reading_plan``;
+  docs/long-runs.md, "A bounded span");
+- ``afrf``, ``skeleton``, ``presliding`` (``long_run_paper``): read chunk by chunk, on a stepped sine, a chirp and
+  a presliding path of the same lengths.
 
-``residual`` and ``compare`` read an HDF5 run file written by the bench's RunWriter (the record loader's path); the
-identification reads the raw float64 pairs as before. The analyses run on a 20 kHz run of ``LONG_S`` s (600 s,
-12 M samples; the issue's target is 3600 s, 72 M: ``python -m benchmarks.bench_long_run --analyses 3600``) against
-a 60 s run at 20 kHz, each analysis in its own child.
+The analyses run on 20 kHz runs of ``LONG_S`` s (600 s, 12 M samples; the issue's target is 3600 s, 72 M:
+``python -m benchmarks.bench_long_run --analyses 3600``) against 60 s runs, each analysis in its own child.
+``--files`` takes runs recorded elsewhere, e.g. by ``hilbench run identification --device
+"sim://?pacing=lockstep"``. Each child reports its wall and CPU time; on a shared machine the CPU time is the
+steadier cost.
 
-Cost per sample is compared with a 1-minute run measured in the same benchmark (``quick``: 2 s and 6 s).
+Cost per sample is compared with a 1-minute run measured in the same benchmark (``quick``: 1 s and 3 s).
 docs/long-runs.md gives the figures and the method.
 """
 
