@@ -5,7 +5,8 @@ call these, so one run gives one answer (docs/long-runs.md, docs/residual-report
 The loop runs at most at :data:`~hilbench.analysis.residual.rundata.MAX_RATE` (2 kHz): ``prepare_run`` reduces a
 faster record by :func:`hilbench.analysis.record.block_average`. :func:`read` does that reduction while reading the
 file chunk by chunk, so the full-rate record is never held; the result is the same bit for bit as loading the whole
-record (tests/analysis/residual/test_record_analysis.py).
+record (tests/analysis/residual/test_record_analysis.py). Over a memory budget, :func:`span_for` gives the bounded
+span (the first samples of each run that fit) and :func:`read` stops there (docs/long-runs.md, "A bounded span").
 """
 
 from __future__ import annotations
