@@ -16,7 +16,7 @@ It does, once and the same way for the CLI, the GUI, campaigns and scripts (docs
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -262,6 +262,54 @@ def load_record(path: str | Path, *, torque_channel: str | None = None, timing: 
             calibration=run.calibration, device=run.device, events=events, notes=notes)
 
 
+#: samples per chunk of :meth:`ChannelReader.chunks` when the caller does not choose (a few MiB per channel set)
+READER_CHUNK = 1 << 18
+
+
+class ChannelReader:
+    """A run file held open to read samples ``[start, stop)`` of its channels (context manager)."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self._run = open_run(self.path)
+
+    def __enter__(self) -> ChannelReader:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._run.close()
+
+    @property
+    def n_samples(self) -> int:
+        return int(self._run.n_samples)
+
+    def has(self, name: str) -> bool:
+        key = LINEAR_ALIASES.get(name, name) if self._run.axis == "linear" else name
+        return key in self._run.channels
+
+    def protocol_array(self, name: str) -> np.ndarray | None:
+        return self._run.protocol_array(name) if name in self._run.protocol_array_names else None
+
+    def read(self, name: str, start: int, stop: int) -> np.ndarray:
+        """Samples ``[start, stop)`` of channel ``name`` as float64, checked (one-line AnalysisError)."""
+        return numeric(self._run.channel(name, start, stop), name, f"{self.path} (samples from {start})")
+
+    def chunks(self, names: Sequence[str], chunk: int = READER_CHUNK, start: int = 0, stop: int | None = None,
+               progress: Callable[[int, int], None] | None = None) -> Iterator[tuple[int, list[np.ndarray]]]:
+        """``(first sample, [channel arrays])`` of at most ``chunk`` samples each, in order, from ``start`` to
+        ``stop`` (default the end); ``progress(done, total)`` after each chunk."""
+        stop = self.n_samples if stop is None else min(stop, self.n_samples)
+        total = max(0, stop - start)
+        for a in range(start, stop, max(1, int(chunk))):
+            b = min(a + chunk, stop)
+            yield a, [self.read(n, a, b) for n in names]
+            if progress is not None:
+                progress(b - start, total)
+
+
 #: samples per chunk read from a file by :func:`stream_record` (two float64 channels: 2 MiB)
 STREAM_CHUNK = 1 << 17
 
@@ -301,8 +349,6 @@ def stream_record(path: str | Path, *, torque_channel: str | None = None, timing
             events=[(str(e["kind"]), str(e["message"])) for e in run.events], n_samples=n)
 
     def chunks():
-        from hilbench.analysis.channel_windows import ChannelReader  # the one chunk reader (it imports this module)
-
         with ChannelReader(path) as r:
             for _, (x, tau) in r.chunks(("position", name), chunk, stop=n):
                 yield x, tau
