@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
     span = record_analysis.span_for(headers, budget)
     if span is not None:
         outputs.say(f"over --memory {mib(budget)}: the loop analyses the first {span} samples of each run at its "
-                    "rate (a bounded span, docs/long-runs.md)")
+                    "rate (a bounded span, docs/long-runs.md)", args.json)
     for h in headers:  # the loop's cutoff applies at the rate it analyses (at most 2 kHz)
         check_cutoff(args.cutoff, h.sample_rate / decimation_factor(h.sample_rate, record_analysis.MAX_RATE))
     recs = [read_decimated(p, args, partial(record_analysis.read, max_samples=span), h.n_samples, timing=args.timing)
