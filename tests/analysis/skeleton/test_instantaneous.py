@@ -160,7 +160,7 @@ def test_errors_are_analysis_errors():
         instantaneous(np.ones(20000), FS)
 
 
-def test_the_ridge_streamed_block_by_block_is_the_whole_maps_ridge():
+def test_the_ridge_streamed_block_by_block_is_the_whole_maps_ridge(monkeypatch):
     """The ridge without the map (wavelet_ridge.streamed_ridge: |W| block by block into RidgeTracker, 1 byte per
     cell) equals ridge_path of the whole map normalised by its maximum, bit for bit, on a chirp whose amplitude
     grows 100-fold (the running maximum used as the floor's reference changes from block to block); and the
@@ -181,6 +181,10 @@ def test_the_ridge_streamed_block_by_block_is_the_whole_maps_ridge():
     assert len(list(magnitude_blocks(x, fs, scales, 0.5, 0.8, hop, core))) >= 9
     mag = magnitude_map(x, fs, scales, 0.5, 0.8, hop, core)
     whole = ridge_path(np.log(mag / float(mag.max()) + 1e-12), 0.5, 3)
+    np.testing.assert_array_equal(streamed_ridge(x, fs, scales, 0.5, 0.8, hop, core, 0.5, 3), whole)
+    import hilbench.analysis.skeleton.wavelet_ridge as wavelet_ridge
+
+    monkeypatch.setattr(wavelet_ridge, "RIDGE_COLUMNS", 100)  # each block handed to the ridge in parts
     np.testing.assert_array_equal(streamed_ridge(x, fs, scales, 0.5, 0.8, hop, core, 0.5, 3), whole)
     f_ridge = 0.8 / scales[whole[500:-500]]  # the chirp's frequency, to a bin (16 voices: 4.4 %)
     f_true = 0.5 + 0.05 * t[::hop][500:-500]
