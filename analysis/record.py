@@ -16,7 +16,7 @@ It does, once and the same way for the CLI, the GUI, campaigns and scripts (docs
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -262,6 +262,54 @@ def load_record(path: str | Path, *, torque_channel: str | None = None, timing: 
             calibration=run.calibration, device=run.device, events=events, notes=notes)
 
 
+#: samples per chunk of :meth:`ChannelReader.chunks` when the caller does not choose (a few MiB per channel set)
+READER_CHUNK = 1 << 18
+
+
+class ChannelReader:
+    """A run file held open to read samples ``[start, stop)`` of its channels (context manager)."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self._run = open_run(self.path)
+
+    def __enter__(self) -> ChannelReader:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._run.close()
+
+    @property
+    def n_samples(self) -> int:
+        return int(self._run.n_samples)
+
+    def has(self, name: str) -> bool:
+        key = LINEAR_ALIASES.get(name, name) if self._run.axis == "linear" else name
+        return key in self._run.channels
+
+    def protocol_array(self, name: str) -> np.ndarray | None:
+        return self._run.protocol_array(name) if name in self._run.protocol_array_names else None
+
+    def read(self, name: str, start: int, stop: int) -> np.ndarray:
+        """Samples ``[start, stop)`` of channel ``name`` as float64, checked (one-line AnalysisError)."""
+        return numeric(self._run.channel(name, start, stop), name, f"{self.path} (samples from {start})")
+
+    def chunks(self, names: Sequence[str], chunk: int = READER_CHUNK, start: int = 0, stop: int | None = None,
+               progress: Callable[[int, int], None] | None = None) -> Iterator[tuple[int, list[np.ndarray]]]:
+        """``(first sample, [channel arrays])`` of at most ``chunk`` samples each, in order, from ``start`` to
+        ``stop`` (default the end); ``progress(done, total)`` after each chunk."""
+        stop = self.n_samples if stop is None else min(stop, self.n_samples)
+        total = max(0, stop - start)
+        for a in range(start, stop, max(1, int(chunk))):
+            b = min(a + chunk, stop)
+            yield a, [self.read(n, a, b) for n in names]
+            if progress is not None:
+                progress(b - start, total)
+
+
 #: samples per chunk read from a file by :func:`stream_record` (two float64 channels: 2 MiB)
 STREAM_CHUNK = 1 << 17
 
@@ -301,11 +349,8 @@ def stream_record(path: str | Path, *, torque_channel: str | None = None, timing
             events=[(str(e["kind"]), str(e["message"])) for e in run.events], n_samples=n)
 
     def chunks():
-        with open_run(path) as r:
-            for start in range(0, n, chunk):
-                stop = min(start + chunk, n)
-                x = numeric(r.channel("position", start, stop), "position", f"{path} (samples from {start})")
-                tau = numeric(r.channel(name, start, stop), name, f"{path} (samples from {start})")
+        with ChannelReader(path) as r:
+            for _, (x, tau) in r.chunks(("position", name), chunk, stop=n):
                 yield x, tau
 
     return record, chunks
@@ -370,6 +415,24 @@ def resample_host_clocked(host_time: np.ndarray, rate: float, channels: dict[str
 
 #: bytes per kept sample of a decimated record: t, position and torque as float64
 DECIMATED_BYTES_PER_SAMPLE = 24
+#: how the note of a record cut to a bounded span starts (:func:`decimated_record` with ``max_samples``)
+SPAN_NOTE = "analysed the first"
+
+
+def mib(nbytes: float) -> str:
+    """Bytes as a whole number of MiB, for the memory budget's one-line messages."""
+    return f"{nbytes / (1 << 20):.0f} MiB"
+
+
+def bounded_span(budget: int, fixed: int, per_sample: int, runs: int) -> int:
+    """The most samples each of ``runs`` runs may hold for an analysis whose peak is ``fixed + per_sample * samples``
+    bytes (all runs together) to stay within ``budget`` bytes; 0 when not even ``fixed`` fits."""
+    return max(0, (int(budget) - int(fixed)) // (int(per_sample) * max(1, int(runs))))
+
+
+def span_note(record: Record) -> str | None:
+    """The note of a record cut to a bounded span (:func:`decimated_record` with ``max_samples``), else None."""
+    return next((n for n in record.notes if n.startswith(SPAN_NOTE)), None)
 
 
 def decimation_factor(sample_rate: float, max_rate: float) -> int:
@@ -401,38 +464,48 @@ def block_average(position: np.ndarray, torque: np.ndarray, fs: float, q: int,
 
 def decimated_record(path: str | Path, max_rate: float, *, torque_channel: str | None = None, timing: str = "auto",
                      allow_incomplete: bool = False, chunk: int = STREAM_CHUNK,
-                     progress: Callable[[int], None] | None = None) -> Record:
+                     progress: Callable[[int], None] | None = None, max_samples: int | None = None) -> Record:
     """The record of :func:`load_record` reduced to at most ``max_rate`` Hz by :func:`block_average`, read chunk by
     chunk: memory is the decimated copy (:data:`DECIMATED_BYTES_PER_SAMPLE` per kept sample) plus one chunk,
     whatever the record's length. The result equals ``block_average`` of the whole arrays bit for bit (each block's
     samples are summed in the same order; tests/analysis/test_record.py). A record already at or below
     ``max_rate`` is returned as read (q = 1). ``progress(samples)`` is called after each chunk with the samples
     read so far (for a progress bar). A host-clocked run is resampled whole first (:func:`stream_record`).
-    The record's ``notes`` say what was done; ``n_samples`` is the kept count."""
+    ``max_samples`` (None: all) keeps only the first ``max_samples`` reduced samples and stops reading there, so
+    the copy is bounded whatever the record's length (docs/long-runs.md, "A bounded span"); the result is then
+    the reduction of the record cut at ``max_samples * q`` input samples, bit for bit.
+    The record's ``notes`` say what was done (a cut span: a note starting with :data:`SPAN_NOTE`); ``n_samples``
+    is the kept count."""
     rec, source = stream_record(path, torque_channel=torque_channel, timing=timing,
                                 allow_incomplete=allow_incomplete, chunk=chunk)
     q = decimation_factor(rec.sample_rate, max_rate)
     n_in = rec.n_samples
+    if max_samples is not None and max_samples < 1:
+        raise AnalysisError(f"max_samples must be >= 1, got {max_samples}")
+    limit = n_in // q if max_samples is None else min(n_in // q, int(max_samples))
     if source is None:  # host-clocked: already whole in memory
-        x, tau, fs = block_average(rec.position, rec.torque, rec.sample_rate, q, rec.timing)
+        x, tau, fs = block_average(rec.position[:limit * q], rec.torque[:limit * q], rec.sample_rate, q, rec.timing)
         if progress is not None:
             progress(n_in)
     else:
         xs: list[np.ndarray] = []
         taus: list[np.ndarray] = []
         carry_x, carry_tau = np.empty(0), np.empty(0)
-        done = 0
+        done = kept = 0
         for x_c, tau_c in source():
             done += x_c.size
             x_c, tau_c = np.concatenate([carry_x, x_c]), np.concatenate([carry_tau, tau_c])
-            whole = (x_c.size // q) * q
+            whole = min(x_c.size // q, limit - kept) * q
             if whole:
                 bx, bt, _ = block_average(x_c[:whole], tau_c[:whole], rec.sample_rate, q, rec.timing)
                 xs.append(bx.copy())  # a strided view would keep the whole chunk alive: memory of the full record
                 taus.append(bt)
+                kept += bx.size
             carry_x, carry_tau = x_c[whole:], tau_c[whole:]
             if progress is not None:
                 progress(done)
+            if kept >= limit and limit < n_in // q:  # a bounded span is full: read no further
+                break
         x = np.concatenate(xs) if xs else np.empty(0)
         tau = np.concatenate(taus) if taus else np.empty(0)
         fs = rec.sample_rate / q
@@ -440,5 +513,8 @@ def decimated_record(path: str | Path, max_rate: float, *, torque_channel: str |
     if q > 1:
         notes.append(f"decimated by {q} ({rec.sample_rate:g} -> {fs:g} Hz): torque averaged over blocks of {q} "
                      f"samples ({rec.timing}), position at the block edge; {n_in} -> {x.size} samples")
+    if limit < n_in // q:
+        notes.append(f"{SPAN_NOTE} {x.size / fs:.6g} s of {n_in / rec.sample_rate:.6g} s ({x.size} of "
+                     f"{n_in // q} samples at {fs:g} Hz): a bounded span, docs/long-runs.md")
     return replace(rec, sample_rate=fs, t=np.arange(x.size) / fs, position=x, torque=tau, notes=notes,
                    n_samples=int(x.size))

@@ -10,19 +10,21 @@ Elsewhere than on Linux the benchmark falls back to ``ru_maxrss``.
 - ``stream``: ``identify_chunks`` (the NNLS fit and its figures: equation error, open-loop and segmented
   simulation) reading the file chunk by chunk (the loader's path);
 - ``arrays``: ``identify`` on the whole record loaded as arrays (the array API);
-- ``residual``: the residual loop (``analysis.residual.record_analysis``: the run file read chunk by chunk and reduced
-  to 2 kHz, then the loop with blocked cross-validation);
-- ``compare``: the seven families (``analysis.models.compare.analyse``) on the run file read chunk by chunk and
-  reduced to 5 kHz (``compare.DECIMATED_RATE``), scored on a second run of another seed;
-- ``afrf``, ``skeleton``, ``presliding``: listed in :data:`HOOKS` when their streamed entry points exist (another
-  branch builds them); a missing one is reported as not measured.
+- ``identify``, ``residual``, ``compare``: each as its command reads and analyses a run file with ``--memory 2G``
+  (:data:`BUDGET`), validated on a second run of another seed: ``identify`` whole when its arrays fit, else
+  streamed (``analyse_stream``); ``residual`` reduced to 2 kHz and ``compare`` to 5 kHz while reading, each cut to
+  the bounded span that fits the budget (``record_analysis.span_for``, ``compare.reading_plan``;
+  docs/long-runs.md, "A bounded span");
+- ``afrf``, ``skeleton``, ``presliding`` (``long_run_paper``): read chunk by chunk, on a stepped sine, a chirp and
+  a presliding path of the same lengths.
 
-``residual`` and ``compare`` read an HDF5 run file written by the bench's RunWriter (the record loader's path); the
-identification reads the raw float64 pairs as before. The analyses run on a 20 kHz run of ``LONG_S`` s (600 s,
-12 M samples; the issue's target is 3600 s, 72 M: ``python -m benchmarks.bench_long_run --analyses 3600``) against
-a 60 s run at 20 kHz, each analysis in its own child.
+The analyses run on 20 kHz runs of ``LONG_S`` s (600 s, 12 M samples; the issue's target is 3600 s, 72 M:
+``python -m benchmarks.bench_long_run --analyses 3600``) against 60 s runs, each analysis in its own child.
+``--files`` takes runs recorded elsewhere, e.g. by ``hilbench run identification --device
+"sim://?pacing=lockstep"``. Each child reports its wall and CPU time; on a shared machine the CPU time is the
+steadier cost.
 
-Cost per sample is compared with a 1-minute run measured in the same benchmark (``quick``: 2 s and 6 s).
+Cost per sample is compared with a 1-minute run measured in the same benchmark (``quick``: 1 s and 3 s).
 docs/long-runs.md gives the figures and the method.
 """
 
@@ -101,33 +103,60 @@ def record(path: Path, duration: float, fs: float = FS, seed: int = 0) -> int:
 
 
 _ANALYSIS_CHILD = _PEAK + r"""
-path, val, mode = sys.argv[1], sys.argv[2], sys.argv[3]
+from functools import partial
+from hilbench.analysis.record import decimated_record, load_record, span_note, stream_record
+path, val, mode, budget = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
 base = peak_kib()
 t0 = time.perf_counter()
-if mode == "residual":
+heads = [stream_record(p)[0] for p in (path, val)]
+if mode == "identify":  # as hilbench identify RUN --validate VAL --memory BUDGET
+    from hilbench.analysis.identification import analyse, analyse_stream, array_cost
+    if array_cost(sum(h.n_samples for h in heads)) <= budget:
+        train = load_record(path)
+        res = analyse(train, validation=load_record(val))
+    else:
+        (train, source), valid = stream_record(path), stream_record(val)
+        res = analyse_stream(train, source, validation=valid)
+    figure = res.figures["validation_torque_nrmse"]
+    n = heads[0].n_samples
+    extra = {"elements": int(res.model.ms_stiffness.size), "inertia": res.model.inertia,
+             "validation_position_nrmse": res.figures.get("validation_position_nrmse")}
+elif mode == "residual":  # as hilbench residual RUN --validate VAL --memory BUDGET reads and analyses
     from hilbench.analysis.residual import record_analysis
-    res = record_analysis.analyse(record_analysis.read(path))
+    span = record_analysis.span_for(heads, budget)
+    train, valid = (record_analysis.read(p, max_samples=span) for p in (path, val))
+    res = record_analysis.analyse(train, validation=[valid])
     figure = res.loop.error_after["validation"]["torque_nrmse"]
     n = res.record.n_samples
-elif mode == "compare":
-    from hilbench.analysis.models.compare import DECIMATED_RATE, analyse
-    from hilbench.analysis.record import decimated_record
-    res = analyse(decimated_record(path, DECIMATED_RATE), decimated_record(val, DECIMATED_RATE))
+    extra = {"added": list(res.loop.names_added)}
+elif mode == "compare":  # as hilbench compare RUN --validate VAL --memory BUDGET
+    from hilbench.analysis.models.compare import analyse, reading_plan
+    plan = reading_plan(heads, budget)
+    if plan is None:
+        train, valid = load_record(path), load_record(val)
+    else:
+        qs, span = plan
+        train, valid = (decimated_record(p, h.sample_rate / q, max_samples=span)
+                        for p, h, q in zip((path, val), heads, qs))
+    res = analyse(train, valid)
     rows = {r.name: r for r in res.rows}
     figure = rows["maxwell_slip"].validation["torque_nrmse"] if rows["maxwell_slip"].error is None else None
     n = res.train.x.size
+    extra = {"families": {r.name: (r.error or r.validation["torque_nrmse"]) for r in res.rows}}
 else:
     raise SystemExit(f"unknown mode {mode}")
 wall = time.perf_counter() - t0
-print(json.dumps({"wall_s": wall, "peak_rss_mib": peak_kib() / 1024, "import_rss_mib": base / 1024,
-                  "analysed_samples": int(n), "figure": figure}))
+print(json.dumps({"wall_s": wall, "cpu_s": time.process_time(), "peak_rss_mib": peak_kib() / 1024,
+                  "import_rss_mib": base / 1024, "analysed_samples": int(n), "analysed_rate_hz": train.sample_rate,
+                  "span": span_note(train), "figure": figure, **extra}))
 """
 
-#: streamed entry points of the other analyses: mode -> (module, function) taking (run file path, validation path);
-#: filled when those analyses stream (issue #26); a missing module is reported as not measured
-HOOKS: dict[str, tuple[str, str]] = {}
 LONG_S = 600.0
 LONG_FS = 20_000.0
+#: the memory budget every analysis is given (bytes): the issue's target, ``--memory 2G``
+BUDGET = 2 << 30
+#: the analyses of the identification protocol, each as its command reads and analyses the runs within BUDGET
+MODES = ("identify", "residual", "compare")
 
 
 def write_run_file(path: Path, duration: float, fs: float, seed: int = 0) -> int:
@@ -153,55 +182,76 @@ def write_run_file(path: Path, duration: float, fs: float, seed: int = 0) -> int
     return int(u.size)
 
 
-def measure_analysis(path: Path, val: Path, mode: str) -> dict:
-    """Peak RSS (MiB), wall time (s) and the headline figure of one analysis of a run file in a child process."""
-    import importlib
-    import importlib.util
-
-    if mode in HOOKS:
-        module, func = HOOKS[mode]
-        if importlib.util.find_spec(module) is None or not hasattr(importlib.import_module(module), func):
-            return {"missing": f"{module}.{func}"}
-        code = _PEAK + (f"from {module} import {func}\nt0 = time.perf_counter()\n{func}(sys.argv[1], sys.argv[2])\n"
-                        "print(json.dumps({'wall_s': time.perf_counter() - t0, 'peak_rss_mib': peak_kib() / 1024}))")
-    else:
-        code = _ANALYSIS_CHILD
-    done = subprocess.run([sys.executable, "-c", code, str(path), str(val), mode], capture_output=True, text=True,
-                          check=True)
+def measure_analysis(path: Path, val: Path, mode: str, budget: int = BUDGET) -> dict:
+    """Peak RSS (MiB), wall and CPU time (s) and the headline figures of one analysis of a run file (``val``: the
+    validation run) in a child process, as its command does with ``--memory budget``."""
+    done = subprocess.run([sys.executable, "-c", _ANALYSIS_CHILD, str(path), str(val), mode, str(budget)],
+                          capture_output=True, text=True)
+    if done.returncode != 0:
+        return {"error": (done.stderr.strip().splitlines() or ["no output"])[-1]}
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def analyses(quick: bool = False, long_s: float = LONG_S) -> list[dict]:
-    """residual, compare (and the hooked analyses) on a run of ``long_s`` s at 20 kHz against a 60 s run of the
-    same protocol (quick: 3 s against 1 s at 20 kHz): peak RSS and cost per sample, with the issue's targets."""
+def analysis_rows(mode: str, r0: dict, r1: dict, n0: int, n1: int, short: float, long: float,
+                  quick: bool) -> list[dict]:
+    """The peak-RSS and cost-per-sample rows of ``mode`` on the long run (``r1``, ``n1`` samples) against the
+    short run (``r0``, ``n0``), with the issue's targets."""
+    if "error" in r0 or "error" in r1:
+        return [{"name": f"{mode}_{long:g}s_20kHz", "value": None, "unit": None, "baseline_name": None,
+                 "baseline_value": None, "ratio": None, "target": f"failed: {r1.get('error') or r0.get('error')}",
+                 "ok": False}]
+    clock = "cpu_s" if "cpu_s" in r0 and "cpu_s" in r1 else "wall_s"  # CPU time: steadier on a shared machine
+    c0, c1 = 1e6 * r0[clock] / n0, 1e6 * r1[clock] / n1
+    return [
+        {"name": f"{mode}_{long:g}s_20kHz_peak_rss", "value": r1["peak_rss_mib"], "unit": "MiB",
+         "baseline_name": f"{short:g} s run", "baseline_value": r0["peak_rss_mib"],
+         "ratio": r1["peak_rss_mib"] / r0["peak_rss_mib"], "target": "<= 2048 MiB",
+         "ok": r1["peak_rss_mib"] <= 2048 if not quick else None, "span": r1.get("span")},
+        {"name": f"{mode}_{long:g}s_20kHz_cost_per_sample", "value": c1,
+         "unit": f"{'CPU' if clock == 'cpu_s' else 'wall'} s per million samples",
+         "baseline_name": f"{short:g} s run", "baseline_value": c0, "ratio": c1 / c0,
+         "target": "<= 1.3x the short run's", "ok": c1 <= 1.3 * c0 if not quick else None,
+         "figure": r1.get("figure"), "wall_s": r1["wall_s"], "cpu_s": r1.get("cpu_s"),
+         "baseline_wall_s": r0["wall_s"], "baseline_figure": r0.get("figure")},
+    ]
+
+
+def analyses(quick: bool = False, long_s: float = LONG_S, files: dict | None = None,
+             modes: tuple[str, ...] = MODES) -> list[dict]:
+    """identify, residual and compare, each as its command does with ``--memory 2G``, on a run of ``long_s`` s at
+    20 kHz against a 60 s run of the same protocol (quick: 3 s against 1 s), each validated on a second run of
+    another seed: peak RSS and cost per sample, with the issue's targets. ``files`` ({"short": (train, validation),
+    "long": (...)}): existing run files (e.g. recorded by ``hilbench run`` in lockstep) instead of writing them."""
+    from hilbench.analysis.runfile import open_run
+
     short, long = (1.0, 3.0) if quick else (60.0, long_s)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        files = {}
-        for duration in (short, long):
-            files[duration] = (Path(tmp) / f"run_{duration:g}.h5", Path(tmp) / f"val_{duration:g}.h5")
-            n = write_run_file(files[duration][0], duration, LONG_FS, seed=0)
-            write_run_file(files[duration][1], duration, LONG_FS, seed=1)
-            files[duration] += (n,)
-        for mode in ("residual", "compare", *HOOKS):
-            r0 = measure_analysis(files[short][0], files[short][1], mode)
-            r1 = measure_analysis(files[long][0], files[long][1], mode)
-            if "missing" in r1:
-                rows.append({"name": f"{mode}_long_run", "value": None, "unit": None, "baseline_name": None,
-                             "baseline_value": None, "ratio": None, "target": f"not measured: {r1['missing']} "
-                             "does not exist on this branch", "ok": None})
-                continue
-            n0, n1 = files[short][2], files[long][2]
-            rows.append({"name": f"{mode}_{long:g}s_20kHz_peak_rss", "value": r1["peak_rss_mib"], "unit": "MiB",
-                         "baseline_name": f"{short:g} s run", "baseline_value": r0["peak_rss_mib"],
-                         "ratio": r1["peak_rss_mib"] / r0["peak_rss_mib"], "target": "<= 2048 MiB at 72 M samples",
-                         "ok": r1["peak_rss_mib"] <= 2048 if not quick else None})
-            c0, c1 = 1e6 * r0["wall_s"] / n0, 1e6 * r1["wall_s"] / n1
-            rows.append({"name": f"{mode}_{long:g}s_20kHz_cost_per_sample", "value": c1,
-                         "unit": "s per million samples", "baseline_name": f"{short:g} s run", "baseline_value": c0,
-                         "ratio": c1 / c0, "target": "<= 1.3x the short run's", "ok": c1 <= 1.3 * c0 if not quick
-                         else None, "figure": r1.get("figure"), "wall_s": r1["wall_s"]})
+        if files is None:
+            files = {}
+            for key, duration in (("short", short), ("long", long)):
+                files[key] = (Path(tmp) / f"run_{duration:g}.h5", Path(tmp) / f"val_{duration:g}.h5")
+                for seed, path in enumerate(files[key]):
+                    write_run_file(path, duration, LONG_FS, seed=seed)
+        counts = {}
+        for key in ("short", "long"):
+            with open_run(files[key][0]) as run_file:
+                counts[key] = int(run_file.n_samples)
+        for mode in modes:
+            r0 = measure_analysis(*files["short"], mode)
+            r1 = measure_analysis(*files["long"], mode)
+            rows += analysis_rows(mode, r0, r1, counts["short"], counts["long"], short, long, quick)
     return rows
+
+
+def paper_rows(quick: bool = False, long_s: float = LONG_S) -> list[dict]:
+    """afrf (a stepped sine), skeleton (a chirp) and presliding (a nested path) read chunk by chunk
+    (``long_run_paper``), the run of ``long_s`` s against a 60 s one at 20 kHz (quick: 6 s against 2 s); an
+    analysis that refuses the long run (the skeleton's wavelet map) is a row saying so."""
+    from benchmarks import long_run_paper
+
+    durations = (2.0, 6.0) if quick else (60.0, long_s)
+    return long_run_paper.rows(durations, fs=LONG_FS, modes=("stream",))
 
 
 def measure(path: Path, n: int, mode: str, fs: float = FS) -> dict:
@@ -212,7 +262,7 @@ def measure(path: Path, n: int, mode: str, fs: float = FS) -> dict:
 
 
 def run(quick: bool = False) -> list[dict]:
-    return identification(quick) + analyses(quick)
+    return identification(quick) + analyses(quick) + paper_rows(quick)
 
 
 def identification(quick: bool = False) -> list[dict]:
@@ -253,11 +303,29 @@ def identification(quick: bool = False) -> list[dict]:
     return rows
 
 
-if __name__ == "__main__":
-    if "--analyses" in sys.argv:  # residual and compare only: python -m benchmarks.bench_long_run --analyses [S]
-        extra = [a for a in sys.argv[1:] if not a.startswith("--")]
-        for row in analyses(quick="--quick" in sys.argv, long_s=float(extra[0]) if extra else LONG_S):
-            print(row, flush=True)
+def main(argv: list[str] | None = None) -> None:
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.bench_long_run", description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--analyses", nargs="?", type=float, const=LONG_S, metavar="S",
+                    help="identify, residual and compare only, on a run of S s (default 600) against 60 s")
+    ap.add_argument("--files", nargs=4, type=Path, metavar=("SHORT", "SHORT_VAL", "LONG", "LONG_VAL"),
+                    help="existing run files (e.g. recorded by hilbench run in lockstep) for --analyses")
+    ap.add_argument("--modes", default=",".join(MODES), help="comma-separated analyses for --analyses")
+    ap.add_argument("--paper", nargs="?", type=float, const=LONG_S, metavar="S",
+                    help="afrf, skeleton and presliding only, read chunk by chunk, on S s against 60 s")
+    args = ap.parse_args(argv)
+    if args.analyses is not None:
+        files = None if args.files is None else {"short": tuple(args.files[:2]), "long": tuple(args.files[2:])}
+        rows = analyses(args.quick, args.analyses, files, tuple(m for m in args.modes.split(",") if m))
+    elif args.paper is not None:
+        rows = paper_rows(args.quick, args.paper)
     else:
-        for row in run(quick="--quick" in sys.argv):
-            print(row, flush=True)
+        rows = run(args.quick)
+    for row in rows:
+        print(json.dumps(row), flush=True)
+
+
+if __name__ == "__main__":
+    main()

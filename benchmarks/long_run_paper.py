@@ -51,7 +51,7 @@ else:
     res = (presliding.analyse(load_record(path), replicates=4) if mode == "whole"
            else presliding.analyse_stream(path, replicates=4)[0])
     figure = float(res.quantities["breakaway"])
-print(json.dumps({"wall_s": time.perf_counter() - t0, "peak_rss_mib": peak_kib() / 1024,
+print(json.dumps({"wall_s": time.perf_counter() - t0, "cpu_s": time.process_time(), "peak_rss_mib": peak_kib() / 1024,
                   "import_rss_mib": base / 1024, "figure": figure}))
 """
 
@@ -129,9 +129,11 @@ def measure(path: Path, analysis: str, mode: str, top: float = 0.0) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def rows(durations: tuple[float, ...] = (60.0, 300.0), fs: float = FS) -> list[dict]:
+def rows(durations: tuple[float, ...] = (60.0, 300.0), fs: float = FS,
+         modes: tuple[str, ...] = ("whole", "stream")) -> list[dict]:
     """Rows (name, value, unit, baseline, ratio) for each analysis, mode and duration; the baseline is the first
-    duration's run read the same way."""
+    duration's run read the same way. A run an analysis refuses (one line, e.g. the skeleton's wavelet map over
+    its bound) is a row with that line as its ``target`` and ``ok`` False."""
     out = []
     kinds = {"afrf": "stepped_sine", "skeleton": "chirp", "presliding": "presliding"}
     with tempfile.TemporaryDirectory() as tmp:
@@ -140,22 +142,31 @@ def rows(durations: tuple[float, ...] = (60.0, 300.0), fs: float = FS) -> list[d
             for duration in durations:
                 path = Path(tmp) / f"{analysis}_{duration:g}.h5"
                 n = record(kinds[analysis], path, duration, fs)
-                for mode in ("whole", "stream"):
+                for mode in modes:
                     # the default chirp sweeps at 0.1 Hz/s; its harmonics and the encoder noise put the spectral
-                    # band at ~10x its top frequency, whose wavelet map does not fit MAX_MAP_CELLS past ~2 min
+                    # band at ~10x its top frequency: the skeleton is given 0.1 Hz to twice the top frequency
                     top = 0.1 * duration
-                    results[(duration, mode)] = (n, measure(path, analysis, mode, top))
+                    try:
+                        results[(duration, mode)] = (n, measure(path, analysis, mode, top))
+                    except RuntimeError as exc:
+                        results[(duration, mode)] = (n, {"error": str(exc)})
                 path.unlink()
             for (duration, mode), (n, r) in results.items():
                 n0, r0 = results[(durations[0], mode)]
                 tag = f"{analysis}_{mode}_{duration:g}s_{fs / 1e3:g}kHz"
+                if "error" in r or "error" in r0:
+                    out.append({"name": tag, "value": None, "unit": None, "baseline_name": None,
+                                "baseline_value": None, "ratio": None, "ok": False,
+                                "target": f"refused: {r.get('error') or r0.get('error')}"})
+                    continue
                 out.append({"name": f"{tag}_peak_rss", "value": r["peak_rss_mib"], "unit": "MiB",
                             "baseline_name": f"{durations[0]:g} s run", "baseline_value": r0["peak_rss_mib"],
                             "ratio": r["peak_rss_mib"] / r0["peak_rss_mib"], "samples": n})
                 out.append({"name": f"{tag}_cost_per_sample", "value": 1e6 * r["wall_s"] / n,
                             "unit": "s per million samples", "baseline_name": f"{durations[0]:g} s run",
                             "baseline_value": 1e6 * r0["wall_s"] / n0,
-                            "ratio": (r["wall_s"] / n) / (r0["wall_s"] / n0), "figure": r["figure"]})
+                            "ratio": (r["wall_s"] / n) / (r0["wall_s"] / n0), "figure": r["figure"],
+                            "cpu_s": r.get("cpu_s"), "baseline_cpu_s": r0.get("cpu_s")})
     return out
 
 

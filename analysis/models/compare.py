@@ -177,6 +177,9 @@ COMPARE_BYTES_FIXED = 160 << 20
 #: must pass the presliding mode (186 Hz on the default DC motor), so fs/20 >= 250 Hz. At 2 kHz (a 100 Hz low-pass)
 #: the segmented position error of the presliding families rose from 1.6 % to 5.4 % (docs/long-runs.md)
 DECIMATED_RATE = 5000.0
+#: the shortest span (s) worth comparing when a budget bounds it: a few periods of the identification protocol's
+#: 4 s envelope, and segments enough for the segmented simulation error
+MIN_SPAN_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -193,6 +196,38 @@ class CompareSettings:
 def cost(samples: int) -> int:
     """Estimated peak bytes of :func:`analyse` on ``samples`` (training plus validation)."""
     return COMPARE_BYTES_FIXED + COMPARE_BYTES_PER_SAMPLE * int(samples)
+
+
+def span_samples(budget: int, runs: int = 2) -> int:
+    """The most samples (at the rate compared) each of ``runs`` runs may give :func:`analyse` for its estimated
+    peak (:func:`cost`) to stay within ``budget`` bytes (docs/long-runs.md, "A bounded span")."""
+    from hilbench.analysis.record import bounded_span
+
+    return bounded_span(budget, COMPARE_BYTES_FIXED, COMPARE_BYTES_PER_SAMPLE, runs)
+
+
+def reading_plan(headers, budget: int) -> tuple[list[int], int | None] | None:
+    """How :func:`analyse` reads ``headers`` (training and validation records of
+    :func:`hilbench.analysis.record.stream_record`, arrays not loaded) within ``budget`` bytes: None when the
+    whole runs fit at the recorded rate (:func:`cost`); else (the reduction factor of each run: the largest that
+    keeps at least :data:`DECIMATED_RATE`, the bounded span in samples per run at that rate or None when the
+    reduced runs fit whole). Raises :class:`AnalysisError` in one line, before any sample is read, when not even
+    the first :data:`MIN_SPAN_S` s (or the shortest run) of each run fit (docs/long-runs.md, "A bounded span")."""
+    from hilbench.analysis.record import mib
+
+    samples = sum(h.n_samples for h in headers)
+    if cost(samples) <= budget:
+        return None
+    qs = [max(1, int(h.sample_rate // DECIMATED_RATE)) for h in headers]  # the smallest copy the physics allows
+    if cost(sum(h.n_samples // q for h, q in zip(headers, qs, strict=True))) <= budget:
+        return qs, None
+    span = span_samples(budget, len(headers))
+    shortest = min(min(int(MIN_SPAN_S * h.sample_rate / q), h.n_samples // q) for h, q in zip(headers, qs, strict=True))
+    if span < shortest:
+        raise AnalysisError(f"compare on {samples} samples needs about {mib(cost(samples))}, and on the first "
+                            f"{MIN_SPAN_S:g} s of each run reduced to {DECIMATED_RATE:g} Hz about "
+                            f"{mib(cost(shortest * len(headers)))}, over --memory {mib(budget)}: raise --memory")
+    return qs, span
 
 
 def run_data(record) -> RunData:

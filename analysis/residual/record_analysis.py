@@ -5,7 +5,8 @@ call these, so one run gives one answer (docs/long-runs.md, docs/residual-report
 The loop runs at most at :data:`~hilbench.analysis.residual.rundata.MAX_RATE` (2 kHz): ``prepare_run`` reduces a
 faster record by :func:`hilbench.analysis.record.block_average`. :func:`read` does that reduction while reading the
 file chunk by chunk, so the full-rate record is never held; the result is the same bit for bit as loading the whole
-record (tests/analysis/residual/test_record_analysis.py).
+record (tests/analysis/residual/test_record_analysis.py). Over a memory budget, :func:`span_for` gives the bounded
+span (the first samples of each run that fit) and :func:`read` stops there (docs/long-runs.md, "A bounded span").
 """
 
 from __future__ import annotations
@@ -29,6 +30,9 @@ if TYPE_CHECKING:
 #: fixed part, from the peaks measured on the default identification runs (docs/long-runs.md), with margin
 LOOP_BYTES_PER_SAMPLE = 2400
 LOOP_BYTES_FIXED = 200 << 20
+#: the shortest span (s at the loop's rate) worth analysing when a budget bounds it: below it the blocked
+#: cross-validation has folds of a fraction of a second
+MIN_SPAN_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -80,13 +84,49 @@ def cost(samples: int) -> int:
     return LOOP_BYTES_FIXED + LOOP_BYTES_PER_SAMPLE * int(samples)
 
 
+def span_samples(budget: int, runs: int) -> int:
+    """The most samples (at the loop's rate) each of ``runs`` runs may give the loop for its estimated peak
+    (:func:`cost`) to stay within ``budget`` bytes; 0 when not even the fixed part fits (docs/long-runs.md,
+    "A bounded span")."""
+    from hilbench.analysis.record import bounded_span
+
+    return bounded_span(budget, LOOP_BYTES_FIXED, LOOP_BYTES_PER_SAMPLE, runs)
+
+
+def span_for(headers: Sequence[Record], budget: int) -> int | None:
+    """How the loop reads ``headers`` (records of :func:`hilbench.analysis.record.stream_record`, arrays not
+    loaded) within ``budget`` bytes: None when the whole runs fit (:func:`cost`), else the bounded span
+    (:func:`span_samples`, samples per run at the loop's rate). Raises :class:`AnalysisError` in one line, before
+    any sample is read, when not even the first :data:`MIN_SPAN_S` s (or the shortest run) of each run fit."""
+    from hilbench.analysis.record import mib
+
+    samples = sum(analysed_samples(h.n_samples, h.sample_rate) for h in headers)
+    if cost(samples) <= budget:
+        return None
+    from hilbench.analysis.record import decimation_factor
+
+    span = span_samples(budget, len(headers))
+    rates = [h.sample_rate / decimation_factor(h.sample_rate, MAX_RATE) for h in headers]
+    shortest = min(min(int(MIN_SPAN_S * r) for r in rates),
+                   min(analysed_samples(h.n_samples, h.sample_rate) for h in headers))
+    if span < shortest:
+        raise AnalysisError(f"the residual loop on {samples} samples (at most 2 kHz) needs about {mib(cost(samples))}"
+                            f", and on the first {shortest} samples of each run about "
+                            f"{mib(cost(shortest * len(headers)))}, over --memory {mib(budget)}: raise --memory")
+    return span
+
+
 def read(path: str | Path, *, torque_channel: str | None = None, timing: str = "auto", allow_incomplete: bool = False,
-         chunk: int | None = None, progress: Callable[[int], None] | None = None) -> Record:
-    """The run file as the loop reads it: :func:`hilbench.analysis.record.decimated_record` at :data:`MAX_RATE`."""
+         chunk: int | None = None, progress: Callable[[int], None] | None = None,
+         max_samples: int | None = None) -> Record:
+    """The run file as the loop reads it: :func:`hilbench.analysis.record.decimated_record` at :data:`MAX_RATE`;
+    ``max_samples`` (None: all) bounds the copy to the run's first ``max_samples`` samples at that rate
+    (:func:`span_samples` gives the bound of a memory budget)."""
     from hilbench.analysis.record import STREAM_CHUNK, decimated_record
 
     return decimated_record(path, MAX_RATE, torque_channel=torque_channel, timing=timing,
-                            allow_incomplete=allow_incomplete, chunk=chunk or STREAM_CHUNK, progress=progress)
+                            allow_incomplete=allow_incomplete, chunk=chunk or STREAM_CHUNK, progress=progress,
+                            max_samples=max_samples)
 
 
 def _prepared(record: Record, cutoff: float | None) -> RunData:

@@ -34,12 +34,11 @@ CHIRP_PROTOCOLS = ("chirp",)
 ARRAY_BYTES_PER_SAMPLE = 800
 ARRAY_BYTES_FIXED = 160 << 20
 #: the streamed path: one chunk and one spectrum segment (fixed), then ForceVib on the decimated copy: per sample
-#: of the copy (the analytic signal, its ratios and the per-sample estimates), and per cell of the wavelet map
-#: (float32 |W|, its float64 log for the ridge, the int8 back-pointers), which for a band reaching the copy's
-#: resolution has a column per sample: measured 581 MiB for 2.4 M samples decimated by 13 (26.6 M cells)
+#: of the copy (the analytic signal, its ratios and the per-sample estimates), and per cell of the wavelet map:
+#: the ridge's int8 back-pointer (the map itself is computed and consumed block by block, ``streamed_ridge``)
 STREAM_BYTES_FIXED = 200 << 20
 DECIMATED_BYTES_PER_SAMPLE = 400
-MAP_BYTES_PER_CELL = 16
+MAP_BYTES_PER_CELL = 1
 CURVE_NAMES = ("amplitude", "stiffness", "restoring_force", "energy", "amplitude_count", "velocity", "damping",
                "damping_force", "velocity_count")
 

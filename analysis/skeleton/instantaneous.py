@@ -32,12 +32,11 @@ from hilbench.analysis.skeleton.wavelet_ridge import (
     analytic_spectrum,
     check_cmor,
     fft_length,
-    magnitude_map,
     morlet_spectrum,
     plan_chunks,
     relative_bandwidth,
-    ridge_path,
     scale_grid,
+    streamed_ridge,
     time_width,
 )
 
@@ -46,8 +45,9 @@ DEFAULT_FB = 0.5
 DEFAULT_FC = 0.8
 #: Chunk cores are at least this many samples (FFT work per chunk ~ 2^19 complex points).
 MIN_CORE = 1 << 19
-#: Upper bound on the decimated |W| map, cells (float32: 256 MB).
-MAX_MAP_CELLS = 64_000_000
+#: Upper bound on the decimated |W| map, cells. The map is not held (``streamed_ridge``): the ridge keeps one
+#: int8 back-pointer per cell, 1 GiB at this bound.
+MAX_MAP_CELLS = 1 << 30
 
 
 @dataclass(frozen=True)
@@ -354,11 +354,7 @@ def analytic_ratios(
         pad = int(math.ceil(PAD_SIGMAS * float(time_width(scales.max(), fb)) * fs))
         core = max(MIN_CORE, 2 * pad) if max_core is None else max_core
         hop = _pick_hop(n, fs, scales, fb, fc)
-        mag = magnitude_map(x, fs, scales, fb, fc, hop, core)
-        ref = float(mag.max())
-        if not ref > 0:
-            raise AnalysisError("signal has no energy in the wavelet band")
-        ridge_cols = ridge_path(np.log(mag / ref + 1e-12), penalty, max_jump)
+        ridge_cols = streamed_ridge(x, fs, scales, fb, fc, hop, core, penalty, max_jump)  # the map is not held
         labels = np.repeat(ridge_cols.astype(np.int32), hop)[:n]
         ratios = _evaluate([x, *others], fs, labels, lambda i, f: morlet_spectrum(scales[i] * f, fb, fc), pad,
                            core)

@@ -143,14 +143,14 @@ def analytic_spectrum(segment: np.ndarray, nfft: int) -> np.ndarray:
     return spec
 
 
-def magnitude_map(
+def magnitude_blocks(
     x: np.ndarray, fs: float, scales: np.ndarray, fb: float, fc: float, hop: int, core: int
-) -> np.ndarray:
-    """|W(s, t)| on the decimated grid t = 0, hop, 2*hop, ... (samples), computed chunk by chunk.
+) -> Iterator[np.ndarray]:
+    """|W(s, t)| on the decimated grid t = 0, hop, 2*hop, ... (samples), one chunk's columns at a time, in order.
 
     Each scale's band-limited analytic transform is evaluated directly at the decimated rate by inverting only
     the lowest nfft/hop bins of its spectrum (exact when Psi(s*f) is negligible above fs/hop; ``hop`` is
-    chosen by the caller so that it is). Memory: one chunk spectrum plus the map itself.
+    chosen by the caller so that it is). Memory: one chunk spectrum and one block of columns.
 
     Args:
         x: signal, shape (n,).
@@ -158,12 +158,10 @@ def magnitude_map(
         scales: wavelet scales, s, shape (n_scales,).
         hop: decimation, samples (a power of two).
         core: chunk core length, samples.
-    Returns:
-        float32 array, shape (n_scales, ceil(n/hop)).
+    Yields:
+        float32 arrays of shape (n_scales, k), k columns each; ceil(n/hop) columns in all.
     """
     n = x.size
-    n_cols = -(-n // hop)
-    out = np.empty((scales.size, n_cols), dtype=np.float32)
     pad = int(math.ceil(PAD_SIGMAS * float(time_width(scales.max(), fb)) * fs))
     for ch in plan_chunks(n, pad, core, align=hop):
         seg = x[ch.seg_start:ch.seg_stop]
@@ -174,13 +172,75 @@ def magnitude_map(
         f = np.arange(nb) * (fs / nfft)
         c0 = (ch.start - ch.seg_start) // hop
         c1 = c0 + -(-(ch.stop - ch.start) // hop)
-        g0 = ch.start // hop
+        block = np.empty((scales.size, c1 - c0), dtype=np.float32)
         buf = np.zeros(m, dtype=complex)
         for i, s in enumerate(scales):
             buf[:nb] = spec[:nb] * morlet_spectrum(s * f, fb, fc)
             w = sfft.ifft(buf) * (m / nfft)
-            out[i, g0:g0 + (c1 - c0)] = np.abs(w[c0:c1])
+            block[i] = np.abs(w[c0:c1])
+        yield block
+
+
+def magnitude_map(
+    x: np.ndarray, fs: float, scales: np.ndarray, fb: float, fc: float, hop: int, core: int
+) -> np.ndarray:
+    """The whole |W| map of :func:`magnitude_blocks`: float32, shape (n_scales, ceil(n/hop))."""
+    out = np.empty((scales.size, -(-x.size // hop)), dtype=np.float32)
+    g = 0
+    for block in magnitude_blocks(x, fs, scales, fb, fc, hop, core):
+        out[:, g:g + block.shape[1]] = block
+        g += block.shape[1]
     return out
+
+
+class RidgeTracker:
+    """:func:`ridge_path` fed the columns block by block, in order: the forward pass carries the accumulated cost
+    of one column, and keeps the int8 back-pointers (1 byte per cell); :meth:`path` traces back. Fed the whole
+    map as one block or in any split, it gives the same path, bit for bit (the same operations in the same
+    order)."""
+
+    def __init__(self, n_scales: int, n_times: int, penalty: float, max_jump: int):
+        self.penalty = float(penalty)
+        self.shifts = np.arange(-max_jump, max_jump + 1)
+        self.back = np.empty((n_times, n_scales), dtype=np.int8)
+        self.acc: np.ndarray | None = None
+        self.t = 0
+        self._cand = np.empty((self.shifts.size, n_scales))
+        self._idx = np.arange(n_scales)
+
+    def push(self, log_mag: np.ndarray) -> None:
+        """Columns ln|W| of shape (n_scales, k), the next k in time."""
+        n_s = self._idx.size
+        cost = -np.asarray(log_mag, dtype=float)
+        cand = self._cand
+        start = 0
+        if self.acc is None:
+            self.acc = cost[:, 0].copy()
+            self.t, start = 1, 1
+        for t in range(start, cost.shape[1]):
+            # cand[k, i] = acc[i + shift_k] + penalty*shift_k^2: coming into bin i from bin i + shift_k
+            cand.fill(np.inf)
+            for k, d in enumerate(self.shifts):
+                if d >= 0:
+                    cand[k, : n_s - d] = self.acc[d:]
+                else:
+                    cand[k, -d:] = self.acc[: n_s + d]
+                cand[k] += self.penalty * d * d
+            best = np.argmin(cand, axis=0)
+            self.back[self.t] = best
+            self.acc = cand[best, self._idx] + cost[:, t]
+            self.t += 1
+
+    def path(self) -> np.ndarray:
+        """int array of scale indices, shape (n_times,), once every column has been pushed."""
+        n_t = self.back.shape[0]
+        if self.acc is None or self.t != n_t:
+            raise AnalysisError(f"ridge: {self.t} of {n_t} columns given")
+        path = np.empty(n_t, dtype=np.int64)
+        path[-1] = int(np.argmin(self.acc))
+        for t in range(n_t - 1, 0, -1):
+            path[t - 1] = path[t] + self.shifts[self.back[t, path[t]]]
+        return path
 
 
 def ridge_path(log_mag: np.ndarray, penalty: float, max_jump: int) -> np.ndarray:
@@ -195,27 +255,38 @@ def ridge_path(log_mag: np.ndarray, penalty: float, max_jump: int) -> np.ndarray
     Returns:
         int array of scale indices, shape (n_times,).
     """
-    n_s, n_t = log_mag.shape
-    cost = -np.asarray(log_mag, dtype=float)
-    shifts = np.arange(-max_jump, max_jump + 1)
-    back = np.empty((n_t, n_s), dtype=np.int8)
-    acc = cost[:, 0].copy()
-    cand = np.empty((shifts.size, n_s))
-    idx = np.arange(n_s)
-    for t in range(1, n_t):
-        # cand[k, i] = acc[i + shift_k] + penalty*shift_k^2: coming into bin i from bin i + shift_k
-        cand.fill(np.inf)
-        for k, d in enumerate(shifts):
-            if d >= 0:
-                cand[k, : n_s - d] = acc[d:]
-            else:
-                cand[k, -d:] = acc[: n_s + d]
-            cand[k] += penalty * d * d
-        best = np.argmin(cand, axis=0)
-        back[t] = best
-        acc = cand[best, idx] + cost[:, t]
-    path = np.empty(n_t, dtype=np.int64)
-    path[-1] = int(np.argmin(acc))
-    for t in range(n_t - 1, 0, -1):
-        path[t - 1] = path[t] + shifts[back[t, path[t]]]
-    return path
+    tracker = RidgeTracker(log_mag.shape[0], log_mag.shape[1], penalty, max_jump)
+    tracker.push(log_mag)
+    return tracker.path()
+
+
+#: |W| below this fraction of the map's largest value counts as no signal (the floor of ln|W|)
+FLOOR = 1e-12
+#: columns of ln|W| handed to the ridge at a time by :func:`streamed_ridge` (float64: 8 B x scales each)
+RIDGE_COLUMNS = 4096
+
+
+def streamed_ridge(x: np.ndarray, fs: float, scales: np.ndarray, fb: float, fc: float, hop: int, core: int,
+                   penalty: float, max_jump: int) -> np.ndarray:
+    """The ridge of ln(|W| + FLOOR * max|W|) over the map of :func:`magnitude_blocks`, computed block by block
+    without holding the map (1 byte per cell, :class:`RidgeTracker`).
+
+    The whole-map version normalises by the map's maximum first; a constant per column does not move the
+    ridge, so the only difference is the floor: here it is FLOOR times the largest |W| seen up to that block,
+    not of the whole map. That changes a column's costs only where |W| is below 1e-12 of the record's largest,
+    a column without signal (docs/long-runs.md). Returns the scale indices, shape (ceil(n/hop),)."""
+    tracker = RidgeTracker(scales.size, -(-x.size // hop), penalty, max_jump)
+    top = 0.0
+    for block in magnitude_blocks(x, fs, scales, fb, fc, hop, core):
+        top = max(top, float(block.max()))
+        # the log and the tracker's cost are float64: made RIDGE_COLUMNS at a time, not for the whole block (with
+        # hop 1 a block is 2^19 columns, and its float64 copies were 1.3 GB on a 600 s chirp at 20 kHz)
+        for a in range(0, block.shape[1], RIDGE_COLUMNS):
+            part = block[:, a:a + RIDGE_COLUMNS]
+            if top > 0:
+                tracker.push(np.log(part / np.float32(top) + FLOOR))
+            else:  # no signal yet: every scale alike, as the floor makes them in the whole map
+                tracker.push(np.full(part.shape, math.log(FLOOR)))
+    if not top > 0:
+        raise AnalysisError("signal has no energy in the wavelet band")
+    return tracker.path()

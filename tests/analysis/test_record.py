@@ -151,3 +151,47 @@ def test_decimated_record_holds_the_kept_samples_not_the_chunks(tmp_path):
         tracemalloc.stop()
     assert dec.n_samples == 8000
     assert peak < 1.5e6, peak
+
+
+@pytest.mark.parametrize("chunk", [7, 1000, 1 << 17])
+def test_a_bounded_span_is_the_reduction_of_the_record_cut_there_and_reads_no_further(tmp_path, chunk):
+    """``max_samples`` keeps the first reduced samples only: bit for bit ``block_average`` of the record cut at
+    ``max_samples * q`` input samples, the reading stops within one chunk of there, and a note says what was cut."""
+    from hilbench.analysis.record import SPAN_NOTE, block_average, decimated_record, span_note
+
+    path = tmp_path / "r.h5"
+    _write(path, n=50_003)
+    whole = load_record(path, timing="hold_previous")
+    x, tau, _ = block_average(whole.position[:1500], whole.torque[:1500], whole.sample_rate, 5, "hold_previous")
+    seen = []
+    dec = decimated_record(path, 200.0, timing="hold_previous", chunk=chunk, progress=seen.append, max_samples=300)
+    assert (dec.sample_rate, dec.n_samples) == (200.0, 300)
+    np.testing.assert_array_equal(dec.position, x)
+    np.testing.assert_array_equal(dec.torque, tau)
+    assert seen[-1] == min(50_003, chunk * -(-1500 // chunk))  # stopped at the chunk that filled the span
+    note = span_note(dec)
+    assert note is not None and note.startswith(SPAN_NOTE) and "1.5 s of 50.003 s" in note
+    free = decimated_record(path, 200.0, chunk=chunk, max_samples=10_000)  # longer than the record: no cut
+    assert free.n_samples == 10_000 and span_note(free) is None
+    with pytest.raises(AnalysisError, match="max_samples must be >= 1"):
+        decimated_record(path, 200.0, max_samples=0)
+
+
+def test_a_streamed_record_names_the_chunk_of_a_non_finite_sample(tmp_path):
+    """stream_record reads through the one chunk reader (analysis.channel_windows): a NaN at sample 4321 read in
+    chunks of 1000 is refused in one line naming the chunk's first sample and the index within it."""
+    from hilbench.analysis.record import stream_record
+
+    path = tmp_path / "nan.h5"
+    n = 10_000
+    k = np.arange(n)
+    x = k * 1e-4
+    x[4321] = np.nan
+    with RunWriter(path, sample_rate=1000.0, channels=("sample_index", "t", "torque", "position")) as w:
+        w.append({"sample_index": k, "t": k / 1000.0, "torque": np.cos(k / 50.0), "position": x})
+    rec, source = stream_record(path, chunk=1000)
+    assert rec.n_samples == n and rec.position is None
+    with pytest.raises(AnalysisError, match=r"samples from 4000\): channel 'position' has 1 non-finite value\(s\), "
+                                            r"first at sample 321"):
+        for _ in source():
+            pass

@@ -91,3 +91,11 @@ def test_compare_over_its_memory_budget_reads_reduced_runs_or_refuses_in_one_lin
     assert main([*args[:-1], "256M", "-o", str(tmp_path / "out2")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "over --memory 256 MiB" in err and not (tmp_path / "out2").exists()
+    # between the two: the first 1 s (MIN_SPAN_S) or more of each run at 5 kHz that fit, said in one line and in
+    # the JSON; span = 300 MiB // (2 * 40 000 B) = 3932 samples, 0.7864 s
+    monkeypatch.setattr(compare, "MIN_SPAN_S", 0.5)
+    assert main([*args, "-o", str(tmp_path / "out3")]) == 0
+    doc = json.loads((tmp_path / "out3" / "compare.json").read_text())
+    assert doc["data"]["train"]["samples"] == doc["data"]["validation"]["samples"] == 3932
+    assert doc["data"]["train"]["span"].startswith("analysed the first 0.7864 s of 2 s (3932 of 10000 samples")
+    assert "analysed the first 0.7864 s" in capsys.readouterr().out

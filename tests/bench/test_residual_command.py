@@ -67,7 +67,11 @@ def test_cli_bad_input_is_one_line(runs, capsys):
 
 
 def test_cli_over_its_memory_budget_refuses_in_one_line_before_reading(runs, capsys, monkeypatch):
+    """Not even the shortest span (10 s of each run) fits: one line, exit 2, before any sample is read."""
     import hilbench.analysis.record as record
+    import hilbench.analysis.residual.record_analysis as ra
+
+    monkeypatch.setattr(ra, "LOOP_BYTES_PER_SAMPLE", 10_000)  # 10 s of both runs: 200 MiB + 200 MB
 
     def no_read(*args, **kwargs):
         raise AssertionError("read the samples before checking the budget")
@@ -77,6 +81,24 @@ def test_cli_over_its_memory_budget_refuses_in_one_line_before_reading(runs, cap
                  "--json", str(runs / "m.json")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "over --memory 256 MiB" in err and not (runs / "m.json").exists()
+
+
+def test_cli_over_its_memory_budget_analyses_the_first_span_that_fits(runs, capsys, monkeypatch):
+    """Between the whole runs and the shortest span: the loop analyses the first samples of each run that fit
+    (docs/long-runs.md, "A bounded span"), says so in one line and in the JSON's inputs."""
+    import hilbench.analysis.residual.record_analysis as ra
+
+    monkeypatch.setattr(ra, "LOOP_BYTES_FIXED", 0)
+    monkeypatch.setattr(ra, "LOOP_BYTES_PER_SAMPLE", 10_000)  # whole: 2 x 15 000 samples, 300 MB
+    assert main(["residual", str(runs / "train.h5"), "--validate", str(runs / "valid.h5"), "--memory", "260M",
+                 "--candidates", "viscous", "--json", str(runs / "span.json")]) == 0
+    span = 260 * 2**20 // (2 * 10_000)  # 13 631 samples at 1 kHz
+    doc = json.loads((runs / "span.json").read_text())
+    notes = doc["inputs"]["span"]
+    assert set(notes) == {str(runs / "train.h5"), str(runs / "valid.h5")}
+    assert all(n.startswith(f"analysed the first 13.631 s of 15 s ({span} of 15000 samples") for n in notes.values())
+    assert f"the loop analyses the first {span} samples of each run" in capsys.readouterr().out
+    assert [e["name"] for e in doc["effects_added"]] == ["viscous"]
 
 
 def test_progress_goes_to_a_terminal_and_quiet_silences_it(monkeypatch):

@@ -47,32 +47,27 @@ def register(subparsers) -> None:
 
 def _records(args, budget: int) -> tuple:
     """(train, validation) records: whole when the comparison fits ``budget`` (bytes) at the recorded rate, else
-    reduced by the largest whole factor that keeps at least 5 kHz while reading chunk by chunk (docs/long-runs.md);
-    one line, before any sample is read, when even that does not fit."""
-    from hilbench.analysis.models.compare import DECIMATED_RATE, cost
-    from hilbench.analysis.record import decimated_record, stream_record
-    from hilbench.bench.analysis_input import load, mib, read_decimated
-    from hilbench.bench.errors import BenchError
+    reduced by the largest whole factor that keeps at least 5 kHz while reading chunk by chunk, and cut to the
+    first samples of each run that fit when even that does not (``compare.reading_plan``, docs/long-runs.md)."""
+    from hilbench.analysis.models.compare import cost, reading_plan
+    from hilbench.analysis.record import decimated_record, mib, span_note, stream_record
+    from hilbench.bench.analysis_input import load, read_decimated
     from hilbench.bench.storage import outputs
 
     opts = {"torque_channel": args.torque_channel, "timing": args.torque_timing or "auto",
             "allow_incomplete": args.allow_incomplete}
     heads = [stream_record(p, **opts)[0] for p in (args.run, args.validate)]
-    samples = sum(h.n_samples for h in heads)
-    if cost(samples) <= budget:
+    plan = reading_plan(heads, budget)
+    if plan is None:
         recs = tuple(load(p, args) for p in (args.run, args.validate))
     else:
-        # the largest factor that keeps the rate >= DECIMATED_RATE: the smallest copy the physics allows
-        qs = [max(1, int(h.sample_rate // DECIMATED_RATE)) for h in heads]
-        kept = sum(h.n_samples // q for h, q in zip(heads, qs, strict=True))
-        if cost(kept) > budget:
-            raise BenchError(f"compare on {samples} samples needs about {mib(cost(samples))}, and about "
-                             f"{mib(cost(kept))} reduced to {DECIMATED_RATE:g} Hz, over --memory {mib(budget)}: "
-                             "raise --memory or compare shorter runs")
-        recs = tuple(read_decimated(p, args, partial(decimated_record, max_rate=h.sample_rate / q), h.n_samples)
+        qs, span = plan
+        recs = tuple(read_decimated(p, args, partial(decimated_record, max_rate=h.sample_rate / q, max_samples=span),
+                                    h.n_samples)
                      for p, h, q in zip((args.run, args.validate), heads, qs, strict=True))
-        outputs.say(f"over --memory {mib(budget)} read whole ({mib(cost(samples))}): compared at "
-                    f"{recs[0].sample_rate:g} Hz, read chunk by chunk ({recs[0].notes[-1]})")
+        how = [n for n in recs[0].notes if n.startswith("decimated") or n == span_note(recs[0])] or ["not reduced"]
+        outputs.say(f"over --memory {mib(budget)} read whole ({mib(cost(sum(h.n_samples for h in heads)))}): "
+                    f"compared at {recs[0].sample_rate:g} Hz, read chunk by chunk ({'; '.join(how)})")
     for p, rec in zip((args.run, args.validate), recs, strict=True):
         outputs.say(f"{p}: torque timing of {rec.torque_channel}: {rec.timing} ({rec.timing_origin})", level=2)
     return recs
@@ -83,6 +78,7 @@ def run(args) -> int:
     from hilbench.analysis.models.compare_plots import report
     from hilbench.analysis.models.families import FAMILIES, published_plant
     from hilbench.analysis.models.model_file import family_document
+    from hilbench.analysis.record import span_note
     from hilbench.bench.analysis_input import memory_budget
     from hilbench.bench.analysis_progress import progress_bar
     from hilbench.bench.errors import BenchError
@@ -122,9 +118,10 @@ def run(args) -> int:
     data = {"train": {"file": str(Path(args.run).resolve()), "samples": int(train.x.size),
                       "sample_rate_hz": train.fs, "torque_channel": train_rec.torque_channel, "torque_timing": timing,
                       "incomplete": train_rec.incomplete,
-                      "read": next((n for n in train_rec.notes if n.startswith("decimated")), "whole")},
+                      "read": next((n for n in train_rec.notes if n.startswith("decimated")), "whole"),
+                      "span": span_note(train_rec)},
             "validation": {"file": str(Path(args.validate).resolve()), "samples": int(val.x.size),
-                           "sample_rate_hz": val.fs, "incomplete": val_rec.incomplete}}
+                           "sample_rate_hz": val.fs, "incomplete": val_rec.incomplete, "span": span_note(val_rec)}}
     outputs.write_json(out / "compare.json", document(result, data), indent=2, allow_nan=False)
     (out / "models").mkdir(exist_ok=True)
     written = []

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from functools import partial
 from pathlib import Path
 
 
@@ -64,22 +65,10 @@ def _headers(args: argparse.Namespace) -> list:
                           allow_incomplete=args.allow_incomplete)[0] for p in [args.run, *args.validate]]
 
 
-def _check_budget(headers: list, budget: int) -> None:
-    """One line, before any sample is read, when the loop's estimated peak is over ``--memory``."""
-    from hilbench.analysis.residual.record_analysis import analysed_samples, cost
-    from hilbench.bench.analysis_input import mib
-    from hilbench.bench.errors import BenchError
-
-    samples = sum(analysed_samples(h.n_samples, h.sample_rate) for h in headers)
-    if cost(samples) > budget:
-        raise BenchError(f"the residual loop on {samples} samples (at most 2 kHz) needs about {mib(cost(samples))}, "
-                         f"over --memory {mib(budget)}: raise --memory or analyse a shorter run")
-
-
 def run(args: argparse.Namespace) -> int:
     from hilbench.analysis.models.families import FAMILIES
     from hilbench.analysis.models.model_file import read_model
-    from hilbench.analysis.record import decimation_factor
+    from hilbench.analysis.record import decimation_factor, mib, span_note
     from hilbench.analysis.residual import record_analysis
     from hilbench.analysis.residual.report import report_dict
     from hilbench.bench.analysis_input import check_cutoff, memory_budget, read_decimated
@@ -99,10 +88,13 @@ def run(args: argparse.Namespace) -> int:
         raise BenchError(f"--inertia must be finite and >= 0, got {args.inertia}")
     budget = memory_budget(args.memory)
     headers = _headers(args)
-    _check_budget(headers, budget)
+    span = record_analysis.span_for(headers, budget)
+    if span is not None:
+        outputs.say(f"over --memory {mib(budget)}: the loop analyses the first {span} samples of each run at its "
+                    "rate (a bounded span, docs/long-runs.md)", args.json)
     for h in headers:  # the loop's cutoff applies at the rate it analyses (at most 2 kHz)
         check_cutoff(args.cutoff, h.sample_rate / decimation_factor(h.sample_rate, record_analysis.MAX_RATE))
-    recs = [read_decimated(p, args, record_analysis.read, h.n_samples, timing=args.timing)
+    recs = [read_decimated(p, args, partial(record_analysis.read, max_samples=span), h.n_samples, timing=args.timing)
             for p, h in zip([args.run, *args.validate], headers, strict=True)]
     for p, rec in zip([args.run, *args.validate], recs, strict=True):
         outputs.say(f"{p}: torque timing of {rec.torque_channel}: {rec.timing} ({rec.timing_origin})", args.json,
@@ -121,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
               "sample_rate_hz": rec.sample_rate,
               "fixed_inertia": args.inertia if record == "torque-driven" or args.inertia is not None else 0.0,
               "record": record, "start_model": res.start_model,
+              "span": {p: span_note(r) for p, r in zip([args.run, *args.validate], recs, strict=True) if span_note(r)},
               "incomplete": {p: r.incomplete for p, r in zip([args.run, *args.validate], recs, strict=True)
                              if r.incomplete is not None}}
     outputs.write_json(args.json, report_dict(result, inputs), indent=2, allow_nan=False)

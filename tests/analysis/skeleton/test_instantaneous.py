@@ -158,3 +158,39 @@ def test_errors_are_analysis_errors():
         instantaneous(x, FS, fb=0.1, fc=0.5)
     with pytest.raises(AnalysisError, match="constant"):
         instantaneous(np.ones(20000), FS)
+
+
+def test_the_ridge_streamed_block_by_block_is_the_whole_maps_ridge(monkeypatch):
+    """The ridge without the map (wavelet_ridge.streamed_ridge: |W| block by block into RidgeTracker, 1 byte per
+    cell) equals ridge_path of the whole map normalised by its maximum, bit for bit, on a chirp whose amplitude
+    grows 100-fold (the running maximum used as the floor's reference changes from block to block); and the
+    tracker fed any split of a map gives ridge_path's path."""
+    from hilbench.analysis.skeleton.wavelet_ridge import (
+        RidgeTracker,
+        magnitude_blocks,
+        magnitude_map,
+        scale_grid,
+        streamed_ridge,
+    )
+
+    fs, n = 200.0, 40_000
+    t = np.arange(n) / fs
+    x = np.geomspace(0.01, 1.0, n) * np.sin(np.pi * 0.05 * t**2 + 2 * np.pi * 0.5 * t)  # 0.5 to 10.5 Hz
+    scales = scale_grid(0.3, 20.0, 0.8, 16)
+    hop, core = 4, 4096  # about ten blocks
+    assert len(list(magnitude_blocks(x, fs, scales, 0.5, 0.8, hop, core))) >= 9
+    mag = magnitude_map(x, fs, scales, 0.5, 0.8, hop, core)
+    whole = ridge_path(np.log(mag / float(mag.max()) + 1e-12), 0.5, 3)
+    np.testing.assert_array_equal(streamed_ridge(x, fs, scales, 0.5, 0.8, hop, core, 0.5, 3), whole)
+    import hilbench.analysis.skeleton.wavelet_ridge as wavelet_ridge
+
+    monkeypatch.setattr(wavelet_ridge, "RIDGE_COLUMNS", 100)  # each block handed to the ridge in parts
+    np.testing.assert_array_equal(streamed_ridge(x, fs, scales, 0.5, 0.8, hop, core, 0.5, 3), whole)
+    f_ridge = 0.8 / scales[whole[500:-500]]  # the chirp's frequency, to a bin (16 voices: 4.4 %)
+    f_true = 0.5 + 0.05 * t[::hop][500:-500]
+    assert np.max(np.abs(f_ridge / f_true - 1)) < 0.05
+    log_mag = np.log(mag + 1e-12)
+    tracker = RidgeTracker(scales.size, mag.shape[1], 0.5, 3)
+    for a, b in ((0, 1), (1, 7), (7, 5000), (5000, mag.shape[1])):
+        tracker.push(log_mag[:, a:b])
+    np.testing.assert_array_equal(tracker.path(), ridge_path(log_mag, 0.5, 3))
