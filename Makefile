@@ -58,9 +58,10 @@ firmware: $(STAMP) toolchain
 
 # Tests without a realtime device run on every core; those with one (marked `realtime` by tests/conftest.py)
 # then run one at a time on a quiet machine. Both parts always run; the worse exit code is make's.
+# Each part lists its 15 slowest tests, so that growth of the suite's time (aim: under 10 min) is seen where it happens.
 test: $(STAMP) toolchain chromium
-	@$(BIN)/python -m pytest -q -p no:cacheprovider -m "not realtime" -n auto --dist loadfile; a=$$?; \
-	$(BIN)/python -m pytest -q -p no:cacheprovider -m realtime; b=$$?; \
+	@$(BIN)/python -m pytest -q -p no:cacheprovider --durations=15 -m "not realtime" -n auto --dist loadfile; a=$$?; \
+	$(BIN)/python -m pytest -q -p no:cacheprovider --durations=15 -m realtime; b=$$?; \
 	exit $$(( a > b ? a : b ))
 
 bench: $(STAMP)
