@@ -59,9 +59,11 @@ firmware: $(STAMP) toolchain
 # Tests without a realtime device run on every core; those with one (marked `realtime` by tests/conftest.py)
 # then run one at a time on a quiet machine. Both parts always run; the worse exit code is make's.
 # Each part lists its 15 slowest tests, so that growth of the suite's time (aim: under 10 min) is seen where it happens.
+# A test that hangs fails after TEST_TIMEOUT seconds (pytest-timeout) instead of holding the whole run.
+TEST_TIMEOUT ?= 300
 test: $(STAMP) toolchain chromium
-	@$(BIN)/python -m pytest -q -p no:cacheprovider --durations=15 -m "not realtime" -n auto --dist loadfile; a=$$?; \
-	$(BIN)/python -m pytest -q -p no:cacheprovider --durations=15 -m realtime; b=$$?; \
+	@$(BIN)/python -m pytest -q -p no:cacheprovider --durations=15 --timeout=$(TEST_TIMEOUT) -m "not realtime" -n auto --dist loadfile; a=$$?; \
+	$(BIN)/python -m pytest -q -p no:cacheprovider --durations=15 --timeout=$(TEST_TIMEOUT) -m realtime; b=$$?; \
 	exit $$(( a > b ? a : b ))
 
 bench: $(STAMP)

@@ -566,10 +566,12 @@ class CanopenDrive(HostClockedDevice):
         self._timing = None
         arrays = cycle.arrays
         try:
+            started = time.monotonic()
             cycle.start()
             hb_deadline = None
             while True:
                 time.sleep(BLOCK_PERIOD)
+                cycle.check_started(started, f"CANopen node {self.node_id}")
                 ended = not cycle.alive() or bool(arrays["ctl"][1])
                 if ended:
                     cycle.join()

@@ -27,7 +27,7 @@ import numpy as np
 from hilbench.drivers.can_buffer import enlarge_receive_buffer
 from hilbench.drivers.can_frames import drop_malformed_frames
 from hilbench.drivers.device import Device, refusal
-from hilbench.drivers.errors import ConfigError
+from hilbench.drivers.errors import ConfigError, DeviceTimeoutError
 
 LATE_FRACTION = 0.25
 JITTER_LIMIT = 0.10
@@ -211,6 +211,7 @@ _SENT, _STOP, _ESTOP, _ERROR, _REALTIME, _ECHOED = 0, 1, 2, 3, 4, 5  # control s
 _MALFORMED, _LIMIT, _LIMIT_AT = 6, 7, 8  # frames dropped undecoded; limit tripped (guard index + 1), at rx row
 _RX = 9
 RT_PRIORITY = 20  # SCHED_FIFO priority of the cycle process, where the OS allows it
+START_LIMIT = 20.0  # s: the longest wait for a cycle's first trigger (a spawned process on a loaded host)
 TAIL_LIMIT = 60.0  # s: the longest wait, after the last trigger, for a lagging drive's remaining answers
 
 
@@ -257,15 +258,23 @@ class CanCycle:
     def start(self) -> None:
         import os
 
-        own = self.spec.interface != "virtual"
-        args = (self.spec, self._shm.name, self.n, self._start_delay, os.getpid() if own else 0)
         if self.spec.interface == "virtual":
             import threading
 
-            self._worker = threading.Thread(target=_cycle_main, args=args, name="can-cycle", daemon=True)
+            # In a thread, the bus is opened here and the arrays are shared as they are: the thread only runs
+            # the loop (a CI run once hung with the thread waiting inside can.Bus(), the cycle never started).
+            bus = _open_bus(self.spec)
+            if bus is None:
+                self.arrays["ctl"][_ERROR] = 1
+                self.arrays["ctl"][_STOP] = 1
+                return
+            self._worker = threading.Thread(target=_cycle_with_bus, args=(bus, self.spec, self.arrays, self.n,
+                                                                          self._start_delay), name="can-cycle",
+                                            daemon=True)
         else:
             import multiprocessing
 
+            args = (self.spec, self._shm.name, self.n, self._start_delay, os.getpid())
             self._worker = multiprocessing.get_context("spawn").Process(target=_cycle_main, args=args,
                                                                         name="can-cycle", daemon=True)
         self._worker.start()
@@ -308,6 +317,15 @@ class CanCycle:
     def stop(self) -> None:
         self.arrays["ctl"][_STOP] = 1
 
+    def check_started(self, since: float, name: str) -> None:
+        """Raise :class:`DeviceTimeoutError` when the cycle, started at ``since`` (``time.monotonic``), has sent
+        no trigger within :data:`START_LIMIT` while still alive: a run must end in one line, never hang."""
+        if not self.sent and self.alive() and time.monotonic() - since > START_LIMIT:
+            self.stop()
+            self.join()
+            raise DeviceTimeoutError(f"{name}: the host's CAN cycle sent no frame within {START_LIMIT:g} s of "
+                                     f"its start (it never started; nothing was commanded)")
+
     def estop(self) -> None:
         self.arrays["ctl"][_ESTOP] = 1
 
@@ -323,7 +341,10 @@ class CanCycle:
         self.stop()
         self.join()
         self.arrays = {}
-        self._shm.close()
+        try:
+            self._shm.close()
+        except BufferError:  # a cycle thread that outlived its join still holds views: the mapping goes with it
+            pass
         self._shm.unlink()
 
 
@@ -333,37 +354,50 @@ def _cycle_main(spec: CanCycleSpec, shm_name: str, n: int, start_delay: float, p
     they would if the host itself ran them, and the drive's SYNC or heartbeat timeout takes over)."""
     from multiprocessing import shared_memory
 
-    import can
-
     shm = shared_memory.SharedMemory(name=shm_name)
     try:
         a = CanCycle._view(shm.buf, n, len(spec.tx_ids), len(spec.rx_ids))
-        ctl, host_time, scheduled, rx, tx = a["ctl"], a["host_time"], a["scheduled"], a["rx"], a["tx"]
-        rx_time = a["rx_time"]
+        ctl = a["ctl"]
         if parent:
             import gc
 
             ctl[_REALTIME] = _realtime_priority()
             gc.disable()  # no collector pauses in the cycle; it allocates nothing that lives on
-        kwargs = dict(spec.bus_kwargs)
-        if spec.echo_id is not None and spec.interface in OWN_FRAMES_OPTION:
-            kwargs["receive_own_messages"] = True
-        try:
-            bus = can.Bus(interface=spec.interface, channel=spec.channel, **kwargs)
-        except Exception:
+        bus = _open_bus(spec)
+        if bus is None:
             ctl[_ERROR] = 1
             ctl[_STOP] = 1
             return
-        enlarge_receive_buffer(bus)
-        malformed = drop_malformed_frames(bus)
-        try:
-            _cycle_loop(bus, spec, n, start_delay, ctl, host_time, scheduled, (rx, rx_time), tx, parent)
-        finally:
-            ctl[_MALFORMED] = malformed.count
-            bus.shutdown()
-        del a, ctl, host_time, scheduled, rx, rx_time, tx
+        _cycle_with_bus(bus, spec, a, n, start_delay, parent)
+        del a, ctl  # the views must go before the mapping closes
     finally:
         shm.close()
+
+
+def _open_bus(spec: CanCycleSpec):
+    """The cycle's own bus (None when it cannot be opened)."""
+    import can
+
+    kwargs = dict(spec.bus_kwargs)
+    if spec.echo_id is not None and spec.interface in OWN_FRAMES_OPTION:
+        kwargs["receive_own_messages"] = True
+    try:
+        return can.Bus(interface=spec.interface, channel=spec.channel, **kwargs)
+    except Exception:
+        return None
+
+
+def _cycle_with_bus(bus, spec: CanCycleSpec, a: dict, n: int, start_delay: float, parent: int = 0) -> None:
+    """Run the cycle on an open ``bus`` over the arrays ``a``, then release the bus."""
+    ctl = a["ctl"]
+    enlarge_receive_buffer(bus)
+    malformed = drop_malformed_frames(bus)
+    try:
+        _cycle_loop(bus, spec, n, start_delay, ctl, a["host_time"], a["scheduled"], (a["rx"], a["rx_time"]), a["tx"],
+                    parent)
+    finally:
+        ctl[_MALFORMED] = malformed.count
+        bus.shutdown()
 
 
 def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_time, scheduled, received, tx,
@@ -416,9 +450,9 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
     def wait_until(deadline: float) -> None:
         while True:
             left = deadline - clock()
-            if left <= 0 or ctl[_LIMIT]:
+            if left <= 0 or ctl[_LIMIT] or ctl[_STOP]:
                 return
-            msg = bus.recv(timeout=left)
+            msg = bus.recv(timeout=min(left, 0.1))  # a stop is seen within 0.1 s, however far off the next cycle
             if msg is not None:
                 take(msg)
 
@@ -432,7 +466,7 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
             break
         due = t0 + k * period
         wait_until(due)
-        if ctl[_LIMIT]:  # a limit tripped while waiting: this cycle's setpoint is not sent
+        if ctl[_LIMIT] or ctl[_STOP]:  # a limit tripped, or a stop came, while waiting: this setpoint is not sent
             break
         if ctl[_ESTOP]:
             for msg in stop_msgs:
@@ -453,7 +487,10 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
     quiet = max(1.0, 20 * period)
     end, last_call = clock() + quiet, clock() + TAIL_LIMIT
     answered = min(counts or [0])
-    while not ctl[_STOP] and answered < ctl[_SENT] and (left := min(end, last_call) - clock()) > 0:  # host gave up
+    # A tripped limit ends the record at the sample that tripped: wait for that sample's other frames too (an
+    # ODrive's cyclic frames are not answers to triggers, so its rows can run ahead of the commands sent).
+    wanted = max(int(ctl[_SENT]), int(ctl[_LIMIT_AT]) + 1 if ctl[_LIMIT] else 0)
+    while not ctl[_STOP] and answered < wanted and (left := min(end, last_call) - clock()) > 0:  # host gave up
         msg = bus.recv(timeout=left)
         if msg is not None:
             take(msg)

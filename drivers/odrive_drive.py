@@ -241,12 +241,14 @@ class OdriveDrive(HostClockedDevice):
         done, fault = 0, ""
         heard = time.monotonic()  # when the number of samples last grew (reset once the first command is out)
         try:
+            started = time.monotonic()
             cycle.start()
             # The zero-torque feed keeps the axis's watchdog fed until the cycle's first command is out: starting
             # the cycle process takes longer than the watchdog timeout on a loaded host. A feed frame that lands
             # between the first commands makes the axis hold zero for one tick, which its torque target records.
             while not cycle.sent and cycle.alive() and not a["ctl"][1]:
                 time.sleep(0.0005)
+                cycle.check_started(started, f"ODrive node {self.node_id}")
             self._stop_feed()  # the cycle's commands feed the watchdog now
             heard = time.monotonic()
             while True:
