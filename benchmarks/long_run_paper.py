@@ -130,14 +130,14 @@ def measure(path: Path, analysis: str, mode: str, top: float = 0.0) -> dict:
 
 
 def rows(durations: tuple[float, ...] = (60.0, 300.0), fs: float = FS,
-         modes: tuple[str, ...] = ("whole", "stream")) -> list[dict]:
+         modes: tuple[str, ...] = ("whole", "stream"), analyses: tuple[str, ...] = ANALYSES) -> list[dict]:
     """Rows (name, value, unit, baseline, ratio) for each analysis, mode and duration; the baseline is the first
     duration's run read the same way. A run an analysis refuses (one line, e.g. the skeleton's wavelet map over
     its bound) is a row with that line as its ``target`` and ``ok`` False."""
     out = []
     kinds = {"afrf": "stepped_sine", "skeleton": "chirp", "presliding": "presliding"}
     with tempfile.TemporaryDirectory() as tmp:
-        for analysis in ANALYSES:
+        for analysis in analyses:
             results = {}
             for duration in durations:
                 path = Path(tmp) / f"{analysis}_{duration:g}.h5"
