@@ -205,31 +205,36 @@ class RidgeTracker:
         self.back = np.empty((n_times, n_scales), dtype=np.int8)
         self.acc: np.ndarray | None = None
         self.t = 0
-        self._cand = np.empty((self.shifts.size, n_scales))
         self._idx = np.arange(n_scales)
+        # acc with max_jump inf on either side: row k of its sliding windows is acc shifted by shifts[k], inf where
+        # bin i + shift_k is off the map; the penalties of the shifts as a column
+        self._pad = np.full(n_scales + 2 * max_jump, np.inf)
+        self._windows = np.lib.stride_tricks.sliding_window_view(self._pad, n_scales)
+        self._pen = (self.penalty * self.shifts * self.shifts).astype(float)[:, None]
+        self._cand = np.empty((self.shifts.size, n_scales))
 
     def push(self, log_mag: np.ndarray) -> None:
         """Columns ln|W| of shape (n_scales, k), the next k in time."""
         n_s = self._idx.size
         cost = -np.asarray(log_mag, dtype=float)
-        cand = self._cand
+        j = (self.shifts.size - 1) // 2
+        pad, windows, pen, cand, idx, back = self._pad, self._windows, self._pen, self._cand, self._idx, self.back
         start = 0
         if self.acc is None:
             self.acc = cost[:, 0].copy()
             self.t, start = 1, 1
+        acc = self.acc
+        cost_t = np.ascontiguousarray(cost.T)  # one column per row: contiguous in the loop below
         for t in range(start, cost.shape[1]):
-            # cand[k, i] = acc[i + shift_k] + penalty*shift_k^2: coming into bin i from bin i + shift_k
-            cand.fill(np.inf)
-            for k, d in enumerate(self.shifts):
-                if d >= 0:
-                    cand[k, : n_s - d] = self.acc[d:]
-                else:
-                    cand[k, -d:] = self.acc[: n_s + d]
-                cand[k] += self.penalty * d * d
-            best = np.argmin(cand, axis=0)
-            self.back[self.t] = best
-            self.acc = cand[best, self._idx] + cost[:, t]
+            # cand[k, i] = acc[i + shift_k] + penalty*shift_k^2: coming into bin i from bin i + shift_k (inf when
+            # off the map); the same additions, in the same order, as one shift at a time
+            pad[j:j + n_s] = acc
+            np.add(windows, pen, out=cand)
+            best = cand.argmin(axis=0)
+            back[self.t] = best
+            acc = cand[best, idx] + cost_t[t]
             self.t += 1
+        self.acc = acc
 
     def path(self) -> np.ndarray:
         """int array of scale indices, shape (n_times,), once every column has been pushed."""
