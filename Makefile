@@ -8,6 +8,10 @@ C_SRC  := $(wildcard firmware_sim/engine/*.c firmware_sim/engine/*.h firmware/co
           firmware_sim/engine/plant_build.py firmware/targets/host/core_build.py
 PKG    := $(wildcard hilbench/*.py)
 export QT_QPA_PLATFORM ?= offscreen
+# Compiled modules are cached in __pycache__ (git-ignored) even where the environment says not to
+# (PYTHONDONTWRITEBYTECODE): every CLI, device and worker process the tests start would compile hilbench again
+# (0.84 s against 0.55 s for `hilbench --help`), and pytest would rewrite every test module in each part.
+unexport PYTHONDONTWRITEBYTECODE
 
 .PHONY: all setup demo test bench lint clean toolchain firmware chromium
 
