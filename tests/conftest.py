@@ -16,7 +16,24 @@ DEVICE_COMMANDS = ("-m hilbench.firmware_sim", "qemu-system-")
 UNPACED = "--pacing lockstep"
 
 
+#: the modules that take longest (seconds of test time, measured on 2 cores with --durations=0), run first: `make
+#: test` hands whole modules to its workers in collection order (--dist loadfile), and one of these coming last
+#: left the other worker idle for up to a minute (longest first is the classic bound for that schedule)
+SLOWEST_FIRST = ("benchmarks/test_quick.py", "test_packaging.py", "analysis/drift/test_drift_stationary.py",
+                 "analysis/identification/test_identification.py", "analysis/reproductions/test_paper.py",
+                 "analysis/residual/test_residual_loop.py", "bench/test_demo.py",
+                 "analysis/identification/test_uncertainty.py", "bench/test_default_chirp_warning.py",
+                 "bench/test_identify_command.py", "analysis/drift/test_drift_temperature.py")
+
+
+def _slowest_first(item: pytest.Item) -> int:
+    path = Path(str(item.path)).resolve()
+    rel = path.relative_to(TESTS).as_posix() if TESTS in path.parents else ""
+    return SLOWEST_FIRST.index(rel) if rel in SLOWEST_FIRST else len(SLOWEST_FIRST)
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    items.sort(key=_slowest_first)  # stable: the order within a module, and of the other modules, is kept
     # A test that starts a device says so by requesting the `starts_devices` fixture (a module: `pytestmark =
     # pytest.mark.usefixtures("starts_devices")`); it, and a test marked `realtime` itself, is realtime, which `make
     # test` runs one at a time after the parallel part so that no other test competes with it for the cores. The
