@@ -175,10 +175,15 @@ def execute_chunk(items: list[tuple[str, str]], settings: StepSettings,
 
 
 def chunk(todo: list[Task], workers: int) -> list[list[Task]]:
-    """Split the tasks into chunks of at most MAX_CHUNK, at least four chunks per worker (so that the last
-    chunks balance the workers); small campaigns get one run per chunk."""
-    size = max(1, min(MAX_CHUNK, len(todo) // (4 * max(1, workers))))
-    return [todo[i:i + size] for i in range(0, len(todo), size)]
+    """Split the tasks into chunks of at most MAX_CHUNK that shrink as the work left does (guided scheduling):
+    each is a quarter of the remaining tasks' share per worker, so the last ones are single runs and no worker
+    waits for another's last chunk of eight; small campaigns get one run per chunk."""
+    out, i, per = [], 0, 4 * max(1, workers)
+    while i < len(todo):
+        size = max(1, min(MAX_CHUNK, (len(todo) - i) // per))
+        out.append(todo[i:i + size])
+        i += size
+    return out
 
 
 #: what the steps import (much of it inside their functions; scipy.signal alone takes seconds): imported once per
@@ -200,7 +205,16 @@ def start_fork_server() -> None:
 
     import dask
 
-    env = {k: str(v) for k, v in dask.config.get("distributed.nanny.pre-spawn-environ", {}).items()}
+    # The thread counts are set here whatever Dask's config says: its distributed defaults (pre-spawn-environ) load
+    # only when distributed is imported, which `hilbench analyse` does after this. The environment read here was
+    # empty, so each worker ran OpenBLAS on two threads (200 runs of 2 s: 32 s of CPU against 15 s serial; tables
+    # that differed from the serial ones in the last bits). Importing distributed first would delay the server.
+    # Not MALLOC_TRIM_THRESHOLD_: set, it also fixes glibc's mmap threshold at 128 KiB, so every array of a run's
+    # analysis above that was mapped and unmapped again; the workers spent 1.7x the serial loop's CPU on a
+    # campaign of 25 000-sample runs (the serial loop with it set: 51 s, 19.5 s of it sys; without: 30.5 s, 4.2 s)
+    env = {k: str(v) for k, v in dask.config.get("distributed.nanny.pre-spawn-environ", {}).items()
+           if k != "MALLOC_TRIM_THRESHOLD_"}
+    env.update({k: "1" for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")})
     saved = {k: os.environ.get(k) for k in env}
     os.environ.update(env)
     try:
@@ -266,10 +280,16 @@ def analyse(folders: list[Path], out: Path, steps: tuple[str, ...] = ("identify"
     bar = tqdm(total=len(todo), unit="run", desc="analyse", disable=not progress or not todo, dynamic_ncols=True)
     try:
         if serial:
+            from threadpoolctl import threadpool_limits
+
             warm_up()
             summary.startup_time = time.perf_counter() - t0
-            for part in chunk(todo, 1):
-                record(part, execute_chunk(_items(part), settings, fn))
+            # one BLAS thread, as each Dask worker has (OMP_NUM_THREADS=1): the fits' matrices are small, and
+            # OpenBLAS's second thread spun a second core for nothing (200 short runs: 29.9 s of CPU in 15.3 s,
+            # against 14.8 s of CPU in 13.9 s with one thread)
+            with threadpool_limits(limits=1, user_api="blas"):
+                for part in chunk(todo, 1):
+                    record(part, execute_chunk(_items(part), settings, fn))
         elif todo:
             if not (scheduler or scheduler_file):
                 start_fork_server()

@@ -134,9 +134,14 @@ def test_a_killed_client_leaves_good_parts_and_a_rerun_analyses_only_the_missing
 
 def test_chunks_balance_the_workers_and_cap_the_task_size():
     todo = list(range(200))
-    parts = chunk(todo, 2)  # 200 runs, 2 workers: 8 per task, 25 tasks
-    assert [len(p) for p in parts] == [MAX_CHUNK] * 25 and sum(parts, []) == todo
-    assert [len(p) for p in chunk(todo[:20], 2)] == [2] * 10  # at least 4 tasks per worker
+    parts = chunk(todo, 2)  # 200 runs, 2 workers: 8 per task while 64 or more are left, then shrinking to 1
+    sizes = [len(p) for p in parts]
+    assert sum(parts, []) == todo and sizes[:18] == [MAX_CHUNK] * 18 and sizes == sorted(sizes, reverse=True)
+    # each a quarter of the remaining share per worker: the last 8 are single runs
+    left = [sum(sizes[:k]) for k in range(len(sizes))]
+    assert all(s == max(1, min(MAX_CHUNK, (200 - a) // 8)) for s, a in zip(sizes, left, strict=True))
+    assert sizes[-8:] == [1] * 8 and len(parts) < 60
+    assert [len(p) for p in chunk(todo[:20], 2)] == [2, 2, 2] + [1] * 14  # at least 4 tasks per worker
     assert [len(p) for p in chunk(todo[:5], 2)] == [1] * 5
 
 
@@ -148,3 +153,36 @@ def test_cli_bad_input_is_one_line_and_exit_2(campaign, tmp_path, capsys):
     assert main(["analyse", str(campaign), "-o", str(campaign)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "campaign folder" in err
+
+
+_BLAS_CHILD = """
+import json, sys
+from pathlib import Path
+from hilbench.bench.campaign_analysis.engine import analyse
+
+def blas_threads(path, settings):
+    from threadpoolctl import threadpool_info
+    # carried in a numeric column of the table's fixed schema
+    return {"inertia": float(max((i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"), default=0))}
+
+if __name__ == "__main__":
+    mode = sys.argv[3]
+    s = analyse([Path(sys.argv[1])], Path(sys.argv[2]), serial=mode == "serial", workers=2, dashboard=False,
+                progress=False, say=lambda _line: None, functions={"identify": blas_threads})
+    print(json.dumps(s.table and str(s.table)))
+"""
+
+
+@pytest.mark.parametrize("mode", ["serial", "cluster"])
+def test_every_run_is_analysed_with_one_blas_thread(campaign, tmp_path, mode):
+    """A fresh `hilbench analyse` (distributed not imported before it starts the workers' fork server) ran each worker's
+    OpenBLAS on two threads: Dask's pre-spawn environment was read before distributed had loaded its config.
+    That spun a second core per worker (200 runs: 32 s of CPU against 15 s serial) and made the tables differ
+    from the serial ones in the last bits. The serial loop, too, now limits BLAS to one thread."""
+    script = tmp_path / "child.py"  # a file, not -c: the fork server re-imports the main module
+    script.write_text(_BLAS_CHILD)
+    done = subprocess.run([sys.executable, str(script), str(campaign), str(tmp_path / "r"), mode],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    rows = [r for r in _rows(tmp_path / "r" / "results.parquet") if r["status"] == "ok"]
+    assert len(rows) == 8 and {r["inertia"] for r in rows} == {1.0}, [r["inertia"] for r in rows]  # BLAS threads
