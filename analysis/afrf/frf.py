@@ -123,9 +123,40 @@ def harmonic_phasors(x: np.ndarray, fs: float, f: float, n_harmonics: int = 3,
         flat = x.reshape(-1, n)
         slopes = np.array([_drift_slope(row, periods) for row in flat]).reshape(x.shape[:-1] + (1,))
         x = x - slopes * np.arange(n)
-    spectrum = np.fft.rfft(x, axis=-1)
     bins = periods * np.arange(1, n_harmonics + 1)
-    return spectrum[..., bins] * (2.0 / n)
+    return dft_bins(x, bins) * (2.0 / n)
+
+
+#: samples per block of :func:`dft_bins`
+DFT_BLOCK = 1 << 16
+
+
+def dft_bins(x: np.ndarray, bins: np.ndarray, block: int = DFT_BLOCK) -> np.ndarray:
+    """DFT of ``x`` (last axis, n samples) at the integer ``bins`` only: ``X_k = sum_i x_i*exp(-2j*pi*k*i/n)``.
+
+    The same numbers as ``np.fft.rfft(x)[..., bins]`` to rounding, in O(n*len(bins)) time and one block of
+    memory: the twiddles of one block, exp(-2j*pi*(k*b mod n)/n) for b < block, are the same for every block
+    up to the factor exp(-2j*pi*(k*i0 mod n)/n) of the block's first sample i0 (exact integer phases, so
+    nothing accumulates). A whole-window rFFT cost n*log(n) and n/2 complex values for three bins: on a
+    one-hour stepped sine its windows of 12 M samples made the analysis's cost per sample 1.4x a minute's.
+
+    Args:
+        x: real samples, shape (..., n).
+        bins: integer frequency bins, shape (K,), each in [0, n).
+    Returns:
+        complex array (..., K).
+    """
+    x = np.asarray(x, dtype=float)
+    bins = np.asarray(bins, dtype=np.int64)
+    n = x.shape[-1]
+    b = np.arange(min(block, n), dtype=np.int64)
+    base = np.exp((-2j * np.pi / n) * ((bins[:, None] * b[None, :]) % n))  # (K, block)
+    out = np.zeros(x.shape[:-1] + (bins.size,), dtype=complex)
+    for i0 in range(0, n, block):
+        seg = x[..., i0:i0 + block]
+        start = np.exp((-2j * np.pi / n) * ((bins * i0) % n))  # (K,)
+        out += (seg @ base[:, :seg.shape[-1]].T) * start
+    return out
 
 
 def harmonics(x: np.ndarray, fs: float, f: float, n_harmonics: int = 3, detrend: bool = True) -> np.ndarray:
