@@ -181,8 +181,11 @@ def test_every_run_is_analysed_with_one_blas_thread(campaign, tmp_path, mode):
     from the serial ones in the last bits. The serial loop, too, now limits BLAS to one thread."""
     script = tmp_path / "child.py"  # a file, not -c: the fork server re-imports the main module
     script.write_text(_BLAS_CHILD)
+    # without the thread limits make test sets for its own processes: the analysis must set them itself
+    env = {k: v for k, v in os.environ.items() if k not in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+                                                             "MKL_NUM_THREADS")}
     done = subprocess.run([sys.executable, str(script), str(campaign), str(tmp_path / "r"), mode],
-                          capture_output=True, text=True, timeout=300)
+                          capture_output=True, text=True, timeout=300, env=env)
     assert done.returncode == 0, done.stderr[-2000:]
     rows = [r for r in _rows(tmp_path / "r" / "results.parquet") if r["status"] == "ok"]
     assert len(rows) == 8 and {r["inertia"] for r in rows} == {1.0}, [r["inertia"] for r in rows]  # BLAS threads
