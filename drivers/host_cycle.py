@@ -263,10 +263,8 @@ class CanCycle:
 
             # In a thread, the bus is opened here and the arrays are shared as they are: the thread only runs
             # the loop (a CI run once hung with the thread waiting inside can.Bus(), the cycle never started).
-            bus = _open_bus(self.spec)
+            bus = _open_bus(self.spec, self.arrays["ctl"])
             if bus is None:
-                self.arrays["ctl"][_ERROR] = 1
-                self.arrays["ctl"][_STOP] = 1
                 return
             self._worker = threading.Thread(target=_cycle_with_bus, args=(bus, self.spec, self.arrays, self.n,
                                                                           self._start_delay), name="can-cycle",
@@ -363,10 +361,8 @@ def _cycle_main(spec: CanCycleSpec, shm_name: str, n: int, start_delay: float, p
 
             ctl[_REALTIME] = _realtime_priority()
             gc.disable()  # no collector pauses in the cycle; it allocates nothing that lives on
-        bus = _open_bus(spec)
+        bus = _open_bus(spec, ctl)
         if bus is None:
-            ctl[_ERROR] = 1
-            ctl[_STOP] = 1
             return
         _cycle_with_bus(bus, spec, a, n, start_delay, parent)
         del a, ctl  # the views must go before the mapping closes
@@ -374,8 +370,8 @@ def _cycle_main(spec: CanCycleSpec, shm_name: str, n: int, start_delay: float, p
         shm.close()
 
 
-def _open_bus(spec: CanCycleSpec):
-    """The cycle's own bus (None when it cannot be opened)."""
+def _open_bus(spec: CanCycleSpec, ctl):
+    """The cycle's own bus; None when it cannot be opened, and then ``ctl`` says so (error, stopped)."""
     import can
 
     kwargs = dict(spec.bus_kwargs)
@@ -384,6 +380,8 @@ def _open_bus(spec: CanCycleSpec):
     try:
         return can.Bus(interface=spec.interface, channel=spec.channel, **kwargs)
     except Exception:
+        ctl[_ERROR] = 1
+        ctl[_STOP] = 1
         return None
 
 
