@@ -61,9 +61,16 @@ class Samples(SampleBlock):
     status: np.ndarray
     sample_rate: int
     calibration: Calibration
+    temperature: float | None = None  # winding temperature when the block was sent, degC (None: no sensor)
 
     def __len__(self) -> int:
         return len(self.counts)
+
+    def extra(self) -> dict[str, np.ndarray]:
+        """The device's temperature reading held over the block's samples (one reading per block)."""
+        if self.temperature is None:
+            return {}
+        return {"temperature": np.full(len(self.counts), self.temperature)}
 
     @property
     def index(self) -> np.ndarray:
@@ -197,6 +204,11 @@ class Amplifier(Device):
         if ident.protocol_version != p.PROTOCOL_VERSION:
             raise DriverError(f"device speaks protocol {ident.protocol_version}, this host {p.PROTOCOL_VERSION}")
         return ident
+
+    @property
+    def reported_channels(self) -> tuple[str, ...]:
+        """``temperature`` when the device's IDENTITY names a winding sensor (protocol v3)."""
+        return ("temperature",) if self.identity.sensors & p.Sensor.TEMPERATURE else ()
 
     # ------------------------------------------------------------------ plumbing
     def _receive(self) -> None:
@@ -396,6 +408,7 @@ class Amplifier(Device):
                 allow_loss: bool) -> Iterator[Samples]:
         cfg = self.config
         n_total = len(values)
+        sensing = bool(self.reported_channels)
         while not self._samples.empty():
             if self._samples.get_nowait() is _CLOSED:
                 self._samples.put(_CLOSED)
@@ -430,7 +443,7 @@ class Amplifier(Device):
                 next_index = blk.first_index + len(blk)
                 yield Samples(blk.first_index, self._unwrap(blk.counts), blk.current_cmd.astype(np.float64),
                               blk.current_meas.astype(np.float64), blk.status.copy(), cfg.sample_rate,
-                              self.calibration)
+                              self.calibration, blk.temperature if sensing else None)
                 if len(blk) and blk.status[-1] & p.SampleStatus.END and next_index < start + n_total:
                     finished = True
                     why = p.describe_faults(blk.faults) if blk.faults else "disarmed"

@@ -128,6 +128,12 @@ class Device(abc.ABC):
     capabilities: Capabilities = Capabilities()
     name: str = "device"
 
+    @property
+    def reported_channels(self) -> tuple[str, ...]:
+        """Run-file channels this device adds to every block's :meth:`SampleBlock.extra` beyond its clock's
+        set (e.g. ``temperature`` from a device with a winding sensor); known before the first stream."""
+        return ()
+
     @abc.abstractmethod
     def info(self) -> dict:
         """Identity of the device (model, serial, firmware...), JSON-able."""

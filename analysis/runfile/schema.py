@@ -62,6 +62,8 @@ CHANNELS: dict[str, ChannelSpec] = {
     "velocity": ChannelSpec("rad/s", "m/s", "f8", "measured velocity"),
     "velocity_cmd": ChannelSpec("rad/s", "m/s", "f8", "commanded velocity (velocity mode)"),
     "current_ff": ChannelSpec("A", "A", "f8", "feed-forward current streamed with the position reference"),
+    "temperature": ChannelSpec("degC", "degC", "f8", "winding temperature the device reports (one reading per "
+                                                        "sample block, held over its samples)"),
 }
 DEVICE_CHANNELS = ("sample_index", "t", "current_cmd", "current", "torque", "position", "counts")
 REQUIRED_CHANNELS = ("sample_index", "t")

@@ -203,6 +203,7 @@ class Bench:
         self.amplifier = amplifier
         self.url = url
         self.settings = settings or DeviceSettings()
+        self._temperatures: list[float] = []  # the present run's first, last and highest temperature, degC
 
     @classmethod
     def open(cls, url: str = "sim://", settings: DeviceSettings | None = None, timeout: float = 2.0) -> Bench:
@@ -272,7 +273,8 @@ class Bench:
         reference = (("position_cmd",) + (("current_ff",) if ff is not None else ())) if position else ()
         writer = RunWriter(
             path, sample_rate=float(protocol.sample_rate),  # type: ignore
-            channels=DEVICE_CHANNELS + reference + (HOST_CLOCKED_CHANNELS if host_clocked else ()),
+            channels=(DEVICE_CHANNELS + reference + (HOST_CLOCKED_CHANNELS if host_clocked else ())
+                      + amp.reported_channels),
             record=getattr(protocol, "record", "torque-driven"),
             custom_channels=HOST_CLOCKED_CUSTOM if host_clocked else None,
             device={**self.identity(), "url": self.url},
@@ -284,6 +286,7 @@ class Bench:
             operator=operator, notes=notes, overwrite=overwrite,
         )
         status, message = "aborted", ""
+        self._temperatures = []
         try:
             amp.arm()
             self._execute(protocol, stream, segments, writer, progress, control)
@@ -316,6 +319,9 @@ class Bench:
                 pass
             for kind, text in amp.run_events():  # host-clocked timing, latched EMCY
                 writer.add_event(kind, text)
+            if self._temperatures:  # the run's thermal summary, in the file beside the channel
+                first, last, high = self._temperatures
+                writer.add_event("info", f"winding temperature {first:.2f} -> {last:.2f} degC (max {high:.2f} degC)")
             writer.finish(status)
         return RunResult(path, status, writer.n_samples, writer.uid, message)  # what the file holds
 
@@ -352,9 +358,14 @@ class Bench:
                     if ref.shape[1] > 1:
                         reference["current_ff"] = ref[:, 1]
                 k += n
+                extra = blk.extra()
                 writer.append({"sample_index": blk.index, "t": t, "current_cmd": blk.current_cmd,
                                "current": blk.current_meas, "torque": torque, "position": measured,
-                               "counts": blk.counts, **reference, **blk.extra()})
+                               "counts": blk.counts, **reference, **extra})
+                if n and "temperature" in extra:
+                    reading = float(extra["temperature"][-1])
+                    seen = self._temperatures
+                    self._temperatures = [seen[0], reading, max(seen[2], reading)] if seen else [reading] * 3
                 done += n
                 if progress is not None:
                     prev = measured[:1] if last_pos is None else np.array([last_pos])

@@ -17,7 +17,7 @@ import numpy as np
 from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.acquisition import excitations
 from hilbench.bench.acquisition.campaign import INDEX_NAME
-from hilbench.firmware_sim.engine.drift import TEMPERATURE_UNIT, Drift, DriftState, rest, simulate_drifting
+from hilbench.firmware_sim.engine.drift import Drift, DriftState, rest, simulate_drifting
 from hilbench.firmware_sim.engine.friction_models import dc_motor
 from hilbench.firmware_sim.engine.plant import PlantParams
 
@@ -106,8 +106,8 @@ def write_campaign(out_dir: str | os.PathLike, spec: SyntheticCampaign,
     for run in simulate_runs(spec):
         names = ["sample_index", "t", "current_cmd", "current", "torque"]
         names += [] if run.index in fail_runs else ["position"]
-        with RunWriter(out / f"{run.key}.h5", sample_rate=float(spec.sample_rate), channels=names,
-                       custom_channels={"temperature": TEMPERATURE_UNIT}, protocol_name="identification",
+        with RunWriter(out / f"{run.key}.h5", sample_rate=float(spec.sample_rate),
+                       channels=(*names, "temperature"), protocol_name="identification",
                        protocol_params=run.params, operator=spec.operator, start_time=run.start_time,
                        device={"model": "synthetic", "serial": "C-plant"}) as w:
             w.append({k: run.channels[k] for k in [*names, "temperature"]})

@@ -38,6 +38,7 @@ from hilbench.drivers.protocol.messages import (
     Result,
     SampleBlock,
     SampleStatus,
+    Sensor,
     SetpointBlock,
     State,
     Status,
@@ -49,9 +50,10 @@ from hilbench.drivers.protocol.messages import (
 from hilbench.drivers.protocol.serial_framing import MAX_FRAME_BYTES, FrameDecoder, decode_frame, encode_frame
 
 __all__ = [
-    "PROTOCOL_VERSION", "FRAME_VERSIONS", "POSITION_GAINS", "SAMPLE_RATES", "MAX_FRAME_BYTES", "MESSAGE_CLASSES",
+    "PROTOCOL_VERSION", "FRAME_VERSIONS", "POSITION_GAINS", "SAMPLE_RATES", "MAX_FRAME_BYTES",
+    "MESSAGE_CLASSES",
     "ProtocolError",
-    "Message", "MsgType", "Mode", "State", "Fault", "SampleStatus", "Result",
+    "Message", "MsgType", "Mode", "State", "Fault", "SampleStatus", "Sensor", "Result",
     "Arm", "ClearFaults", "Config", "Disarm", "EStop", "GetConfig", "GetIdentity", "Heartbeat", "Identity",
     "Reply", "SampleBlock", "SetpointBlock", "Status",
     "decode_message", "encode_message", "describe_faults", "make_setpoint_blocks",

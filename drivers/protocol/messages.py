@@ -16,10 +16,11 @@ import numpy as np
 
 from hilbench.drivers.errors import ProtocolError
 
-#: Protocol this host speaks (v2: position mode, the CONFIG gains, GET_IDENTITY carries the host's version).
-PROTOCOL_VERSION = 2
-#: Frame versions a decoder accepts: a v2 host still reads a v1 device's answers (to refuse it clearly).
-FRAME_VERSIONS = (1, 2)
+#: Protocol this host speaks (v2: position mode, the CONFIG gains, GET_IDENTITY carries the host's version;
+#: v3: IDENTITY names the device's sensors, a SAMPLES header carries the winding temperature).
+PROTOCOL_VERSION = 3
+#: Frame versions a decoder accepts: the host still reads a v1 device's answers (to refuse it clearly).
+FRAME_VERSIONS = (1, 2, 3)
 SAMPLE_RATES = (1000, 2000, 5000, 10000, 20000)  # Hz, the only rates a device accepts
 
 
@@ -63,6 +64,12 @@ class Fault(enum.IntFlag):
     WATCHDOG = 0x08
     BUFFER_UNDERRUN = 0x10
     ESTOP = 0x20
+
+
+class Sensor(enum.IntFlag):
+    """What a device measures beyond the encoder and the current (IDENTITY, protocol v3)."""
+
+    TEMPERATURE = 0x01  # winding temperature in every SAMPLES header, degC
 
 
 class SampleStatus(enum.IntFlag):
@@ -176,20 +183,23 @@ class GetIdentity(Message):
 
 
 class Identity(Message):
-    """Who the device is: strings of at most 255 UTF-8 bytes, its buffer and block sizes (samples)."""
+    """Who the device is: strings of at most 255 UTF-8 bytes, its buffer and block sizes (samples) and, from
+    protocol v3, its :class:`Sensor` flags (one byte after the block size)."""
 
-    __slots__ = ("model", "serial", "firmware", "protocol_version", "buffer_capacity", "max_block")
+    __slots__ = ("model", "serial", "firmware", "protocol_version", "buffer_capacity", "max_block", "sensors")
     TYPE = MsgType.IDENTITY
     _TAIL = struct.Struct("<HIH")
+    _TAIL_V3 = struct.Struct("<HIHB")
 
     def __init__(self, model: str, serial: str, firmware: str, protocol_version: int = PROTOCOL_VERSION,
-                 buffer_capacity: int = 8192, max_block: int = 256) -> None:
+                 buffer_capacity: int = 8192, max_block: int = 256, sensors: int = 0) -> None:
         self.model = model
         self.serial = serial
         self.firmware = firmware
         self.protocol_version = protocol_version
         self.buffer_capacity = buffer_capacity
         self.max_block = max_block
+        self.sensors = Sensor(sensors)
 
     def encode(self) -> bytes:
         out = bytearray()
@@ -198,6 +208,9 @@ class Identity(Message):
             if len(raw) > 255:
                 raise ProtocolError("IDENTITY: strings are limited to 255 UTF-8 bytes")
             out += bytes([len(raw)]) + raw
+        if self.protocol_version >= 3:
+            return bytes(out) + self._TAIL_V3.pack(self.protocol_version, self.buffer_capacity, self.max_block,
+                                                   int(self.sensors))
         return bytes(out) + self._TAIL.pack(self.protocol_version, self.buffer_capacity, self.max_block)
 
     @classmethod
@@ -215,7 +228,13 @@ class Identity(Message):
             except UnicodeDecodeError as exc:
                 raise ProtocolError("IDENTITY: string is not UTF-8") from exc
             pos += 1 + n
-        return cls(*texts, *_unpack(cls._TAIL, payload[pos:], "IDENTITY"))
+        tail = payload[pos:]
+        if len(tail) == cls._TAIL_V3.size:
+            version, capacity, block, sensors = _unpack(cls._TAIL_V3, tail, "IDENTITY")
+            if version < 3 or sensors & ~int(Sensor.TEMPERATURE):
+                raise ProtocolError(f"IDENTITY: a sensors byte (0x{sensors:02x}) from a protocol {version} device")
+            return cls(*texts, version, capacity, block, sensors)
+        return cls(*texts, *_unpack(cls._TAIL, tail, "IDENTITY"))
 
 
 #: Position-loop defaults (protocol v2), tuned on the simulated DC motor (J 0.0022 kg*m^2, Kt 0.2 N*m/A,
@@ -446,18 +465,20 @@ class SampleBlock(Message):
     ``counts`` int32 encoder counts (wrap modulo 2**32, unwrap host-side), ``current_cmd`` and
     ``current_meas`` float32 A, ``status`` uint16 :class:`SampleStatus` bits. The header carries the
     device's flow-control state: ``free`` setpoint slots and ``received`` setpoints since ARM, and its
-    latched ``faults`` and ``state`` after the block.
+    latched ``faults`` and ``state`` after the block; from protocol v3 also ``temperature``, the winding
+    temperature when the block was sent (float32 degC, NaN when the device has no sensor).
     """
 
     __slots__ = ("seq", "first_index", "free", "received", "faults", "state", "counts", "current_cmd",
-                 "current_meas", "status")
+                 "current_meas", "status", "temperature")
     TYPE = MsgType.SAMPLES
     _ST = struct.Struct("<IQIQHB")
+    _TEMPERATURE = struct.Struct("<f")
     SAMPLE_BYTES = 14
 
     def __init__(self, seq: int, first_index: int, free: int, received: int, faults: int, state: int,
                  counts: np.ndarray, current_cmd: np.ndarray, current_meas: np.ndarray,
-                 status: np.ndarray) -> None:
+                 status: np.ndarray, temperature: float = math.nan) -> None:
         self.seq = seq
         self.first_index = first_index
         self.free = free
@@ -468,30 +489,38 @@ class SampleBlock(Message):
         self.current_cmd = np.asarray(current_cmd, dtype="<f4")
         self.current_meas = np.asarray(current_meas, dtype="<f4")
         self.status = np.asarray(status, dtype="<u2")
+        self.temperature = float(temperature)
         if not len(self.counts) == len(self.current_cmd) == len(self.current_meas) == len(self.status):
             raise ProtocolError("SAMPLES: arrays of different lengths")
 
     def __len__(self) -> int:
         return len(self.counts)
 
-    def encode(self) -> bytes:
+    def encode(self, version: int = PROTOCOL_VERSION) -> bytes:
         head = self._ST.pack(self.seq & 0xFFFFFFFF, self.first_index, self.free, self.received,
                              int(self.faults), int(self.state))
+        if version >= 3:
+            head += self._TEMPERATURE.pack(self.temperature)
         return b"".join((head, self.counts.tobytes(), self.current_cmd.tobytes(),
                          self.current_meas.tobytes(), self.status.tobytes()))
 
     @classmethod
     def decode(cls, payload: bytes) -> SampleBlock:
-        head, body = payload[: cls._ST.size], payload[cls._ST.size:]
-        fields = _unpack(cls._ST, head, "SAMPLES")
-        if len(body) % cls.SAMPLE_BYTES:
+        # the v3 header is 4 bytes longer, never a whole number of 14-byte samples: its length tells the layout
+        size = cls._ST.size
+        if len(payload) >= size and (len(payload) - size) % cls.SAMPLE_BYTES:
+            size += cls._TEMPERATURE.size
+        head, body = payload[: size], payload[size:]
+        fields = _unpack(cls._ST, head[: cls._ST.size], "SAMPLES")
+        temperature = cls._TEMPERATURE.unpack(head[cls._ST.size:])[0] if size > cls._ST.size else math.nan
+        if len(body) % cls.SAMPLE_BYTES or len(head) != size:
             raise ProtocolError("SAMPLES: body is not a whole number of samples")
         n = len(body) // cls.SAMPLE_BYTES
         counts = np.frombuffer(body, "<i4", n, 0)
         cmd = np.frombuffer(body, "<f4", n, 4 * n)
         meas = np.frombuffer(body, "<f4", n, 8 * n)
         status = np.frombuffer(body, "<u2", n, 12 * n)
-        return cls(*fields, counts, cmd, meas, status)
+        return cls(*fields, counts, cmd, meas, status, temperature)
 
 
 MESSAGE_CLASSES: dict[int, type[Message]] = {

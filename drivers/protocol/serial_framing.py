@@ -18,6 +18,7 @@ from hilbench.drivers.protocol.messages import (
     Config,
     GetIdentity,
     Message,
+    SampleBlock,
     decode_message,
 )
 
@@ -32,7 +33,7 @@ def encode_frame(msg: Message, version: int | None = None) -> bytes:
     if version is None:
         v1_probe = isinstance(msg, GetIdentity) and msg.host_version < 2
         version = 1 if v1_probe else PROTOCOL_VERSION
-    payload = msg.encode(version) if isinstance(msg, Config) else msg.encode()
+    payload = msg.encode(version) if isinstance(msg, Config | SampleBlock) else msg.encode()
     raw = bytes((version, int(msg.TYPE))) + payload
     if len(raw) + 4 > MAX_FRAME_BYTES:
         raise ProtocolError(f"{msg.TYPE.name}: frame of {len(raw) + 4} bytes exceeds {MAX_FRAME_BYTES}")

@@ -224,7 +224,7 @@ static int identity_layout_ok(const uint8_t *p, size_t n) {
         pos += 1 + (size_t)p[pos];
         if (pos > n) return 0;
     }
-    return n - pos == 8;
+    return n - pos == 8 || n - pos == 9;  /* v3 adds the sensors byte */
 }
 
 int hb_msg_decode(uint8_t type, const uint8_t *p, size_t n, hb_msg *msg) {
@@ -259,7 +259,9 @@ int hb_msg_decode(uint8_t type, const uint8_t *p, size_t n, hb_msg *msg) {
     case HB_REPLY:
         return n == 4 ? 0 : -1;
     case HB_SAMPLES:
-        return n >= HB_SAMPLES_HEADER_BYTES && (n - HB_SAMPLES_HEADER_BYTES) % HB_SAMPLE_BYTES == 0 ? 0 : -1;
+        /* the two header sizes differ by 4 bytes, never a whole number of 14-byte samples: unambiguous */
+        if (n >= HB_SAMPLES_HEADER_BYTES && (n - HB_SAMPLES_HEADER_BYTES) % HB_SAMPLE_BYTES == 0) return 0;
+        return n >= HB_SAMPLES_HEADER_BYTES_V3 && (n - HB_SAMPLES_HEADER_BYTES_V3) % HB_SAMPLE_BYTES == 0 ? 0 : -1;
     default:
         return -1;
     }
@@ -294,6 +296,11 @@ size_t hb_identity_encode(const char *model, const char *serial, const char *fir
 
 size_t hb_identity_encode_version(const char *model, const char *serial, const char *firmware, uint32_t capacity,
                                   uint16_t max_block, uint16_t version, uint8_t *out) {
+    return hb_identity_encode_sensors(model, serial, firmware, capacity, max_block, version, 0, out);
+}
+
+size_t hb_identity_encode_sensors(const char *model, const char *serial, const char *firmware, uint32_t capacity,
+                                  uint16_t max_block, uint16_t version, uint8_t sensors, uint8_t *out) {
     const char *texts[3] = {model, serial, firmware};
     size_t pos = 0;
     for (int i = 0; i < 3; i++) {
@@ -306,7 +313,9 @@ size_t hb_identity_encode_version(const char *model, const char *serial, const c
     hb_put_u16(out + pos, version);
     hb_put_u32(out + pos + 2, capacity);
     hb_put_u16(out + pos + 6, max_block);
-    return pos + 8;
+    if (version < 3) return pos + 8;
+    out[pos + 8] = sensors;
+    return pos + 9;
 }
 
 void hb_samples_header_encode(const hb_samples_header *h, uint8_t *out) {
@@ -316,4 +325,11 @@ void hb_samples_header_encode(const hb_samples_header *h, uint8_t *out) {
     hb_put_u64(out + 16, h->received);
     hb_put_u16(out + 24, h->faults);
     out[26] = h->state;
+}
+
+size_t hb_samples_header_encode_version(const hb_samples_header *h, uint8_t version, uint8_t *out) {
+    hb_samples_header_encode(h, out);
+    if (version < 3) return HB_SAMPLES_HEADER_BYTES;
+    hb_put_f32(out + HB_SAMPLES_HEADER_BYTES, h->temperature);
+    return HB_SAMPLES_HEADER_BYTES_V3;
 }

@@ -67,16 +67,17 @@ static void send_reply(hb_device *d, uint8_t request, uint8_t result, uint16_t f
 static void flush_block(hb_device *d) {
     uint32_t n = d->block_n;
     if (!n) return;
-    hb_samples_header h = {d->sample_seq++, free_slots(d), d->block_first, d->received, d->faults, d->state};
+    hb_samples_header h = {d->sample_seq++, free_slots(d), d->block_first, d->received, d->faults, d->state,
+                           (d->setup.sensors & HB_SENSOR_TEMPERATURE) ? (float)hb_hal_temperature(d->hal) : NAN};
     uint8_t *p = d->payload;
-    hb_samples_header_encode(&h, p);
-    p += HB_SAMPLES_HEADER_BYTES;
+    size_t head = hb_samples_header_encode_version(&h, d->version, p);
+    p += head;
     for (uint32_t i = 0; i < n; i++) hb_put_u32(p + 4 * i, (uint32_t)d->blk_counts[i]);
     for (uint32_t i = 0; i < n; i++) hb_put_f32(p + 4 * (n + i), d->blk_cmd[i]);
     for (uint32_t i = 0; i < n; i++) hb_put_f32(p + 4 * (2 * n + i), d->blk_meas[i]);
     for (uint32_t i = 0; i < n; i++) hb_put_u16(p + 12 * n + 2 * i, d->blk_status[i]);
     d->block_n = 0;
-    send(d, HB_SAMPLES, d->payload, HB_SAMPLES_HEADER_BYTES + (size_t)HB_SAMPLE_BYTES * n);
+    send(d, HB_SAMPLES, d->payload, head + (size_t)HB_SAMPLE_BYTES * n);
 }
 
 /* ------------------------------------------------------------------ state */
@@ -440,8 +441,9 @@ void hb_device_handle(hb_device *d, uint8_t type, const uint8_t *payload, size_t
         d->identity_requests++;
         d->version = (uint8_t)(m.host_version < HB_PROTOCOL_VERSION_MIN ? HB_PROTOCOL_VERSION_MIN :
                                m.host_version > HB_PROTOCOL_VERSION ? HB_PROTOCOL_VERSION : m.host_version);
-        size_t len = hb_identity_encode_version(d->setup.model, d->setup.serial, d->setup.firmware,
-                                                d->setup.capacity, d->setup.max_block, d->version, d->payload);
+        size_t len = hb_identity_encode_sensors(d->setup.model, d->setup.serial, d->setup.firmware,
+                                                d->setup.capacity, d->setup.max_block, d->version,
+                                                d->setup.sensors, d->payload);
         send(d, HB_IDENTITY, d->payload, len);
         return;
     }

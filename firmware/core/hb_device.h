@@ -1,4 +1,4 @@
-/* The device side of protocol v2 (serving v1 hosts too): configuration, arming, setpoint ring buffer with
+/* The device side of protocol v3 (serving v1 and v2 hosts too): configuration, arming, setpoint ring buffer with
  * credit flow control, sample clock, watchdog, limits, latched faults, e-stop, the velocity PI loop and the
  * position PID loop. Static memory only:
  * one hb_device holds every buffer (the target decides where it lives; a board uses one static object).
@@ -14,7 +14,7 @@
 #include "hb_config.h"
 #include "hb_protocol.h"
 
-#define HB_CORE_VERSION "2.0.0"
+#define HB_CORE_VERSION "3.0.0"
 
 enum hb_pacing { HB_REALTIME = 0, HB_LOCKSTEP = 1 };
 enum hb_link { HB_LINK_SERIAL = 0, HB_LINK_CAN = 1, HB_LINK_CAN_FD = 2 };
@@ -28,13 +28,14 @@ typedef struct {
     uint8_t can_node;         /* 1..15 */
     double velocity_kp;       /* A/(rad/s), velocity PI loop */
     double velocity_ki;       /* A/rad */
+    uint8_t sensors;          /* enum hb_sensors: what the board measures beyond the encoder and current */
 } hb_device_setup;
 
 typedef struct {
     hb_device_setup setup;
     void *hal;
     uint8_t state;
-    uint8_t version;          /* protocol spoken with the host: set by its GET_IDENTITY (1 or 2) */
+    uint8_t version;          /* protocol spoken with the host: set by its GET_IDENTITY (1, 2 or 3) */
     hb_config cfg;
     /* derived from the configuration */
     uint32_t window;          /* over-speed window W, samples */
@@ -79,7 +80,7 @@ typedef struct {
     hb_frame_decoder decoder;
     hb_can_reassembler can;
     uint8_t tx[HB_COBS_MAX(HB_MAX_FRAME)];
-    uint8_t payload[HB_SAMPLES_HEADER_BYTES + HB_SAMPLE_BYTES * HB_MAX_BLOCK];
+    uint8_t payload[HB_SAMPLES_HEADER_BYTES_V3 + HB_SAMPLE_BYTES * HB_MAX_BLOCK];
 } hb_device;
 
 void hb_device_init(hb_device *d, const hb_device_setup *setup, void *hal);

@@ -25,6 +25,10 @@ void hb_hal_measure(void *hal, int64_t *counts, hb_real *current);
  * this writes the DAC and the amplifier's enable pin; the host target advances its plant one sample. */
 void hb_hal_apply(void *hal, hb_real current, int enabled);
 
+/* The winding temperature, degC, read when a sample block is sent (protocol v3). A target whose setup
+ * declares no HB_SENSOR_TEMPERATURE returns NaN. */
+hb_real hb_hal_temperature(void *hal);
+
 /* Serial links: write bytes (a whole frame at a time). CAN links: send one frame. */
 void hb_hal_serial_write(void *hal, const uint8_t *data, size_t n);
 void hb_hal_can_write(void *hal, uint16_t id, const uint8_t *data, uint8_t len);

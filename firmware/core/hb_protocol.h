@@ -1,4 +1,4 @@
-/* hilbench protocol v2 (and v1 hosts), device side: constants, wire structs, framing and the message codec.
+/* hilbench protocol v3 (and v1, v2 hosts), device side: constants, wire structs, framing and the message codec.
  *
  * Byte layouts: docs/protocol.md. Everything is little-endian on the wire and is assembled byte by byte,
  * so the code does not depend on the target's endianness or struct packing.
@@ -9,7 +9,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define HB_PROTOCOL_VERSION 2       /* the newest version this core speaks */
+#define HB_PROTOCOL_VERSION 3       /* the newest version this core speaks (v3: sensors, temperature) */
 #define HB_PROTOCOL_VERSION_MIN 1   /* the oldest version it still serves (a v1 host) */
 #define HB_MAX_FRAME 8192            /* decoded frame limit: version + type + payload + crc32, bytes */
 #define HB_MAX_PAYLOAD (HB_MAX_FRAME - 6)
@@ -29,11 +29,13 @@ enum hb_sample_status { HB_S_ENABLED = 0x01, HB_S_FAULT = 0x02, HB_S_END = 0x04 
 enum hb_result { HB_OK = 0, HB_FAULT_LATCHED = 1, HB_NOT_CONFIGURED = 2, HB_INVALID_CONFIG = 3, HB_BAD_STATE = 4 };
 enum hb_mode { HB_CURRENT = 0, HB_VELOCITY = 1, HB_POSITION = 2 };
 enum hb_config_flags { HB_CFG_FEEDFORWARD = 0x01 };
+enum hb_sensors { HB_SENSOR_TEMPERATURE = 0x01 };  /* IDENTITY v3: what the SAMPLES header reports */
 
 #define HB_CONFIG_BYTES_V1 65          /* protocol v1 layout: no position loop */
 #define HB_CONFIG_BYTES 106            /* protocol v2 layout: v1 + position gains + flags */
 #define HB_STATUS_BYTES 63
-#define HB_SAMPLES_HEADER_BYTES 27
+#define HB_SAMPLES_HEADER_BYTES 27     /* v1, v2 layout */
+#define HB_SAMPLES_HEADER_BYTES_V3 31  /* v3: + temperature f32 */
 #define HB_SAMPLE_BYTES 14
 
 /* CONFIG as on the wire (f64 values are kept as sent, so GET_CONFIG echoes them exactly). */
@@ -72,6 +74,7 @@ typedef struct {
     uint64_t first_index, received;
     uint16_t faults;
     uint8_t state;
+    float temperature;        /* v3: winding temperature, degC; NaN when the device has no sensor */
 } hb_samples_header;
 
 /* A decoded host message. For SETPOINTS, `values` points into the payload (n little-endian f32). */
@@ -148,6 +151,11 @@ size_t hb_identity_encode(const char *model, const char *serial, const char *fir
 /* The same reporting protocol `version` (the one agreed with the host). */
 size_t hb_identity_encode_version(const char *model, const char *serial, const char *firmware, uint32_t capacity,
                                   uint16_t max_block, uint16_t version, uint8_t *out);
+/* v3 and later: the IDENTITY ends with the sensors byte (enum hb_sensors). */
+size_t hb_identity_encode_sensors(const char *model, const char *serial, const char *firmware, uint32_t capacity,
+                                  uint16_t max_block, uint16_t version, uint8_t sensors, uint8_t *out);
 void hb_samples_header_encode(const hb_samples_header *h, uint8_t *out); /* HB_SAMPLES_HEADER_BYTES */
+/* The header in the layout of `version`; returns its length (HB_SAMPLES_HEADER_BYTES_V3 from v3). */
+size_t hb_samples_header_encode_version(const hb_samples_header *h, uint8_t version, uint8_t *out);
 
 #endif

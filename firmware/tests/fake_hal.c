@@ -33,6 +33,12 @@ void hb_hal_apply(void *hal, hb_real current, int enabled) {
     f->measured++;
 }
 
+hb_real hb_hal_temperature(void *hal) {
+    fake_hal *f = hal;
+    f->temperature_reads++;
+    return (hb_real)(f->temperature + 0.25 * (double)f->measured);  /* distinct per block: which sample read it */
+}
+
 void hb_hal_serial_write(void *hal, const uint8_t *data, size_t n) {
     fake_hal *f = hal;
     if (f->tx_len + n <= FAKE_TX) {

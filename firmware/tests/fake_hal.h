@@ -23,6 +23,8 @@ typedef struct {
     int configured;
     double inertia, kt, dt, cpr;  /* pure-inertia encoder: kg*m^2, N*m/A, s, counts/rev (0 = script) */
     double theta, omega;          /* rad, rad/s */
+    double temperature;           /* degC read at sample 0; the reading grows 0.25 degC per sample measured */
+    size_t temperature_reads;
     size_t tx_len;
     uint8_t tx[FAKE_TX];
     uint32_t can_frames;

@@ -32,6 +32,7 @@ typedef struct {
     uint16_t status[16384];
     uint64_t first[512];
     uint8_t block_state[512];
+    float block_temperature[512];  /* v3 headers; NaN from a v1/v2 one */
     uint8_t reply[64][4];
     uint8_t last_status[HB_STATUS_BYTES];
 } output;
@@ -55,10 +56,13 @@ static void parse(fake_hal *f, output *o) {
         const uint8_t *p = raw + 2;
         size_t len = (size_t)n - 6;
         if (raw[1] == HB_SAMPLES) {
-            size_t k = (len - HB_SAMPLES_HEADER_BYTES) / HB_SAMPLE_BYTES;
+            size_t head = raw[0] >= 3 ? HB_SAMPLES_HEADER_BYTES_V3 : HB_SAMPLES_HEADER_BYTES;
+            CHECK((len - head) % HB_SAMPLE_BYTES == 0);
+            size_t k = (len - head) / HB_SAMPLE_BYTES;
             o->first[o->n_blocks] = hb_get_u64(p + 4);
+            o->block_temperature[o->n_blocks] = raw[0] >= 3 ? hb_get_f32(p + 27) : NAN;
             o->block_state[o->n_blocks++] = p[26];
-            const uint8_t *b = p + HB_SAMPLES_HEADER_BYTES;
+            const uint8_t *b = p + head;
             for (size_t j = 0; j < k; j++) {
                 size_t s = o->n_samples++;
                 o->counts[s] = (int32_t)hb_get_u32(b + 4 * j);
@@ -107,7 +111,7 @@ static void send_block(hb_device *d, uint32_t seq, const float *v, uint32_t n, i
 static void fresh(uint8_t pacing, uint32_t rate, uint8_t mode, double watchdog) {
     memset(&hal, 0, sizeof hal);
     hal.gain = 1.0;
-    hb_device_setup s = {"HB-TEST", "T-1", "test", 4096, 128, pacing, HB_LINK_SERIAL, 1, 0.5, 20.0};
+    hb_device_setup s = {"HB-TEST", "T-1", "test", 4096, 128, pacing, HB_LINK_SERIAL, 1, 0.5, 20.0, 0};
     hb_device_init(&dev, &s, &hal);
     send_config(&dev, rate, mode, 5.0, 1e4, -INFINITY, INFINITY, watchdog, 4096, 0);
     send_empty(&dev, HB_ARM, 0);
@@ -171,8 +175,10 @@ static void test_golden_frames(const char *dir) {
     uint8_t p[1024];
     size_t n = hb_identity_encode_version("HB-AMP-1", "SIM-0001", "1.0.0+sim", 8192, 256, 1, p);
     CHECK(golden_equals(dir, "identity", HB_IDENTITY, p, n));
-    n = hb_identity_encode("HB-AMP-1", "SIM-0001", "1.0.0+sim", 8192, 256, p);
+    n = hb_identity_encode_version("HB-AMP-1", "SIM-0001", "1.0.0+sim", 8192, 256, 2, p);
     CHECK(golden_equals_version(dir, 2, "identity", HB_IDENTITY, p, n));
+    n = hb_identity_encode_sensors("HB-AMP-1", "SIM-0001", "1.0.0+sim", 8192, 256, 3, HB_SENSOR_TEMPERATURE, p);
+    CHECK(golden_equals_version(dir, 3, "identity", HB_IDENTITY, p, n));
     hb_config c = {10000, HB_VELOCITY, 4.5, 150.0, -INFINITY, 12.5, 0.1, 0.0452, 16384, 3.0, 0, 0, 0, 0, 0, 0};
     hb_config_encode_v1(&c, p);
     CHECK(golden_equals(dir, "config", HB_CONFIG, p, HB_CONFIG_BYTES_V1));
@@ -186,7 +192,7 @@ static void test_golden_frames(const char *dir) {
     CHECK(golden_equals(dir, "status", HB_STATUS, p, HB_STATUS_BYTES));
     hb_reply_encode(HB_ARM, HB_FAULT_LATCHED, HB_F_ESTOP, p);
     CHECK(golden_equals(dir, "reply", HB_REPLY, p, 4));
-    hb_samples_header h = {3, 100, (1ull << 33) + 5, (1ull << 33) + 9, 0, HB_STREAMING};
+    hb_samples_header h = {3, 100, (1ull << 33) + 5, (1ull << 33) + 9, 0, HB_STREAMING, NAN};
     hb_samples_header_encode(&h, p);
     int32_t counts[4] = {0, -1, 2147483647, -2147483647 - 1};
     float cmd[4] = {0.5f, 0.0f, -0.25f, 1.0f}, meas[4] = {0.49f, 0.01f, -0.26f, 0.99f};
@@ -199,6 +205,13 @@ static void test_golden_frames(const char *dir) {
         hb_put_u16(b + 48 + 2 * i, st[i]);
     }
     CHECK(golden_equals(dir, "samples", HB_SAMPLES, p, HB_SAMPLES_HEADER_BYTES + 4 * HB_SAMPLE_BYTES));
+    /* v3: the same samples after a header 4 bytes longer, the temperature f32 at offset 27 */
+    uint8_t q[1024];
+    h.temperature = 36.625f;
+    CHECK(hb_samples_header_encode_version(&h, 3, q) == HB_SAMPLES_HEADER_BYTES_V3);
+    memcpy(q + HB_SAMPLES_HEADER_BYTES_V3, b, 4 * HB_SAMPLE_BYTES);
+    CHECK(golden_equals_version(dir, 3, "samples", HB_SAMPLES, q, HB_SAMPLES_HEADER_BYTES_V3 + 4 * HB_SAMPLE_BYTES));
+    CHECK(hb_samples_header_encode_version(&h, 2, q) == HB_SAMPLES_HEADER_BYTES && memcmp(q, p, 27) == 0);
 
     static const struct { const char *name; uint8_t type; } empty[] = {
         {"estop", HB_ESTOP}, {"disarm", HB_DISARM}, {"arm", HB_ARM}, {"clear_faults", HB_CLEAR_FAULTS},
@@ -379,7 +392,7 @@ static void test_estop_disarm_and_latching(void) {
     parse(&hal, &out);
     CHECK(dev.faults == 0 && out.reply[out.n_replies - 1][1] == HB_OK && dev.state == HB_ARMED);
     /* e-stop before any configuration is latched too, and refused requests say why */
-    hb_device_setup s = {"HB-TEST", "T-1", "test", 4096, 128, HB_LOCKSTEP, HB_LINK_SERIAL, 1, 0.5, 20.0};
+    hb_device_setup s = {"HB-TEST", "T-1", "test", 4096, 128, HB_LOCKSTEP, HB_LINK_SERIAL, 1, 0.5, 20.0, 0};
     hb_device_init(&dev, &s, &hal);
     send_empty(&dev, HB_ARM, 0);
     send_empty(&dev, HB_GET_CONFIG, 0);
@@ -615,7 +628,7 @@ static int last_frame(uint8_t type, uint8_t *buf, size_t *len) {
  * a v1 host then asking for it gets NOT_CONFIGURED (v1 cannot express it). */
 static void test_version_negotiation(void) {
     memset(&hal, 0, sizeof hal);
-    hb_device_setup s = {"HB-TEST", "T-1", "test", 4096, 128, HB_LOCKSTEP, HB_LINK_SERIAL, 1, 0.5, 20.0};
+    hb_device_setup s = {"HB-TEST", "T-1", "test", 4096, 128, HB_LOCKSTEP, HB_LINK_SERIAL, 1, 0.5, 20.0, 0};
     hb_device_init(&dev, &s, &hal);
     static uint8_t buf[HB_MAX_FRAME], p[HB_CONFIG_BYTES];
     size_t len = 0;
@@ -655,6 +668,51 @@ static void test_version_negotiation(void) {
     CHECK(last_frame(HB_REPLY, buf, &len) == 2 && buf[1] == HB_INVALID_CONFIG);
 }
 
+/* Protocol v3: a device whose setup names a temperature sensor says so in IDENTITY and puts the HAL's
+ * reading, taken when the block is sent, in every SAMPLES header; without the sensor the header carries NaN;
+ * a v2 host gets the 27-byte header and an IDENTITY without the sensors byte. */
+static void test_v3_temperature(void) {
+    static uint8_t buf[HB_MAX_FRAME];
+    size_t len = 0;
+    for (int sensors = 0; sensors <= 1; sensors++) {
+        memset(&hal, 0, sizeof hal);
+        hal.gain = 1.0;
+        hal.temperature = 30.0;
+        hb_device_setup s = {"HB-TEST", "T-1", "test", 4096, 16, HB_LOCKSTEP, HB_LINK_SERIAL, 1, 0.5, 20.0,
+                             (uint8_t)(sensors ? HB_SENSOR_TEMPERATURE : 0)};
+        hb_device_init(&dev, &s, &hal);
+        uint8_t v3[2] = {3, 0};
+        host_send(&dev, HB_GET_IDENTITY, v3, 2, 0);
+        CHECK(dev.version == 3 && last_frame(HB_IDENTITY, buf, &len) == 3);
+        CHECK(buf[len - 1] == sensors && hb_get_u16(buf + len - 9) == 3);
+        send_config(&dev, 1000, HB_CURRENT, 5.0, 1e4, -INFINITY, INFINITY, 0.0, 4096, 0);
+        send_empty(&dev, HB_ARM, 0);
+        send_block(&dev, 0, ones, 16, 0, 0);  /* setpoint blocks of at most max_block too */
+        send_block(&dev, 1, ones, 16, 0, 0);
+        send_block(&dev, 2, ones, 8, 1, 0);
+        for (int t = 0; t < 8; t++) hb_device_tick(&dev, 1000000);  /* lockstep: at most 4 blocks per tick */
+        parse(&hal, &out);
+        CHECK(out.n_samples == 40 && out.n_blocks == 3);  /* 16 + 16 + 8 samples */
+        for (size_t i = 0; i < out.n_blocks; i++) {
+            /* the fake reading grows 0.25 degC per sample applied: read when the block goes out, after
+             * its last sample (first + n - 1) and at most one more (a full block leaves with the next one) */
+            size_t n = i + 1 < out.n_blocks ? 16 : 8;
+            double after = 30.0 + 0.25 * (double)(out.first[i] + n), got = out.block_temperature[i];
+            CHECK(sensors ? got == after || got == after + 0.25 : isnan(out.block_temperature[i]));
+        }
+        CHECK(hal.temperature_reads == (sensors ? 3u : 0u));  /* no sensor: the HAL is not asked */
+    }
+    uint8_t v2[2] = {2, 0};  /* a v2 host on the sensing device: the v2 layouts */
+    host_send(&dev, HB_GET_IDENTITY, v2, 2, 0);
+    CHECK(dev.version == 2 && last_frame(HB_IDENTITY, buf, &len) == 2 && hb_get_u16(buf + len - 8) == 2);
+    send_empty(&dev, HB_CLEAR_FAULTS, 0);
+    send_empty(&dev, HB_ARM, 0);
+    send_block(&dev, 0, ones, 10, 1, 2000000);
+    for (int t = 0; t < 4; t++) hb_device_tick(&dev, 3000000);
+    parse(&hal, &out);
+    CHECK(out.n_samples == 10 && out.n_blocks == 1 && isnan(out.block_temperature[0]));
+}
+
 static void can_sink(void *ctx, uint16_t id, const uint8_t *data, uint8_t len) {
     hb_device *d = ctx;
     /* host-to-device: flip the direction bit of a frame the device would send */
@@ -665,7 +723,7 @@ static void can_sink(void *ctx, uint16_t id, const uint8_t *data, uint8_t len) {
  * carries type 0x0B, direction 1, node 3. A lost segment drops that message only (counted). */
 static void test_can_mapping(void) {
     memset(&hal, 0, sizeof hal);
-    hb_device_setup s = {"HB-TEST", "T-1", "test", 4096, 60, HB_LOCKSTEP, HB_LINK_CAN, 3, 0.5, 20.0};
+    hb_device_setup s = {"HB-TEST", "T-1", "test", 4096, 60, HB_LOCKSTEP, HB_LINK_CAN, 3, 0.5, 20.0, 0};
     hb_device_init(&dev, &s, &hal);
     hb_config c = {1000, HB_CURRENT, 5.0, 100.0, -INFINITY, INFINITY, 0.5, 0.2, 4096, 1.0, 0, 0, 0, 0, 0, 0};
     uint8_t p[HB_CONFIG_BYTES];
@@ -712,6 +770,7 @@ int main(int argc, char **argv) {
     test_position_loop_step_closed_form();
     test_position_feedforward_and_integral_limit();
     test_version_negotiation();
+    test_v3_temperature();
     test_can_mapping();
     printf("%d checks, %d failed\n", checks, failures);
     return failures ? 1 : 0;

@@ -13,10 +13,14 @@ from hilbench.firmware_sim.devices.sim_config import SimConfig
 from hilbench.firmware_sim.engine.plant import PlantParameterError, _CParams, validate
 from hilbench.firmware_sim.engine.plant import ffi as plant_ffi
 
-FIRMWARE_VERSION = "hilbench-sim c-core 2.0.0"
+FIRMWARE_VERSION = "hilbench-sim c-core 3.0.0"
 PACINGS = {"realtime": 0, "lockstep": 1}
 RATES = (1000, 2000, 5000, 10000, 20000)  # Hz, the order of hb_host.substeps_by_rate
 LINKS = {"serial": 0, "can": 1, "can-fd": 2}
+SENSOR_TEMPERATURE = 0x01  # hb_sensors (protocol v3 IDENTITY)
+STATE_STREAMING = 3        # hb_state
+
+
 
 
 def _us(now: float) -> int:
@@ -64,8 +68,18 @@ class CoreDevice:
         setup.can_node = node
         setup.velocity_kp = sim.plant.velocity_kp
         setup.velocity_ki = sim.plant.velocity_ki
+        if sim.drift is not None:  # a motor that warms up and wears, with a winding temperature sensor
+            d = h.sim.drift
+            for name, value in vars(sim.drift).items():
+                setattr(d, name, value)
+            d.block = sim.drift_block
+            d.ambient = d.temperature = sim.ambient
+            d.distance = 0.0
+            d.on = 1
+            setup.sensors = SENSOR_TEMPERATURE
         lib.hb_host_init(h, setup)
         self._dev = ffi.addressof(h, "device")
+        self._idle_since: float | None = None
 
     def rx_bytes(self, data: bytes, now: float) -> None:
         """Bytes received on the serial link at ``now`` (s)."""
@@ -76,7 +90,15 @@ class CoreDevice:
         lib.hb_device_rx_can(self._dev, arbitration_id, data, len(data), _us(now))
 
     def tick(self, now: float) -> None:
-        """Run the sample clock up to ``now`` (s): the samples due, the watchdog."""
+        """Run the sample clock up to ``now`` (s): the samples due, the watchdog. Between streams the
+        winding cools towards ambient for the wall-clock time that passes (the samples heat it)."""
+        if self._host.sim.drift.on:
+            if self._dev.state != STATE_STREAMING:
+                if self._idle_since is not None:
+                    lib.hb_plant_hal_rest(ffi.addressof(self._host, "sim"), now - self._idle_since)
+                self._idle_since = now
+            else:
+                self._idle_since = None
         lib.hb_device_tick(self._dev, _us(now))
         if self._host.sim.plant_failed:
             raise FloatingPointError("plant state became non-finite; check the simulator's parameters")
@@ -115,3 +137,12 @@ class CoreDevice:
         names = ("state", "faults", "index", "free", "received", "fault_index", "fault_silence",
                  "current_applied", "crc_errors", "dropped_frames", "rx_frames", "tx_frames")
         return {name: getattr(s, name) for name in names}
+
+    def drift_state(self) -> dict[str, float]:
+        """The drift laws' state: winding temperature (degC), distance slid (rad), friction level L and
+        viscous factor b(T)/b_ref (NaN without [drift])."""
+        d = self._host.sim.drift
+        if not d.on:
+            return dict.fromkeys(("temperature", "distance", "level", "viscous"), float("nan"))
+        return {"temperature": d.temperature, "distance": d.distance, "level": lib.hb_drift_level(ffi.addressof(d)),
+                "viscous": lib.hb_drift_viscous(ffi.addressof(d))}

@@ -1,4 +1,5 @@
-"""The simulator's TOML configuration: device identity, buffer size and the plant with its injected effects.
+"""The simulator's TOML configuration: device identity, buffer size, the plant with its injected effects and,
+optionally, the drift of a motor that warms up and wears (``[drift]``, off when absent).
 
 See ``firmware_sim/devices/default_sim.toml``. Bad files raise :class:`SimConfigError` with a one-line message.
 """
@@ -7,9 +8,10 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 
+from hilbench.firmware_sim.engine.drift import Drift
 from hilbench.firmware_sim.engine.friction_models import dc_motor, paper_system
 from hilbench.firmware_sim.engine.plant import (
     MAX_ELEMENTS,
@@ -37,6 +39,9 @@ class SimConfig:
     model: str = "HB-SIM-1"
     serial: str = "SIM-0001"
     buffer_capacity: int = 8192
+    drift: Drift | None = None   # None: no thermal model, no wear, no temperature sensor
+    ambient: float = 23.0        # degC, the winding's temperature when the device starts
+    drift_block: float = 0.05    # s between updates of the drifted friction parameters
 
     def substeps_at(self, sample_rate: int) -> int:
         return self.substeps or substeps_for(self.plant, 1.0 / sample_rate)
@@ -67,7 +72,7 @@ def load_sim_config(path: str | Path | None = None, seed: int | None = None) -> 
 
 
 def sim_config_from_dict(data: dict, seed: int | None = None, source: str = "config") -> SimConfig:
-    unknown = sorted(set(data) - {"device", "plant"})
+    unknown = sorted(set(data) - {"device", "plant", "drift"})
     if unknown:
         raise SimConfigError(f"{source}: unknown section(s) {', '.join(unknown)}")
     device = dict(data.get("device", {}))
@@ -113,5 +118,38 @@ def sim_config_from_dict(data: dict, seed: int | None = None, source: str = "con
         validate(params, dt, int(substeps) or substeps_for(params, dt))
     except (PlantParameterError, TypeError) as exc:
         raise SimConfigError(f"{source}: bad [plant]: {exc}") from exc
+    drift, ambient, block = _drift(data.get("drift"), source)
     return SimConfig(plant=params, substeps=int(substeps), model=str(device.get("model", "HB-SIM-1")),
-                     serial=str(device.get("serial", "SIM-0001")), buffer_capacity=capacity)
+                     serial=str(device.get("serial", "SIM-0001")), buffer_capacity=capacity,
+                     drift=drift, ambient=ambient, drift_block=block)
+
+
+#: [drift] keys beyond the laws' constants (firmware_sim.engine.drift.Drift)
+DRIFT_EXTRA = {"ambient": 23.0, "block": 0.05}
+
+
+def _drift(table, source: str) -> tuple[Drift | None, float, float]:
+    """The [drift] table: the constants of :class:`Drift` plus ``ambient`` (degC) and ``block`` (s)."""
+    if table is None:
+        return None, DRIFT_EXTRA["ambient"], DRIFT_EXTRA["block"]
+    if not isinstance(table, dict):
+        raise SimConfigError(f"{source}: [drift] must be a table")
+    laws = {f.name for f in fields(Drift)}
+    bad = sorted(set(table) - laws - set(DRIFT_EXTRA))
+    if bad:
+        raise SimConfigError(f"{source}: unknown [drift] key(s) {', '.join(bad)}; known: "
+                             f"{', '.join(sorted(laws | set(DRIFT_EXTRA)))}")
+    for key, value in table.items():
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise SimConfigError(f"{source}: [drift] {key} must be a number, got {value!r}")
+    ambient = float(table.get("ambient", DRIFT_EXTRA["ambient"]))
+    block = float(table.get("block", DRIFT_EXTRA["block"]))
+    if not math.isfinite(ambient) or not 0.0 < block <= 10.0:
+        raise SimConfigError(f"{source}: [drift] ambient must be finite and block in (0, 10] s, "
+                             f"got {ambient!r} and {block!r}")
+    try:
+        drift = Drift(**{k: float(v) for k, v in table.items() if k in laws})
+        drift.level_factor(ambient, 0.0)  # the level law must hold at the start
+    except PlantParameterError as exc:
+        raise SimConfigError(f"{source}: bad [drift]: {exc}") from exc
+    return drift, ambient, block

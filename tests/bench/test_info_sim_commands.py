@@ -12,7 +12,7 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_bench_info_on_the_simulator(capsys):
     assert main(["info", "--device", "sim://?pacing=lockstep"]) == 0
     out = capsys.readouterr().out
-    for line in ("model: HB-SIM-1", "protocol version: 2", "state: UNCONFIGURED", "faults: none",
+    for line in ("model: HB-SIM-1", "protocol version: 3", "sensors: none", "state: UNCONFIGURED", "faults: none",
                  "config: not configured", "counters: crc_errors=0"):
         assert line in out
 
@@ -54,3 +54,10 @@ def test_firmware_imports_only_the_protocol_from_drivers():
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
     mods = eval(res.stdout)
     assert all(m in ("drivers", "drivers.errors") or m.startswith("drivers.protocol") for m in mods), mods
+
+
+def test_bench_info_names_the_temperature_sensor_of_a_drifting_simulator(capsys, tmp_path):
+    sim = tmp_path / "sim.toml"
+    sim.write_text("[drift]\nambient = 25.0\n")
+    assert main(["info", "--device", f"sim://?pacing=lockstep&config={sim}"]) == 0
+    assert "sensors: temperature (winding temperature in every sample block, degC)" in capsys.readouterr().out

@@ -18,7 +18,7 @@ from tests.drivers.protocol_examples import canonical_messages
 
 GOLDEN = Path(__file__).resolve().parents[1] / "data" / "protocol"
 MESSAGES = canonical_messages()
-VERSIONED = [(v, name) for v in (1, 2) for name in sorted(canonical_messages(v))]
+VERSIONED = [(v, name) for v in (1, 2, 3) for name in sorted(canonical_messages(v))]
 
 
 def reference_cobs(data: bytes) -> bytes:
@@ -50,7 +50,7 @@ def test_golden_frame(version, name):
 @pytest.mark.parametrize(("version", "name"), VERSIONED)
 def test_frame_matches_independent_oracle(version, name):
     msg = canonical_messages(version)[name]
-    payload = msg.encode(version) if isinstance(msg, p.Config) else msg.encode()
+    payload = msg.encode(version) if isinstance(msg, p.Config | p.SampleBlock) else msg.encode()
     raw = bytes([version, int(msg.TYPE)]) + payload
     expected = reference_cobs(raw + struct.pack("<I", zlib.crc32(raw) & 0xFFFFFFFF)) + b"\x00"
     assert p.encode_frame(msg, version) == expected
@@ -66,9 +66,10 @@ def test_v2_layouts_by_hand():
     assert struct.unpack_from("<5d", payload, 65) == (2500.0, 125000.0, 4.5, 3.25, 250.0)
     assert payload[105] == 1 and payload[4] == 2
     assert payload[:65] == struct.pack("<IBddddddId", 20000, 2, 8.0, 300.0, -0.5, 0.75, 0.5, 0.2, 65536, 1.0)
-    assert p.GetIdentity().encode() == b"\x02\x00" and p.GetIdentity(1).encode() == b""
+    assert p.GetIdentity(2).encode() == b"\x02\x00" and p.GetIdentity(1).encode() == b""
+    assert p.GetIdentity().encode() == b"\x03\x00"  # this host speaks v3
     assert cobs.decode(p.encode_frame(p.GetIdentity(1))[:-1])[0] == 1  # a v1 probe goes out as a v1 frame
-    assert cobs.decode(p.encode_frame(p.GetIdentity())[:-1])[0] == 2
+    assert cobs.decode(p.encode_frame(p.GetIdentity())[:-1])[0] == 3
     sp = canonical_messages(2)["setpoints_position"].encode()
     assert struct.unpack_from("<6f", sp, 5) == (0.0, 0.5, np.float32(2.5e-4), -0.75, np.float32(-1e-3), 1.25)
     with pytest.raises(ProtocolError, match="v1 has no position mode"):
@@ -91,14 +92,37 @@ def test_position_config_problems():
     assert "position-mode option" in " ".join(p.Config(mode=p.Mode.CURRENT, feedforward=True).problems())
 
 
-def test_sample_block_layout_by_hand():
-    # header <IQIQHB then counts i4, cmd f4, meas f4, status u2 (struct of arrays), see docs/protocol.md
-    blk = MESSAGES["samples"]
-    payload = blk.encode()
-    assert len(payload) == 27 + 14 * 4
-    assert struct.unpack_from("<4i", payload, 27) == (0, -1, 2**31 - 1, -(2**31))
-    assert struct.unpack_from("<4f", payload, 27 + 16) == (0.5, 0.0, -0.25, 1.0)
-    assert struct.unpack_from("<4H", payload, 27 + 48) == (1, 1, 3, 5)
+@pytest.mark.parametrize(("version", "head"), [(2, 27), (3, 31)])
+def test_sample_block_layout_by_hand(version, head):
+    # header <IQIQHB (v3: + temperature f4) then counts i4, cmd f4, meas f4, status u2 (struct of arrays),
+    # see docs/protocol.md
+    blk = canonical_messages(version)["samples"]
+    payload = blk.encode(version)
+    assert len(payload) == head + 14 * 4
+    assert struct.unpack_from("<IQIQHB", payload, 0) == (3, 2**33 + 5, 100, 2**33 + 9, 0, 3)
+    if version >= 3:
+        assert struct.unpack_from("<f", payload, 27) == (36.625,)
+    assert struct.unpack_from("<4i", payload, head) == (0, -1, 2**31 - 1, -(2**31))
+    assert struct.unpack_from("<4f", payload, head + 16) == (0.5, 0.0, -0.25, 1.0)
+    assert struct.unpack_from("<4H", payload, head + 48) == (1, 1, 3, 5)
+    back = p.SampleBlock.decode(payload)  # the header's length tells the layout: 27 + 14n or 31 + 14n bytes
+    assert back == blk
+    assert math.isnan(back.temperature) if version < 3 else back.temperature == 36.625
+
+
+def test_identity_v3_names_its_sensors():
+    """IDENTITY v3 = the v2 layout + one sensors byte; a v2 IDENTITY decodes with no sensors."""
+    v3 = canonical_messages(3)["identity"].encode()
+    v2 = canonical_messages(2)["identity"].encode()
+    assert v3[:-1][:-8] == v2[:-8] and len(v3) == len(v2) + 1 and v3[-1] == 1
+    assert p.Identity.decode(v3).sensors == p.Sensor.TEMPERATURE
+    assert p.Identity.decode(v2).sensors == 0
+    bad = v2[:-8] + struct.pack("<HIHB", 2, 8192, 256, 1)  # a sensors byte in a v2 IDENTITY
+    with pytest.raises(ProtocolError, match="sensors byte"):
+        p.Identity.decode(bad)
+    for n in (1, 2, 3, 5):  # a body of a non-whole number of samples is refused under either header
+        with pytest.raises(ProtocolError, match="whole number"):
+            p.SampleBlock.decode(bytes(27 + 14 + n))
 
 
 def test_config_problems_are_specific():
@@ -132,9 +156,9 @@ def test_decoder_drops_oversize_frame_and_recovers():
 
 
 def test_version_mismatch_is_a_protocol_error():
-    raw = bytes([3, int(p.MsgType.ARM)])
+    raw = bytes([4, int(p.MsgType.ARM)])
     frame = reference_cobs(raw + struct.pack("<I", zlib.crc32(raw)))
-    with pytest.raises(ProtocolError, match="version 3"):
+    with pytest.raises(ProtocolError, match="version 4"):
         p.decode_frame(frame)
 
 

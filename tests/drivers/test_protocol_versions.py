@@ -1,4 +1,4 @@
-"""Protocol v1/v2 compatibility, bytes on the wire: a v1 host still works with the v2 firmware core; a v2
+"""Protocol v1/v2/v3 compatibility, bytes on the wire: a v1 host still works with the v3 firmware core; a v3
 host refuses a v1 device in one line; position-mode setpoints are checked host-side before anything moves."""
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ def v1_host_reads(data: bytes) -> list[p.Message]:
     return out
 
 
-def test_a_v1_host_works_with_the_v2_core():
+def test_a_v1_host_works_with_the_v3_core():
     dev = CoreDevice(load_sim_config(), pacing="lockstep")
     now = 1.0
 
@@ -45,7 +45,7 @@ def test_a_v1_host_works_with_the_v2_core():
         return v1_host_reads(dev.take_bytes())
 
     (ident,) = exchange(p.GetIdentity(1))
-    assert ident.protocol_version == 1 and ident.firmware.endswith("2.0.0")
+    assert ident.protocol_version == 1 and ident.firmware.endswith("3.0.0")
     config = p.Config(sample_rate=1000, mode=p.Mode.CURRENT, current_limit=3.0, torque_constant=0.2,
                       counts_per_rev=4096, **dict.fromkeys(p.Config.GAINS, 0.0))
     assert len(config.encode(1)) == 65
@@ -98,15 +98,15 @@ class V1Device:
         pass
 
 
-def test_a_v2_host_refuses_a_v1_device_in_one_line():
+def test_a_v3_host_refuses_a_v1_device_in_one_line():
     link = V1Device()
     with pytest.raises(DriverError) as info:
         Amplifier(link, timeout=0.3)
     text = str(info.value)
     assert "\n" not in text
-    assert text == ("device HB-OLD (firmware hilbench-sim 1.0.0) speaks protocol 1; this host needs protocol 2: "
+    assert text == ("device HB-OLD (firmware hilbench-sim 1.0.0) speaks protocol 1; this host needs protocol 3: "
                     "update the device firmware")
-    assert link.rejected == 2  # the two v2 GET_IDENTITY attempts
+    assert link.rejected == 2  # the two v3 GET_IDENTITY attempts
 
 
 @pytest.fixture(scope="module")

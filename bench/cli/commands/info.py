@@ -35,6 +35,8 @@ def describe(amp) -> list[str]:
         f"firmware: {ident.firmware}",
         f"protocol version: {ident.protocol_version}",
         f"setpoint buffer: {ident.buffer_capacity} samples (blocks up to {ident.max_block})",
+        "sensors: " + (", ".join(s.name.lower() for s in p.Sensor if s & ident.sensors) or "none")
+        + (" (winding temperature in every sample block, degC)" if ident.sensors & p.Sensor.TEMPERATURE else ""),
         f"state: {p.State(status.state).name}",
         f"faults: {p.describe_faults(status.faults)}"
         + (f" (first at sample {status.fault_index})" if status.faults else ""),

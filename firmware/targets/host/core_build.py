@@ -30,6 +30,7 @@ typedef struct {
     uint8_t can_node;
     double velocity_kp;
     double velocity_ki;
+    uint8_t sensors;
 } hb_device_setup;
 
 typedef struct {
@@ -58,12 +59,26 @@ typedef struct {
 } hb_host_can_frame;
 
 typedef struct {
+    int on;
+    double winding_resistance, thermal_resistance, thermal_time_constant, reference_temperature;
+    double level_temperature_coefficient, viscous_temperature_coefficient;
+    double wear_rate, wear_step, wear_step_distance, block;
+    double ambient, temperature, distance;
+} hb_drift;
+
+typedef struct {
     hb_params base;
+    hb_params params;
     int substeps_by_rate[5];
     uint64_t seed;
     int plant_failed;
+    hb_drift drift;
     ...;
 } hb_plant_hal;
+
+void hb_plant_hal_rest(hb_plant_hal *h, double seconds);
+double hb_drift_level(const hb_drift *d);
+double hb_drift_viscous(const hb_drift *d);
 
 typedef struct {
     hb_plant_hal sim;

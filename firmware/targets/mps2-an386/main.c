@@ -98,7 +98,7 @@ int main(void) {
     hal.sim.seed = SIM_SEED;
     hb_device_setup setup = {SIM_MODEL, SIM_SERIAL, "hilbench-sim c-core " HB_CORE_VERSION " mps2-an386",
                              SIM_CAPACITY, HB_TARGET_MAX_BLOCK, HB_TARGET_PACING, HB_LINK_SERIAL, 1,
-                             SIM_VELOCITY_KP, SIM_VELOCITY_KI};
+                             SIM_VELOCITY_KP, SIM_VELOCITY_KI, 0};  /* no temperature sensor */
     hb_device_init(&device, &setup, &hal);
     UART0_BAUDDIV = 16;
     UART0_CTRL = 0xBu;  /* TX and RX enabled, RX interrupt */

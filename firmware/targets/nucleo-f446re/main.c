@@ -8,6 +8,8 @@
  * the loop reaches it (jitter: one loop pass, a few microseconds). */
 #include <stdint.h>
 
+#include <math.h>
+
 #include "board.h"
 #include "hb_device.h"
 #include "hb_hal.h"
@@ -225,12 +227,17 @@ void hb_hal_apply(void *h, hb_real current, int enabled) {
     GPIOA_BSRR = enabled ? 1u << 8 : 1u << (8 + 16);
 }
 
+hb_real hb_hal_temperature(void *h) {
+    (void)h;
+    return (hb_real)NAN;                           /* no winding sensor on this board (setup.sensors = 0) */
+}
+
 int main(void) {
     clock_init();
     peripherals_init();
     hb_device_setup setup = {BOARD_MODEL, BOARD_SERIAL, "hilbench c-core " HB_CORE_VERSION " nucleo-f446re",
                              HB_BUFFER_CAPACITY, HB_MAX_BLOCK, HB_REALTIME, HB_LINK_SERIAL, 1,
-                             BOARD_VELOCITY_KP, BOARD_VELOCITY_KI};
+                             BOARD_VELOCITY_KP, BOARD_VELOCITY_KI, 0};  /* no temperature sensor */
     hb_device_init(&device, &setup, &hal);
     uint8_t rx[128];
     for (;;) {

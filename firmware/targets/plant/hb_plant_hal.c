@@ -10,6 +10,43 @@
 
 #define HB_TWO_PI 6.283185307179586
 
+double hb_drift_level(const hb_drift *d) {
+    double thermal = 1.0 + d->level_temperature_coefficient * (d->temperature - d->reference_temperature);
+    double wear = 1.0 + d->wear_rate * d->distance + (d->distance >= d->wear_step_distance ? d->wear_step : 0.0);
+    return thermal > 0.0 ? thermal * wear : 0.0;  /* a law that would turn friction negative stops at zero */
+}
+
+double hb_drift_viscous(const hb_drift *d) {
+    return exp(-d->viscous_temperature_coefficient * (d->temperature - d->reference_temperature));
+}
+
+/* The running parameters from the nominal ones at the drift state: Maxwell-slip stiffnesses (their slip
+ * displacements kept, so slip forces scale too), Coulomb and Stribeck levels by L, viscous by b(T)/b_ref. */
+static void apply_drift(hb_plant_hal *h) {
+    const hb_params *n = &h->nominal;
+    hb_params *p = &h->params;
+    double level = hb_drift_level(&h->drift), visc = hb_drift_viscous(&h->drift);
+    for (int i = 0; i < n->n_elements; i++) h->drift_k[i] = level * n->ms_stiffness[i];
+    p->ms_stiffness = h->drift_k;
+    p->coulomb_pos = level * n->coulomb_pos;
+    p->coulomb_neg = level * n->coulomb_neg;
+    p->stribeck_excess = level * n->stribeck_excess;
+    p->viscous_pos = visc * n->viscous_pos;
+    p->viscous_neg = visc * n->viscous_neg;
+    h->drift_left = h->drift_block;
+}
+
+void hb_plant_hal_rest(hb_plant_hal *h, double seconds) {
+    hb_drift *d = &h->drift;
+    if (!d->on || !(seconds > 0.0)) return;
+    d->temperature = d->ambient + (d->temperature - d->ambient) * exp(-seconds / d->thermal_time_constant);
+}
+
+hb_real hb_hal_temperature(void *hal) {
+    hb_plant_hal *h = hal;
+    return h->drift.on ? (hb_real)h->drift.temperature : (hb_real)NAN;
+}
+
 int hb_hal_configure(void *hal, const hb_config *c) {
     hb_plant_hal *h = hal;
     static const uint32_t rates[5] = {1000, 2000, 5000, 10000, 20000};
@@ -24,6 +61,13 @@ int hb_hal_configure(void *hal, const hb_config *c) {
     h->dt = 1.0 / (double)c->sample_rate;
     h->substeps = substeps;
     hb_state_init(&h->plant, &h->params, 0.0, 0.0, h->seed);
+    if (h->drift.on) {
+        h->nominal = h->params;
+        h->drift_decay = exp(-h->dt / h->drift.thermal_time_constant);
+        long block = lround(h->drift.block / h->dt);
+        h->drift_block = block < 1 ? 1 : (int)block;
+        apply_drift(h);
+    }
     return 0;
 }
 
@@ -66,5 +110,15 @@ void hb_hal_apply(void *hal, hb_real current, int enabled) {
     double theta, omega, friction, cmd, meas, torque, pos;
     int64_t counts;
     hb_outputs out = {&theta, &omega, &friction, &cmd, &meas, &torque, &pos, &counts};
+    double theta_before = h->plant.theta;
     if (hb_run(&h->params, &h->plant, &u, 1, h->dt, h->substeps, HB_MODE_CURRENT, &out) != 0) h->plant_failed = 1;
+    if (!h->drift.on) return;
+    /* first-order thermal model, exact for the sample's current held (zero-order hold):
+     * T+ = T_amb + a*(T - T_amb) + (1 - a)*R_th*R_w*i^2, a = exp(-dt/tau_th); i is the motor's actual current */
+    hb_drift *d = &h->drift;
+    double i = h->plant.current, a = h->drift_decay;
+    d->temperature = d->ambient + a * (d->temperature - d->ambient) +
+                     (1.0 - a) * d->thermal_resistance * d->winding_resistance * i * i;
+    d->distance += fabs(h->plant.theta - theta_before);  /* the outputs are the sample's start; the state its end */
+    if (--h->drift_left <= 0) apply_drift(h);
 }

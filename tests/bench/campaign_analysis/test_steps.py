@@ -34,8 +34,7 @@ def _head_and_tail(spec: SyntheticCampaign, folder: Path, fraction: float) -> tu
         m = channels["t"].size
         channels["sample_index"], channels["t"] = np.arange(m), np.arange(m) / spec.sample_rate
         path = folder / f"{name}.h5"
-        with RunWriter(path, sample_rate=spec.sample_rate, channels=[k for k in channels if k != "temperature"],
-                       custom_channels={"temperature": "degC"}, protocol_name="identification",
+        with RunWriter(path, sample_rate=spec.sample_rate, channels=list(channels), protocol_name="identification",
                        protocol_params=run.params, device={"model": "synthetic", "serial": "C-plant"}) as w:
             w.append(channels)
         paths.append(path)
