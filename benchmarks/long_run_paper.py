@@ -24,6 +24,10 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import numpy as np
 
 FS = 10_000.0
 ANALYSES = ("afrf", "skeleton", "skeleton_band", "presliding")
@@ -102,27 +106,46 @@ def record(kind: str, path: Path, duration: float, fs: float = FS) -> int:
 
 
 def _write_presliding(path: Path, duration: float, fs: float) -> int:
+    """The nested path of ``presliding_cycle`` repeated to ``duration`` s, the DC motor's Maxwell-slip force along
+    it plus 2 mN*m of noise, written 10 s at a time (an hour at 20 kHz is 72 M samples: the stop operator of the
+    whole path would take 16 floats a sample). The path ends each repeat where the next starts and its last stroke
+    passes every earlier turning point, so from the second repeat on the elements' state, and the force, repeat
+    exactly: the first two repeats are simulated and the second one tiled."""
     import numpy as np
 
-    from hilbench.analysis.models.friction_model import FrictionModel
-    from hilbench.analysis.presliding.identify import model_force
     from hilbench.analysis.runfile import RunWriter
-    from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_D, dc_motor
+    from hilbench.firmware_sim.engine.friction_models import dc_motor
+    from hilbench.firmware_sim.engine.plant import stop_operator
 
-    turns = np.array([0.0, 6, -4, 3, -2, 1.5, -1, 0.5, -0.25, 2.5, -5, 8, 0]) * DC_MOTOR_D
-    cycle = np.concatenate([a + (b - a) * 0.5 * (1 - np.cos(np.pi * np.linspace(0, 1, 2000, endpoint=False)))
-                            for a, b in zip(turns[:-1], turns[1:], strict=True)])
-    x = np.resize(cycle, int(duration * fs))
+    cycle = presliding_cycle()
     p = dc_motor()
-    slip = np.asarray(p.ms_slip)
     k = np.asarray(p.ms_stiffness)
-    model = FrictionModel(axis="rotary", inertia=0.0, ms_stiffness=k, ms_delta=slip / k)
-    force = model_force(model, x, fs) + 2e-3 * np.random.default_rng(0).standard_normal(x.size)
-    n = x.size
+    two = stop_operator(np.tile(cycle, 2), np.asarray(p.ms_slip) / k) @ k
+    n = int(duration * fs)
+    rng = np.random.default_rng(0)  # drawn block by block: the same stream as one draw of n
+    block = int(10 * fs)
     with RunWriter(path, sample_rate=fs, channels=("sample_index", "t", "position", "torque"),
                    record="displacement-driven", protocol_name="presliding", protocol_params={"inertia": 0.0}) as w:
-        w.append({"sample_index": np.arange(n), "t": np.arange(n) / fs, "position": x, "torque": force})
+        for k0 in range(0, n, block):
+            i = np.arange(k0, min(n, k0 + block))
+            phase = i % cycle.size
+            force = np.where(i < cycle.size, two[phase], two[cycle.size + phase])
+            w.append({"sample_index": i, "t": i / fs, "position": cycle[phase],
+                      "torque": force + 2e-3 * rng.standard_normal(i.size)})
     return n
+
+
+def presliding_cycle() -> np.ndarray:
+    """One repeat of the nested presliding path (rad): cosine strokes of 2000 samples (0.1 s at 20 kHz) between
+    the turning points 0, 6, -4, 3, -2, 1.5, -1, 0.5, -0.25, 2.5, -5, 8 and back to 0, in units of the DC motor's
+    largest slip distance (1.2 s a repeat at 20 kHz)."""
+    import numpy as np
+
+    from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_D
+
+    turns = np.array([0.0, 6, -4, 3, -2, 1.5, -1, 0.5, -0.25, 2.5, -5, 8, 0]) * DC_MOTOR_D
+    return np.concatenate([a + (b - a) * 0.5 * (1 - np.cos(np.pi * np.linspace(0, 1, 2000, endpoint=False)))
+                           for a, b in zip(turns[:-1], turns[1:], strict=True)])
 
 
 def measure(path: Path, analysis: str, mode: str, top: float = 0.0) -> dict:

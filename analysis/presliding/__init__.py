@@ -79,8 +79,9 @@ def reversal_warning(result: PreslidingResult) -> str | None:
 
 
 def _finish(result: PreslidingResult) -> PreslidingResult:
+    """The result with the reversal warning after the analysis's own (e.g. the span of a long record)."""
     line = reversal_warning(result)
-    result.warnings = [line] if line else []
+    result.warnings = [*result.warnings, line] if line else list(result.warnings)
     return result
 
 

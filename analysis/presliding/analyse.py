@@ -18,12 +18,14 @@ from hilbench.analysis.presliding.identify import PreslidingFit, PreslidingSetti
 from hilbench.analysis.presliding.parametric import RollingFit, fit_rolling, origin_uncertainty
 from hilbench.analysis.presliding.quantities import DEFAULT_FRACTION, Resolution, bootstrap, quantities, resolution
 from hilbench.analysis.presliding.reversals import MemoryCheck, extreme_forces, find_reversals, memory_check
+from hilbench.analysis.presliding.span import plan_span, x_means
 
 #: the reversal hysteresis, in position steps, when none is given
 HYSTERESIS_STEPS = 1.5
 #: count edges the virgin ramp must cross before the edge-pinned fit is made
 MIN_EDGE_RAMP = 5
-#: records longer than this are averaged in blocks first (samples)
+#: records longer than this are averaged in blocks first (samples); a long record of many repeats of the path is
+#: cut to the first repeats instead (span.py)
 MAX_SAMPLES = 10_000
 TABLE_COLUMNS = ("n", "sample", "t_s", "x", "kind", "depth", "travel", "force_measured", "force_extreme",
                  "force_rules", "force_model")
@@ -101,16 +103,33 @@ def analyse(t: np.ndarray, x: np.ndarray, force: np.ndarray, fs: float, axis: st
 
     ``hysteresis`` (m or rad): the smallest travel counted as a reversal, default HYSTERESIS_STEPS position
     steps. ``replicates``: bootstrap replicates for the uncertainties. A record longer than ``max_samples`` is
-    first averaged in blocks (:func:`block_means`). AnalysisError for unusable input (e.g. no reversal)."""
-    step = position_resolution(np.asarray(x, float))  # of the samples as recorded, before any averaging
+    first averaged in blocks (:func:`block_means`); when those blocks would be too long for the path, only the
+    first whole repeats of it are analysed, and a warning says so (:mod:`~.span`). AnalysisError for unusable input
+    (e.g. no reversal)."""
+    x = np.asarray(x, float)
+    options = {"counts_per_rev": counts_per_rev, "hysteresis": hysteresis, "fraction": fraction,
+               "replicates": replicates, "seed": seed, "max_samples": max_samples}
+    step = position_resolution(x)  # of the samples as recorded, before any averaging
+    span = plan_span(x.size, max_samples, HYSTERESIS_STEPS * step if hysteresis is None else hysteresis,
+                     lambda m, head: x_means(x, m, head), lambda a, b: x[a:b])
+    if span is None:
+        return _analyse_record(t, x, force, fs, axis, settings, step, **options)
+    k = span.samples
+    res = _analyse_record(t[:k], x[:k], force[:k], fs, axis, settings, position_resolution(x[:k]), **options)
+    res.warnings.append(span.warning(x.size, fs, max_samples))
+    return res
+
+
+def _analyse_record(t: np.ndarray, x: np.ndarray, force: np.ndarray, fs: float, axis: str,
+                    settings: PreslidingSettings | None, step: float, *, max_samples: int, **options
+                    ) -> PreslidingResult:
+    """:func:`analyse` on all of the arrays given, averaged in blocks of ceil(n/max_samples)."""
     raw = np.asarray(force, float)
-    edge = _edge_fit(np.asarray(x, float), raw, step, axis, settings, max(1, math.ceil(MIN_EXCURSION_S * fs)))
+    edge = _edge_fit(x, raw, step, axis, settings, max(1, math.ceil(MIN_EXCURSION_S * fs)))
     window = max(1, round(EXTREME_WINDOW_S * fs))
     t, x, force, block = block_means(t, x, force, max_samples)
     return analyse_blocks(t, x, force, fs / block, block, step, axis, settings, edge,
-                          lambda rev: extreme_forces(raw, rev * block + block // 2, window),
-                          counts_per_rev=counts_per_rev, hysteresis=hysteresis, fraction=fraction,
-                          replicates=replicates, seed=seed)
+                          lambda rev: extreme_forces(raw, rev * block + block // 2, window), **options)
 
 
 def analyse_blocks(t: np.ndarray, x: np.ndarray, force: np.ndarray, fs: float, block: int, step: float, axis: str,

@@ -27,12 +27,14 @@ from scipy.ndimage import uniform_filter1d
 from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.presliding.analyse import (
     EXTREME_WINDOW_S,
+    HYSTERESIS_STEPS,
     MAX_SAMPLES,
     PreslidingResult,
     analyse_blocks,
 )
 from hilbench.analysis.presliding.identify import PreslidingSettings
 from hilbench.analysis.presliding.quantities import DEFAULT_FRACTION
+from hilbench.analysis.presliding.span import XMeans, plan_span
 
 #: second differences kept for the noise level's median (float64: 32 MiB)
 NOISE_SAMPLES = 1 << 22
@@ -127,14 +129,40 @@ def analyse_stream(reader, fs: float, axis: str, force_name: str, settings: Pres
                    progress: Callable[[int, int], None] | None = None) -> PreslidingResult:
     """:func:`~.analyse.analyse` on a run file open in ``reader``
     (:class:`hilbench.analysis.channel_windows.ChannelReader`), two passes of ``chunk`` samples (module
-    docstring); ``progress(done, total)`` counts the samples of both passes."""
+    docstring); ``progress(done, total)`` counts the samples of both passes. A record whose blocks would be too long
+    for its path is cut to its first repeats as :func:`~.analyse.analyse` cuts it (:mod:`~.span`): the span is then
+    read again, as a record of its own, and the progress restarts over it."""
     n = reader.n_samples
     if n < 3:
         raise AnalysisError(f"{reader.path}: {n} samples; a presliding record needs a virgin ramp and reversals")
     if max_samples < 100:
         raise AnalysisError(f"max_samples must be >= 100, got {max_samples}")
-    tick = None if progress is None else (lambda d, t: progress(d, 2 * n))
-    means, m, step, moves = _pass_one(reader, ("t", "position", force_name), n, max_samples, chunk, tick)
+    options = {"counts_per_rev": counts_per_rev, "hysteresis": hysteresis, "fraction": fraction,
+               "replicates": replicates, "seed": seed}
+    first = _pass_one(reader, ("t", "position", force_name), n, max_samples, chunk, _ticks(progress, n))
+    span = plan_span(n, max_samples, HYSTERESIS_STEPS * first[2] if hysteresis is None else hysteresis,
+                     _x_means(reader, first, n, chunk), lambda a, b: reader.read("position", a, b))
+    if span is None:
+        return _analyse_read(reader, first, fs, axis, force_name, settings, chunk, progress, options)
+    head = _Head(reader, span.samples)
+    again = _pass_one(head, ("t", "position", force_name), head.n_samples, max_samples, chunk,
+                      _ticks(progress, head.n_samples))
+    res = _analyse_read(head, again, fs, axis, force_name, settings, chunk, progress, options)
+    res.warnings.append(span.warning(n, fs, max_samples))
+    return res
+
+
+def _ticks(progress: Callable[[int, int], None] | None, n: int) -> Callable[[int, int], None] | None:
+    """Pass one's progress as a share of both passes over ``n`` samples."""
+    return None if progress is None else (lambda d, t: progress(d, 2 * n))
+
+
+def _analyse_read(reader, first: tuple[np.ndarray, int, float, int], fs: float, axis: str, force_name: str,
+                  settings: PreslidingSettings | None, chunk: int, progress, options: dict) -> PreslidingResult:
+    """The analysis of all of ``reader``'s record from pass one's ``first`` (block means, m, step, moves); pass two
+    runs once the turning points are known."""
+    means, m, step, moves = first
+    n = reader.n_samples
     window = max(1, round(EXTREME_WINDOW_S * fs))
     state: dict[str, bool] = {}
 
@@ -146,8 +174,36 @@ def analyse_stream(reader, fs: float, axis: str, force_name: str, settings: Pres
 
     res = analyse_blocks(means[0], means[1], means[2], fs / m, m, step, axis, settings,
                          (None, None, "the displacement is not quantised in whole steps", None, None), extremes_of,
-                         counts_per_rev=counts_per_rev, hysteresis=hysteresis, fraction=fraction,
-                         replicates=replicates, seed=seed)
+                         **options)
     if state.get("quantised"):
         res.edge_error = NOT_STREAMED
     return res
+
+
+def _x_means(reader, first: tuple[np.ndarray, int, float, int], n: int, chunk: int) -> XMeans:
+    """:data:`~.span.XMeans` on the run file: pass one's block means for the whole record at its block, else a
+    pass over the position of the head asked for (one chunk and its blocks in memory)."""
+    def means(m: int, head: int) -> np.ndarray:
+        if m == first[1] and head >= n:
+            return first[0][1]
+        blocks = _Blocks(m, 1)
+        for _, (x,) in reader.chunks(("position",), chunk, stop=head):
+            blocks.push(x[None, :])
+        return blocks.result()[0]
+
+    return means
+
+
+class _Head:
+    """The first ``n`` samples of a run file open in ``reader``, read as a record of their own."""
+
+    def __init__(self, reader, n: int):
+        self._reader = reader
+        self.path = reader.path
+        self.n_samples = int(n)
+
+    def read(self, name: str, start: int, stop: int) -> np.ndarray:
+        return self._reader.read(name, start, min(stop, self.n_samples))
+
+    def chunks(self, names, chunk: int, progress=None):
+        return self._reader.chunks(names, chunk, stop=self.n_samples, progress=progress)

@@ -54,7 +54,9 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "skeleton_amplitude_min": ("float64", "rad"), "skeleton_amplitude_max": ("float64", "rad"),
     "skeleton_stiffness_low_amplitude": ("float64", "N*m/rad"),
     "skeleton_stiffness_high_amplitude": ("float64", "N*m/rad"),
-    "warnings": ("string", ""),  # afrf, skeleton: the analysis's warnings, "; "-separated
+    # afrf, skeleton, presliding: the analysis's warnings, "; "-separated (presliding: the span of a long record
+    # analysed, fewer than 4 reversals)
+    "warnings": ("string", ""),
     "temperature_mean": ("float64", "degC"), "sliding_distance": ("float64", "rad"),
     "samples": ("int64", "1"), "duration": ("float64", "s"),
 }
@@ -197,15 +199,16 @@ def residual_step(path: str, settings: StepSettings) -> dict[str, Any]:
 def presliding_step(path: str, settings: StepSettings) -> dict[str, Any]:
     """``hilbench presliding`` on one displacement-driven run with the command's defaults (fraction 0.9, 48
     thresholds, the protocol's inertia, ``presliding_replicates`` bootstrap replicates): ``analysis.presliding
-    .analyse``; the row has the quantities with their standard uncertainties and the relative rms error of the
-    force simulated from the measured displacement."""
+    .analyse``; the row has the quantities with their standard uncertainties, the relative rms error of the
+    force simulated from the measured displacement and the warnings (e.g. the span of a long record analysed)."""
     from hilbench.analysis import presliding
     from hilbench.analysis.record import load_record
 
     rec = load_record(path)
     res = presliding.analyse(rec, replicates=settings.presliding_replicates)
     q, e = res.quantities, res.uncertainties
-    row: dict[str, Any] = {"validation_force_relative_error": res.fit.relative_rms, **_size(rec)}
+    row: dict[str, Any] = {"validation_force_relative_error": res.fit.relative_rms,
+                           "warnings": "; ".join(res.warnings), **_size(rec)}
     for name, column in (("breakaway", "presliding_breakaway"), ("initial_stiffness", "initial_stiffness"),
                          ("presliding_distance", "presliding_distance")):
         row[column], row[f"{column}_se"] = q[name], e[name]

@@ -302,8 +302,9 @@ def presliding(run, options: dict | None = None) -> AnalysisResult:
     from hilbench.analysis.presliding import reversal_warning
 
     few = reversal_warning(res)
-    return AnalysisResult(TITLES["presliding"], numbers, [loops, virgin], list(res.resolution.lines) + ([few] if few
-                                                                                                      else []))
+    # res.warnings: the span of a long record analysed (analysis/presliding/span.py)
+    return AnalysisResult(TITLES["presliding"], numbers, [loops, virgin],
+                          list(res.resolution.lines) + list(res.warnings) + ([few] if few else []))
 
 
 ANALYSES: dict[str, Callable] = {"identification": identification, "skeleton": skeleton, "afrf": afrf,

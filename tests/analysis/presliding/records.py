@@ -64,3 +64,25 @@ def gms_force(x: np.ndarray, breakaway: float, presliding: float, substeps: int 
 def maxwell_force(x: np.ndarray, k: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Exact Maxwell-slip force along x (independent stop operators of tests/truth/generator)."""
     return stop_operator_forces(k, w, x)
+
+
+#: turning points of a repeatable nested path (units of the scale): it ends where it began, after a stroke past every
+#: other turning point, so from its second repeat on a Maxwell-slip state repeats exactly
+REPEAT_SEQUENCE = (6.0, -4.0, 3.0, -2.0, 1.5, -1.0, 0.5, -0.25, 2.5, -5.0, 8.0, 0.0)
+
+
+def repeated_path(scale: float, stroke: int, repeats: int) -> np.ndarray:
+    """``repeats`` of the nested path :data:`REPEAT_SEQUENCE` (rad or m), cosine strokes of ``stroke`` samples each,
+    as benchmarks/long_run_paper.py writes the long presliding record."""
+    turns = np.array((0.0, *REPEAT_SEQUENCE)) * scale
+    s = 0.5 * (1 - np.cos(np.pi * np.arange(stroke) / stroke))
+    cycle = np.concatenate([a + (b - a) * s for a, b in zip(turns[:-1], turns[1:], strict=True)])
+    return np.tile(cycle, repeats)
+
+
+def repeated_force(x: np.ndarray, period: int, k: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Maxwell-slip force along a path of whole repeats of ``period`` samples: two repeats simulated, the second
+    tiled (the state repeats from there on), so a long record costs no more than two repeats."""
+    two = maxwell_force(x[: 2 * period], k, w)
+    reps = -(-x.size // period)
+    return np.concatenate([two[:period], *([two[period:]] * (reps - 1))])[: x.size]
