@@ -67,6 +67,8 @@ def _dies(path: str, settings: StepSettings) -> dict:
 #: 2000 samples (65 ms each), shows where the cluster's fixed cost (its start, 1 to 1.5 s more than the serial
 #: loop's imports) still outweighs the work
 SIZES = ((2.0, 1000.0), (5.0, 5000.0))
+#: alternating serial and cluster analyses of the target campaign (about 50 s a pair)
+REPEATS = 3
 
 
 def _speedup_rows(tmp: Path, n: int, duration: float, fs: float, target: bool) -> list[dict]:
@@ -75,17 +77,27 @@ def _speedup_rows(tmp: Path, n: int, duration: float, fs: float, target: bool) -
     tag = f"{n}_runs_{duration:g}s_{fs / 1e3:g}kHz"
     folder = tmp / f"campaign_{tag}"
     write_campaign(folder, SyntheticCampaign(runs=n, duration=duration, sample_rate=fs, seed=3), fail_runs=(4,))
-    serial = _timed(folder, tmp / f"serial_{tag}", "serial")
-    cluster = _timed(folder, tmp / f"cluster_{tag}", "cluster")
-    identical = pq.read_table(serial["table"]).equals(pq.read_table(cluster["table"]))
+    # serial and cluster alternate, REPEATS times each for the target, and the fastest of each is compared: other
+    # jobs on the machine only ever add time, and this VM's wall times vary by +-15 % from one run to the next
+    serials, clusters = [], []
+    for k in range(REPEATS if target else 1):
+        serials.append(_timed(folder, tmp / f"serial_{tag}_{k}", "serial"))
+        clusters.append(_timed(folder, tmp / f"cluster_{tag}_{k}", "cluster"))
+    serial, cluster = min(serials, key=lambda r: r["wall"]), min(clusters, key=lambda r: r["wall"])
+    identical = all(pq.read_table(serials[0]["table"]).equals(pq.read_table(r["table"])) for r in serials + clusters)
     shutil.rmtree(folder)
     speedup = serial["wall"] / cluster["wall"]
+    pairs = sorted(s_["wall"] / c["wall"] for s_, c in zip(serials, clusters, strict=True))
     phase_serial, phase_cluster = serial["wall"] - serial["startup"], cluster["wall"] - cluster["startup"]
     goal = ">= 1.7x (quiet machine)" if target else "informational: 65 ms of work per run"
     return [
         {"name": f"analyse_{tag}_speedup_2_workers_end_to_end", "value": speedup, "unit": "x",
-         "baseline_name": "serial wall / cluster wall", "baseline_value": None, "ratio": None,
-         "target": goal, "ok": speedup >= 1.7 if target else None},
+         "baseline_name": f"fastest serial wall / fastest cluster wall of {len(serials)}", "baseline_value": None,
+         "ratio": None, "target": goal, "ok": speedup >= 1.7 if target else None},
+        {"name": f"analyse_{tag}_speedup_2_workers_median_pair", "value": pairs[len(pairs) // 2], "unit": "x",
+         "baseline_name": "median of serial/cluster over the alternating pairs",
+         "baseline_value": pairs[0], "ratio": None, "target": f"pairs {', '.join(f'{v:.2f}' for v in pairs)}",
+         "ok": None},
         {"name": f"analyse_{tag}_speedup_2_workers_after_startup", "value": phase_serial / phase_cluster,
          "unit": "x", "baseline_name": "same, less start-up", "baseline_value": None, "ratio": None,
          "target": goal, "ok": phase_serial / phase_cluster >= 1.7 if target else None},
