@@ -1,4 +1,4 @@
-/* Device state machine of protocol v2, serving v1 hosts too (docs/protocol.md; design: docs/firmware.md). */
+/* Device state machine of protocol v3, serving v1 and v2 hosts too (docs/protocol.md; design: docs/firmware.md). */
 #include "hb_device.h"
 
 #include <math.h>

@@ -151,10 +151,10 @@ def simulate_drifting(params: PlantParams, u: np.ndarray, dt: float, drift: Drif
         plant = Plant(drifted_params(params, drift, state), dt, substeps, mode)
         if saved is not None:
             plant.set_state(saved)
-        theta_before = plant.theta
         out = plant.run(u[start:start + n_block])
         saved = plant.get_state()
         temperatures.append(heat(drift, state, out.current_meas, dt))
-        state.distance += float(np.sum(np.abs(np.diff(np.concatenate([[theta_before], out.theta])))))
+        # out.theta is each sample's start; the block's last sample ends at the plant's state
+        state.distance += float(np.sum(np.abs(np.diff(np.concatenate([out.theta, [plant.theta]])))))
         parts.append(out)
     return PlantOutput.concatenate(parts), np.concatenate(temperatures) if temperatures else np.empty(0)

@@ -102,3 +102,40 @@ def test_bad_drift_tables_are_one_line():
         with pytest.raises(SimConfigError) as info:
             sim_config_from_dict({"drift": table})
         assert fragment in str(info.value) and "\n" not in str(info.value)
+
+
+def test_the_device_drifts_as_the_python_drift_laws_do():
+    """Independent oracle: the same drift simulated by firmware_sim.engine.drift (Python, the C plant run block by
+    block) and by the device's plant HAL (C, per sample). The Python laws heat with the measured current, the
+    current at the start of each sample (0 A at sample 0), the HAL with the current held over it, so from ambient
+    under a constant current the Python temperature at the start of sample k is the HAL's after k - 1 samples. A
+    block's header reads the HAL after its last sample e or one more: Python's temperature at e + 2 or e + 3, to
+    float32 rounding. The motion under 5 A (sliding; the friction level falls with the temperature and grows with
+    wear) agrees to the encoder's resolution and 0.1 % of the distance."""
+    from hilbench.firmware_sim.engine.drift import Drift, DriftState, simulate_drifting
+
+    laws = {"thermal_time_constant": 2.0, "thermal_resistance": 2.0, "winding_resistance": 1.0,
+            "level_temperature_coefficient": -0.01, "viscous_temperature_coefficient": 0.02, "wear_rate": 2e-4}
+    host, dev = device(ambient=23.0, **laws)
+    sim = sim_config_from_dict({"drift": {"ambient": 23.0, **laws}})
+    i, n = 5.0, 4 * RATE
+    u = np.full(n, i, dtype=np.float32)
+    blocks = stream(host, u)
+    counts = np.concatenate([b.counts for b in blocks]).astype(np.int64)
+    params = sim.plant.replace(current_limit=10.0, torque_constant=KT, counts_per_rev=CPR)
+    state = DriftState(temperature=23.0, ambient=23.0)
+    out, temperature = simulate_drifting(params, u.astype(float), 1.0 / RATE, Drift(**laws), state,
+                                         substeps=sim.substeps_at(RATE), block=0.05)
+    worst = 0.0
+    for b in blocks:
+        e = b.first_index + len(b) - 1
+        if e + 3 < n:
+            worst = max(worst, min(abs(b.temperature - temperature[e + 2]), abs(b.temperature - temperature[e + 3])))
+    assert worst < 1e-4  # K; float32 of ~66 degC is 4e-6 K
+    drift_state = dev.drift_state()
+    step = 2.0 * 1.0 * i**2 * (1 - math.exp(-1 / RATE / 2.0))  # at most one sample's rise, K (0.025 K)
+    assert 0.0 < drift_state["temperature"] - state.temperature < 1.01 * step
+    assert drift_state["distance"] == pytest.approx(state.distance, rel=1e-3)
+    theta = counts * 2 * np.pi / CPR
+    assert np.max(np.abs(theta - out.position_meas)) < 1e-3 * theta[-1] + 2 * np.pi / CPR
+    assert theta[-1] > 100.0  # it slid: the wear term acted (level 1 + 2e-4/rad)
