@@ -127,12 +127,12 @@ def identify_step(files: dict[str, Path], out: Path) -> None:
 
 
 def afrf_step(files: dict[str, Path], out: Path) -> None:
-    _cli("afrf", files["afrf"], "--json", out / "afrf.json", "--plot", out / "afrf.png")
+    _cli("afrf", files["afrf"], "--json", out / "afrf.json", "--plot", out / "afrf.png", "--overwrite")
 
 
 def residual_step(files: dict[str, Path], out: Path) -> None:
     _cli("residual", files["identification"], "--validate", files["validation"], "--json", out / "residual.json",
-         "--report", out / "residual")
+         "--report", out / "residual", "--overwrite")
     import json
 
     doc = json.loads((out / "residual.json").read_text())

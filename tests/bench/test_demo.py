@@ -23,3 +23,18 @@ def test_demo_runs_everything_and_finds_the_undeclared_cogging(tmp_path, capsys)
     assert err > 2.0
     assert (tmp_path / "residual" / "summary.md").exists() and (tmp_path / "afrf.png").exists()
     assert "done: everything is in" in capsys.readouterr().out
+
+
+def test_every_demo_step_replaces_the_outputs_of_an_earlier_demo(monkeypatch, tmp_path):
+    """`make demo` twice: run_demo refuses a used folder unless --overwrite, so each step it then runs must replace
+    its own earlier outputs (the afrf and residual steps once stopped a second `make demo` with 'exists')."""
+    from hilbench.bench.cli import demo
+
+    calls = []
+    monkeypatch.setattr(demo, "_cli", lambda *argv: calls.append([str(a) for a in argv]))
+    (tmp_path / "residual.json").write_text('{"effects_added": []}')  # what the residual step reads back
+    files = {k: tmp_path / f"{k}.h5" for k in ("identification", "validation", "afrf")}
+    for _name, step in demo.analysis_steps():
+        step(files, tmp_path)
+    assert [argv[0] for argv in calls] == ["identify", "afrf", "residual"]
+    assert all("--overwrite" in argv for argv in calls), calls
