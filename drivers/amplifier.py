@@ -188,14 +188,21 @@ class Amplifier(Device):
             raise
 
     def _identify(self) -> p.Identity:
-        """GET_IDENTITY with this host's protocol version. A v1 device does not read it (v1 has an empty
-        GET_IDENTITY); asked again the v1 way, it answers, and is refused in one line."""
+        """GET_IDENTITY with this host's protocol version. An older device drops it (its decoder refuses a
+        newer frame); asked again the v2 way, then the v1 way, it answers, and is refused in one line that
+        names the version it speaks."""
         try:
             ident = self._request(p.GetIdentity(), p.MsgType.IDENTITY, timeout=self.timeout * 2 / 3, attempts=2)
         except DeviceTimeoutError:
-            try:
-                old = self._request(p.GetIdentity(1), p.MsgType.IDENTITY, timeout=self.timeout / 3, attempts=1)
-            except DeviceTimeoutError:
+            old = None
+            for version in range(p.PROTOCOL_VERSION - 1, 0, -1):
+                try:
+                    old = self._request(p.GetIdentity(version), p.MsgType.IDENTITY,
+                                        timeout=self.timeout / 3 / (p.PROTOCOL_VERSION - 1), attempts=1)
+                    break
+                except DeviceTimeoutError:
+                    continue
+            if old is None:
                 raise DeviceTimeoutError(f"no answer to GET_IDENTITY from the device within "
                                          f"{self.timeout:.3g} s") from None
             raise DriverError(f"device {old.model} (firmware {old.firmware}) speaks protocol "

@@ -29,10 +29,11 @@ _CRC = struct.Struct("<I")
 def encode_frame(msg: Message, version: int | None = None) -> bytes:
     """The bytes to write for ``msg``: COBS-encoded frame followed by the 0x00 delimiter. ``version`` is
     the frame's version byte (1 for a v1 peer, with the v1 CONFIG layout); by default PROTOCOL_VERSION,
-    except a v1 GET_IDENTITY (no host version), which goes out as a v1 frame so that a v1 device reads it."""
+    except a GET_IDENTITY probing an older device (host version 1 or 2), which goes out in a frame of that
+    version so that such a device reads it."""
     if version is None:
-        v1_probe = isinstance(msg, GetIdentity) and msg.host_version < 2
-        version = 1 if v1_probe else PROTOCOL_VERSION
+        probe = isinstance(msg, GetIdentity) and msg.host_version < PROTOCOL_VERSION
+        version = max(1, msg.host_version) if probe else PROTOCOL_VERSION
     payload = msg.encode(version) if isinstance(msg, Config | SampleBlock) else msg.encode()
     raw = bytes((version, int(msg.TYPE))) + payload
     if len(raw) + 4 > MAX_FRAME_BYTES:

@@ -69,6 +69,7 @@ def test_v2_layouts_by_hand():
     assert p.GetIdentity(2).encode() == b"\x02\x00" and p.GetIdentity(1).encode() == b""
     assert p.GetIdentity().encode() == b"\x03\x00"  # this host speaks v3
     assert cobs.decode(p.encode_frame(p.GetIdentity(1))[:-1])[0] == 1  # a v1 probe goes out as a v1 frame
+    assert cobs.decode(p.encode_frame(p.GetIdentity(2))[:-1])[0] == 2  # a v2 probe as a v2 frame
     assert cobs.decode(p.encode_frame(p.GetIdentity())[:-1])[0] == 3
     sp = canonical_messages(2)["setpoints_position"].encode()
     assert struct.unpack_from("<6f", sp, 5) == (0.0, 0.5, np.float32(2.5e-4), -0.75, np.float32(-1e-3), 1.25)

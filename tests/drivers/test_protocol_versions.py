@@ -106,7 +106,32 @@ def test_a_v3_host_refuses_a_v1_device_in_one_line():
     assert "\n" not in text
     assert text == ("device HB-OLD (firmware hilbench-sim 1.0.0) speaks protocol 1; this host needs protocol 3: "
                     "update the device firmware")
-    assert link.rejected == 2  # the two v3 GET_IDENTITY attempts
+    assert link.rejected == 3  # the two v3 GET_IDENTITY attempts and the v2 probe
+
+
+class V2Device(V1Device):
+    """A protocol-v2 device (firmware core 2.x) as a link: it reads frames of version 1 and 2 only, and a v2
+    GET_IDENTITY (host version 2) makes it answer as a v2 device."""
+
+    def send(self, msg: p.Message) -> None:
+        frame = cobs.decode(p.encode_frame(msg)[:-1])
+        if frame[0] > 2:
+            self.rejected += msg.TYPE == p.MsgType.GET_IDENTITY
+            return
+        if msg.TYPE == p.MsgType.GET_IDENTITY:
+            version = 2 if len(frame) == 8 else 1
+            self.out.put(p.Identity("HB-SIM-1", "SIM-0001", "hilbench-sim c-core 2.0.0", version, 8192, 512))
+        elif msg.TYPE == p.MsgType.DISARM:
+            self.out.put(p.Reply(p.MsgType.DISARM, p.Result.OK, 0))
+
+
+def test_a_v3_host_names_the_version_of_a_v2_device_it_refuses():
+    link = V2Device()
+    with pytest.raises(DriverError) as info:
+        Amplifier(link, timeout=0.3)
+    assert str(info.value) == ("device HB-SIM-1 (firmware hilbench-sim c-core 2.0.0) speaks protocol 2; this host "
+                               "needs protocol 3: update the device firmware")
+    assert link.rejected == 2  # the two v3 attempts; the v2 probe was answered
 
 
 @pytest.fixture(scope="module")
