@@ -149,7 +149,7 @@ def run(quick: bool = False) -> list[dict]:
     results.append(
         dict(
             name="run file write, lzf, margin over the fastest device rate",
-            value=lzf_rate / 20_000.0, unit="x", baseline_name="20 kHz, the fastest rate a device records",
+            value=lzf_rate, unit="samples/s", baseline_name="20 kHz, the fastest rate a device records",
             baseline_value=20_000.0, ratio=lzf_rate / 20_000.0, target=">= 10x", ok=lzf_rate >= 10 * 20_000.0,
         )
     )
