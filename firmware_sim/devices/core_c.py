@@ -21,8 +21,6 @@ SENSOR_TEMPERATURE = 0x01  # hb_sensors (protocol v3 IDENTITY)
 STATE_STREAMING = 3        # hb_state
 
 
-
-
 def _us(now: float) -> int:
     return int(now * 1e6)
 
