@@ -3,43 +3,48 @@ target, and 2 s at 1 kHz) analysed by ``hilbench analyse`` serially and on a Loc
 speedup (target >= 1.7x on a 2-core machine), and the two Parquet tables must be identical. Then the faults: one
 worker dies (os._exit) on a run and another run raises; the campaign completes with exactly those two rows failed.
 
-Each of the two timed analyses runs in a fresh interpreter, as ``hilbench analyse --serial`` and ``--workers 2``
-would: both pay the imports of the analysis (the serial process itself, the cluster's fork server once for its
-workers) and the cluster pays its start. The wall times mean little on a machine other jobs share: the load
-average is reported beside them, and the CPU times bound what two idle cores would give."""
+Each of the two timed analyses is the command itself, ``hilbench analyse --serial`` and ``--workers 2``, in a fresh
+interpreter, timed from outside: both pay the interpreter's start and the imports of the analysis (the serial
+process itself, the cluster's fork server once for its workers) and the cluster pays its start and shutdown. The
+wall times mean little on a machine other jobs share: the load average is reported beside them, and the CPU times
+bound what two idle cores would give."""
 
 from __future__ import annotations
 
 import json
 import os
+import re
 import resource
 import shutil
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import pyarrow.parquet as pq
 
+from hilbench.bench.acquisition.campaign import INDEX_NAME
 from hilbench.bench.campaign_analysis.engine import analyse
 from hilbench.bench.campaign_analysis.steps import StepSettings, identify_step
 from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
 
 FAULT_RUN = "id7-1.h5"
 ROOT = Path(__file__).resolve().parents[1]
-#: one timed analysis in a fresh interpreter; its last line is the summary as JSON
+#: one timed analysis in a fresh interpreter: the ``hilbench`` command itself (its main, as the console script calls
+#: it), then the summary line's start-up time as JSON
 CHILD = """
-import json, sys
-from pathlib import Path
-from hilbench.bench.campaign_analysis.engine import analyse
-s = analyse([Path(sys.argv[1])], Path(sys.argv[2]), serial=sys.argv[3] == "serial", workers=2, dashboard=False,
-            progress=False, say=lambda _line: None)
-print(json.dumps({"wall": s.wall_time, "startup": s.startup_time, "table": str(s.table)}))
+import sys
+from hilbench.bench.cli.main import main
+code = main(sys.argv[1:])
 # the local cluster's workers are children of multiprocessing's fork server: stopping it (a private method, the one
 # its tests use) waits for it, so its CPU and its workers' reach this process's RUSAGE_CHILDREN
 from multiprocessing import forkserver
 getattr(forkserver._forkserver, "_stop", lambda: None)()
+sys.exit(code)
 """
+#: the command's last line: "... rows in all (W s, S s of it start-up) -> TABLE"
+SUMMARY = re.compile(r"\((?P<wall>[0-9.]+) s, (?P<startup>[0-9.]+) s of it start-up\) -> (?P<table>.+)$")
 
 
 def _children_cpu() -> float:
@@ -49,11 +54,20 @@ def _children_cpu() -> float:
 
 
 def _timed(folder: Path, out: Path, mode: str) -> dict:
+    """``hilbench analyse FOLDER -o OUT`` with ``--serial`` or ``--workers 2``, timed from outside: the wall time
+    includes the interpreter's start, the command's imports and the cluster's shutdown."""
+    engine = ["--serial"] if mode == "serial" else ["--workers", "2", "--no-dashboard"]
     cpu0, load0 = _children_cpu(), os.getloadavg()[0]
-    done = subprocess.run([sys.executable, "-c", CHILD, str(folder), str(out), mode], cwd=ROOT, check=True,
-                          capture_output=True, text=True)
-    return {**json.loads(done.stdout.strip().splitlines()[-1]), "cpu": _children_cpu() - cpu0,
-            "load": max(load0, os.getloadavg()[0])}
+    t0 = time.perf_counter()
+    done = subprocess.run([sys.executable, "-c", CHILD, "analyse", str(folder), "-o", str(out), *engine],
+                          cwd=ROOT, check=True, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    m = SUMMARY.search(done.stdout.strip().splitlines()[-1])
+    if m is None:
+        raise RuntimeError(f"hilbench analyse: no summary line in {done.stdout!r}")
+    # start-up as the command counts it (cluster start, imports) plus what precedes its clock (interpreter, CLI)
+    return {"wall": wall, "startup": float(m["startup"]) + wall - float(m["wall"]), "table": m["table"],
+            "cpu": _children_cpu() - cpu0, "load": max(load0, os.getloadavg()[0])}
 
 
 def _dies(path: str, settings: StepSettings) -> dict:
@@ -67,8 +81,33 @@ def _dies(path: str, settings: StepSettings) -> dict:
 #: 2000 samples (65 ms each), shows where the cluster's fixed cost (its start, 1 to 1.5 s more than the serial
 #: loop's imports) still outweighs the work
 SIZES = ((2.0, 1000.0), (5.0, 5000.0))
-#: alternating serial and cluster analyses of the target campaign (about 50 s a pair)
-REPEATS = 3
+#: alternating serial, cluster and two-halves analyses of the target campaign (about 65 s a round)
+REPEATS = 4
+
+
+def _halves(folder: Path, tmp: Path) -> tuple[Path, Path]:
+    """Two campaign folders of half the runs each (their index, links to the run files)."""
+    doc = json.loads((folder / INDEX_NAME).read_text())
+    runs, out = doc["runs"], []
+    for k, part in enumerate((runs[: len(runs) // 2], runs[len(runs) // 2 :])):
+        half = tmp / f"{folder.name}_half{k}"
+        half.mkdir()
+        for entry in part:
+            (half / entry["file"]).symlink_to(folder / entry["file"])
+        (half / INDEX_NAME).write_text(json.dumps({**doc, "runs": part}))
+        out.append(half)
+    return out[0], out[1]
+
+
+def _two_serial_halves(halves: tuple[Path, Path], out: Path) -> float:
+    """Wall time of two ``hilbench analyse --serial``, one per half, at the same time: what two cores give this
+    work, with nothing shared (the machine's ceiling for the cluster)."""
+    t0 = time.perf_counter()
+    procs = [subprocess.Popen([sys.executable, "-c", CHILD, "analyse", str(h), "-o", str(out / h.name), "--serial"],
+                              cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for h in halves]
+    if any(p.wait() for p in procs):
+        raise RuntimeError("hilbench analyse --serial failed on a half campaign")
+    return time.perf_counter() - t0
 
 
 def _speedup_rows(tmp: Path, n: int, duration: float, fs: float, target: bool) -> list[dict]:
@@ -79,14 +118,19 @@ def _speedup_rows(tmp: Path, n: int, duration: float, fs: float, target: bool) -
     write_campaign(folder, SyntheticCampaign(runs=n, duration=duration, sample_rate=fs, seed=3), fail_runs=(4,))
     # serial and cluster alternate, REPEATS times each for the target, and the fastest of each is compared: other
     # jobs on the machine only ever add time, and this VM's wall times vary by +-15 % from one run to the next
-    serials, clusters = [], []
+    # with the target, a third analysis each round: the two halves of the campaign serially at the same time
+    serials, clusters, ceilings = [], [], []
+    halves = _halves(folder, tmp) if target else None
     for k in range(REPEATS if target else 1):
         serials.append(_timed(folder, tmp / f"serial_{tag}_{k}", "serial"))
         clusters.append(_timed(folder, tmp / f"cluster_{tag}_{k}", "cluster"))
+        if halves:
+            ceilings.append(_two_serial_halves(halves, tmp / f"halves_{tag}_{k}"))
     serial, cluster = min(serials, key=lambda r: r["wall"]), min(clusters, key=lambda r: r["wall"])
     identical = all(pq.read_table(serials[0]["table"]).equals(pq.read_table(r["table"])) for r in serials + clusters)
     shutil.rmtree(folder)
     speedup = serial["wall"] / cluster["wall"]
+    ceiling = serial["wall"] / min(ceilings) if ceilings else None
     pairs = sorted(s_["wall"] / c["wall"] for s_, c in zip(serials, clusters, strict=True))
     phase_serial, phase_cluster = serial["wall"] - serial["startup"], cluster["wall"] - cluster["startup"]
     goal = ">= 1.7x (quiet machine)" if target else "informational: 65 ms of work per run"
@@ -101,6 +145,9 @@ def _speedup_rows(tmp: Path, n: int, duration: float, fs: float, target: bool) -
         {"name": f"analyse_{tag}_speedup_2_workers_after_startup", "value": phase_serial / phase_cluster,
          "unit": "x", "baseline_name": "same, less start-up", "baseline_value": None, "ratio": None,
          "target": goal, "ok": phase_serial / phase_cluster >= 1.7 if target else None},
+        *([{"name": f"analyse_{tag}_machine_ceiling_two_serial_halves", "value": ceiling, "unit": "x",
+            "baseline_name": "fastest serial wall / fastest wall of two serial halves at once", "baseline_value": None,
+            "ratio": None, "target": f"cluster at {speedup / ceiling:.0%} of it", "ok": None}] if ceiling else []),
         {"name": f"analyse_{tag}_cluster_wall", "value": cluster["wall"], "unit": "s", "baseline_name": "serial wall",
          "baseline_value": serial["wall"], "ratio": cluster["wall"] / serial["wall"], "target": None, "ok": None},
         {"name": f"analyse_{tag}_cluster_startup", "value": cluster["startup"], "unit": "s",

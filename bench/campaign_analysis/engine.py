@@ -28,9 +28,10 @@ from typing import Any
 
 from hilbench import __version__
 from hilbench.bench.acquisition.campaign import INDEX_NAME
+from hilbench.bench.campaign_analysis.fork_server import start_fork_server, warm_up
 from hilbench.bench.campaign_analysis.steps import STEPS, StepSettings, steps_for
 from hilbench.bench.campaign_analysis.table import ResultsFolder, row_key
-from hilbench.bench.errors import BenchError
+from hilbench.bench.errors import AnalyseError
 
 StepFunction = Callable[[str, StepSettings], dict[str, Any]]
 #: most runs per task: large enough that the per-task cost vanishes, small enough that both workers stay busy to
@@ -39,10 +40,6 @@ MAX_CHUNK = 8
 _QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(\S*)\s*$")
 #: environment keys read into numeric columns: key -> (column, accepted units)
 ENVIRONMENT = {"ambient": ("ambient", ("C", "degC")), "load": ("load", ("kg",))}
-
-
-class AnalyseError(BenchError):
-    """A campaign folder or an option that cannot be analysed; one line."""
 
 
 @dataclass
@@ -184,56 +181,6 @@ def chunk(todo: list[Task], workers: int) -> list[list[Task]]:
         out.append(todo[i:i + size])
         i += size
     return out
-
-
-#: what the steps import (much of it inside their functions; scipy.signal alone takes seconds): imported once per
-#: process before the first task, by the local cluster's fork server for all its workers
-WORKER_MODULES = ("numpy", "scipy.signal", "scipy.optimize", "scipy.interpolate", "h5py",
-                  "hilbench.analysis.runfile", "hilbench.bench.verdict", "hilbench.bench.analysis_input",
-                  "hilbench.analysis.identification.identify", "hilbench.analysis.identification.maxwell_fit",
-                  "hilbench.analysis.identification.output_error", "hilbench.analysis.record",
-                  "hilbench.bench.campaign_analysis.engine")
-
-
-def start_fork_server() -> None:
-    """Start multiprocessing's fork server now, preloading :data:`WORKER_MODULES`, so that its imports overlap the
-    client's own start (importing distributed, starting the scheduler); in Dask's pre-spawn environment
-    (``OMP_NUM_THREADS=1`` ...) so that each worker's BLAS runs one thread, as a spawned worker's would. A server
-    already running (an earlier analysis in this process) is kept."""
-    import multiprocessing
-    from multiprocessing import forkserver
-
-    import dask
-
-    # The thread counts are set here whatever Dask's config says: its distributed defaults (pre-spawn-environ) load
-    # only when distributed is imported, which `hilbench analyse` does after this. The environment read here was
-    # empty, so each worker ran OpenBLAS on two threads (200 runs of 2 s: 32 s of CPU against 15 s serial; tables
-    # that differed from the serial ones in the last bits). Importing distributed first would delay the server.
-    # Not MALLOC_TRIM_THRESHOLD_: set, it also fixes glibc's mmap threshold at 128 KiB, so every array of a run's
-    # analysis above that was mapped and unmapped again; the workers spent 1.7x the serial loop's CPU on a
-    # campaign of 25 000-sample runs (the serial loop with it set: 51 s, 19.5 s of it sys; without: 30.5 s, 4.2 s)
-    env = {k: str(v) for k, v in dask.config.get("distributed.nanny.pre-spawn-environ", {}).items()
-           if k != "MALLOC_TRIM_THRESHOLD_"}
-    env.update({k: "1" for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")})
-    saved = {k: os.environ.get(k) for k in env}
-    os.environ.update(env)
-    try:
-        multiprocessing.get_context("forkserver").set_forkserver_preload(["distributed", *WORKER_MODULES])
-        forkserver.ensure_running()  # launches the server and returns: it imports while this process goes on
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-
-
-def warm_up() -> None:
-    """Import :data:`WORKER_MODULES`."""
-    import importlib
-
-    for name in WORKER_MODULES:
-        importlib.import_module(name)
 
 
 def _finite_or_none(row: dict[str, Any]) -> dict[str, Any]:

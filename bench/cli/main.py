@@ -113,6 +113,10 @@ def _run(args: argparse.Namespace, show_tb: bool) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     argv, flags = split_global_flags(list(sys.argv[1:] if argv is None else argv))
+    if argv[:1] == ["analyse"]:  # its cluster's fork server starts before the parser is built
+        from hilbench.bench.cli.commands.analyse import start_early
+
+        start_early(argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
     args.traceback = "traceback" in flags

@@ -155,6 +155,32 @@ def test_cli_bad_input_is_one_line_and_exit_2(campaign, tmp_path, capsys):
     assert err.count("\n") == 1 and "campaign folder" in err
 
 
+_EARLY_CHILD = """
+import sys
+from multiprocessing import forkserver
+from hilbench.bench.cli.commands.analyse import start_early
+start_early(sys.argv[1:])
+print(forkserver._forkserver._forkserver_pid is not None)
+"""
+
+
+def test_the_fork_server_starts_before_the_parser_only_for_a_local_cluster(campaign, tmp_path):
+    """`hilbench analyse` starts its workers' fork server first thing (its 2 s of imports are the local cluster's
+    critical path), but only for a line that names a campaign folder and asks for no other engine."""
+    def started(*args: str) -> bool:
+        done = subprocess.run([sys.executable, "-c", _EARLY_CHILD, *args], capture_output=True, text=True,
+                              timeout=60)
+        assert done.returncode == 0, done.stderr[-2000:]
+        return done.stdout.split() == ["True"]
+
+    assert started(str(campaign), "-o", str(tmp_path / "r"), "--workers", "2")
+    assert not started(str(campaign), "--serial")
+    assert not started(str(campaign), "--scheduler", "tcp://127.0.0.1:8786")
+    assert not started(str(campaign), "--scheduler-file", str(tmp_path / "s.json"))
+    assert not started(str(campaign), "--help")
+    assert not started(str(tmp_path))  # no index.json: the command refuses it
+
+
 _BLAS_CHILD = """
 import json, sys
 from pathlib import Path
