@@ -145,9 +145,14 @@ def _speedup_rows(tmp: Path, n: int, duration: float, fs: float, target: bool) -
         {"name": f"analyse_{tag}_speedup_2_workers_after_startup", "value": phase_serial / phase_cluster,
          "unit": "x", "baseline_name": "same, less start-up", "baseline_value": None, "ratio": None,
          "target": goal, "ok": phase_serial / phase_cluster >= 1.7 if target else None},
+        # what two processes of this work get from the machine at this hour (no scheduler, nothing shared): the
+        # cluster cannot beat it, and on this shared VM it moved between 1.57x and 1.91x in one morning
         *([{"name": f"analyse_{tag}_machine_ceiling_two_serial_halves", "value": ceiling, "unit": "x",
             "baseline_name": "fastest serial wall / fastest wall of two serial halves at once", "baseline_value": None,
-            "ratio": None, "target": f"cluster at {speedup / ceiling:.0%} of it", "ok": None}] if ceiling else []),
+            "ratio": None, "target": None, "ok": None},
+           {"name": f"analyse_{tag}_cluster_share_of_machine_ceiling", "value": speedup / ceiling, "unit": "x",
+            "baseline_name": "cluster speedup / machine ceiling", "baseline_value": None, "ratio": None,
+            "target": ">= 0.9 (what the cluster itself costs)", "ok": speedup / ceiling >= 0.9}] if ceiling else []),
         {"name": f"analyse_{tag}_cluster_wall", "value": cluster["wall"], "unit": "s", "baseline_name": "serial wall",
          "baseline_value": serial["wall"], "ratio": cluster["wall"] / serial["wall"], "target": None, "ok": None},
         {"name": f"analyse_{tag}_cluster_startup", "value": cluster["startup"], "unit": "s",
