@@ -32,7 +32,7 @@ from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_
 FAULT_RUN = "id7-1.h5"
 ROOT = Path(__file__).resolve().parents[1]
 #: one timed analysis in a fresh interpreter: the ``hilbench`` command itself (its main, as the console script calls
-#: it), then the summary line's start-up time as JSON
+#: it); the command's last line, its summary, gives its own wall and start-up times
 CHILD = """
 import sys
 from hilbench.bench.cli.main import main
