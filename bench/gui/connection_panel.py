@@ -228,7 +228,8 @@ def identity_text(ident: dict) -> str:
         parts = [str(ident["protocol"])]
         parts += [f"{key} {ident[key]}" for key in ("model", "serial", "node", "rated_torque_Nm") if key in ident]
         return "  ".join(parts)
-    sensing = "  senses winding temperature" if int(ident.get("sensors", 0) or 0) & 1 else ""  # IDENTITY v3
+    sensors = wire.Sensor(int(ident.get("sensors", 0) or 0))  # IDENTITY v3
+    sensing = "  senses winding temperature" if sensors & wire.Sensor.TEMPERATURE else ""
     return (f"{ident.get('model', '?')}  serial {ident.get('serial', '?')}  firmware {ident.get('firmware', '?')}"
             f"  protocol v{ident.get('protocol_version', '?')}  buffer {ident.get('buffer_capacity', '?')}{sensing}")
 
