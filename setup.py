@@ -10,7 +10,8 @@ from setuptools import find_packages, setup
 SUBPACKAGES = ("bench", "drivers", "firmware_sim", "analysis")
 
 package_dir = {"hilbench": "hilbench"}
-packages = ["hilbench"]
+# hilbench/common: the bottom layer of shared definitions (units, run-file schema, metrics, CAN helpers)
+packages = ["hilbench"] + [f"hilbench.{name}" for name in find_packages("hilbench")]
 for sub in SUBPACKAGES:
     package_dir[f"hilbench.{sub}"] = sub
     packages += [f"hilbench.{sub}"] + [f"hilbench.{sub}.{name}" for name in find_packages(sub)]

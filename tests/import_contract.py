@@ -11,6 +11,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 PACKAGES = ("bench", "drivers", "firmware_sim", "analysis")
+#: the bottom layer (under the namespace root): every package may import it, it imports nothing else of hilbench
+COMMON = "hilbench.common"
+#: its folder, relative to the repository root
+COMMON_DIR = ("hilbench", "common")
 #: what a simulated device may take from drivers: the protocol definitions only
 PROTOCOL_DEFINITIONS = ("hilbench.drivers.protocol", "hilbench.drivers.cia402", "hilbench.drivers.odrive_can")
 
@@ -29,34 +33,41 @@ def module_name(root: Path, path: Path) -> str:
     parts = list(path.relative_to(root).with_suffix("").parts)
     if parts[-1] == "__init__":
         parts = parts[:-1]
+    if tuple(parts[:2]) == COMMON_DIR:  # hilbench/common/... is already under the namespace
+        return ".".join(parts)
     return ".".join(["hilbench", *parts])
+
+
+def _package_files(root: Path) -> list[Path]:
+    """Every module of the package folders and of the bottom layer under ``root``."""
+    files = [p for pkg in PACKAGES for p in sorted((root / pkg).rglob("*.py"))]
+    return files + sorted(root.joinpath(*COMMON_DIR).rglob("*.py"))
 
 
 def edges(root: Path) -> list[Edge]:
     """Every ``hilbench.*`` import in the package folders under ``root``, at any depth of the code."""
     out: list[Edge] = []
-    for pkg in PACKAGES:
-        for path in sorted((root / pkg).rglob("*.py")):
-            source = module_name(root, path)
-            tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
-            is_pkg = path.name == "__init__.py"
-            for node in ast.walk(tree):
-                targets: list[str] = []
-                if isinstance(node, ast.Import):
-                    targets = [a.name for a in node.names]
-                elif isinstance(node, ast.ImportFrom):
-                    if node.level:  # relative: resolve against the importing module's package
-                        base = source.split(".")
-                        base = base if is_pkg else base[:-1]
-                        base = base[: len(base) - (node.level - 1)]
-                        mod = ".".join(base + ([node.module] if node.module else []))
-                    else:
-                        mod = node.module or ""
-                    targets = [f"{mod}.{a.name}" for a in node.names] if mod else []
-                    targets = targets or [mod]
-                for t in targets:
-                    if t.startswith("hilbench."):
-                        out.append(Edge(source, t, f"{path.relative_to(root)}:{node.lineno}"))
+    for path in _package_files(root):
+        source = module_name(root, path)
+        tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+        is_pkg = path.name == "__init__.py"
+        for node in ast.walk(tree):
+            targets: list[str] = []
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:  # relative: resolve against the importing module's package
+                    base = source.split(".")
+                    base = base if is_pkg else base[:-1]
+                    base = base[: len(base) - (node.level - 1)]
+                    mod = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    mod = node.module or ""
+                targets = [f"{mod}.{a.name}" for a in node.names] if mod else []
+                targets = targets or [mod]
+            for t in targets:
+                if t.startswith("hilbench."):
+                    out.append(Edge(source, t, f"{path.relative_to(root)}:{node.lineno}"))
     return out
 
 
@@ -69,6 +80,8 @@ def violations(all_edges: list[Edge]) -> list[str]:
     bad: list[str] = []
     for e in all_edges:
         s, t = e.source, e.target
+        if _under(s, COMMON) and not _under(t, COMMON):
+            bad.append(f"{e} (hilbench.common, the bottom layer, imports nothing else of hilbench)")
         if _under(s, "hilbench.drivers") and any(_under(t, f"hilbench.{p}") for p in ("bench", "analysis",
                                                                                        "firmware_sim")):
             bad.append(f"{e} (drivers never imports bench, analysis or the simulators)")
@@ -147,7 +160,7 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 
 def modules(root: Path) -> set[str]:
-    return {module_name(root, p) for pkg in PACKAGES for p in (root / pkg).rglob("*.py")}
+    return {module_name(root, p) for p in _package_files(root)}
 
 
 def check(root: Path) -> list[str]:

@@ -60,3 +60,18 @@ def test_a_planted_cycle_is_caught():
     graph = {"hilbench.a": {"hilbench.b"}, "hilbench.b": {"hilbench.c"}, "hilbench.c": {"hilbench.a"},
              "hilbench.d": {"hilbench.a"}}
     assert cycles(graph) == [["hilbench.a", "hilbench.b", "hilbench.c"]]
+
+
+def test_the_bottom_layer_imports_nothing_else_of_hilbench(tmp_path):
+    tree = tmp_path / "tree"
+    for pkg in ("bench", "drivers", "firmware_sim", "analysis"):
+        (tree / pkg).mkdir(parents=True)
+    common = tree / "hilbench" / "common"
+    common.mkdir(parents=True)
+    (common / "__init__.py").write_text("")
+    (common / "units.py").write_text("from hilbench.common import __doc__\n")
+    (tree / "drivers" / "device.py").write_text("from hilbench.common import units\n")
+    assert check(tree) == []  # anyone may import the bottom layer, and it may import itself
+    (common / "units.py").write_text("def f():\n    from hilbench.analysis import record\n")
+    found = check(tree)
+    assert any("hilbench/common/units.py" in line and "bottom layer" in line for line in found), found
