@@ -17,7 +17,6 @@ Definitions (``d_k = host_time[k+1] - host_time[k]``, the cycle time the drive s
 
 from __future__ import annotations
 
-import abc
 import struct
 import time
 from dataclasses import dataclass
@@ -26,8 +25,7 @@ import numpy as np
 
 from hilbench.drivers.can_buffer import enlarge_receive_buffer
 from hilbench.drivers.can_frames import drop_malformed_frames
-from hilbench.drivers.device import Device, refusal
-from hilbench.drivers.errors import ConfigError, DeviceTimeoutError
+from hilbench.drivers.errors import DeviceTimeoutError
 
 LATE_FRACTION = 0.25
 JITTER_LIMIT = 0.10
@@ -86,76 +84,6 @@ def timing_summary(host_time: np.ndarray, scheduled: np.ndarray, rate: float, ec
     late = int(np.count_nonzero(host_time - np.asarray(scheduled) > LATE_FRACTION * period))
     return TimingSummary(int(host_time.size), rate, float(np.percentile(d, 50)), float(np.percentile(d, 99)),
                          float(d.max()), missed, late, float(np.percentile(np.abs(d - period), 99)), echoed)
-
-
-class HostClockedDevice(Device):
-    """What every host-clocked drive shares: the timing of its last stream, the run events, an idempotent close.
-
-    Subclasses set ``config`` (None until configured) and ``_timing`` (after each stream), and implement
-    :meth:`fault_line` (the latched fault, "" if none), :meth:`live_state` and :meth:`_release` (free the bus).
-    """
-
-    clock = "host"
-    config = None
-    _timing: TimingSummary | None = None
-    _closed = False
-
-    @property
-    def timing(self) -> TimingSummary | None:
-        """Timing of the last stream."""
-        return self._timing
-
-    def fault_line(self) -> str:
-        """The latched fault in one line with its code and text, "" when there is none."""
-        return ""
-
-    @abc.abstractmethod
-    def live_state(self) -> dict:
-        """For an operator display, without disturbing a stream: ``state`` (text), ``armed`` (power stage on),
-        ``streaming``, ``faults`` (one-line texts), ``cycle`` (cycles sent in the current or last stream),
-        ``current_cmd`` (A, the last command sent) and ``counters`` (name: (value, unit)) of the last stream."""
-
-    def _check_config(self, config) -> None:
-        """Refuse, before anything is sent, a CONFIG with problems or one the drive's capabilities cannot run."""
-        problems = config.problems()
-        if problems:
-            raise ConfigError("; ".join(problems))
-        why = refusal(self.name, self.capabilities, config.mode.name.lower(), config.sample_rate)
-        if why:
-            raise ConfigError(why)
-
-    def timing_counters(self) -> dict[str, tuple[float, str]]:
-        """The last stream's timing figures as (value, unit) for a display."""
-        t = self._timing
-        if t is None:
-            return {}
-        return {"cycles": (t.cycles, "cycles"), "missed cycles": (t.missed, "cycles"),
-                "late cycles": (t.late, "cycles"), "cycle time p99": (round(t.p99 * 1e3, 3), "ms"),
-                "cycle time max": (round(t.max * 1e3, 3), "ms"),
-                "jitter p99": (round(t.jitter_p99 * 1e6), "us")}
-
-    def run_events(self) -> list[tuple[str, str]]:
-        out = [("info", self._timing.line())] if self._timing is not None else []
-        fault = self.fault_line()
-        if fault:
-            out.append(("fault", fault))
-        return out
-
-    def close(self) -> None:
-        if self._closed:
-            return
-        self._closed = True
-        try:
-            if self.config is not None:
-                self.disarm()
-        except Exception:  # closing must release the bus whatever the drive or the bus says
-            pass
-        finally:
-            self._release()
-
-    @abc.abstractmethod
-    def _release(self) -> None:
-        """Stop background tasks and free the bus (called once, by :meth:`close`)."""
 
 
 @dataclass(frozen=True)
