@@ -30,10 +30,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hilbench.common.can import drop_malformed_frames, enlarge_receive_buffer
 from hilbench.drivers import protocol as p
 from hilbench.drivers.amplifier import check_setpoints
-from hilbench.drivers.can_buffer import enlarge_receive_buffer
-from hilbench.drivers.can_frames import drop_malformed_frames
 from hilbench.drivers.device import CycleSamples, Device, refusal
 from hilbench.drivers.errors import (
     CommandRefusedError,
@@ -136,7 +135,7 @@ class HostClockedDevice(Device):
         if fault:
             out.append(("fault", fault))
         out += self._drive_events()
-        malformed = getattr(self, "malformed", None)  # the drive's own bus (drivers/can_frames.py), once opened
+        malformed = getattr(self, "malformed", None)  # the drive's own bus (hilbench/common/can.py), once opened
         dropped = (malformed.count if malformed is not None else 0) + self._malformed_cycle
         if dropped:
             out.append(("info", f"{dropped} malformed frame(s) on the bus were counted and dropped"))

@@ -23,8 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hilbench.drivers.can_buffer import enlarge_receive_buffer
-from hilbench.drivers.can_frames import drop_malformed_frames
+from hilbench.common.can import drop_malformed_frames, enlarge_receive_buffer
 from hilbench.drivers.errors import DeviceTimeoutError
 
 LATE_FRACTION = 0.25

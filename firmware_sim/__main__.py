@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from hilbench.firmware_sim.devices.bus_buffer import widen_device_buffer
+from hilbench.common.can import enlarge_receive_buffer
 
 PACINGS = ("realtime", "lockstep")
 #: Node ids each kind of simulated device can take: the hilbench protocol's 4-bit node; CiA 402 1..126 (127 is
@@ -136,7 +136,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m hilbench.firmware
             check_bus_args("can", args.interface, args.can, args.node)
 
             bus = can.Bus(interface=args.interface, channel=args.can, fd=args.fd)
-            widen_device_buffer(bus)
+            enlarge_receive_buffer(bus)
             transport = CanTransport(bus, args.node, args.fd)
     except (ValueError, OSError, ImportError, RuntimeError, can.CanError) as exc:
         print(f"{prog}: error: {' '.join(str(exc).split())}", file=sys.stderr)

@@ -15,8 +15,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from hilbench.firmware_sim.devices.bus_buffer import widen_device_buffer as enlarge_receive_buffer
-from hilbench.firmware_sim.devices.bus_frames import drop_malformed as drop_malformed_frames
+from hilbench.common.can import drop_malformed_frames, enlarge_receive_buffer
 from hilbench.firmware_sim.engine.plant import Plant
 
 RT_PRIORITY = 20  # SCHED_FIFO priority of a simulated drive's process, where the OS allows it
