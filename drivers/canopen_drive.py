@@ -446,8 +446,7 @@ class CanopenDrive(HostClockedDevice):
             time.sleep(0.005)
 
     def arm(self) -> None:
-        if self.config is None:
-            raise CommandRefusedError("configure() the drive before arming")
+        self._configured("arming")
         if self.power_state() in (c.State.FAULT, c.State.FAULT_REACTION):
             raise DeviceFaultError(f"CANopen node {self.node_id} is in fault ({self.fault_text()}); "
                                    f"clear it with `hilbench fault clear --device URL` first")

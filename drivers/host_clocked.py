@@ -44,6 +44,7 @@ from hilbench.drivers.errors import (
 from hilbench.drivers.host_cycle import CanCycle, CanCycleSpec, Guard, TimingSummary, timing_summary
 
 BLOCK_PERIOD = 0.02  # s between sample blocks handed to the caller
+FEED_PERIOD = 0.02   # s between watchdog feeds while armed and not streaming
 
 
 @dataclass(frozen=True)
@@ -81,6 +82,10 @@ class HostClockedDevice(Device):
     _cycle: CanCycle | None = None
     _progress = 0          # cycles sent in the current (or last) stream
     _malformed_cycle = 0   # malformed frames the cycles' buses dropped
+    #: whether the drive's watchdog is fed by its commands (ODrive, moteus): then a zero-torque feed
+    #: (:meth:`_feed_message`, sent on ``self.bus``) runs while armed and not streaming
+    feeds_watchdog = False
+    _feed = None
 
     @property
     def timing(self) -> TimingSummary | None:
@@ -106,9 +111,34 @@ class HostClockedDevice(Device):
             bus = can.Bus(interface=interface, channel=channel, **bus_kwargs)
         except Exception as exc:  # python-can raises many types for a missing interface
             raise DriverError(f"{self.name}: cannot open the CAN bus: {' '.join(str(exc).split())}") from exc
+        return self._guard_bus(bus)
+
+    def _guard_bus(self, bus):
+        """``bus`` with its socket buffer enlarged and its malformed frames counted (``self.malformed``)."""
         enlarge_receive_buffer(bus)
         self.malformed = drop_malformed_frames(bus)  # a stray datagram is counted, never fatal
         return bus
+
+    # ------------------------------------------------------------------ the watchdog feed
+    def _feed_message(self):
+        """The zero-torque command that feeds the drive's watchdog (a python-can message), where
+        :attr:`feeds_watchdog`."""
+        raise NotImplementedError
+
+    def _start_feed(self) -> None:
+        if self.feeds_watchdog and self._feed is None:
+            self._feed = self.bus.send_periodic(self._feed_message(), FEED_PERIOD)
+
+    def _stop_feed(self) -> None:
+        if self._feed is not None:
+            self._feed.stop()
+            self._feed = None
+
+    def _configured(self, doing: str):
+        """The configuration, or one line refusing ``doing`` (arming, streaming) before :meth:`configure`."""
+        if self.config is None:
+            raise CommandRefusedError(f"configure() the drive before {doing}")
+        return self.config
 
     def _check_config(self, config) -> None:
         """Refuse, before anything is sent, a CONFIG with problems or one the drive's capabilities cannot run."""
@@ -177,7 +207,18 @@ class HostClockedDevice(Device):
         (the cycle is then stopped)."""
 
     def _begin(self, cycle: CanCycle, started: float) -> None:
-        """Once the cycle process is started (e.g. hand the watchdog over from a feed to the cycle)."""
+        """Once the cycle is started: hand the watchdog over from the feed to the cycle's commands.
+
+        The feed keeps the watchdog fed until the cycle's first command is out: starting the cycle process takes
+        longer than a watchdog timeout on a loaded host. A feed frame that lands between the first commands makes
+        the drive hold zero torque for that cycle. A cycle in a thread sends its first command ``start_delay``
+        (0.05 s) after its start, within any watchdog timeout: its feed stops at once."""
+        if not self.feeds_watchdog:
+            return
+        while not cycle.in_process and not cycle.sent and cycle.alive() and not cycle.arrays["ctl"][1]:
+            time.sleep(0.0005)
+            cycle.check_started(started, self.label)
+        self._stop_feed()  # the cycle's commands feed the watchdog now
 
     def _poll(self, cycle: CanCycle, n: int) -> str:
         """Every poll: the drive's fault that ends the stream now, in words ("" while there is none)."""
@@ -212,10 +253,7 @@ class HostClockedDevice(Device):
         limit trips, :class:`DeviceTimeoutError` when the drive falls silent, and :class:`SampleLossError` when
         samples are missing, unless ``allow_loss``.
         """
-        cfg = self.config
-        if cfg is None:
-            raise CommandRefusedError("configure() the drive before streaming")
-        values = check_setpoints(setpoints, cfg)
+        values = check_setpoints(setpoints, self._configured("streaming"))
         self._check_ready()
         return self._stream(values, allow_loss)
 
@@ -239,6 +277,9 @@ class HostClockedDevice(Device):
                 if fault:
                     cycle.stop()
                     ended = True
+                elif (cycle.sent >= n or cycle.limit is not None) and not self._closed:
+                    # the cycle's last command is out: the feed keeps the watchdog fed while it collects the tail
+                    self._start_feed()
                 if ended:
                     cycle.join()
                 sent = self._progress = cycle.sent
@@ -280,6 +321,8 @@ class HostClockedDevice(Device):
             self._cycle = None
             self._malformed_cycle += cycle.malformed
             cycle.close()
+            if not self._closed and not fault:
+                self._start_feed()
             self._after_stream(finished, fault)
 
     # ------------------------------------------------------------------ the host's limits

@@ -118,6 +118,8 @@ class CanCycleSpec:
     ``guards``: limits checked on every received frame, in the cycle itself (:class:`Guard`). The first
     value out of its range ends the cycle at once: no further setpoint is sent, ``end_data`` (zero torque,
     operation disabled) goes out, and :attr:`CanCycle.limit` says which guard tripped on which frame.
+
+    ``fd`` and ``width``: CAN-FD frames, and the payload bytes each row keeps (tx ``(n, len(tx_ids), width)``).
     """
 
     interface: str
@@ -131,6 +133,8 @@ class CanCycleSpec:
     end_data: tuple[bytes, ...]
     echo_id: int | None = None
     guards: tuple[Guard, ...] = ()
+    fd: bool = False   # CAN-FD frames (with bit-rate switch), e.g. moteus's
+    width: int = 8     # payload bytes each tx and rx row holds (64 for CAN-FD)
 
 
 OWN_FRAMES_OPTION = ("virtual", "socketcan")  # interfaces that return own frames only when asked to
@@ -157,19 +161,20 @@ class CanCycle:
         n = len(tx_data)
         self.n = n
         m = len(spec.rx_ids)
-        layout = self._layout(n, len(spec.tx_ids), m)
+        layout = self._layout(n, len(spec.tx_ids), m, spec.width)
         size = layout[-1][1] + layout[-1][2]
         self._shm = shared_memory.SharedMemory(create=True, size=max(size, 8))
-        self.arrays = self._view(self._shm.buf, n, len(spec.tx_ids), m)
+        self.arrays = self._view(self._shm.buf, n, len(spec.tx_ids), m, spec.width)
         self.arrays["tx"][:] = tx_data
         self.arrays["ctl"][:] = 0
         self._start_delay = start_delay
         self._worker = None
 
     @staticmethod
-    def _layout(n: int, ntx: int, m: int) -> list[tuple[str, int, int, tuple, str]]:
+    def _layout(n: int, ntx: int, m: int, width: int = 8) -> list[tuple[str, int, int, tuple, str]]:
         parts = [("ctl", (_RX + m,), "i8"), ("host_time", (n,), "f8"), ("scheduled", (n,), "f8"),
-                 ("rx", (m, n, 8), "u1"), ("rx_time", (m, n), "f8"), ("tx", (n, ntx, 8), "u1")]
+                 ("rx", (m, n, width), "u1"), ("rx_time", (m, n), "f8"),
+                 ("tx", (n, ntx, width), "u1")]
         out, offset = [], 0
         for name, shape, dtype in parts:
             nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
@@ -178,9 +183,9 @@ class CanCycle:
         return out
 
     @classmethod
-    def _view(cls, buf, n: int, ntx: int, m: int) -> dict[str, np.ndarray]:
+    def _view(cls, buf, n: int, ntx: int, m: int, width: int = 8) -> dict[str, np.ndarray]:
         return {name: np.ndarray(shape, dtype, buffer=buf, offset=offset)
-                for name, offset, _, shape, dtype in cls._layout(n, ntx, m)}
+                for name, offset, _, shape, dtype in cls._layout(n, ntx, m, width)}
 
     def start(self) -> None:
         import os
@@ -210,6 +215,12 @@ class CanCycle:
 
     def received(self, j: int) -> int:
         return int(min(self.arrays["ctl"][_RX + j], self.n))
+
+    @property
+    def in_process(self) -> bool:
+        """Whether the cycle runs in a thread of this process (python-can's ``virtual`` bus): it then sends its
+        first frame ``start_delay`` after :meth:`start`, not after a process has started."""
+        return self.spec.interface == "virtual"
 
     @property
     def realtime(self) -> bool:
@@ -281,7 +292,7 @@ def _cycle_main(spec: CanCycleSpec, shm_name: str, n: int, start_delay: float, p
 
     shm = shared_memory.SharedMemory(name=shm_name)
     try:
-        a = CanCycle._view(shm.buf, n, len(spec.tx_ids), len(spec.rx_ids))
+        a = CanCycle._view(shm.buf, n, len(spec.tx_ids), len(spec.rx_ids), spec.width)
         ctl = a["ctl"]
         if parent:
             import gc
@@ -333,9 +344,10 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
 
     slot = {cob: j for j, cob in enumerate(spec.rx_ids)}
     counts = [0] * len(spec.rx_ids)
-    msgs = [can.Message(arbitration_id=cob, data=bytes(8)[:length], is_extended_id=cob > 0x7FF)
+    fd = {"is_fd": True, "bitrate_switch": True} if spec.fd else {}
+    msgs = [can.Message(arbitration_id=cob, data=bytes(length), is_extended_id=cob > 0x7FF, **fd)
             for cob, length in zip(spec.tx_ids, spec.tx_len, strict=True)]
-    stop_msgs, end_msgs = ([can.Message(arbitration_id=cob, data=d, is_extended_id=cob > 0x7FF)
+    stop_msgs, end_msgs = ([can.Message(arbitration_id=cob, data=d, is_extended_id=cob > 0x7FF, **fd)
                             for cob, d in zip(spec.tx_ids, payloads, strict=True)]
                            for payloads in (spec.stop_data, spec.end_data))
     clock = time.monotonic
@@ -344,6 +356,7 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
     echoes = 0
 
     rx, rx_time = received
+    width = spec.width
     guards = [(g.slot, g.offset, g.fmt, g.low, g.high) for g in spec.guards]
 
     def take(msg) -> None:
@@ -359,7 +372,8 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
             return
         k = counts[j]
         if k < n:
-            rx[j, k, :len(msg.data)] = msg.data
+            data = msg.data[:width]  # a longer frame than the cycle expects keeps its first bytes
+            rx[j, k, :len(data)] = data
             rx_time[j, k] = clock()
         counts[j] = k + 1
         ctl[_RX + j] = k + 1

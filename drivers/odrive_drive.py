@@ -42,7 +42,6 @@ from hilbench.drivers.errors import (
 from hilbench.drivers.host_clocked import GuardFrame, HostClockedDevice
 from hilbench.drivers.host_cycle import CanCycle, CanCycleSpec
 
-FEED_PERIOD = 0.02  # s between watchdog feeds while armed and not streaming
 OWNER_LISTEN = 0.15  # s the host listens, sending nothing, for another host's commands to the axis
 
 
@@ -50,6 +49,7 @@ class OdriveDrive(HostClockedDevice):
     """One ODrive axis at ``node_id`` (0..63) on a python-can bus."""
 
     capabilities = Capabilities({"current": (1000,)})
+    feeds_watchdog = True
 
     def __init__(self, interface: str, channel: str, node_id: int, tvl_endpoint: int, timeout: float = 2.0,
                  **bus_kwargs) -> None:
@@ -65,7 +65,6 @@ class OdriveDrive(HostClockedDevice):
         self._heartbeat = threading.Event()
         self._sdo: dict[int, int] = {}
         self._sdo_event = threading.Event()
-        self._feed = None
         self._last_cmd = 0.0  # A, the last current command sent
         self._others: set[int] = set()  # host commands for this axis heard before this host sent any
         self._sent_any = False
@@ -158,8 +157,7 @@ class OdriveDrive(HostClockedDevice):
         self.config = config
 
     def arm(self) -> None:
-        if self.config is None:
-            raise CommandRefusedError("configure() the drive before arming")
+        self._configured("arming")
         if self.axis_error:
             raise DeviceFaultError(f"ODrive node {self.node_id}: {o.describe_errors(self.axis_error)}; "
                                    f"clear it with `hilbench fault clear --device URL` first")
@@ -167,19 +165,12 @@ class OdriveDrive(HostClockedDevice):
         self._send(o.Cmd.SET_AXIS_STATE, o.U32.pack(o.AxisState.CLOSED_LOOP_CONTROL))
         self._wait_heartbeat(lambda: self.axis_state == o.AxisState.CLOSED_LOOP_CONTROL, "closed loop control")
 
-    def _start_feed(self) -> None:
+    def _feed_message(self):
         import can
 
-        if self._feed is None:
-            self._sent_any = True
-            msg = can.Message(arbitration_id=o.can_id(self.node_id, o.Cmd.SET_INPUT_TORQUE), data=o.FLOAT.pack(0.0),
-                              is_extended_id=False)
-            self._feed = self.bus.send_periodic(msg, FEED_PERIOD)
-
-    def _stop_feed(self) -> None:
-        if self._feed is not None:
-            self._feed.stop()
-            self._feed = None
+        self._sent_any = True
+        return can.Message(arbitration_id=o.can_id(self.node_id, o.Cmd.SET_INPUT_TORQUE), data=o.FLOAT.pack(0.0),
+                           is_extended_id=False)
 
     def clear_faults(self) -> None:
         self._send(o.Cmd.CLEAR_ERRORS)
@@ -217,21 +208,9 @@ class OdriveDrive(HostClockedDevice):
                              o.can_id(self.node_id, o.Cmd.GET_TORQUES)), (zero,), (zero,), guards=self._guards(cfg))
         return spec, tx
 
-    def _begin(self, cycle: CanCycle, started: float) -> None:
-        # The zero-torque feed keeps the axis's watchdog fed until the cycle's first command is out: starting
-        # the cycle process takes longer than the watchdog timeout on a loaded host. A feed frame that lands
-        # between the first commands makes the axis hold zero for one tick, which its torque target records.
-        while not cycle.sent and cycle.alive() and not cycle.arrays["ctl"][1]:
-            time.sleep(0.0005)
-            cycle.check_started(started, self.label)
-        self._stop_feed()  # the cycle's commands feed the watchdog now
-
     def _poll(self, cycle: CanCycle, n: int) -> str:
         if self.axis_error or self.axis_state != o.AxisState.CLOSED_LOOP_CONTROL:
             return f"{o.describe_errors(self.axis_error)} (axis state {self.axis_state})"
-        if (cycle.sent >= n or cycle.limit is not None) and not self._closed:
-            # the cycle's last command is out: zero torque keeps the watchdog fed while it collects the tail
-            self._start_feed()
         return ""
 
     def _rows(self, done: int, ready: int, arrays: dict) -> tuple[CycleSamples | None, int, bool]:
@@ -245,10 +224,6 @@ class OdriveDrive(HostClockedDevice):
         if done < n:  # a run that ends short is never complete
             raise SampleLossError(f"ODrive node {self.node_id}: {done} of {n} samples arrived (its cyclic "
                                   f"messages stopped or were lost after {cycle.sent} commands)")
-
-    def _after_stream(self, finished: bool, fault: str) -> None:
-        if not self._closed and not fault:
-            self._start_feed()
 
     def _block(self, i: int, j: int, a: dict) -> CycleSamples:
         cal_ratio, cfg = self.config.ratio, self.config

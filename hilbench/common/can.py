@@ -85,3 +85,16 @@ def drop_malformed_frames(bus: object) -> MalformedFrames:
     bus._recv_internal = receive  # type: ignore[attr-defined]
     bus.malformed_frames = counter  # type: ignore[attr-defined]
     return counter
+
+
+#: The payload lengths a CAN-FD frame can have (its DLC codes 0-15), bytes.
+FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
+
+
+def pad_fd(data: bytes, fill: int = 0x50) -> bytes:
+    """``data`` padded to the next CAN-FD payload length with ``fill`` (0x50: the moteus protocol's no-op,
+    which moteus's own transports pad with)."""
+    size = next((n for n in FD_LENGTHS if n >= len(data)), None)
+    if size is None:
+        raise ValueError(f"{len(data)} bytes do not fit a CAN-FD frame (64 at most)")
+    return bytes(data) + bytes([fill]) * (size - len(data))
