@@ -19,7 +19,8 @@ setpoint it received, or 0 before the first; moteus: the float32 torque command 
 drive was killed is never ``completed``.
 Targets: 0 motors left energised, 0 samples lost or invented, 0 files that do not open.
 Full length 10 min (``python -m benchmarks --only drive_soak``); ``--quick`` one run; ``--seconds S`` a soak of
-S seconds (``python -m benchmarks.bench_drive_soak --seconds 60``).
+S seconds, ``--kinds moteus`` (or a comma list) on those drives only
+(``python -m benchmarks.bench_drive_soak --seconds 60 --kinds moteus``).
 """
 
 from __future__ import annotations
@@ -195,11 +196,12 @@ def _wait_streaming(out: Path, host: subprocess.Popen, samples: int = 50, timeou
             continue
 
 
-def soak(seconds: float, seed: int = 30, work: Path | None = None) -> dict:
+def soak(seconds: float, seed: int = 30, work: Path | None = None, kinds: tuple[str, ...] | None = None) -> dict:
+    """The soak over the drives ``kinds`` (default: all of :data:`KINDS`); totals, and runs and host kills per kind."""
     rng = np.random.default_rng(seed)
     random.seed(seed)
     work = Path(work or tempfile.mkdtemp(prefix="hilbench-drive-soak-"))
-    drives = [SimDrive(kind, node) for kind, node in KINDS]
+    drives = [SimDrive(kind, node) for kind, node in KINDS if kinds is None or kind in kinds]
     totals = {k: 0 for k in ("runs", "kills", "drive_kills", "stray_bursts", "stray_datagrams", "completed",
                              "energised", "lost", "invented", "unreadable", "absent", "samples", "short_completed",
                              "host_errors", "clear_failed", "drive_ended")}
@@ -232,6 +234,8 @@ def soak(seconds: float, seed: int = 30, work: Path | None = None) -> dict:
             _, err = host.communicate(timeout=300)
             totals["runs"] += 1
             totals["kills"] += killed
+            for key, value in ((f"runs {drive.kind}", 1), (f"kills {drive.kind}", killed)):
+                totals[key] = totals.get(key, 0) + value
             totals["drive_kills"] += drive_killed
             if drive_killed:
                 drive.start()
@@ -260,9 +264,12 @@ def soak(seconds: float, seed: int = 30, work: Path | None = None) -> dict:
 
 def run(quick: bool = False) -> list[dict]:
     seconds = 1.0 if quick else 600.0  # quick: one run (make test runs every benchmark quick)
-    if "--seconds" in sys.argv:  # a short soak of its own length: python -m benchmarks.bench_drive_soak --seconds 60
+    # a short soak of its own length, on some of the drives: python -m benchmarks.bench_drive_soak --seconds 60
+    # --kinds moteus
+    if "--seconds" in sys.argv:
         seconds = float(sys.argv[sys.argv.index("--seconds") + 1])
-    t = soak(seconds)
+    kinds = tuple(sys.argv[sys.argv.index("--kinds") + 1].split(",")) if "--kinds" in sys.argv else None
+    t = soak(seconds, kinds=kinds)
     tag = f"drive soak {seconds:g} s, 1 kHz"
 
     def row(name, value, unit, target, ok):
@@ -273,6 +280,8 @@ def run(quick: bool = False) -> list[dict]:
     return [
         row("runs (CiA 402, ODrive and moteus in turn)", t["runs"], "runs", "report", None),
         row("host kills (SIGKILL)", t["kills"], "runs", "report", None),
+        *[row(f"{name} (host kills)", t[f"runs {name}"], "runs", f"{t[f'kills {name}']} killed", None)
+          for name in ("canopen", "odrive", "moteus") if f"runs {name}" in t],
         row("drive kills (SIGKILL)", t["drive_kills"], "runs", "report", None),
         row("runs ended by the drive's death (aborted, not completed)", t["drive_ended"], "runs", "report", None),
         row("stray datagram bursts", t["stray_bursts"], "bursts", "report", None),

@@ -111,11 +111,16 @@ class MoteusDrive(HostClockedDevice):
         self.interface, self.channel, self.bus_kwargs = interface, channel, {**bus_kwargs, "fd": True}
         self.config: p.Config | None = None
         self._estopped = False
+        self._halted = False  # the controller left position mode (or was stopped): no feed re-energises it
         self._mode, self._fault = STOPPED, 0  # as last reported
         self._last_cmd = 0.0
         self._loop = asyncio.new_event_loop()
         threading.Thread(target=self._loop.run_forever, name="moteus-transport", daemon=True).start()
-        self.device = moteus.PythonCanDevice(interface=interface, channel=channel, **self.bus_kwargs)
+        try:
+            self.device = moteus.PythonCanDevice(interface=interface, channel=channel, **self.bus_kwargs)
+        except Exception as exc:  # python-can raises many types for a missing interface
+            self._loop.call_soon_threadsafe(self._loop.stop)
+            raise e.DriverError(f"{self.name}: cannot open the CAN bus: {' '.join(str(exc).split())}") from exc
         self.bus = self._guard_bus(self.device._can)  # the transport's own bus (python-can's BusABC)
         try:
             self._refuse_if_owned()  # listens only, before the transport sends anything
@@ -233,6 +238,7 @@ class MoteusDrive(HostClockedDevice):
         if self._mode in (FAULTED, TIMEOUT) or self._estopped:
             why = "e-stop requested" if self._estopped else _fault_text(self._mode, self._fault)
             raise e.DeviceFaultError(f"{self.label}: {why}; clear it with `hilbench fault clear --device URL` first")
+        self._halted = False
         self._start_feed()  # zero torque, position mode: the power stage on, the watchdog fed
         deadline = time.monotonic() + self.timeout
         while self._state()[MODE] != POSITION_MODE:
@@ -242,6 +248,10 @@ class MoteusDrive(HostClockedDevice):
                                          f"({_fault_text(self._mode, self._fault)})")
             time.sleep(FEED_WAIT)
 
+    def _start_feed(self) -> None:
+        if not self._halted:  # after a stop, a fault or a timeout only arm() powers the motor again
+            super()._start_feed()
+
     def _feed_message(self):
         return self._message(self._zero_torque())
 
@@ -250,13 +260,14 @@ class MoteusDrive(HostClockedDevice):
                                              kd_scale=0.0)
 
     def disarm(self) -> None:
+        self._halted = True
         if self._cycle is not None:
             self._cycle.stop()
         self._stop_feed()
         self.bus.send(self._message(self.controller.make_stop()))
 
     def estop(self) -> None:
-        self._estopped = True
+        self._estopped = self._halted = True
         cycle = self._cycle
         if cycle is not None:
             cycle.estop()
@@ -305,7 +316,7 @@ class MoteusDrive(HostClockedDevice):
         tx[:, 0, :len(base)] = frames
         self._setpoints = frames
         end = self._message(self._zero_torque()).data
-        stop = self._message(self.controller.make_stop()).data
+        stop = self._message(self.controller.make_stop(query=True)).data  # answered: the stream sees mode 0
         spec = CanCycleSpec(self.interface, self.channel, self.bus_kwargs, float(self.config.sample_rate),
                             (command_id,), (len(base),), ((self.id << 8) | HOST_ID,), (bytes(stop),), (bytes(end),),
                             echo_id=command_id,  # host_time: when command k was on the bus
@@ -331,7 +342,7 @@ class MoteusDrive(HostClockedDevice):
         end = False
         left = np.flatnonzero(mode != POSITION_MODE)
         if left.size:  # the controller left position mode (fault, timeout, stop): keep the sample that says so
-            ready, end = done + int(left[0]) + 1, True
+            ready, end, self._halted = done + int(left[0]) + 1, True, True
             v = {r: a[: ready - done] for r, a in v.items()}
             self._mode, self._fault = int(mode[left[0]]), int(v[FAULT][left[0]])
         return self._block(done, ready, v, arrays), ready, end

@@ -23,6 +23,7 @@ from hilbench.drivers.errors import (
     DeviceFaultError,
     DeviceTimeoutError,
     DeviceURLError,
+    DriverError,
     PortBusyError,
 )
 from hilbench.drivers.moteus_drive import MoteusDrive, reply_layout
@@ -226,3 +227,31 @@ def test_sim_moteus_arguments_reach_the_simulator_or_are_one_line():
                               "udp_multicast", "--node", "127"], capture_output=True, text=True, timeout=60)
     assert refused.returncode == 2
     assert refused.stderr.strip().splitlines() == ["hilbench sim: error: --node must be 1..126 for --moteus, got 127"]
+
+
+def test_estop_mid_stream_stops_the_controller_and_latches_until_a_fault_clear(bus):
+    host = bus.host()
+    try:
+        host.configure(config())
+        host.arm()
+        assert host.live_state()["armed"] and not host.live_state()["streaming"]
+        stream = host.stream(np.full(5000, 2.0))
+        next(stream)
+        host.estop()
+        with pytest.raises(DeviceFaultError, match=r"left position mode at sample \d+: e-stop \(stop sent\)"):
+            for _ in stream:
+                pass
+        assert bus.sim.mode == Mode.STOPPED and bus.sim.torque_held == 0.0
+        assert host.faults() == ["e-stop requested by the host (stop sent)"]
+        with pytest.raises(DeviceFaultError, match="e-stop requested; clear it with"):
+            host.arm()
+        host.clear_faults()
+        host.arm()
+        assert bus.sim.mode == Mode.POSITION
+    finally:
+        host.close()
+
+
+def test_a_bus_that_cannot_open_is_one_line():
+    with pytest.raises(DriverError, match=r"^moteus://nonsense/x\?id=1: cannot open the CAN bus: "):
+        MoteusDrive("nonsense", "x", 1, timeout=0.3)
