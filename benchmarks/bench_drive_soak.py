@@ -262,13 +262,10 @@ def soak(seconds: float, seed: int = 30, work: Path | None = None, kinds: tuple[
     return totals
 
 
-def run(quick: bool = False) -> list[dict]:
-    seconds = 1.0 if quick else 600.0  # quick: one run (make test runs every benchmark quick)
-    # a short soak of its own length, on some of the drives: python -m benchmarks.bench_drive_soak --seconds 60
-    # --kinds moteus
-    if "--seconds" in sys.argv:
-        seconds = float(sys.argv[sys.argv.index("--seconds") + 1])
-    kinds = tuple(sys.argv[sys.argv.index("--kinds") + 1].split(",")) if "--kinds" in sys.argv else None
+def run(quick: bool = False, seconds: float | None = None, kinds: tuple[str, ...] | None = None) -> list[dict]:
+    """The soak's rows: ``quick`` one run (make test runs every benchmark quick), else ``seconds`` (default 600)
+    on the drives ``kinds`` (default all)."""
+    seconds = 1.0 if quick else (seconds or 600.0)
     t = soak(seconds, kinds=kinds)
     tag = f"drive soak {seconds:g} s, 1 kHz"
 
@@ -297,5 +294,9 @@ def run(quick: bool = False) -> list[dict]:
 
 
 if __name__ == "__main__":
-    for r in run(quick="--quick" in sys.argv):
+    # a short soak of its own length, on some of the drives: python -m benchmarks.bench_drive_soak --seconds 60
+    # --kinds moteus
+    argv = sys.argv[1:]
+    for r in run(quick="--quick" in argv, seconds=float(argv[argv.index("--seconds") + 1]) if "--seconds" in argv
+                 else None, kinds=tuple(argv[argv.index("--kinds") + 1].split(",")) if "--kinds" in argv else None):
         print(f"{r['name']:<60} {r['value']:12.0f} {r['unit']:<8} target {r['target']} ok {r['ok']}")

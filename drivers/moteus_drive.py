@@ -134,7 +134,7 @@ class MoteusDrive(HostClockedDevice):
             values = self._state()
             if values[MODE] in (POSITION_MODE, CURRENT_MODE):
                 raise e.PortBusyError(f"{self.name} is in use by another host (the controller is in "
-                                    f"{MODES[values[MODE]]} mode); nothing was commanded: stop that host's run first")
+                                      f"{MODES[values[MODE]]} mode); nothing was commanded: stop that host's run first")
             raw = self._run(self.controller.custom_query({r: moteus.INT32 for r in IDENTITY}), "identity")
             self._identity = {IDENTITY[r]: int(v) for r, v in raw.values.items() if r in IDENTITY}
         except BaseException:
@@ -178,7 +178,7 @@ class MoteusDrive(HostClockedDevice):
                 heard.append(msg.arbitration_id)
         if heard:
             raise e.PortBusyError(f"{self.name} is in use by another host (its commands, CAN id "
-                                f"0x{heard[-1]:X}, on the bus); nothing was sent to it: stop that host's run first")
+                                  f"0x{heard[-1]:X}, on the bus); nothing was sent to it: stop that host's run first")
 
     # ------------------------------------------------------------------ what every device answers
     def info(self) -> dict:
@@ -229,7 +229,7 @@ class MoteusDrive(HostClockedDevice):
         self._check_config(config)
         if config.mode == p.Mode.POSITION and None in self.gains:
             raise e.ConfigError(f"{self.name}: position mode needs the controller's own position gains in the URL "
-                              f"(&kp=N*m/rev&kd=N*m*s/rev, its servo.pid_position.kp and .kd), to scale the host's")
+                                f"(&kp=N*m/rev&kd=N*m*s/rev, its servo.pid_position.kp and .kd), to scale the host's")
         self.config = config
 
     def arm(self) -> None:
@@ -245,7 +245,7 @@ class MoteusDrive(HostClockedDevice):
             if time.monotonic() > deadline:
                 self._stop_feed()
                 raise e.DeviceTimeoutError(f"{self.label} did not enter position mode within {self.timeout:g} s "
-                                         f"({_fault_text(self._mode, self._fault)})")
+                                           f"({_fault_text(self._mode, self._fault)})")
             time.sleep(FEED_WAIT)
 
     def _start_feed(self) -> None:
@@ -279,7 +279,7 @@ class MoteusDrive(HostClockedDevice):
         self._state()  # also the reply layout the stream's rows are decoded with
         if self._estopped or self._mode != POSITION_MODE:
             raise e.CommandRefusedError(f"cannot stream: {self.label} is not in position mode "
-                                      f"({_fault_text(self._mode, self._fault)}); arm it first")
+                                        f"({_fault_text(self._mode, self._fault)}); arm it first")
 
     def _commands(self, values: np.ndarray) -> tuple[bytes, np.ndarray]:
         """The cycle's command frames: the library's frame for the first sample, and its bytes for every sample
@@ -381,7 +381,7 @@ class MoteusDrive(HostClockedDevice):
         (position, p_res), (velocity, v_res) = self._layout[POSITION], self._layout[VELOCITY]
         if p_res != 3 or v_res != 3:
             raise e.ConfigError(f"{self.label} replies position and velocity in resolutions {p_res}, {v_res}, not "
-                              f"float32 as queried")
+                                f"float32 as queried")
         return GuardFrame(0, "<f", position, velocity, 1 / (2 * math.pi), 1 / (2 * math.pi))
 
     def _release(self) -> None:
