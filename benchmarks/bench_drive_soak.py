@@ -1,21 +1,26 @@
-"""Drive soak: CiA 402 and ODrive runs at 1 kHz with random host kills, drive kills and stray datagrams.
+"""Drive soak: CiA 402, ODrive and moteus runs at 1 kHz with random host kills, drive kills and stray datagrams.
 
-Two simulated drives (``hilbench sim --canopen`` and ``--odrive``, each its own process on udp_multicast, on this
-host only) live through the soak. Hosts are real ``hilbench run identify`` processes on their URLs, 0.5-3 s each,
-alternating between the drives. Each run draws its trouble: SIGKILL of the host at a random moment (40 %), SIGKILL
-of the drive (15 %; it is started again afterwards), and a burst of stray datagrams on the drive's group (30 %).
+Three simulated drives (``hilbench sim --canopen``, ``--odrive`` and ``--moteus``, each its own process on
+udp_multicast, on this host only) live through the soak. Hosts are real ``hilbench run identify`` processes on
+their URLs, 0.5-3 s each, taking the drives in turn. Each run draws its trouble: SIGKILL of the host at a random
+moment (40 %), SIGKILL of the drive (15 %; it is started again afterwards), and a burst of stray datagrams on the
+drive's group (30 %).
 
-After a host kill, the drive must be at zero torque within its documented timeout (CiA 402: SYNC timeout
-0.1 s; ODrive: watchdog 0.2 s) plus a 0.5 s allowance for this loaded machine: the soak then asks it (CiA 402:
-statusword by SDO; ODrive: the axis state in its heartbeat). A drive still in operation enabled or closed loop
-is a motor left energised. Then ``hilbench fault clear`` re-arms it, as an operator would.
+After a host kill, the drive must be at zero torque within its documented timeout (CiA 402: SYNC timeout 0.1 s;
+ODrive: watchdog 0.2 s; moteus: its servo.default_timeout_s, 0.1 s) plus a 0.5 s allowance for this loaded
+machine: the soak then asks it (CiA 402: statusword by SDO; ODrive: the axis state in its heartbeat; moteus: its
+mode register, by a query that commands nothing). A drive still in operation enabled, closed loop, or position or
+current mode is a motor left energised. Then ``hilbench fault clear`` re-arms it, as an operator would.
 
 Every run file is checked: sample indices 0..n-1 without gap or repeat (``lost``); every commanded current is one
 the host sent (CiA 402: the per-mille quantisation of its setpoint; ODrive: the drive's torque target is a
-setpoint it received, or 0 before the first) (``invented``); a completed run holds every planned sample; a killed
-run repairs to ``crashed``; a run whose drive was killed is never ``completed``.
+setpoint it received, or 0 before the first; moteus: the float32 torque command sent for that sample)
+(``invented``); a completed run holds every planned sample; a killed run repairs to ``crashed``; a run whose
+drive was killed is never ``completed``.
 Targets: 0 motors left energised, 0 samples lost or invented, 0 files that do not open.
-Full length 10 min (``python -m benchmarks --only drive_soak``); ``--quick`` one run.
+Full length 10 min (``python -m benchmarks --only drive_soak``); ``--quick`` one run; ``--seconds S`` a soak of
+S seconds, ``--kinds moteus`` (or a comma list) on those drives only
+(``python -m benchmarks.bench_drive_soak --seconds 60 --kinds moteus``).
 """
 
 from __future__ import annotations
@@ -36,6 +41,8 @@ import numpy as np
 RATE = 1000  # Hz
 KT, RATED = 0.2, 0.5  # N*m/A (the host's default), N*m (the simulated drive's 0x6076)
 ALLOWANCE = 0.5  # s beyond a drive's own timeout, for this loaded machine
+TIMEOUT = {"canopen": 0.1, "odrive": 0.2, "moteus": 0.1}  # s: each drive's own documented timeout
+KINDS = (("canopen", 4), ("odrive", 2), ("moteus", 3))  # the simulated drives and their node (controller) ids
 
 
 class SimDrive:
@@ -75,8 +82,12 @@ class SimDrive:
                 s.sendto(bytes([i % 256]) * (1 + i % 17), (self.group, self.port))
 
     def energised(self) -> bool:
-        """Whether the drive still drives its motor: CiA 402 in operation enabled, ODrive in closed loop."""
+        """Whether the drive still drives its motor: CiA 402 in operation enabled, ODrive in closed loop, moteus in
+        position or current mode."""
         import can
+
+        if self.kind == "moteus":
+            return moteus_mode(self.group, self.port, self.node) in (9, 10)
 
         if self.kind == "canopen":
             import canopen
@@ -104,6 +115,27 @@ class SimDrive:
             raise RuntimeError("the simulated ODrive sent no heartbeat")
         finally:
             bus.shutdown()
+
+
+def moteus_mode(group: str, port: int, controller: int) -> int:
+    """The mode register of the moteus controller on ``group``/``port``, by a query that writes nothing (so it
+    neither commands the controller nor feeds its watchdog)."""
+    import can
+    import moteus
+
+    query = moteus.Controller(controller).make_query()
+    bus = can.Bus(interface="udp_multicast", channel=group, port=port, hop_limit=0, fd=True)
+    try:
+        bus.send(can.Message(arbitration_id=0x8000 | controller, data=query.data, is_extended_id=True, is_fd=True,
+                             bitrate_switch=True))
+        deadline = time.monotonic() + 2.0
+        while time.monotonic() < deadline:
+            msg = bus.recv(0.2)
+            if msg is not None and msg.arbitration_id == controller << 8:
+                return int(moteus.parse_registers(bytes(msg.data)).response[moteus.Register.MODE])
+        raise RuntimeError("the simulated moteus controller did not answer a query")
+    finally:
+        bus.shutdown()
 
 
 def check_drive_file(path: Path, kind: str, killed: bool, drive_killed: bool) -> dict[str, int]:
@@ -134,6 +166,10 @@ def check_drive_file(path: Path, kind: str, killed: bool, drive_killed: bool) ->
         expected = np.rint(setpoints * KT / RATED * 1000) * RATED / 1000 / KT
         wrong = ~np.isclose(cmd, expected[np.clip(index, 0, setpoints.size - 1)], rtol=1e-12, atol=0.0)
         out["invented"] = int(np.sum(wrong)) + max(0, n - setpoints.size)
+    elif kind == "moteus":  # the torque command sent for that sample, float32 on the wire
+        expected = np.float32(setpoints * KT).astype(np.float64) / KT
+        wrong = cmd != expected[np.clip(index, 0, setpoints.size - 1)]
+        out["invented"] = int(np.sum(wrong)) + max(0, n - setpoints.size)
     else:  # the drive's own torque target: a setpoint it received (float32 on the wire) or 0 before the first
         sent = np.concatenate([[0.0], (setpoints * KT).astype(np.float32).astype(np.float64)])
         out["invented"] = int(np.sum(~np.isin((cmd * KT).astype(np.float32).astype(np.float64), sent)))
@@ -160,11 +196,12 @@ def _wait_streaming(out: Path, host: subprocess.Popen, samples: int = 50, timeou
             continue
 
 
-def soak(seconds: float, seed: int = 30, work: Path | None = None) -> dict:
+def soak(seconds: float, seed: int = 30, work: Path | None = None, kinds: tuple[str, ...] | None = None) -> dict:
+    """The soak over the drives ``kinds`` (default: all of :data:`KINDS`); totals, and runs and host kills per kind."""
     rng = np.random.default_rng(seed)
     random.seed(seed)
     work = Path(work or tempfile.mkdtemp(prefix="hilbench-drive-soak-"))
-    drives = [SimDrive("canopen", 4), SimDrive("odrive", 2)]
+    drives = [SimDrive(kind, node) for kind, node in KINDS if kinds is None or kind in kinds]
     totals = {k: 0 for k in ("runs", "kills", "drive_kills", "stray_bursts", "stray_datagrams", "completed",
                              "energised", "lost", "invented", "unreadable", "absent", "samples", "short_completed",
                              "host_errors", "clear_failed", "drive_ended")}
@@ -172,7 +209,7 @@ def soak(seconds: float, seed: int = 30, work: Path | None = None) -> dict:
     try:
         i = 0
         while time.monotonic() < t_end:
-            drive = drives[i % 2]
+            drive = drives[i % len(drives)]
             duration = float(rng.uniform(0.5, 3.0))
             kill, drive_kill, stray = rng.random() < 0.4, rng.random() < 0.15, rng.random() < 0.3
             out = work / f"{drive.kind}{i:04d}.h5"
@@ -192,11 +229,13 @@ def soak(seconds: float, seed: int = 30, work: Path | None = None) -> dict:
                 elif kill and host.poll() is None:
                     os.kill(host.pid, signal.SIGKILL)
                     killed = True
-                    time.sleep((0.1 if drive.kind == "canopen" else 0.2) + ALLOWANCE)
+                    time.sleep(TIMEOUT[drive.kind] + ALLOWANCE)
                     totals["energised"] += drive.energised()
             _, err = host.communicate(timeout=300)
             totals["runs"] += 1
             totals["kills"] += killed
+            for key, value in ((f"runs {drive.kind}", 1), (f"kills {drive.kind}", killed)):
+                totals[key] = totals.get(key, 0) + value
             totals["drive_kills"] += drive_killed
             if drive_killed:
                 drive.start()
@@ -223,9 +262,11 @@ def soak(seconds: float, seed: int = 30, work: Path | None = None) -> dict:
     return totals
 
 
-def run(quick: bool = False) -> list[dict]:
-    seconds = 1.0 if quick else 600.0  # quick: one run (make test runs every benchmark quick)
-    t = soak(seconds)
+def run(quick: bool = False, seconds: float | None = None, kinds: tuple[str, ...] | None = None) -> list[dict]:
+    """The soak's rows: ``quick`` one run (make test runs every benchmark quick), else ``seconds`` (default 600)
+    on the drives ``kinds`` (default all)."""
+    seconds = 1.0 if quick else (seconds or 600.0)
+    t = soak(seconds, kinds=kinds)
     tag = f"drive soak {seconds:g} s, 1 kHz"
 
     def row(name, value, unit, target, ok):
@@ -234,8 +275,10 @@ def run(quick: bool = False) -> list[dict]:
 
     clean = t["runs"] - t["kills"] - t["drive_kills"]
     return [
-        row("runs (CiA 402 and ODrive alternating)", t["runs"], "runs", "report", None),
+        row("runs (CiA 402, ODrive and moteus in turn)", t["runs"], "runs", "report", None),
         row("host kills (SIGKILL)", t["kills"], "runs", "report", None),
+        *[row(f"{name} (host kills)", t[f"runs {name}"], "runs", f"{t[f'kills {name}']} killed", None)
+          for name in ("canopen", "odrive", "moteus") if f"runs {name}" in t],
         row("drive kills (SIGKILL)", t["drive_kills"], "runs", "report", None),
         row("runs ended by the drive's death (aborted, not completed)", t["drive_ended"], "runs", "report", None),
         row("stray datagram bursts", t["stray_bursts"], "bursts", "report", None),
@@ -251,5 +294,9 @@ def run(quick: bool = False) -> list[dict]:
 
 
 if __name__ == "__main__":
-    for r in run(quick="--quick" in sys.argv):
+    # a short soak of its own length, on some of the drives: python -m benchmarks.bench_drive_soak --seconds 60
+    # --kinds moteus
+    argv = sys.argv[1:]
+    for r in run(quick="--quick" in argv, seconds=float(argv[argv.index("--seconds") + 1]) if "--seconds" in argv
+                 else None, kinds=tuple(argv[argv.index("--kinds") + 1].split(",")) if "--kinds" in argv else None):
         print(f"{r['name']:<60} {r['value']:12.0f} {r['unit']:<8} target {r['target']} ok {r['ok']}")

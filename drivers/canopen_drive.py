@@ -32,16 +32,12 @@ import math
 import struct
 import threading
 import time
-from collections.abc import Iterator
 
 import numpy as np
 
 from hilbench.drivers import cia402 as c
 from hilbench.drivers import protocol as p
-from hilbench.drivers.amplifier import check_setpoints
 from hilbench.drivers.calibration import Calibration, CountUnwrapper
-from hilbench.drivers.can_buffer import enlarge_receive_buffer
-from hilbench.drivers.can_frames import drop_malformed_frames
 from hilbench.drivers.device import Capabilities, CycleSamples
 from hilbench.drivers.errors import (
     CommandRefusedError,
@@ -52,12 +48,12 @@ from hilbench.drivers.errors import (
     PortBusyError,
     SampleLossError,
 )
-from hilbench.drivers.host_cycle import CanCycle, CanCycleSpec, Guard, HostClockedDevice, timing_summary
+from hilbench.drivers.host_clocked import GuardFrame, HostClockedDevice
+from hilbench.drivers.host_cycle import CanCycle, CanCycleSpec
 
 HOST_NODE_ID = 127          # the host's node id for its heartbeat (0x700 + 127)
 DRIVE_HEARTBEAT_MS = 100    # producer heartbeat the host asks of the drive
 RATES = (1000, 2000)        # Hz; 2 kHz is near a 1 Mbit/s bus's limit for SYNC + 1 RPDO + 2 TPDOs
-BLOCK_PERIOD = 0.02         # s between sample blocks handed to the caller
 #: SYNCs a stream allows the drive before its TPDO must report "operation enabled" (CiA 301 lets a drive apply
 #: the controlword after sampling, and a drive may take cycles to close its loops): configurable, bounded.
 ENABLE_CYCLES = 4  # an enable latency of 3 SYNCs, reported one SYNC late by a sample-then-apply drive
@@ -73,6 +69,9 @@ PDO_TYPES = {c.CONTROLWORD: (0x6, "UNSIGNED16"), c.TARGET_TORQUE: (0x3, "INTEGER
 #: Objects the host reads or writes and cannot run without (beyond the PDO-mapped ones).
 REQUIRED = (c.DEVICE_TYPE, c.SUPPORTED_MODES, c.RATED_TORQUE, c.ENCODER_RESOLUTION, c.MODES_OF_OPERATION,
             c.MODES_DISPLAY, c.COMM_CYCLE_PERIOD, c.MAX_TORQUE, c.PRODUCER_HEARTBEAT)
+#: The TPDOs' layouts as the host maps them (TPDO1: statusword, torque actual; TPDO2: position, velocity actual).
+TPDO1 = np.dtype([("status", "<u2"), ("torque", "<i2")])
+TPDO2 = np.dtype([("position", "<i4"), ("velocity", "<i4")])
 DATA_TYPE_NAMES = {0x1: "BOOLEAN", 0x2: "INTEGER8", 0x3: "INTEGER16", 0x4: "INTEGER32", 0x5: "UNSIGNED8",
                    0x6: "UNSIGNED16", 0x7: "UNSIGNED32", 0x8: "REAL32", 0x9: "VISIBLE_STRING", 0x11: "REAL64",
                    0x15: "INTEGER64", 0x1B: "UNSIGNED64"}
@@ -82,6 +81,8 @@ class CanopenDrive(HostClockedDevice):
     """A CiA 402 drive at ``node_id`` on a python-can bus (``interface``, ``channel``), OD from ``eds``."""
 
     capabilities = Capabilities({"current": RATES})
+    row_name = "cycle"
+    end_text = "zero torque sent, operation disabled"
 
     def __init__(self, interface: str, channel: str, node_id: int, eds: str, timeout: float = 2.0,
                  enable_cycles: int = ENABLE_CYCLES, **bus_kwargs) -> None:
@@ -90,6 +91,7 @@ class CanopenDrive(HostClockedDevice):
         self.name = f"canopen://{interface}/{channel}?node={node_id}"
         self.node_id = node_id
         self.timeout = timeout
+        self.label = f"CANopen node {node_id}"
         self.config: p.Config | None = None
         self._emcy: list[tuple[int, int, float]] = []
         self._emcy_event = threading.Event()
@@ -97,10 +99,7 @@ class CanopenDrive(HostClockedDevice):
         self._estop_requested = False
         self._last_status = 0       # statusword of the last sample streamed
         self._last_cmd = 0.0        # A, the last current command sent
-        self._progress = 0          # cycles sent in the current (or last) stream
         self._sdo_lock = threading.RLock()  # canopen's SDO client serves one transfer at a time
-        self._cycle: CanCycle | None = None
-        self._malformed_cycle = 0   # malformed frames the cycles' buses dropped
         self._notes: list[str] = []  # one-line remarks on the streams, for the run events
         self.enable_cycles = enable_cycles
         self.interface, self.channel, self.bus_kwargs = interface, channel, dict(bus_kwargs)
@@ -108,15 +107,7 @@ class CanopenDrive(HostClockedDevice):
         self._restore: dict[tuple[int, int | None], int] = {}  # objects to put back on close
         self._check_rest = False  # set by configure: the next stream's first sample is checked for motion
         od = _check_eds(eds, node_id)  # before the bus is even opened
-        import can
-
-        try:
-            bus = can.Bus(interface=interface, channel=channel, **bus_kwargs)
-        except Exception as exc:  # python-can raises many types for a missing interface
-            raise DriverError(f"{self.name}: cannot open the CAN bus: {' '.join(str(exc).split())}") from exc
-        enlarge_receive_buffer(bus)
-        self.malformed = drop_malformed_frames(bus)  # a stray datagram is counted, never fatal
-        self.network = canopen.Network(bus)
+        self.network = canopen.Network(self._open_bus(interface, channel, **bus_kwargs))
         self.network.connect()
         try:
             self._refuse_if_owned()  # listens only: nothing is sent to a drive another host runs
@@ -455,8 +446,7 @@ class CanopenDrive(HostClockedDevice):
             time.sleep(0.005)
 
     def arm(self) -> None:
-        if self.config is None:
-            raise CommandRefusedError("configure() the drive before arming")
+        self._configured("arming")
         if self.power_state() in (c.State.FAULT, c.State.FAULT_REACTION):
             raise DeviceFaultError(f"CANopen node {self.node_id} is in fault ({self.fault_text()}); "
                                    f"clear it with `hilbench fault clear --device URL` first")
@@ -515,198 +505,124 @@ class CanopenDrive(HostClockedDevice):
         else:
             self._controlword(int(c.Command.QUICK_STOP))
 
-    # ------------------------------------------------------------------ the cycle
-    def stream(self, setpoints, allow_loss: bool = False) -> Iterator[CycleSamples]:
-        """Play ``setpoints`` (A) one per cycle at the configured rate; yield blocks as the TPDOs arrive.
-
-        Raises :class:`DeviceFaultError` (after yielding every sample received) when the drive leaves
-        operation enabled (EMCY text in the message), and :class:`SampleLossError` when some SYNC got no
-        TPDO back, unless ``allow_loss``.
-        """
-        cfg = self.config
-        if cfg is None:
-            raise CommandRefusedError("configure() the drive before streaming")
-        values = check_setpoints(setpoints, cfg)
+    # ------------------------------------------------------------------ the stream loop's hooks
+    def _check_ready(self) -> None:
         if self._emcy:
             raise DeviceFaultError(f"cannot stream: {self.emcy_line()}")
         if self.power_state() not in (c.State.OPERATION_ENABLED, c.State.SWITCHED_ON):
             raise CommandRefusedError(f"cannot stream: CANopen node {self.node_id} is not switched on "
                                       f"(arm it first)")
-        torque_cmd = values * cfg.torque_constant
-        pm = c.torque_to_permille(torque_cmd, self.rated_torque)
-        return self._stream(values, pm, allow_loss)
 
-    def _stream(self, values: np.ndarray, pm: np.ndarray, allow_loss: bool) -> Iterator[CycleSamples]:
+    def _cycle_spec(self, values: np.ndarray) -> tuple[CanCycleSpec, np.ndarray]:
+        """Per cycle: the RPDO (enable operation, target torque in per mille of the rated torque), then SYNC."""
         cfg = self.config
         n = len(values)
-        rate = cfg.sample_rate
+        self._pm = c.torque_to_permille(values * cfg.torque_constant, self.rated_torque)
         rpdo_fmt = _pdo_format(self._rpdo)
         fmt1, fmt2 = _pdo_format(self._tpdo1), _pdo_format(self._tpdo2)
+        assert fmt1.size == TPDO1.itemsize and fmt2.size == TPDO2.itemsize
         tx = np.zeros((n, 2, 8), np.uint8)
         frame = np.zeros(n, dtype=np.dtype([("cw", "<u2"), ("torque", "<i2")]))
         frame["cw"] = int(c.Command.ENABLE_OPERATION)
-        frame["torque"] = pm
+        frame["torque"] = self._pm
         tx[:, 0, :4] = frame.view(np.uint8).reshape(n, 4)
-        spec = CanCycleSpec(self.interface, self.channel, self.bus_kwargs, float(rate),
+        spec = CanCycleSpec(self.interface, self.channel, self.bus_kwargs, float(cfg.sample_rate),
                             (self._rpdo.cob_id, self.sync_id), (rpdo_fmt.size, 0),
                             (self._tpdo1.cob_id, self._tpdo2.cob_id),
                             (rpdo_fmt.pack(int(c.Command.QUICK_STOP), 0), b""),
                             (rpdo_fmt.pack(int(c.Command.SWITCH_ON), 0), b""),  # zero torque, operation disabled
                             echo_id=self.sync_id,  # host_time: when SYNC k was on the bus
                             guards=self._guards(cfg))
-        dt1 = np.dtype([("status", "<u2"), ("torque", "<i2")])
-        dt2 = np.dtype([("position", "<i4"), ("velocity", "<i4")])
-        assert fmt1.size == dt1.itemsize and fmt2.size == dt2.itemsize
-        cycle = CanCycle(spec, tx)
-        self._cycle, self._progress = cycle, 0
-        unwrap = CountUnwrapper()
-        done = 0
-        enabled_at: int | None = None  # the first cycle whose TPDO reported operation enabled
-        finished = False
-        self._timing = None
-        arrays = cycle.arrays
-        try:
-            started = time.monotonic()
-            cycle.start()
-            hb_deadline = None
-            while True:
-                time.sleep(BLOCK_PERIOD)
-                cycle.check_started(started, f"CANopen node {self.node_id}")
-                ended = not cycle.alive() or bool(arrays["ctl"][1])
-                if ended:
-                    cycle.join()
-                sent = cycle.sent
-                self._progress = sent
-                ready = min(cycle.received(0), cycle.received(1))
-                if cycle.limit is not None:  # the sample that tripped a limit is the last one
-                    ready = min(ready, cycle.limit[1] + 1)
-                if ready > done:
-                    t1 = arrays["rx"][0, done:ready, :4].copy().view(dt1).ravel()
-                    t2 = arrays["rx"][1, done:ready, :8].copy().view(dt2).ravel()
-                    if self._check_rest and done == 0:
-                        self._check_rest = False
-                        moving = self._uncommanded(t1, t2)
-                        if moving:
-                            self._notes.append(moving)
-                    states = [c.state_of(int(w)) for w in t1["status"]]
-                    enabled = np.array([s is c.State.OPERATION_ENABLED for s in states])
-                    if enabled_at is None:  # the enable handshake: a drive may report "enabled" a few SYNCs late
-                        lead = int(np.argmax(enabled)) if enabled.any() else len(enabled)
-                        if all(s in (c.State.SWITCHED_ON, c.State.READY) for s in states[:lead]):
-                            if done + lead > self.enable_cycles:
-                                cycle.stop()
-                                cycle.join()
-                                raise CommandRefusedError(
-                                    f"CANopen node {self.node_id} did not report operation enabled within "
-                                    f"{self.enable_cycles} cycles of the stream (statusword "
-                                    f"0x{int(t1['status'][0]):04X}: {states[0].value if states[0] else '?'}); "
-                                    f"give it longer with &enable_cycles=N in the device URL")
-                            enabled[:lead] = True  # samples before the drive enabled: kept, their status says so
-                        if lead < len(enabled):
-                            enabled_at = done + lead
-                    if not enabled.all():  # the drive left operation enabled: keep the sample that says so
-                        first = int(np.argmin(enabled))
-                        # ...unless it is switched on: only the end-of-stream SWITCH_ON gets there, so this TPDO
-                        # answers the end's own SYNC, and arrived as a cycle's because TPDOs were lost before it
-                        ours = c.state_of(int(t1["status"][first])) is c.State.SWITCHED_ON
-                        ready = done + first + (0 if ours and not self._estop_requested else 1)
-                        t1, t2 = t1[: ready - done], t2[: ready - done]
-                        cycle.stop()
-                        ended = True
-                        cycle.join()
-                    if ready > done:
-                        yield self._block(done, ready, pm, t1, t2, arrays["host_time"], unwrap)
-                    done = ready
-                    hb_deadline = None
-                elif not ended and sent > done + rate * 0.25:  # a quarter second of SYNCs unanswered
-                    hb_deadline = hb_deadline or time.monotonic()
-                    if time.monotonic() - hb_deadline > self.timeout:
-                        cycle.stop()
-                        raise DeviceTimeoutError(
-                            f"CANopen node {self.node_id} stopped answering SYNC at cycle {done} "
-                            f"(no TPDO for {self.timeout:g} s)")
-                if ended:
-                    break
-            finished = True
-            sent = cycle.sent
-            if enabled_at:
-                self._notes.append(f"CANopen node {self.node_id} reported operation enabled from cycle {enabled_at} "
-                                   f"of a stream on (the samples before it are kept; their drive_status says so)")
-            if cycle.error:
-                raise DriverError(f"{self.name}: the cycle process could not open the CAN bus")
-            if cycle.limit is not None:
-                guard, row = cycle.limit
-                raise DeviceFaultError(self._limit_line(guard, row, arrays), int(p.Fault[guard.name]))
-            self._timing = timing_summary(arrays["host_time"][:sent], arrays["scheduled"][:sent], rate, cycle.echoed)
-            if done < n:
-                word = int(arrays["rx"][0, done - 1, :2].view("<u2")[0]) if done else 0
-                last = c.state_of(word)
-                if done and last is not c.State.OPERATION_ENABLED:
-                    if not self._emcy:
-                        self._emcy_event.wait(0.2)
-                    why = self.emcy_line() or f"statusword 0x{word:04X} ({last.value if last else '?'})"
-                    if self._estop_requested:
-                        why = f"quick stop (e-stop); {why}"
-                    raise DeviceFaultError(f"CANopen node {self.node_id} left operation enabled at cycle "
-                                           f"{done - 1}: {why}")
-                lost = sent - done
-                if lost and not allow_loss:
-                    raise SampleLossError(f"CANopen node {self.node_id}: {lost} of {sent} SYNCs got no TPDO back "
-                                          "(TPDOs are matched to SYNCs in order: the samples after the first loss "
-                                          "are shifted)")
-        finally:
-            cycle.stop()
-            cycle.join()
-            sent = cycle.sent
-            if self._timing is None and sent:
-                self._timing = timing_summary(arrays["host_time"][:sent], arrays["scheduled"][:sent], rate,
-                                              cycle.echoed)
-            self._cycle = None
-            self._malformed_cycle += cycle.malformed
-            cycle.close()
-            if not finished and not self._closed:
-                try:
-                    self.disarm()
-                except DriverError:
-                    pass
+        self._unwrap = CountUnwrapper()
+        self._enabled_at: int | None = None  # the first cycle whose TPDO reported operation enabled
+        return spec, tx
 
-    def _block(self, a: int, b: int, pm: np.ndarray, t1: np.ndarray, t2: np.ndarray, host_time: np.ndarray,
-               unwrap: CountUnwrapper) -> CycleSamples:
+    def _rows(self, done: int, ready: int, arrays: dict) -> tuple[CycleSamples | None, int, bool]:
+        t1 = arrays["rx"][0, done:ready, :4].copy().view(TPDO1).ravel()
+        t2 = arrays["rx"][1, done:ready, :8].copy().view(TPDO2).ravel()
+        if self._check_rest and done == 0:
+            self._check_rest = False
+            moving = self._uncommanded(t1, t2)
+            if moving:
+                self._notes.append(moving)
+        states = [c.state_of(int(w)) for w in t1["status"]]
+        enabled = np.array([s is c.State.OPERATION_ENABLED for s in states])
+        end = False
+        if self._enabled_at is None:  # the enable handshake: a drive may report "enabled" a few SYNCs late
+            lead = int(np.argmax(enabled)) if enabled.any() else len(enabled)
+            if all(s in (c.State.SWITCHED_ON, c.State.READY) for s in states[:lead]):
+                if done + lead > self.enable_cycles:
+                    raise CommandRefusedError(
+                        f"CANopen node {self.node_id} did not report operation enabled within "
+                        f"{self.enable_cycles} cycles of the stream (statusword "
+                        f"0x{int(t1['status'][0]):04X}: {states[0].value if states[0] else '?'}); "
+                        f"give it longer with &enable_cycles=N in the device URL")
+                enabled[:lead] = True  # samples before the drive enabled: kept, their status says so
+            if lead < len(enabled):
+                self._enabled_at = done + lead
+        if not enabled.all():  # the drive left operation enabled: keep the sample that says so
+            first = int(np.argmin(enabled))
+            # ...unless it is switched on: only the end-of-stream SWITCH_ON gets there, so this TPDO
+            # answers the end's own SYNC, and arrived as a cycle's because TPDOs were lost before it
+            ours = c.state_of(int(t1["status"][first])) is c.State.SWITCHED_ON
+            ready = done + first + (0 if ours and not self._estop_requested else 1)
+            t1, t2 = t1[: ready - done], t2[: ready - done]
+            end = True
+        block = self._block(done, ready, t1, t2, arrays["host_time"]) if ready > done else None
+        return block, ready, end
+
+    def _answer_slack(self, rate: float) -> float:
+        return rate * 0.25  # a quarter second of SYNCs unanswered before the silence is timed
+
+    def _silence_line(self, done: int, n: int) -> str:
+        return f"CANopen node {self.node_id} stopped answering SYNC at cycle {done} (no TPDO for {self.timeout:g} s)"
+
+    def _end_stream(self, cycle: CanCycle, done: int, n: int, allow_loss: bool) -> None:
+        if done >= n:
+            return
+        arrays, sent = cycle.arrays, cycle.sent
+        word = int(arrays["rx"][0, done - 1, :2].view("<u2")[0]) if done else 0
+        last = c.state_of(word)
+        if done and last is not c.State.OPERATION_ENABLED:
+            if not self._emcy:
+                self._emcy_event.wait(0.2)
+            why = self.emcy_line() or f"statusword 0x{word:04X} ({last.value if last else '?'})"
+            if self._estop_requested:
+                why = f"quick stop (e-stop); {why}"
+            raise DeviceFaultError(f"CANopen node {self.node_id} left operation enabled at cycle {done - 1}: {why}")
+        lost = sent - done
+        if lost and not allow_loss:
+            raise SampleLossError(f"CANopen node {self.node_id}: {lost} of {sent} SYNCs got no TPDO back "
+                                  "(TPDOs are matched to SYNCs in order: the samples after the first loss are shifted)")
+
+    def _after_stream(self, finished: bool, fault: str) -> None:
+        if finished and self._enabled_at:
+            self._notes.append(f"CANopen node {self.node_id} reported operation enabled from cycle "
+                               f"{self._enabled_at} of a stream on (the samples before it are kept; their "
+                               f"drive_status says so)")
+        if not finished and not self._closed:
+            try:
+                self.disarm()
+            except DriverError:
+                pass
+
+    def _block(self, a: int, b: int, t1: np.ndarray, t2: np.ndarray, host_time: np.ndarray) -> CycleSamples:
         cal = self.calibration
-        counts = unwrap(t2["position"])  # position units
+        counts = self._unwrap(t2["position"])  # position units
         if self.position_factor != 1.0:  # to encoder increments, to the nearest one
             counts = np.rint(counts * self.position_factor).astype(np.int64)
         torque = c.permille_to_torque(t1["torque"], self.rated_torque) * cal.ratio
-        torque_cmd = c.permille_to_torque(pm[a:b], self.rated_torque) * cal.ratio
+        torque_cmd = c.permille_to_torque(self._pm[a:b], self.rated_torque) * cal.ratio
         velocity = t2["velocity"] * (self.velocity_factor * 2 * math.pi / (self.counts_per_rev * cal.ratio))
         self._last_status, self._last_cmd = int(t1["status"][-1]), float(cal.current(torque_cmd[-1]))
         return CycleSamples(np.arange(a, b, dtype=np.int64), host_time[a:b].copy(), counts,
                             cal.current(torque_cmd), cal.current(torque), torque_cmd, torque,
                             cal.position(counts), velocity, self.config.sample_rate, t1["status"].copy())
 
-    def _guards(self, cfg: p.Config) -> tuple[Guard, ...]:
-        """The host's own check of the position window and the velocity limit on every TPDO2 (position and
-        velocity actual, increments and increments/s at the motor shaft, as the hilbench device checks them)."""
+    def _guard_frame(self) -> GuardFrame:
+        """TPDO2: position and velocity actual (0x6064, 0x606C), int32, in the drive's units."""
         scale = self.counts_per_rev / (2 * math.pi)  # increments per rad at the motor
-        pos, vel = scale / self.position_factor, scale / self.velocity_factor  # the drive's units per rad (/s)
-        out = []
-        if math.isfinite(cfg.position_min) or math.isfinite(cfg.position_max):
-            out.append(Guard("POSITION_WINDOW", 1, 0, "<i", cfg.position_min * pos, cfg.position_max * pos))
-        out.append(Guard("OVER_SPEED", 1, 4, "<i", -cfg.velocity_limit * vel, cfg.velocity_limit * vel))
-        return tuple(out)
-
-    def _limit_line(self, guard: Guard, row: int, arrays: dict) -> str:
-        raw = int(arrays["rx"][1, row, guard.offset:guard.offset + 4].view("<i4")[0])
-        factor = self.position_factor if guard.name == "POSITION_WINDOW" else self.velocity_factor
-        rad = raw * factor * 2 * math.pi / self.counts_per_rev
-        cfg = self.config
-        if guard.name == "POSITION_WINDOW":
-            what = (f"position {rad:.6g} rad outside the window [{cfg.position_min:.6g}, {cfg.position_max:.6g}] "
-                    f"rad")
-        else:
-            what = f"speed {abs(rad):.6g} rad/s above the velocity limit {cfg.velocity_limit:.6g} rad/s"
-        return (f"stream stopped by the host at cycle {row}: {guard.name} ({what}, at the motor shaft); "
-                f"zero torque sent, operation disabled")
+        return GuardFrame(1, "<i", 0, 4, scale / self.position_factor, scale / self.velocity_factor)
 
     def fault_line(self) -> str:
         return self.emcy_line()
@@ -755,14 +671,10 @@ class CanopenDrive(HostClockedDevice):
             entries.append(f"0x{code:04X} {c.emcy_text(code)}{info}")
         return [f"0x1003 error history ({count}, newest first): " + ("; ".join(entries) if entries else "empty")]
 
-    def run_events(self) -> list[tuple[str, str]]:
-        out = super().run_events()
-        out += [("info", f"CANopen node {self.node_id}: {line}") for line in self._adopted + self._skipped]
+    def _drive_events(self) -> list[tuple[str, str]]:
+        out = [("info", f"CANopen node {self.node_id}: {line}") for line in self._adopted + self._skipped]
         out += [("info", line) for line in dict.fromkeys(self._notes)]
         self._notes.clear()
-        dropped = self.malformed.count + self._malformed_cycle
-        if dropped:
-            out.append(("info", f"{dropped} malformed frame(s) on the bus were counted and dropped"))
         return out
 
     def _release(self) -> None:

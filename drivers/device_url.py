@@ -9,6 +9,9 @@
   ``&port=P`` picks its UDP port, default 43113: buses sharing a port hear each other whatever the group);
 - ``odrive://INTERFACE/CHANNEL?node=N&tvl_endpoint=ID`` -- an ODrive axis over CAN Simple
   (:class:`drivers.odrive_drive.OdriveDrive`);
+- ``moteus://INTERFACE/CHANNEL?id=1&kp=4&kd=0.1`` -- a moteus controller over the moteus library's python-can
+  transport, CAN-FD (:class:`drivers.moteus_drive.MoteusDrive`; ``kp``, ``kd``: the controller's own
+  ``servo.pid_position`` gains, N*m/rev and N*m*s/rev, needed for position mode only);
 - ``sim://?pacing=lockstep&config=sim.toml&seed=3&tick=0.004`` -- starts the simulated amplifier (the C
   firmware core) as a separate process (``python -m hilbench.firmware_sim --serial``) and connects to its
   pseudo-terminal.
@@ -158,6 +161,30 @@ def _open_odrive(url: str, timeout: float):
     return OdriveDrive(interface, channel, node, endpoint, timeout=timeout, **kwargs)
 
 
+def _moteus_parts(url: str) -> tuple[str, str, int, dict]:
+    interface, channel, params, kwargs = _bus_location(url, set(SCHEMES["moteus"].options))
+    controller = _int(params, "id", 1, url)
+    if not 1 <= controller <= 126:
+        raise DeviceURLError(f"{url}: id must be 1..126 (127 is moteus's broadcast id), got {controller}")
+    for key in ("kp", "kd"):
+        if key in params:
+            try:
+                kwargs[key] = float(params[key])
+            except ValueError:
+                raise DeviceURLError(f"{url}: {key} must be a number, got {params[key]!r}") from None
+            if not (kwargs[key] > 0 and kwargs[key] < float("inf")):
+                raise DeviceURLError(f"{url}: {key} must be positive and finite (the controller's "
+                                     f"servo.pid_position.{key}), got {params[key]}")
+    return interface, channel, controller, kwargs
+
+
+def _open_moteus(url: str, timeout: float):
+    from hilbench.drivers.moteus_drive import MoteusDrive
+
+    interface, channel, controller, kwargs = _moteus_parts(url)
+    return MoteusDrive(interface, channel, controller, timeout=timeout, **kwargs)
+
+
 def _canopen_parts(url: str) -> tuple[str, str, int, str, dict]:
     interface, channel, params, kwargs = _bus_location(url, set(SCHEMES["canopen"].options))
     if "eds" not in params:
@@ -188,6 +215,8 @@ SCHEMES: dict[str, Scheme] = {s.name: s for s in (
            frozenset({"node", "eds", "bitrate", "port", "enable_cycles"}), _canopen_parts, _open_canopen),
     Scheme("odrive", "odrive://INTERFACE/CHANNEL?node=N&tvl_endpoint=ID",
            frozenset({"node", "tvl_endpoint", "bitrate", "port"}), _odrive_parts, _open_odrive),
+    Scheme("moteus", "moteus://INTERFACE/CHANNEL?id=1",
+           frozenset({"id", "kp", "kd", "bitrate", "port"}), _moteus_parts, _open_moteus),
     Scheme("sim", "sim://?pacing=lockstep&config=sim.toml&seed=3&tick=0.004",
            frozenset({"pacing", "config", "seed", "tick"}), _sim_params, _open_sim),
 )}
@@ -214,7 +243,7 @@ def check_device_url(url: str) -> None:
 
 def open_device(url: str, timeout: float = 2.0) -> Device:
     """Connect to the device at ``url`` (see the module doc): an :class:`Amplifier` for the hilbench protocol,
-    a host-clocked :class:`Device` for a CANopen or ODrive drive."""
+    a host-clocked :class:`Device` for a CANopen, ODrive or moteus drive."""
     scheme = _scheme(url)
     scheme.check(url)
     return scheme.open(url, timeout)

@@ -17,17 +17,14 @@ Definitions (``d_k = host_time[k+1] - host_time[k]``, the cycle time the drive s
 
 from __future__ import annotations
 
-import abc
 import struct
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
-from hilbench.drivers.can_buffer import enlarge_receive_buffer
-from hilbench.drivers.can_frames import drop_malformed_frames
-from hilbench.drivers.device import Device, refusal
-from hilbench.drivers.errors import ConfigError, DeviceTimeoutError
+from hilbench.common.can import drop_malformed_frames, enlarge_receive_buffer
+from hilbench.drivers.errors import DeviceTimeoutError
 
 LATE_FRACTION = 0.25
 JITTER_LIMIT = 0.10
@@ -88,76 +85,6 @@ def timing_summary(host_time: np.ndarray, scheduled: np.ndarray, rate: float, ec
                          float(d.max()), missed, late, float(np.percentile(np.abs(d - period), 99)), echoed)
 
 
-class HostClockedDevice(Device):
-    """What every host-clocked drive shares: the timing of its last stream, the run events, an idempotent close.
-
-    Subclasses set ``config`` (None until configured) and ``_timing`` (after each stream), and implement
-    :meth:`fault_line` (the latched fault, "" if none), :meth:`live_state` and :meth:`_release` (free the bus).
-    """
-
-    clock = "host"
-    config = None
-    _timing: TimingSummary | None = None
-    _closed = False
-
-    @property
-    def timing(self) -> TimingSummary | None:
-        """Timing of the last stream."""
-        return self._timing
-
-    def fault_line(self) -> str:
-        """The latched fault in one line with its code and text, "" when there is none."""
-        return ""
-
-    @abc.abstractmethod
-    def live_state(self) -> dict:
-        """For an operator display, without disturbing a stream: ``state`` (text), ``armed`` (power stage on),
-        ``streaming``, ``faults`` (one-line texts), ``cycle`` (cycles sent in the current or last stream),
-        ``current_cmd`` (A, the last command sent) and ``counters`` (name: (value, unit)) of the last stream."""
-
-    def _check_config(self, config) -> None:
-        """Refuse, before anything is sent, a CONFIG with problems or one the drive's capabilities cannot run."""
-        problems = config.problems()
-        if problems:
-            raise ConfigError("; ".join(problems))
-        why = refusal(self.name, self.capabilities, config.mode.name.lower(), config.sample_rate)
-        if why:
-            raise ConfigError(why)
-
-    def timing_counters(self) -> dict[str, tuple[float, str]]:
-        """The last stream's timing figures as (value, unit) for a display."""
-        t = self._timing
-        if t is None:
-            return {}
-        return {"cycles": (t.cycles, "cycles"), "missed cycles": (t.missed, "cycles"),
-                "late cycles": (t.late, "cycles"), "cycle time p99": (round(t.p99 * 1e3, 3), "ms"),
-                "cycle time max": (round(t.max * 1e3, 3), "ms"),
-                "jitter p99": (round(t.jitter_p99 * 1e6), "us")}
-
-    def run_events(self) -> list[tuple[str, str]]:
-        out = [("info", self._timing.line())] if self._timing is not None else []
-        fault = self.fault_line()
-        if fault:
-            out.append(("fault", fault))
-        return out
-
-    def close(self) -> None:
-        if self._closed:
-            return
-        self._closed = True
-        try:
-            if self.config is not None:
-                self.disarm()
-        except Exception:  # closing must release the bus whatever the drive or the bus says
-            pass
-        finally:
-            self._release()
-
-    @abc.abstractmethod
-    def _release(self) -> None:
-        """Stop background tasks and free the bus (called once, by :meth:`close`)."""
-
-
 @dataclass(frozen=True)
 class Guard:
     """A limit the cycle checks on every frame it receives: the value at byte ``offset`` of the frames of rx
@@ -191,6 +118,8 @@ class CanCycleSpec:
     ``guards``: limits checked on every received frame, in the cycle itself (:class:`Guard`). The first
     value out of its range ends the cycle at once: no further setpoint is sent, ``end_data`` (zero torque,
     operation disabled) goes out, and :attr:`CanCycle.limit` says which guard tripped on which frame.
+
+    ``fd`` and ``width``: CAN-FD frames, and the payload bytes each row keeps (tx ``(n, len(tx_ids), width)``).
     """
 
     interface: str
@@ -204,6 +133,8 @@ class CanCycleSpec:
     end_data: tuple[bytes, ...]
     echo_id: int | None = None
     guards: tuple[Guard, ...] = ()
+    fd: bool = False   # CAN-FD frames (with bit-rate switch), e.g. moteus's
+    width: int = 8     # payload bytes each tx and rx row holds (64 for CAN-FD)
 
 
 OWN_FRAMES_OPTION = ("virtual", "socketcan")  # interfaces that return own frames only when asked to
@@ -230,19 +161,20 @@ class CanCycle:
         n = len(tx_data)
         self.n = n
         m = len(spec.rx_ids)
-        layout = self._layout(n, len(spec.tx_ids), m)
+        layout = self._layout(n, len(spec.tx_ids), m, spec.width)
         size = layout[-1][1] + layout[-1][2]
         self._shm = shared_memory.SharedMemory(create=True, size=max(size, 8))
-        self.arrays = self._view(self._shm.buf, n, len(spec.tx_ids), m)
+        self.arrays = self._view(self._shm.buf, n, len(spec.tx_ids), m, spec.width)
         self.arrays["tx"][:] = tx_data
         self.arrays["ctl"][:] = 0
         self._start_delay = start_delay
         self._worker = None
 
     @staticmethod
-    def _layout(n: int, ntx: int, m: int) -> list[tuple[str, int, int, tuple, str]]:
+    def _layout(n: int, ntx: int, m: int, width: int = 8) -> list[tuple[str, int, int, tuple, str]]:
         parts = [("ctl", (_RX + m,), "i8"), ("host_time", (n,), "f8"), ("scheduled", (n,), "f8"),
-                 ("rx", (m, n, 8), "u1"), ("rx_time", (m, n), "f8"), ("tx", (n, ntx, 8), "u1")]
+                 ("rx", (m, n, width), "u1"), ("rx_time", (m, n), "f8"),
+                 ("tx", (n, ntx, width), "u1")]
         out, offset = [], 0
         for name, shape, dtype in parts:
             nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
@@ -251,9 +183,9 @@ class CanCycle:
         return out
 
     @classmethod
-    def _view(cls, buf, n: int, ntx: int, m: int) -> dict[str, np.ndarray]:
+    def _view(cls, buf, n: int, ntx: int, m: int, width: int = 8) -> dict[str, np.ndarray]:
         return {name: np.ndarray(shape, dtype, buffer=buf, offset=offset)
-                for name, offset, _, shape, dtype in cls._layout(n, ntx, m)}
+                for name, offset, _, shape, dtype in cls._layout(n, ntx, m, width)}
 
     def start(self) -> None:
         import os
@@ -283,6 +215,12 @@ class CanCycle:
 
     def received(self, j: int) -> int:
         return int(min(self.arrays["ctl"][_RX + j], self.n))
+
+    @property
+    def in_process(self) -> bool:
+        """Whether the cycle runs in a thread of this process (python-can's ``virtual`` bus): it then sends its
+        first frame ``start_delay`` after :meth:`start`, not after a process has started."""
+        return self.spec.interface == "virtual"
 
     @property
     def realtime(self) -> bool:
@@ -354,7 +292,7 @@ def _cycle_main(spec: CanCycleSpec, shm_name: str, n: int, start_delay: float, p
 
     shm = shared_memory.SharedMemory(name=shm_name)
     try:
-        a = CanCycle._view(shm.buf, n, len(spec.tx_ids), len(spec.rx_ids))
+        a = CanCycle._view(shm.buf, n, len(spec.tx_ids), len(spec.rx_ids), spec.width)
         ctl = a["ctl"]
         if parent:
             import gc
@@ -406,9 +344,10 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
 
     slot = {cob: j for j, cob in enumerate(spec.rx_ids)}
     counts = [0] * len(spec.rx_ids)
-    msgs = [can.Message(arbitration_id=cob, data=bytes(8)[:length], is_extended_id=cob > 0x7FF)
+    fd = {"is_fd": True, "bitrate_switch": True} if spec.fd else {}
+    msgs = [can.Message(arbitration_id=cob, data=bytes(length), is_extended_id=cob > 0x7FF, **fd)
             for cob, length in zip(spec.tx_ids, spec.tx_len, strict=True)]
-    stop_msgs, end_msgs = ([can.Message(arbitration_id=cob, data=d, is_extended_id=cob > 0x7FF)
+    stop_msgs, end_msgs = ([can.Message(arbitration_id=cob, data=d, is_extended_id=cob > 0x7FF, **fd)
                             for cob, d in zip(spec.tx_ids, payloads, strict=True)]
                            for payloads in (spec.stop_data, spec.end_data))
     clock = time.monotonic
@@ -417,6 +356,7 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
     echoes = 0
 
     rx, rx_time = received
+    width = spec.width
     guards = [(g.slot, g.offset, g.fmt, g.low, g.high) for g in spec.guards]
 
     def take(msg) -> None:
@@ -432,7 +372,8 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
             return
         k = counts[j]
         if k < n:
-            rx[j, k, :len(msg.data)] = msg.data
+            data = msg.data[:width]  # a longer frame than the cycle expects keeps its first bytes
+            rx[j, k, :len(data)] = data
             rx_time[j, k] = clock()
         counts[j] = k + 1
         ctl[_RX + j] = k + 1

@@ -15,8 +15,8 @@ from typing import Protocol
 
 import serial
 
+from hilbench.common.can import enlarge_receive_buffer
 from hilbench.drivers import protocol as p
-from hilbench.drivers.can_buffer import enlarge_receive_buffer
 from hilbench.drivers.errors import LinkClosedError, PortBusyError
 
 

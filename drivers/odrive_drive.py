@@ -25,28 +25,23 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections.abc import Iterator
 
 import numpy as np
 
 from hilbench.drivers import odrive_can as o
 from hilbench.drivers import protocol as p
-from hilbench.drivers.amplifier import check_setpoints
-from hilbench.drivers.can_buffer import enlarge_receive_buffer
-from hilbench.drivers.can_frames import drop_malformed_frames
 from hilbench.drivers.device import Capabilities, CycleSamples
 from hilbench.drivers.errors import (
     CommandRefusedError,
     ConfigError,
     DeviceFaultError,
     DeviceTimeoutError,
-    DriverError,
     PortBusyError,
     SampleLossError,
 )
-from hilbench.drivers.host_cycle import CanCycle, CanCycleSpec, Guard, HostClockedDevice, timing_summary
+from hilbench.drivers.host_clocked import GuardFrame, HostClockedDevice
+from hilbench.drivers.host_cycle import CanCycle, CanCycleSpec
 
-FEED_PERIOD = 0.02  # s between watchdog feeds while armed and not streaming
 OWNER_LISTEN = 0.15  # s the host listens, sending nothing, for another host's commands to the axis
 
 
@@ -54,6 +49,7 @@ class OdriveDrive(HostClockedDevice):
     """One ODrive axis at ``node_id`` (0..63) on a python-can bus."""
 
     capabilities = Capabilities({"current": (1000,)})
+    feeds_watchdog = True
 
     def __init__(self, interface: str, channel: str, node_id: int, tvl_endpoint: int, timeout: float = 2.0,
                  **bus_kwargs) -> None:
@@ -61,6 +57,7 @@ class OdriveDrive(HostClockedDevice):
 
         self.name = f"odrive://{interface}/{channel}?node={node_id}"
         self.node_id, self.tvl_endpoint, self.timeout = node_id, tvl_endpoint, timeout
+        self.label = f"ODrive node {node_id}"
         self.interface, self.channel, self.bus_kwargs = interface, channel, dict(bus_kwargs)
         self.config: p.Config | None = None
         self.axis_error = 0
@@ -68,22 +65,13 @@ class OdriveDrive(HostClockedDevice):
         self._heartbeat = threading.Event()
         self._sdo: dict[int, int] = {}
         self._sdo_event = threading.Event()
-        self._feed = None
-        self._cycle: CanCycle | None = None
         self._last_cmd = 0.0  # A, the last current command sent
-        self._progress = 0    # cycles sent in the current (or last) stream
         self._others: set[int] = set()  # host commands for this axis heard before this host sent any
-        self._malformed_cycle = 0
         self._sent_any = False
         if not 0 <= tvl_endpoint <= 0xFFFF:
             raise ConfigError(f"{self.name}: tvl_endpoint must be 0..65535 (a CAN Simple endpoint id), "
                               f"got {tvl_endpoint}")
-        try:
-            self.bus = can.Bus(interface=interface, channel=channel, **bus_kwargs)
-        except Exception as exc:
-            raise DriverError(f"{self.name}: cannot open the CAN bus: {' '.join(str(exc).split())}") from exc
-        enlarge_receive_buffer(self.bus)
-        self.malformed = drop_malformed_frames(self.bus)  # a stray datagram is counted, never fatal
+        self.bus = self._open_bus(interface, channel, **bus_kwargs)
         started = time.monotonic()
         self.notifier = can.Notifier(self.bus, [self._on_message])
         if not self._heartbeat.wait(timeout):
@@ -169,8 +157,7 @@ class OdriveDrive(HostClockedDevice):
         self.config = config
 
     def arm(self) -> None:
-        if self.config is None:
-            raise CommandRefusedError("configure() the drive before arming")
+        self._configured("arming")
         if self.axis_error:
             raise DeviceFaultError(f"ODrive node {self.node_id}: {o.describe_errors(self.axis_error)}; "
                                    f"clear it with `hilbench fault clear --device URL` first")
@@ -178,19 +165,12 @@ class OdriveDrive(HostClockedDevice):
         self._send(o.Cmd.SET_AXIS_STATE, o.U32.pack(o.AxisState.CLOSED_LOOP_CONTROL))
         self._wait_heartbeat(lambda: self.axis_state == o.AxisState.CLOSED_LOOP_CONTROL, "closed loop control")
 
-    def _start_feed(self) -> None:
+    def _feed_message(self):
         import can
 
-        if self._feed is None:
-            self._sent_any = True
-            msg = can.Message(arbitration_id=o.can_id(self.node_id, o.Cmd.SET_INPUT_TORQUE), data=o.FLOAT.pack(0.0),
-                              is_extended_id=False)
-            self._feed = self.bus.send_periodic(msg, FEED_PERIOD)
-
-    def _stop_feed(self) -> None:
-        if self._feed is not None:
-            self._feed.stop()
-            self._feed = None
+        self._sent_any = True
+        return can.Message(arbitration_id=o.can_id(self.node_id, o.Cmd.SET_INPUT_TORQUE), data=o.FLOAT.pack(0.0),
+                           is_extended_id=False)
 
     def clear_faults(self) -> None:
         self._send(o.Cmd.CLEAR_ERRORS)
@@ -209,94 +189,41 @@ class OdriveDrive(HostClockedDevice):
             cycle.estop()
         self._send(o.Cmd.ESTOP)
 
-    # ------------------------------------------------------------------ the cycle
-    def stream(self, setpoints, allow_loss: bool = False) -> Iterator[CycleSamples]:
-        """Send ``setpoints`` (A, as torque k_t*i) one per cycle; yield the drive's cyclic samples.
-
-        Raises :class:`DeviceFaultError`, after yielding every sample received, when the heartbeat reports
-        an axis error or the axis leaves closed loop control.
-        """
-        cfg = self.config
-        if cfg is None:
-            raise CommandRefusedError("configure() the drive before streaming")
-        values = check_setpoints(setpoints, cfg)
+    # ------------------------------------------------------------------ the stream loop's hooks
+    def _check_ready(self) -> None:
         if self.axis_error or self.axis_state != o.AxisState.CLOSED_LOOP_CONTROL:
             raise CommandRefusedError(f"cannot stream: ODrive node {self.node_id} is not in closed loop control "
                                       f"({o.describe_errors(self.axis_error)}); arm it first")
-        return self._stream(values)
 
-    def _stream(self, values: np.ndarray) -> Iterator[CycleSamples]:
+    def _cycle_spec(self, values: np.ndarray) -> tuple[CanCycleSpec, np.ndarray]:
+        """Per cycle: Set_Input_Torque (k_t * i, N*m); collected: the axis's cyclic estimates and torques."""
         cfg = self.config
-        n, rate = len(values), cfg.sample_rate
+        n = len(values)
         tx = np.zeros((n, 1, 8), np.uint8)
         tx[:, 0, :4] = (values * cfg.torque_constant).astype("<f4").view(np.uint8).reshape(n, 4)
         zero = o.FLOAT.pack(0.0)
-        spec = CanCycleSpec(self.interface, self.channel, self.bus_kwargs, float(rate),
+        spec = CanCycleSpec(self.interface, self.channel, self.bus_kwargs, float(cfg.sample_rate),
                             (o.can_id(self.node_id, o.Cmd.SET_INPUT_TORQUE),), (4,),
                             (o.can_id(self.node_id, o.Cmd.GET_ENCODER_ESTIMATES),
                              o.can_id(self.node_id, o.Cmd.GET_TORQUES)), (zero,), (zero,), guards=self._guards(cfg))
-        cycle = CanCycle(spec, tx)
-        self._cycle, self._timing, self._progress = cycle, None, 0
-        a = cycle.arrays
-        done, fault = 0, ""
-        heard = time.monotonic()  # when the number of samples last grew (reset once the first command is out)
-        try:
-            started = time.monotonic()
-            cycle.start()
-            # The zero-torque feed keeps the axis's watchdog fed until the cycle's first command is out: starting
-            # the cycle process takes longer than the watchdog timeout on a loaded host. A feed frame that lands
-            # between the first commands makes the axis hold zero for one tick, which its torque target records.
-            while not cycle.sent and cycle.alive() and not a["ctl"][1]:
-                time.sleep(0.0005)
-                cycle.check_started(started, f"ODrive node {self.node_id}")
-            self._stop_feed()  # the cycle's commands feed the watchdog now
-            heard = time.monotonic()
-            while True:
-                time.sleep(0.02)
-                ended = not cycle.alive() or bool(a["ctl"][1])
-                if self.axis_error or self.axis_state != o.AxisState.CLOSED_LOOP_CONTROL:
-                    fault = f"{o.describe_errors(self.axis_error)} (axis state {self.axis_state})"
-                    cycle.stop()
-                    ended = True
-                if ended:
-                    cycle.join()
-                self._progress = cycle.sent
-                if (cycle.sent >= n or cycle.limit is not None) and not fault and not self._closed:
-                    # the cycle's last command is out: zero torque keeps the watchdog fed while it collects the tail
-                    self._start_feed()
-                ready = min(cycle.received(0), cycle.received(1))
-                if cycle.limit is not None:  # the sample that tripped a limit is the last one
-                    ready = min(ready, cycle.limit[1] + 1)
-                if ready > done:
-                    yield self._block(done, ready, a)
-                    done, heard = ready, time.monotonic()
-                elif not ended and cycle.sent and time.monotonic() - heard > self.timeout:
-                    cycle.stop()  # the axis went silent: its heartbeat and cyclic messages stopped
-                    cycle.join()
-                    raise DeviceTimeoutError(f"ODrive node {self.node_id} stopped sending its cyclic messages at "
-                                             f"sample {done} of {n} (none for {self.timeout:g} s)")
-                if ended:
-                    break
-            if cycle.error:
-                raise DriverError(f"{self.name}: the cycle process could not open the CAN bus")
-            if cycle.limit is not None:
-                guard, row = cycle.limit
-                raise DeviceFaultError(self._limit_line(guard, row, a), int(p.Fault[guard.name]))
-            if fault:
-                raise DeviceFaultError(f"ODrive node {self.node_id} stopped at sample {done}: {fault}")
-            if done < n:  # a run that ends short is never complete
-                raise SampleLossError(f"ODrive node {self.node_id}: {done} of {n} samples arrived (its cyclic "
-                                      f"messages stopped or were lost after {cycle.sent} commands)")
-        finally:
-            cycle.stop()
-            cycle.join()
-            if cycle.sent:
-                self._timing = timing_summary(a["host_time"][:cycle.sent], a["scheduled"][:cycle.sent], rate)
-            self._cycle = None
-            self._malformed_cycle += cycle.malformed
-            cycle.close()
-            if not self._closed and not fault:
-                self._start_feed()
+        return spec, tx
+
+    def _poll(self, cycle: CanCycle, n: int) -> str:
+        if self.axis_error or self.axis_state != o.AxisState.CLOSED_LOOP_CONTROL:
+            return f"{o.describe_errors(self.axis_error)} (axis state {self.axis_state})"
+        return ""
+
+    def _rows(self, done: int, ready: int, arrays: dict) -> tuple[CycleSamples | None, int, bool]:
+        return self._block(done, ready, arrays), ready, False
+
+    def _silence_line(self, done: int, n: int) -> str:
+        return (f"ODrive node {self.node_id} stopped sending its cyclic messages at sample {done} of {n} "
+                f"(none for {self.timeout:g} s)")
+
+    def _end_stream(self, cycle: CanCycle, done: int, n: int, allow_loss: bool) -> None:
+        if done < n:  # a run that ends short is never complete
+            raise SampleLossError(f"ODrive node {self.node_id}: {done} of {n} samples arrived (its cyclic "
+                                  f"messages stopped or were lost after {cycle.sent} commands)")
 
     def _block(self, i: int, j: int, a: dict) -> CycleSamples:
         cal_ratio, cfg = self.config.ratio, self.config
@@ -311,33 +238,10 @@ class OdriveDrive(HostClockedDevice):
                             2 * math.pi * turns / cal_ratio, 2 * math.pi * est[:, 1] / cal_ratio, cfg.sample_rate,
                             np.full(j - i, self.axis_state, np.uint16))
 
-    def _guards(self, cfg: p.Config) -> tuple[Guard, ...]:
-        """The host's check of the position window and the velocity limit on every Get_Encoder_Estimates
-        (turns and turns/s at the motor shaft, as the hilbench device checks them)."""
+    def _guard_frame(self) -> GuardFrame:
+        """Get_Encoder_Estimates: position (turns) and velocity (turns/s), float32, at the motor shaft."""
         turn = 2 * math.pi
-        out = []
-        if math.isfinite(cfg.position_min) or math.isfinite(cfg.position_max):
-            out.append(Guard("POSITION_WINDOW", 0, 0, "<f", cfg.position_min / turn, cfg.position_max / turn))
-        out.append(Guard("OVER_SPEED", 0, 4, "<f", -cfg.velocity_limit / turn, cfg.velocity_limit / turn))
-        return tuple(out)
-
-    def _limit_line(self, guard: Guard, row: int, a: dict) -> str:
-        turns = float(a["rx"][0, row, guard.offset:guard.offset + 4].view("<f4")[0])
-        rad, cfg = turns * 2 * math.pi, self.config
-        if guard.name == "POSITION_WINDOW":
-            what = (f"position {rad:.6g} rad outside the window [{cfg.position_min:.6g}, {cfg.position_max:.6g}] "
-                    f"rad")
-        else:
-            what = f"speed {abs(rad):.6g} rad/s above the velocity limit {cfg.velocity_limit:.6g} rad/s"
-        return (f"stream stopped by the host at sample {row}: {guard.name} ({what}, at the motor shaft); "
-                f"zero torque sent")
-
-    def run_events(self) -> list[tuple[str, str]]:
-        out = super().run_events()
-        dropped = self.malformed.count + self._malformed_cycle
-        if dropped:
-            out.append(("info", f"{dropped} malformed frame(s) on the bus were counted and dropped"))
-        return out
+        return GuardFrame(0, "<f", 0, 4, 1 / turn, 1 / turn)
 
     def fault_line(self) -> str:
         if not self.axis_error:

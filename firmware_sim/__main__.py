@@ -8,18 +8,18 @@ from __future__ import annotations
 import argparse
 import sys
 
-from hilbench.firmware_sim.devices.bus_buffer import widen_device_buffer
+from hilbench.common.can import enlarge_receive_buffer
 
 PACINGS = ("realtime", "lockstep")
 #: Node ids each kind of simulated device can take: the hilbench protocol's 4-bit node; CiA 402 1..126 (127 is
 #: the host's own heartbeat id, which the drive would otherwise hear as the host); ODrive's 6-bit node (its
-#: 11-bit ids are node << 5 | command).
-NODE_RANGES = {"can": (1, 15), "canopen": (1, 126), "odrive": (0, 63)}
+#: 11-bit ids are node << 5 | command); a moteus controller id 1..126 (127 is its broadcast id).
+NODE_RANGES = {"can": (1, 15), "canopen": (1, 126), "odrive": (0, 63), "moteus": (1, 126)}
 
 
 def check_bus_args(kind: str, interface: str, channel: str, node: int) -> None:
     """Raise ValueError (one line) for a bus, channel or node the simulated device of ``kind`` (can, canopen,
-    odrive) cannot serve on, before any bus is opened."""
+    odrive, moteus) cannot serve on, before any bus is opened."""
     import ipaddress
 
     import can
@@ -53,20 +53,26 @@ def build_parser(prog: str = "python -m hilbench.firmware_sim") -> argparse.Argu
     where.add_argument("--odrive", metavar="CHANNEL",
                        help="be a simulated ODrive axis (CAN Simple) on this python-can channel; prints its "
                             "odrive:// URL")
+    where.add_argument("--moteus", metavar="CHANNEL",
+                       help="be a simulated moteus controller (its register protocol over CAN-FD) on this "
+                            "python-can channel; prints its moteus:// URL")
     parser.add_argument("--clock", choices=("real", "sync"), default="real",
-                        help="--canopen: plant time follows real time between SYNCs (default) or the SYNC count")
+                        help="--canopen, --moteus: plant time follows real time between SYNCs or commands "
+                             "(default) or their count")
     parser.add_argument("--order", choices=("apply-then-sample", "sample-then-apply"), default="apply-then-sample",
                         help="--canopen: whether a SYNC's TPDO reports the state after (default) or before the "
                              "controlword received with that SYNC")
     parser.add_argument("--enable-latency", type=int, choices=range(4), default=0, metavar="{0..3}",
                         help="--canopen: SYNCs between an enable received by RPDO and operation enabled")
     parser.add_argument("--udp-port", type=int, default=None,
-                        help="--canopen on udp_multicast: UDP port (default 43113; buses on one port hear each other)")
+                        help="--canopen, --odrive, --moteus on udp_multicast: UDP port (default 43113; buses on one "
+                             "port hear each other)")
     parser.add_argument("--interface", default="socketcan",
                         help="python-can interface for --can (socketcan, udp_multicast, pcan...; "
                              "default socketcan)")
     parser.add_argument("--node", type=int, default=1,
-                        help="CAN node id (default 1): 1..15 with --can, 1..126 with --canopen, 0..63 with --odrive")
+                        help="CAN node id (default 1): 1..15 with --can, 1..126 with --canopen, 0..63 with --odrive, "
+                             "the controller id 1..126 with --moteus")
     parser.add_argument("--fd", action="store_true", help="use CAN FD frames")
     parser.add_argument("--config",
                         help="simulator TOML (plant and injected effects); default: the packaged one")
@@ -103,13 +109,15 @@ def watch_parent(pid: int, stop, grace: float = 2.0, period: float = 0.25) -> No
 def _serve_drive(args, sim) -> int:
     import threading
 
-    from hilbench.firmware_sim.devices import cia402_drive, odrive_sim
+    from hilbench.firmware_sim.devices import cia402_drive, moteus_sim, odrive_sim
 
     stop = threading.Event()
     if args.parent_pid is not None:
         threading.Thread(target=watch_parent, args=(args.parent_pid, stop), daemon=True).start()
     if args.odrive:
         return odrive_sim.serve(args.interface, args.odrive, args.node, sim, stop, port=args.udp_port)
+    if args.moteus:
+        return moteus_sim.serve(args.interface, args.moteus, args.node, sim, args.clock, stop=stop, port=args.udp_port)
     return cia402_drive.serve(args.interface, args.canopen, args.node, sim, args.clock, stop=stop, port=args.udp_port,
                               order=args.order, enable_latency=args.enable_latency)
 
@@ -124,9 +132,9 @@ def main(argv: list[str] | None = None, prog: str = "python -m hilbench.firmware
 
     try:
         sim = load_sim_config(args.config, seed=args.seed)
-        if args.canopen or args.odrive:
-            kind = "canopen" if args.canopen else "odrive"
-            check_bus_args(kind, args.interface, args.canopen or args.odrive, args.node)
+        if args.canopen or args.odrive or args.moteus:
+            kind = "canopen" if args.canopen else "odrive" if args.odrive else "moteus"
+            check_bus_args(kind, args.interface, args.canopen or args.odrive or args.moteus, args.node)
             return _serve_drive(args, sim)
         if not 0.0005 <= args.tick <= 0.1:
             raise ValueError(f"--tick must be within 0.0005..0.1 s, got {args.tick}")
@@ -136,7 +144,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m hilbench.firmware
             check_bus_args("can", args.interface, args.can, args.node)
 
             bus = can.Bus(interface=args.interface, channel=args.can, fd=args.fd)
-            widen_device_buffer(bus)
+            enlarge_receive_buffer(bus)
             transport = CanTransport(bus, args.node, args.fd)
     except (ValueError, OSError, ImportError, RuntimeError, can.CanError) as exc:
         print(f"{prog}: error: {' '.join(str(exc).split())}", file=sys.stderr)

@@ -45,7 +45,7 @@ class DeviceState:
 
 
 def describe_drive(live: dict) -> DeviceState:
-    """A host-clocked drive's :meth:`~drivers.host_cycle.HostClockedDevice.live_state` for the panel."""
+    """A host-clocked drive's :meth:`~drivers.host_clocked.HostClockedDevice.live_state` for the panel."""
     if live["faults"]:
         state = "FAULT"
     elif live["streaming"]:

@@ -41,7 +41,6 @@ simulated when operation is enabled again (at most ``COAST_LIMIT`` s).
 from __future__ import annotations
 
 import math
-import os
 import threading
 import time
 from pathlib import Path
@@ -50,8 +49,8 @@ import canopen
 import numpy as np
 
 from hilbench.drivers import cia402 as c
-from hilbench.firmware_sim.devices.bus_buffer import widen_device_buffer
-from hilbench.firmware_sim.devices.bus_frames import drop_malformed
+from hilbench.firmware_sim.devices import drive_sim
+from hilbench.firmware_sim.devices.drive_sim import hold_step
 from hilbench.firmware_sim.devices.sim_config import SimConfig, substeps_for
 from hilbench.firmware_sim.devices.stall_grace import StallGrace
 from hilbench.firmware_sim.engine.plant import Plant
@@ -377,9 +376,7 @@ class SimCia402Drive:
                 self.u_held = u_new
                 self._answer()
                 return
-            u = np.full(n, self.u_held)
-            u[-1] = u_new
-            out = plant.run(u)  # the last row is measured now, before u_new acts
+            out = hold_step(plant, self.u_held, u_new, n)  # the last row is measured now, before u_new acts
             self.u_held = u_new
             position, velocity = self._in_units(int(out.counts[-1]), out.omega[-1] * cpr / (2 * math.pi))
             wrap = (position + 2**31) % 2**32 - 2**31
@@ -430,31 +427,17 @@ def serve(interface: str, channel: str, node_id: int, sim: SimConfig, clock: str
           order: str = "apply-then-sample", enable_latency: int = 0) -> int:
     """Run one simulated drive on a python-can bus until ``stop`` is set (or Ctrl-C). Prints the device
     URL to connect to as its first line."""
-    try:  # a drive's control loop is real-time: ask the OS for SCHED_FIFO (runs without it when refused)
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(20))
-    except (AttributeError, OSError):
-        pass
-    kwargs: dict = {"hop_limit": 0} if interface == "udp_multicast" else {}  # udp_multicast: this host only
-    if port is not None:
-        kwargs["port"] = port
-    import can
 
-    bus = can.Bus(interface=interface, channel=channel, **kwargs)
-    widen_device_buffer(bus)
-    drop_malformed(bus)  # a stray datagram must not end the notifier thread (the drive would go deaf)
-    network = canopen.Network(bus)
-    network.connect()
-    drive = SimCia402Drive(network, node_id, sim, clock=clock, supported_modes=supported_modes, order=order,
-                           enable_latency=enable_latency)
-    print(f"canopen://{interface}/{channel}?node={node_id}&eds={EDS_PATH}" + (f"&port={port}" if port else ""),
-          flush=True)
-    stop = stop or threading.Event()
-    try:
-        while not stop.wait(0.2):
-            pass
-    except KeyboardInterrupt:
-        pass
-    finally:
-        drive.close()
-        network.disconnect()
-    return 0
+    def start(bus) -> tuple[str, object]:
+        network = canopen.Network(bus)
+        network.connect()
+        drive = SimCia402Drive(network, node_id, sim, clock=clock, supported_modes=supported_modes, order=order,
+                               enable_latency=enable_latency)
+
+        def close() -> None:
+            drive.close()
+            network.disconnect()
+
+        return f"canopen://{interface}/{channel}?node={node_id}&eds={EDS_PATH}", close
+
+    return drive_sim.serve(interface, channel, port, stop, start)

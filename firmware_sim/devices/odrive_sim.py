@@ -20,16 +20,14 @@ ODrive's does, scaling the torque down to zero over the last 10 % below ``vel_li
 from __future__ import annotations
 
 import math
-import os
 import threading
 import time
 
 import can
-import numpy as np
 
 from hilbench.drivers import odrive_can as o
-from hilbench.firmware_sim.devices.bus_buffer import widen_device_buffer
-from hilbench.firmware_sim.devices.bus_frames import drop_malformed
+from hilbench.firmware_sim.devices import drive_sim
+from hilbench.firmware_sim.devices.drive_sim import hold_step
 from hilbench.firmware_sim.devices.sim_config import SimConfig, substeps_for
 from hilbench.firmware_sim.devices.stall_grace import StallGrace
 from hilbench.firmware_sim.engine.plant import Plant
@@ -133,9 +131,7 @@ class SimOdrive:
                     self._trip(o.WATCHDOG_TIMER_EXPIRED)
                 closed = self.state == o.AxisState.CLOSED_LOOP_CONTROL
                 u_new = self._torque(self.plant.omega) / self.kt if closed else 0.0
-                u = np.full(round(period / self.plant.dt), u_held)
-                u[-1] = u_new
-                out = self.plant.run(u)  # the last row is measured now, before u_new acts
+                out = hold_step(self.plant, u_held, u_new, round(period / self.plant.dt))  # last row: now
                 u_held = u_new
                 position, velocity = out.counts[-1] / self.cpr, out.omega[-1] / (2 * math.pi)
                 if closed and abs(velocity) > self.vel_limit * VEL_LIMIT_TOLERANCE:
@@ -156,25 +152,9 @@ class SimOdrive:
 def serve(interface: str, channel: str, node_id: int, sim: SimConfig, stop: threading.Event,
           port: int | None = None) -> int:
     """Run a simulated ODrive until ``stop``; prints the device URL first."""
-    try:  # the drive's control tick is real-time: ask for SCHED_FIFO (runs without it when refused)
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(20))
-    except (AttributeError, OSError):
-        pass
-    kwargs: dict = {"hop_limit": 0} if interface == "udp_multicast" else {}
-    if port is not None:
-        kwargs["port"] = port
-    bus = can.Bus(interface=interface, channel=channel, **kwargs)
-    widen_device_buffer(bus)
-    drop_malformed(bus)  # a stray datagram must not end the notifier thread (the axis would go deaf)
-    drive = SimOdrive(bus, node_id, sim)
-    print(f"odrive://{interface}/{channel}?node={node_id}&tvl_endpoint={TVL_ENDPOINT}"
-          + (f"&port={port}" if port else ""), flush=True)
-    try:
-        while not stop.wait(0.2):
-            pass
-    except KeyboardInterrupt:
-        pass
-    finally:
-        drive.close()
-        bus.shutdown()
-    return 0
+
+    def start(bus) -> tuple[str, object]:
+        drive = SimOdrive(bus, node_id, sim)
+        return f"odrive://{interface}/{channel}?node={node_id}&tvl_endpoint={TVL_ENDPOINT}", drive.close
+
+    return drive_sim.serve(interface, channel, port, stop, start)

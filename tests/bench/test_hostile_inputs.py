@@ -157,8 +157,9 @@ def test_random_model_files_end_in_our_errors_only(model_path, monkeypatch, fast
 
 # ---- sim: random argument lists (parsing and checks; the simulator is never started) ----
 
-SIM_TOKENS = ["--serial", "--can", "--canopen", "--odrive", "--clock", "--udp-port", "--interface", "--node", "--fd",
-              "--config", "--seed", "--pacing", "--tick"]
+SIM_TOKENS = ["--serial", "--can", "--canopen", "--odrive", "--moteus", "--clock", "--udp-port", "--interface",
+              "--node",
+              "--fd", "--config", "--seed", "--pacing", "--tick"]
 SIM_VALUES = ["vcan0", "0", "1", "15", "16", "-1", "99999999999999999999", "nan", "inf", "-inf", "1e400", "0.004",
               "real", "sync", "realtime", "lockstep", "socketcan", "virtual", "udp_multicast", "nope", "",
               "239.74.163.2", "{missing}", "{config}", "{bad_config}", "{folder}"]

@@ -121,8 +121,7 @@ def test_dropping_counts_only_frames_that_do_not_decode():
     counter says 3; a python-can frame is never dropped."""
     import can
 
-    from hilbench.drivers.can_frames import drop_malformed_frames
-    from hilbench.firmware_sim.devices.bus_frames import drop_malformed
+    from hilbench.common.can import drop_malformed_frames
 
     port = random.randint(40000, 60000)
     group = f"239.{random.randint(1, 254)}.{random.randint(1, 254)}.{random.randint(1, 254)}"
@@ -133,12 +132,12 @@ def test_dropping_counts_only_frames_that_do_not_decode():
     rx2 = can.Bus(interface="udp_multicast", channel=group, port=port, hop_limit=0)
     tx = can.Bus(interface="udp_multicast", channel=group, port=port, hop_limit=0)
     try:
-        host_count, device_count = drop_malformed_frames(rx), drop_malformed(rx2)
+        host_count, device_count = drop_malformed_frames(rx), drop_malformed_frames(rx2)
         tx.send(can.Message(arbitration_id=0x123, data=b"\x01", is_extended_id=False))
         for payload in (b"\x00", b"x" * 20, b"\x93\x01"):
             _stray(group, port, payload)
         tx.send(can.Message(arbitration_id=0x124, data=b"\x02", is_extended_id=False))
-        for bus, count in ((rx, lambda: host_count.count), (rx2, lambda: device_count[0])):
+        for bus, count in ((rx, lambda: host_count.count), (rx2, lambda: device_count.count)):
             got = [bus.recv(1.0), bus.recv(1.0)]
             assert [m.arbitration_id for m in got if m is not None] == [0x123, 0x124]
             assert count() == 3

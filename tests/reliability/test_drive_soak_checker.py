@@ -56,3 +56,14 @@ def test_a_killed_host_must_leave_a_crashed_run_unless_it_had_finished(tmp_path)
     _write(partial, np.arange(60), q[:60], sp)
     got = check_drive_file(partial, "canopen", killed=True, drive_killed=False)
     assert got["unreadable"] == 1 and got["short_completed"] == 1
+
+
+def test_moteus_files_hold_the_float32_command_of_each_sample(tmp_path):
+    sp = np.linspace(-2, 2, 100)
+    sent = np.float32(sp * KT).astype(np.float64) / KT
+    ok = tmp_path / "ok.h5"
+    _write(ok, np.arange(100), sent, sp)
+    assert check_drive_file(ok, "moteus", False, False)["invented"] == 0
+    shifted = tmp_path / "shifted.h5"  # each sample holding the previous sample's command: invented
+    _write(shifted, np.arange(100), np.concatenate([[0.0], sent[:-1]]), sp)
+    assert check_drive_file(shifted, "moteus", False, False)["invented"] == 100

@@ -18,16 +18,22 @@ def register(subparsers) -> None:
                        help="be a simulated CiA 402 drive on this python-can channel (with --interface "
                             "udp_multicast: e.g. 239.74.163.2, this host only); prints its canopen:// URL")
     where.add_argument("--odrive", metavar="CHANNEL", help="be a simulated ODrive axis on this python-can channel")
+    where.add_argument("--moteus", metavar="CHANNEL",
+                       help="be a simulated moteus controller (CAN-FD) on this python-can channel; prints its "
+                            "moteus:// URL")
     parser.add_argument("--clock", choices=("real", "sync"), default="real",
-                        help="--canopen: the plant follows real time between SYNCs (default) or the SYNC count")
-    parser.add_argument("--udp-port", type=int, default=None, help="--canopen on udp_multicast: UDP port")
+                        help="--canopen, --moteus: the plant follows real time between SYNCs or commands (default) "
+                             "or their count")
+    parser.add_argument("--udp-port", type=int, default=None,
+                        help="--canopen, --odrive, --moteus on udp_multicast: UDP port")
     parser.add_argument("--order", choices=("apply-then-sample", "sample-then-apply"), default="apply-then-sample",
                         help="--canopen: a SYNC's TPDO reports the state after (default) or before its controlword")
     parser.add_argument("--enable-latency", type=int, choices=range(4), default=0, metavar="{0..3}",
                         help="--canopen: SYNCs between an enable received by RPDO and operation enabled")
     parser.add_argument("--interface", default="socketcan", help="python-can interface for --can")
     parser.add_argument("--node", type=int, default=1,
-                        help="CAN node id: 1..15 with --can, 1..126 with --canopen, 0..63 with --odrive")
+                        help="CAN node id: 1..15 with --can, 1..126 with --canopen, 0..63 with --odrive, the "
+                             "controller id 1..126 with --moteus")
     parser.add_argument("--fd", action="store_true", help="use CAN FD frames")
     parser.add_argument("--config", help="simulator TOML (plant and injected effects)")
     parser.add_argument("--seed", type=int, help="override the plant's random seed")
@@ -40,8 +46,9 @@ def register(subparsers) -> None:
 def firmware_argv(args) -> list[str]:
     """The ``python -m hilbench.firmware_sim`` command line equivalent to ``args``."""
     argv = [sys.executable, "-m", "hilbench.firmware_sim"]
-    if getattr(args, "canopen", None) or getattr(args, "odrive", None):
-        kind = ["--canopen", args.canopen] if args.canopen else ["--odrive", args.odrive]
+    drive = next((k for k in ("canopen", "odrive", "moteus") if getattr(args, k, None)), None)
+    if drive is not None:
+        kind = [f"--{drive}", getattr(args, drive)]
         return argv + kind + ["--interface", args.interface, "--node", str(args.node), "--clock", args.clock] \
             + [f"--{k}={getattr(args, k)}" for k in ("config", "seed") if getattr(args, k) is not None] \
             + ([f"--udp-port={args.udp_port}"] if args.udp_port else []) \
@@ -66,8 +73,8 @@ def run(args) -> int:
     if not args.serial:  # bus, channel and node refused in one line here, not as a traceback in the simulator
         from hilbench.firmware_sim.__main__ import check_bus_args
 
-        kind = "can" if args.can is not None else "canopen" if args.canopen else "odrive"
-        check_bus_args(kind, args.interface, args.can or args.canopen or args.odrive, args.node)
+        kind = next(k for k in ("can", "canopen", "odrive", "moteus") if getattr(args, k) is not None)
+        check_bus_args(kind, args.interface, getattr(args, kind), args.node)
     sys.stdout.flush()
     os.execv(sys.executable, firmware_argv(args))
     return 0  # not reached

@@ -1,11 +1,12 @@
-"""The receive buffer asked for on socket-based CAN buses: the kernel's own report is the oracle."""
+"""The CAN helpers both ends of a bus share (hilbench.common.can): the receive buffer asked for on socket-based
+buses (the kernel's own report is the oracle)."""
 
 import random
 from pathlib import Path
 
 import can
 
-from hilbench.drivers.can_buffer import RECEIVE_BUFFER, enlarge_receive_buffer
+from hilbench.common.can import RECEIVE_BUFFER, enlarge_receive_buffer
 
 
 def test_a_udp_multicast_bus_gets_the_buffer_or_the_systems_cap():
