@@ -83,6 +83,18 @@ def foreign_figures() -> dict[str, dict]:
                         options=LoopOptions(sim_window=None, record="displacement-driven"))
     put("tribometer validation force error (force_rel_pct, %)", res, "force_rel_pct",
         "tests/truth/generator.py displacement_driven, seeds 5/6, 100 reversals")
+    # the second independent generator (tests/foreign: Bouc-Wen hysteresis, its own RK4 and noise; issue 39)
+    from tests.foreign.matrix import runs as foreign_runs
+    from tests.foreign.matrix import start as foreign_start
+
+    for case, label in (("clean-bw-tribometer", "Bouc-Wen tribometer validation force error (force_rel_pct, %)"),
+                        ("bw-eccentric-0.3rev",
+                         "Bouc-Wen eccentric preload over 0.3 rev validation torque error (torque_rel_pct, %)"),
+                        ("bw-delay", "Bouc-Wen pure delay validation torque error (torque_rel_pct, %)")):
+        train, valid, opts = foreign_runs(case, 1)
+        res = residual_loop(train, valid, start=foreign_start(case), options=opts)
+        key = "force_rel_pct" if opts.record == "displacement-driven" else "torque_rel_pct"
+        put(label, res, key, f"tests/foreign/matrix.py {case}, seed 1")
     root = os.environ.get("HILBENCH_REAL_DATA")
     files = sorted(glob.glob(os.path.join(root, "hsm150", "idf_*.mat"))) if root else []
     if files:

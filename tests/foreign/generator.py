@@ -191,5 +191,7 @@ def torque_record(seed: int, law: BoucWen, *, stroke: float = 2.0, duration: flo
             return np.array([y[1], (applied - law.force(y[0], y[1], y[2])) / inertia, law.w_rate(y[2], y[1])])
 
         state = rk4(rate, state, t[k], h, substeps)
+    if not np.all(np.isfinite(theta)):
+        raise ValueError(f"RK4 unstable at {substeps} substeps per sample: raise substeps")
     tau = quantise(cmd + ar1_noise(rng, n, noise, pole=0.3), lsb)
     return Foreign(t, quantise(theta, enc), tau, fs, law, axis, "torque-driven", friction)
