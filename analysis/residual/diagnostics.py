@@ -412,7 +412,8 @@ def _slow_lines(d: Diagnostic, s: Signals) -> bool:
     ``position_periodic`` alone, rejected at +150 000 % held-out MSE, and never to ``preload_variation``)."""
     if not d.significant:
         return False
-    travel = float(np.ptp(s.position))
+    # the longest single run's travel, as preload_variation's own rule (candidates.PreloadVariation.unfit_reason)
+    travel = max(float(np.ptp(s.position[lo:hi])) for lo, hi in s.run_rows if hi > lo)
     ks = [float(p["wavenumber"]) for p in d.detail.get("peaks", [])]
     if s.axis == "rotary":
         return travel < 2 * np.pi and any(k <= SLOW_ORDERS for k in ks)
