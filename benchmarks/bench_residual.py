@@ -98,6 +98,8 @@ def foreign_figures() -> dict[str, dict]:
     from tests.foreign.matrix import start as foreign_start
 
     for case, label in (("clean-bw-tribometer", "Bouc-Wen tribometer validation force error (force_rel_pct, %)"),
+                        ("bw-tribometer-slope",
+                         "Bouc-Wen tribometer, level slope, validation force error (force_rel_pct, %)"),
                         ("bw-eccentric-0.3rev",
                          "Bouc-Wen eccentric preload over 0.3 rev validation torque error (torque_rel_pct, %)"),
                         ("bw-delay", "Bouc-Wen pure delay validation torque error (torque_rel_pct, %)")):

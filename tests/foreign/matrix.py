@@ -7,6 +7,7 @@ the loop adds equals the truth's, and a clean record (``clean-*``) also ends wit
 |---|---|---|---|
 | clean-bw-stroke | torque-driven, Bouc-Wen, 2 rad stroke | nothing beyond presliding + Coulomb + viscous | nothing |
 | clean-bw-tribometer | displacement-driven linear, Bouc-Wen, 100 reversals, split in halves | nothing | nothing |
+| bw-tribometer-slope | the same, the level x (1 + 1000/m x) (+-30 % over the travel) | | preload_variation |
 | bw-eccentric-0.3rev | train 0.3 rev, validate 0.6 rev | level x (1 + 0.25 sin(theta+phi)) | preload_variation |
 | bw-eccentric-0.6rev | torque-driven, train over 0.6 rev, validate over 0.8 rev | the same | preload_variation |
 | bw-delay | torque-driven, 2 rad stroke, a pure delay of 3 samples (3 ms) | delay | delay |
@@ -19,6 +20,7 @@ import os
 import pickle
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +36,8 @@ CASES: dict[str, tuple] = {
     "clean-bw-stroke": ("torque", {"law": BoucWen(), "stroke": 2.0}, {"law": BoucWen(), "stroke": 2.0},
                         frozenset()),
     "clean-bw-tribometer": ("halves", {"law": TRIBOMETER}, None, frozenset()),
+    "bw-tribometer-slope": ("halves", {"law": replace(TRIBOMETER, slope=1000.0)}, None,
+                            frozenset({"preload_variation"})),
     "bw-eccentric-0.3rev": ("torque", {"law": BoucWen(eccentric=(0.25, 0.3)), "stroke": 0.3 * TWO_PI},
                             {"law": BoucWen(eccentric=(0.25, 0.3)), "stroke": 0.6 * TWO_PI},
                             frozenset({"preload_variation"})),
@@ -45,7 +49,7 @@ CASES: dict[str, tuple] = {
 }
 SEEDS = (1, 2, 3)
 #: the representative subset ``make test`` runs (one seed)
-QUICK = ("clean-bw-tribometer", "bw-eccentric-0.3rev", "bw-delay")
+QUICK = ("clean-bw-tribometer", "bw-tribometer-slope", "bw-eccentric-0.3rev", "bw-delay")
 
 
 def _cached(kind: str, seed: int, kw: dict) -> Foreign:
