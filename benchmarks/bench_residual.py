@@ -1,4 +1,4 @@
-"""The residual loop's strict blind matrix on records of the independent truth generator (tests/truth):
+"""The residual loop's strict blind matrix on records of the two independent generators (tests/truth, tests/foreign):
 each case is right only if the set of effects the loop adds equals the truth's set (map of library names in
 docs/residual-blind-matrix.md). Reports the fraction exactly right (target >= 0.9), the additions on clean
 data of every friction family (target 0), and the loop's time per case on 30 s at 1 kHz against the time
@@ -32,10 +32,20 @@ def confusion(outcomes) -> dict[str, Counter]:
     return table
 
 
+def all_cases() -> tuple[str, ...]:
+    """The matrix's cases: the truth generator's (tests/truth/matrix.py) and the second independent generator's
+    (tests/foreign/matrix.py, Bouc-Wen; issue 39)."""
+    from tests.foreign.matrix import CASES as FOREIGN
+    from tests.truth.matrix import CASES
+
+    return tuple(CASES) + tuple(FOREIGN)
+
+
 def run_matrix(cases, seeds):
+    from tests.foreign import matrix as foreign
     from tests.truth.matrix import run_case
 
-    return [run_case(c, s) for c in cases for s in seeds]
+    return [(foreign.run_case if c in foreign.CASES else run_case)(c, s) for c in cases for s in seeds]
 
 
 FLOORS = Path(__file__).resolve().parent.parent / "tests" / "data" / "residual_foreign_floors.json"
@@ -83,6 +93,20 @@ def foreign_figures() -> dict[str, dict]:
                         options=LoopOptions(sim_window=None, record="displacement-driven"))
     put("tribometer validation force error (force_rel_pct, %)", res, "force_rel_pct",
         "tests/truth/generator.py displacement_driven, seeds 5/6, 100 reversals")
+    # the second independent generator (tests/foreign: Bouc-Wen hysteresis, its own RK4 and noise; issue 39)
+    from tests.foreign.matrix import runs as foreign_runs
+    from tests.foreign.matrix import start as foreign_start
+
+    for case, label in (("clean-bw-tribometer", "Bouc-Wen tribometer validation force error (force_rel_pct, %)"),
+                        ("bw-tribometer-slope",
+                         "Bouc-Wen tribometer, level slope, validation force error (force_rel_pct, %)"),
+                        ("bw-eccentric-0.3rev",
+                         "Bouc-Wen eccentric preload over 0.3 rev validation torque error (torque_rel_pct, %)"),
+                        ("bw-delay", "Bouc-Wen pure delay validation torque error (torque_rel_pct, %)")):
+        train, valid, opts = foreign_runs(case, 1)
+        res = residual_loop(train, valid, start=foreign_start(case), options=opts)
+        key = "force_rel_pct" if opts.record == "displacement-driven" else "torque_rel_pct"
+        put(label, res, key, f"tests/foreign/matrix.py {case}, seed 1")
     root = os.environ.get("HILBENCH_REAL_DATA")
     files = sorted(glob.glob(os.path.join(root, "hsm150", "idf_*.mat"))) if root else []
     if files:
@@ -128,7 +152,7 @@ def run(quick: bool = False) -> list[dict]:
     from hilbench.analysis.residual.design import Setting, fit_model
     from tests.truth.matrix import CASES, SEEDS, START, Truth, prepared, record
 
-    cases = ("clean-dahl", "current-lag") if quick else tuple(CASES)  # quick: records shared with make test
+    cases = ("clean-dahl", "current-lag") if quick else all_cases()  # quick: records shared with make test
     seeds = (1,) if quick else SEEDS
     outcomes = run_matrix(cases, seeds)
     right = sum(o.right for o in outcomes) / len(outcomes)
@@ -179,12 +203,13 @@ def run(quick: bool = False) -> list[dict]:
 
 def main() -> None:
     """Print the matrix, the confusion table and the time per case (Markdown, for docs/)."""
-    from tests.truth.matrix import CASES, SEEDS
+    from tests.truth.matrix import SEEDS
 
-    outcomes = run_matrix(tuple(CASES), SEEDS)
+    cases = all_cases()
+    outcomes = run_matrix(cases, SEEDS)
     print("| case | expected | " + " | ".join(f"seed {s}" for s in SEEDS) + " | loop time (s) |")
     print("|---|---|" + "---|" * len(SEEDS) + "---|")
-    for case in CASES:
+    for case in cases:
         row = [o for o in outcomes if o.case == case]
         cells = [("right: " if o.right else "**wrong, declared indistinguishable**: " if o.declared else
                   "**wrong**: ") + (", ".join(o.added) or "nothing") for o in row]

@@ -434,26 +434,44 @@ LEVEL_TERMS = ("maxwell_slip", "coulomb", "stribeck")
 
 
 def _bind_level(nl: dict, model: list, fit: Fit) -> dict:
-    """``nl`` plus ``_level``: the current model's level terms (name, settings, fitted coefficients), held."""
-    return {**nl, "_level": [(t.name, dict(n), fit.term_coef(t.name).copy()) for t, n in model
-                             if t.name in LEVEL_TERMS or t.name.startswith("family_")]}
+    """``nl`` plus ``_level``: the current model's level terms (name, settings, fitted coefficients), held, and
+    ``_grid``: the threshold grid those coefficients were fitted on.
+
+    The held level is a fixed function of the path, built from the setting of the model the term was bound to,
+    never from the setting of a later model: the loop changes the grid under a model (the spring element, a
+    ``local_presliding`` candidate's shortened grid), and Maxwell-slip coefficients of one grid applied to
+    another crashed the loop on a displacement-driven tribometer record (40 coefficients, a 30-threshold grid;
+    issue 39)."""
+    return {**nl, "_grid": np.array(fit.setting.thresholds, float),
+            "_level": [(t.name, dict(n), fit.term_coef(t.name).copy()) for t, n in model
+                       if t.name in LEVEL_TERMS or t.name.startswith("family_")]}
+
+
+def _held(nl: dict, setting: Setting) -> Setting:
+    """The setting the held level terms were fitted on: ``setting`` with the bound threshold grid."""
+    grid = nl.get("_grid")
+    if grid is None or (grid.shape == setting.thresholds.shape and np.array_equal(grid, setting.thresholds)):
+        return setting
+    return Setting(setting.fixed_inertia, grid, setting.delay)
 
 
 def _level_key(nl: dict, setting: Setting) -> tuple:
-    return tuple((n, c.tobytes()) for n, _, c in nl.get("_level", [])) + (setting.thresholds.tobytes(),)
+    return tuple((n, c.tobytes()) for n, _, c in nl.get("_level", [])) + (_held(nl, setting).thresholds.tobytes(),)
 
 
 def _level_force(run: RunData, nl: dict, setting: Setting) -> np.ndarray:
     """The held level terms' force at full rate, unfiltered, shape (n,), N*m or N (zeros without any)."""
-    return sum((REGISTRY[n].raw_force(run, n_nl, c, setting) for n, n_nl, c in nl.get("_level", [])),
+    held = _held(nl, setting)
+    return sum((REGISTRY[n].raw_force(run, n_nl, c, held) for n, n_nl, c in nl.get("_level", [])),
                np.zeros(run.position.size))
 
 
 def _sliding_level(nl: dict, setting: Setting) -> float:
     """The held level terms' force while sliding (Maxwell-slip: W_0 + sum k_j*Delta_j), N*m or N."""
+    grid = _held(nl, setting).thresholds
     out = 0.0
     for n, _, c in nl.get("_level", []):
-        out += float(c[0] + c[1:] @ setting.thresholds) if n == "maxwell_slip" else float(c[0])
+        out += float(c[0] + c[1:] @ grid) if n == "maxwell_slip" else float(c[0])
     return out
 
 
@@ -637,6 +655,7 @@ class PreloadVariation(Term):
         """The held level force's first-order change when the slip forces alone follow the basis, per basis
         function, shape (n, 2): sum_j W_j*s_j*b(x at element j's last slip) for the Maxwell-slip elements (0 before
         an element first slips), b(x)*force for the Coulomb-like terms (always slipping)."""
+        setting = _held(nl, setting)
         bx = self.basis(run.position, nl)
         out = np.zeros((run.position.size, 2))
         for name, n_nl, c in nl.get("_level", []):
