@@ -158,9 +158,10 @@ class CampaignView(QtWidgets.QWidget):
 
 class CampaignResults(QtWidgets.QWidget):
     """An analysed campaign: the identify rows of ``RESULTS/results.parquet`` as a table, and for the chosen
-    parameter the drift charts of ``hilbench drift`` (analysis.drift.monitor with its defaults; the baseline
-    is the first 50 runs, or the first half of a shorter campaign): the value with its standard error and the
-    baseline fit, the EWMA with its limits, the CUSUM with h, and the change points as vertical lines."""
+    parameter the drift charts of ``hilbench drift`` (analysis.drift.monitor with its defaults, the baseline rule
+    included, so the tab and the command agree): the value with its standard error and the baseline fit, the EWMA
+    with its limits, the CUSUM with h, and the change points as vertical lines. A campaign with several series
+    (protocols or analysis settings) shows the first series that follows the parameter; the status line names it."""
 
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         import pyqtgraph as pg
@@ -251,14 +252,14 @@ class CampaignResults(QtWidgets.QWidget):
             plot.clear()
         name = self.parameter.currentText()
         ok = sum(r.get("status") == "ok" for r in self.rows)
-        base = min(DriftSettings.baseline, max(3, ok // 2))
         try:
-            self.drift = monitor(self.rows, DriftSettings(parameters=(name,), baseline=base))
+            report = monitor(self.rows, DriftSettings(parameters=(name,)))
         except Exception as exc:
             self.drift = None
             self.status.setText(f"{len(self.rows)} runs; no drift charts: {one_line(exc)}")
             return False
-        s = self.drift.series[name]
+        label, s = next(iter(report.series.items()))
+        self.drift = report.result_of(label)
         x = np.arange(s.value.size, dtype=float)
         value = self.plots["value"]
         value.addItem(pg.ErrorBarItem(x=x, y=s.value, height=2 * np.nan_to_num(s.se), pen="#888"))
@@ -269,11 +270,13 @@ class CampaignResults(QtWidgets.QWidget):
             self.plots["ewma"].plot(x, sign * s.ewma_limit, pen=pg.mkPen("#d62728", style=QtCore.Qt.PenStyle.DashLine))
         self.plots["cusum"].plot(x, s.cusum_hi, pen=pg.mkPen("#1f77b4", width=2), name="CUSUM +")
         self.plots["cusum"].plot(x, s.cusum_lo, pen=pg.mkPen("#2ca02c", width=2), name="CUSUM -")
-        self.plots["cusum"].addItem(pg.InfiniteLine(self.drift.settings.cusum_h, angle=0, pen="#d62728"))
+        self.plots["cusum"].addItem(pg.InfiniteLine(s.cusum_h, angle=0, pen="#d62728"))
         for cp in s.change_points:
             for plot in self.plots.values():
                 plot.addItem(pg.InfiniteLine(cp, angle=90, pen=pg.mkPen("#ff7f0e", width=2)))
         points = ", ".join(self.drift.runs[cp] for cp in s.change_points) or "none"
-        self.status.setText(f"{len(self.rows)} runs ({ok} ok), baseline the first {base}; {name}: change points "
-                            f"at {points}; EWMA alarms {len(s.ewma_alarms)}, CUSUM alarms {len(s.cusum_alarms)}")
+        series = f" in {len(report.groups)} series, shown: {label}" if len(report.groups) > 1 else ""
+        self.status.setText(f"{len(self.rows)} runs ({ok} ok){series}; {self.drift.baseline_line()}; {name}: change "
+                            f"points at {points}; EWMA alarms {len(s.ewma_alarms)}, CUSUM alarms "
+                            f"{len(s.cusum_alarms)}")
         return True

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 
@@ -16,11 +17,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", type=Path, default=None, help="output folder (default: RESULTS/drift)")
     p.add_argument("--parameters", default="breakaway,viscous",
                    help="comma-separated parameters to follow (default breakaway,viscous; also inertia, coulomb)")
-    p.add_argument("--baseline", type=int, default=50, help="baseline: the first N runs (default 50)")
+    p.add_argument("--baseline", type=int, default=None, metavar="N",
+                   help="baseline: the first N runs of each series (default: half the runs, at most 50, at least "
+                   "two more than the coefficients fitted; the line printed says which)")
     p.add_argument("--baseline-runs", default=None, metavar="KEY,...",
                    help="baseline: these runs instead (run keys, or campaign/key)")
-    p.add_argument("--penalty", type=float, default=None, help="PELT penalty on the standardised residual "
-                   "(default 3 ln n)")
+    p.add_argument("--false-alarm", type=float, default=5.0, metavar="PCT",
+                   help="chance that a stationary campaign raises any alarm, in %% (default 5); the limits are "
+                   "calibrated for it on simulated campaigns of the same design")
+    p.add_argument("--penalty", type=float, default=None, help="change-point penalty on the clipped scores "
+                   "(default: calibrated for --false-alarm)")
     p.add_argument("--no-page", action="store_true", help="do not write the campaign pages")
     p.add_argument("--overwrite", action="store_true", help="replace an earlier drift report in the output folder")
     p.set_defaults(func=run)
@@ -51,24 +57,34 @@ def run(args: argparse.Namespace) -> int:
     if unknown or not params:
         raise BenchError(f"--parameters: {unknown[0] if unknown else '(none)'!r} is not an identified parameter "
                          f"with a standard error in {table}")
+    if not 0 < args.false_alarm < 100:
+        raise BenchError(f"--false-alarm {args.false_alarm:g}: must lie in (0, 100) %")
+    if args.penalty is not None and not (math.isfinite(args.penalty) and args.penalty > 0):
+        raise BenchError(f"--penalty {args.penalty:g}: must be finite and > 0")
     rows = [r for r in t.to_pylist() if r.get("step") == "identify"]
     settings = DriftSettings(parameters=params, baseline=args.baseline, penalty=args.penalty,
+                             false_alarm=args.false_alarm / 100.0,
                              baseline_runs=tuple(k.strip() for k in args.baseline_runs.split(","))
                              if args.baseline_runs else ())
     result = monitor(rows, settings)
+    for g in result.groups:
+        outputs.say(f"{g.group + ': ' if len(result.groups) > 1 else ''}{g.baseline_line()}")
     out.mkdir(parents=True, exist_ok=True)
     figures = write_figures(result, units, out, outputs.save_figure)
     summary = result.summary()
     summary["figures"] = [p.name for p in figures]
     outputs.write_json(out / "drift.json", summary, indent=1, allow_nan=False)
     for name, p in summary["parameters"].items():
+        unit = units[p["parameter"]]
         c = p["covariates"].get("temperature_mean", {})
-        dep = (f"temperature {c['coefficient']:.3g} +- {c['se']:.2g} {units[name]}/K"
+        dep = (f"temperature {c['coefficient']:.3g} +- {c['se']:.2g} {unit}/K"
                f"{' (found)' if c['found'] else ' (not significant)'}" if "coefficient" in c else
                "no temperature dependence fitted")
-        cps = ", ".join(f"{cp['run']} ({cp['shift']:+.3g} {units[name]})" for cp in p["change_points"]) or "none"
+        cps = ", ".join(f"{cp['run']} ({cp['shift']:+.3g} {unit})" for cp in p["change_points"]) or "none"
+        outliers = ", ".join(f"{o['run']} (z {o['z']:+.2g})" for o in p["outliers"]) or "none"
+        extra = f"; {len(p['extrapolated'])} run(s) beyond the baseline's covariate range" if p["extrapolated"] else ""
         outputs.say(f"{name}: {dep}; change points: {cps}; EWMA alarms {len(p['ewma_alarms'])}, "
-                    f"CUSUM alarms {len(p['cusum_alarms'])}")
+                    f"CUSUM alarms {len(p['cusum_alarms'])}; outliers: {outliers}{extra}")
     if not args.no_page:
         from hilbench.bench.campaign_analysis.page import write_pages
 

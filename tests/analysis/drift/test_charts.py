@@ -32,12 +32,13 @@ def test_signals_count_one_alarm_per_excursion():
     assert signals(np.zeros(5, bool)) == []
 
 
-def test_pelt_finds_a_mean_step_where_it_starts():
+def test_binary_segmentation_finds_a_mean_step_where_it_starts():
     rng = np.random.default_rng(3)
     z = rng.standard_normal(150)
     z[70:] += 3.0
-    assert change_points(z) == [70]
-    assert change_points(rng.standard_normal(150)) == []
+    assert change_points(z, 3 * np.log(150)) == [70]
+    assert change_points(rng.standard_normal(150), 3 * np.log(150)) == []
+    assert change_points(z[:8], 1.0, min_size=5) == []  # too short for two segments
 
 
 def test_bad_chart_constants_are_refused():

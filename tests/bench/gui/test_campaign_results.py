@@ -63,8 +63,9 @@ def test_results_tab_shows_the_runs_table_and_the_drift_charts(view, results):
         assert table.item(i, _column("validation_torque_nrmse")).data(0) == pytest.approx(5.0)  # percent
     assert table.item(FAILED, _column("status")).text() == "failed"
     assert "no position channel" in table.item(FAILED, _column("verdict")).text()
-    # the charts are the drift monitor's, with its defaults bar the baseline (the first half of 59 ok runs)
-    truth = monitor(_rows(), DriftSettings(parameters=("breakaway",), baseline=29)).series["breakaway"]
+    # the charts are the drift monitor's with its defaults: the CLI's baseline rule (the first half of 59 ok runs)
+    truth = monitor(_rows(), DriftSettings(parameters=("breakaway",))).series["breakaway"]
+    assert "baseline: the first 29 of 59 runs" in view.status.text()
     points = [i for i in view.plots["value"].listDataItems() if i.opts.get("symbol") == "o"][0]
     np.testing.assert_array_equal(points.getData()[1], truth.value)
     ewma = view.plots["ewma"].listDataItems()[0].getData()[1]
