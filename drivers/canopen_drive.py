@@ -553,7 +553,7 @@ class CanopenDrive(HostClockedDevice):
                             (rpdo_fmt.pack(int(c.Command.QUICK_STOP), 0), b""),
                             (rpdo_fmt.pack(int(c.Command.SWITCH_ON), 0), b""),  # zero torque, operation disabled
                             echo_id=self.sync_id,  # host_time: when SYNC k was on the bus
-                            guards=self._guards(cfg))
+                            guards=self._guards(cfg), rx_len=(fmt1.size, fmt2.size))
         dt1 = np.dtype([("status", "<u2"), ("torque", "<i2")])
         dt2 = np.dtype([("position", "<i4"), ("velocity", "<i4")])
         assert fmt1.size == dt1.itemsize and fmt2.size == dt2.itemsize

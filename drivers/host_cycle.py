@@ -204,6 +204,7 @@ class CanCycleSpec:
     end_data: tuple[bytes, ...]
     echo_id: int | None = None
     guards: tuple[Guard, ...] = ()
+    rx_len: tuple[int, ...] = ()  # each rx id's data length, bytes: a frame of another length is dropped, counted
 
 
 OWN_FRAMES_OPTION = ("virtual", "socketcan")  # interfaces that return own frames only when asked to
@@ -394,7 +395,7 @@ def _cycle_with_bus(bus, spec: CanCycleSpec, a: dict, n: int, start_delay: float
         _cycle_loop(bus, spec, n, start_delay, ctl, a["host_time"], a["scheduled"], (a["rx"], a["rx_time"]), a["tx"],
                     parent)
     finally:
-        ctl[_MALFORMED] = malformed.count
+        ctl[_MALFORMED] += malformed.count  # besides the frames of the wrong length the cycle dropped
         bus.shutdown()
 
 
@@ -405,6 +406,7 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
     import can
 
     slot = {cob: j for j, cob in enumerate(spec.rx_ids)}
+    rx_len = spec.rx_len
     counts = [0] * len(spec.rx_ids)
     msgs = [can.Message(arbitration_id=cob, data=bytes(8)[:length], is_extended_id=cob > 0x7FF)
             for cob, length in zip(spec.tx_ids, spec.tx_len, strict=True)]
@@ -429,6 +431,9 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
             return
         j = slot.get(msg.arbitration_id)
         if j is None or msg.is_remote_frame or not ctl[_SENT]:  # frames before the first trigger: not ours
+            return
+        if len(msg.data) != (rx_len[j] if rx_len else len(msg.data)) or len(msg.data) > 8:
+            ctl[_MALFORMED] += 1  # a frame of the wrong length would leave invented bytes in its row (or overflow it)
             return
         k = counts[j]
         if k < n:
