@@ -100,20 +100,22 @@ def flag_impossible(current_cmd: np.ndarray, current_meas: np.ndarray, temperatu
     """A block's currents (A, float64 copies) and temperature (degC; None: no sensor) with the readings no motor
     can give set to NaN: a non-finite current; a temperature that is non-finite, below absolute zero or above the
     melting point of copper. Also how many were set, and a note on the last one (its value and sample index)."""
-    out, bad, note = [], 0, ""
-    for values, name in ((current_cmd, "current_cmd"), (current_meas, "current")):
-        values = np.asarray(values, dtype=np.float64).copy()
+    cmd, meas = current_cmd.astype(np.float64), current_meas.astype(np.float64)  # the block's own copies
+    # the streaming path: one dot product per array (x.x is finite iff every x is: float32 squares cannot overflow)
+    if math.isfinite(cmd.dot(cmd) + meas.dot(meas)) and (temperature is None or temperature_possible(temperature)):
+        return cmd, meas, temperature, 0, ""
+    bad, note = 0, ""
+    for values, name in ((cmd, "current_cmd"), (meas, "current")):
         wrong = ~np.isfinite(values)
         if wrong.any():
             bad += int(wrong.sum())
             note = f"{name} {values[wrong][-1]} A at sample {first_index + int(np.flatnonzero(wrong)[-1])}"
             values[wrong] = np.nan
-        out.append(values)
     if temperature is not None and not temperature_possible(temperature):
         bad += 1
         note = f"temperature {temperature} degC at sample {first_index}"
         temperature = math.nan
-    return out[0], out[1], temperature, bad, note
+    return cmd, meas, temperature, bad, note
 
 
 def check_setpoints(setpoints, config: p.Config) -> np.ndarray:
