@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import collections
 import itertools
+import math
 import queue
 import threading
 import time
@@ -24,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hilbench.common.physical_bounds import ABSOLUTE_ZERO_DEGC, WINDING_TEMPERATURE_MAX_DEGC, temperature_possible
 from hilbench.drivers import protocol as p
 from hilbench.drivers.calibration import Calibration, CountUnwrapper
 from hilbench.drivers.device import Capabilities, Device, SampleBlock
@@ -91,6 +93,29 @@ class Samples(SampleBlock):
     def torque(self) -> np.ndarray:
         """Motor torque at the load from the measured current, N*m."""
         return self.calibration.torque(self.current_meas)
+
+
+def flag_impossible(current_cmd: np.ndarray, current_meas: np.ndarray, temperature: float | None,
+                    first_index: int) -> tuple[np.ndarray, np.ndarray, float | None, int, str]:
+    """A block's currents (A, float64 copies) and temperature (degC; None: no sensor) with the readings no motor
+    can give set to NaN: a non-finite current; a temperature that is non-finite, below absolute zero or above the
+    melting point of copper. Also how many were set, and a note on the last one (its value and sample index)."""
+    cmd, meas = current_cmd.astype(np.float64), current_meas.astype(np.float64)  # the block's own copies
+    # the streaming path: one dot product per array (x.x is finite iff every x is: float32 squares cannot overflow)
+    if math.isfinite(cmd.dot(cmd) + meas.dot(meas)) and (temperature is None or temperature_possible(temperature)):
+        return cmd, meas, temperature, 0, ""
+    bad, note = 0, ""
+    for values, name in ((cmd, "current_cmd"), (meas, "current")):
+        wrong = ~np.isfinite(values)
+        if wrong.any():
+            bad += int(wrong.sum())
+            note = f"{name} {values[wrong][-1]} A at sample {first_index + int(np.flatnonzero(wrong)[-1])}"
+            values[wrong] = np.nan
+    if temperature is not None and not temperature_possible(temperature):
+        bad += 1
+        note = f"temperature {temperature} degC at sample {first_index}"
+        temperature = math.nan
+    return cmd, meas, temperature, bad, note
 
 
 def check_setpoints(setpoints, config: p.Config) -> np.ndarray:
@@ -169,11 +194,16 @@ class Amplifier(Device):
         self.last_status: p.Status | None = None
         self.lost_samples = 0
         self.duplicate_samples = 0
+        self.impossible_readings = 0  # readings no motor can give, recorded as NaN (see _flag_impossible)
+        self._last_impossible = ""
+        self._reported = {"crc_errors": 0, "dropped_frames": 0, "impossible": 0}  # what run_events has told
         self._unwrap = CountUnwrapper()
         self._thread = threading.Thread(target=self._receive, name="amplifier-rx", daemon=True)
         self._thread.start()
         try:
             self.identity: p.Identity = self._identify()
+            # from here on the decoder reads payloads in the agreed protocol's layouts, whatever their length
+            self._link.protocol_version = self.identity.protocol_version
             self._drain_stale()
             ident = self.identity
             if ident.max_block < 1 or ident.buffer_capacity < ident.max_block:
@@ -376,11 +406,13 @@ class Amplifier(Device):
 
     @property
     def counters(self) -> dict[str, int]:
-        """Host counters (``host_*``: link CRC errors, dropped frames, lost and duplicate samples) and the
-        device's counters from its last status (``device_*``)."""
+        """Host counters (``host_*``: link CRC errors, which count every malformed frame dropped, dropped
+        frames, lost and duplicate samples, impossible readings recorded as NaN) and the device's counters
+        from its last status (``device_*``)."""
         out = {f"host_{k}": v for k, v in self._link.counters.items()}
         out["host_lost_samples"] = self.lost_samples
         out["host_duplicate_samples"] = self.duplicate_samples
+        out["host_impossible_readings"] = self.impossible_readings
         s = self.last_status
         if s is not None:
             for k in ("crc_errors", "dropped_frames", "rx_frames", "tx_frames"):
@@ -448,9 +480,13 @@ class Amplifier(Device):
                 if blk.first_index > next_index:
                     self.lost_samples += blk.first_index - next_index
                 next_index = blk.first_index + len(blk)
-                yield Samples(blk.first_index, self._unwrap(blk.counts), blk.current_cmd.astype(np.float64),
-                              blk.current_meas.astype(np.float64), blk.status.copy(), cfg.sample_rate,
-                              self.calibration, blk.temperature if sensing else None)
+                cmd, meas, temperature, bad, note = flag_impossible(
+                    blk.current_cmd, blk.current_meas, blk.temperature if sensing else None, blk.first_index)
+                if bad:
+                    self.impossible_readings += bad
+                    self._last_impossible = note
+                yield Samples(blk.first_index, self._unwrap(blk.counts), cmd, meas, blk.status.copy(),
+                              cfg.sample_rate, self.calibration, temperature)
                 if len(blk) and blk.status[-1] & p.SampleStatus.END and next_index < start + n_total:
                     finished = True
                     why = p.describe_faults(blk.faults) if blk.faults else "disarmed"
@@ -467,6 +503,26 @@ class Amplifier(Device):
                     self.disarm()
                 except DriverError:
                     pass
+
+    def run_events(self) -> list[tuple[str, str]]:
+        """Since the previous call: malformed frames the link counted and dropped, and impossible readings
+        recorded as NaN, one ``info`` event each (none when there were none)."""
+        counters = self._link.counters
+        now = {"crc_errors": counters.get("crc_errors", 0), "dropped_frames": counters.get("dropped_frames", 0),
+               "impossible": self.impossible_readings}
+        new = {k: now[k] - self._reported[k] for k in now}
+        self._reported = now
+        out = []
+        if new["crc_errors"] or new["dropped_frames"]:
+            why = getattr(self._link, "last_error", "")
+            out.append(("info", f"link: {new['crc_errors']} malformed frame(s) counted and dropped, "
+                                f"{new['dropped_frames']} message(s) lost to missing segments"
+                                + (f" (last: {why})" if why else "")))
+        if new["impossible"]:
+            out.append(("info", f"{new['impossible']} impossible reading(s) recorded as NaN (non-finite current; "
+                                f"temperature outside {ABSOLUTE_ZERO_DEGC:g}..{WINDING_TEMPERATURE_MAX_DEGC:g} degC "
+                                f"or non-finite); last: {self._last_impossible}"))
+        return out
 
     def _after_silence(self, end: int, next_index: int) -> None:
         """No sample block for a while: ask the device. If it completed the stream, the missing tail was

@@ -532,7 +532,7 @@ class CanopenDrive(HostClockedDevice):
                             (rpdo_fmt.pack(int(c.Command.QUICK_STOP), 0), b""),
                             (rpdo_fmt.pack(int(c.Command.SWITCH_ON), 0), b""),  # zero torque, operation disabled
                             echo_id=self.sync_id,  # host_time: when SYNC k was on the bus
-                            guards=self._guards(cfg))
+                            guards=self._guards(cfg), rx_len=(fmt1.size, fmt2.size))
         self._unwrap = CountUnwrapper()
         self._enabled_at: int | None = None  # the first cycle whose TPDO reported operation enabled
         return spec, tx

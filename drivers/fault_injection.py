@@ -8,17 +8,26 @@ Each ``write`` call (one frame) is damaged with probability ``p_write`` and each
 probability ``p_read``, by one of: drop a byte, flip bits of a byte, insert a byte. With
 ``keep_delimiters`` the damage never creates, removes or moves a 0x00, so every damaged write spoils
 exactly one frame. ``damaged_writes`` / ``damaged_reads`` count what was done.
+
+``inject``: whole frames (with their 0x00) slipped into what ``read`` returns, each with probability
+``p_inject`` per read that holds a delimiter, right after the last one, so the frames around them stay intact:
+CRC-valid frames that a decoder must refuse (a payload of the wrong length, a v3 block cut short) are sent "by
+the device". ``injected`` counts them.
 """
 
 from __future__ import annotations
 
 import random
+from collections.abc import Sequence
 
 
 class FaultyPort:
     def __init__(self, port, p_write: float = 0.0, p_read: float = 0.0, seed: int = 0,
-                 keep_delimiters: bool = False) -> None:
+                 keep_delimiters: bool = False, inject: Sequence[bytes] = (), p_inject: float = 0.0) -> None:
         self._port = port
+        self.inject = list(inject)
+        self.p_inject = p_inject
+        self.injected = 0
         self.p_write = p_write
         self.p_read = p_read
         self.keep_delimiters = keep_delimiters
@@ -61,6 +70,10 @@ class FaultyPort:
         if data and self.p_read and self._rng.random() < self.p_read:
             self.damaged_reads += 1
             data = self.damage(data)
+        boundary = data.rfind(b"\x00") + 1  # after the last delimiter read: between two frames
+        if self.inject and boundary and self._rng.random() < self.p_inject:
+            data = data[:boundary] + self.inject[self.injected % len(self.inject)] + data[boundary:]
+            self.injected += 1
         return data
 
     def __getattr__(self, name):  # in_waiting, fileno, timeout, reset_input_buffer, close ...

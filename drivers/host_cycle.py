@@ -135,6 +135,7 @@ class CanCycleSpec:
     guards: tuple[Guard, ...] = ()
     fd: bool = False   # CAN-FD frames (with bit-rate switch), e.g. moteus's
     width: int = 8     # payload bytes each tx and rx row holds (64 for CAN-FD)
+    rx_len: tuple[int, ...] = ()  # each rx id's data length, bytes: a frame of another length is dropped, counted
 
 
 OWN_FRAMES_OPTION = ("virtual", "socketcan")  # interfaces that return own frames only when asked to
@@ -332,7 +333,7 @@ def _cycle_with_bus(bus, spec: CanCycleSpec, a: dict, n: int, start_delay: float
         _cycle_loop(bus, spec, n, start_delay, ctl, a["host_time"], a["scheduled"], (a["rx"], a["rx_time"]), a["tx"],
                     parent)
     finally:
-        ctl[_MALFORMED] = malformed.count
+        ctl[_MALFORMED] += malformed.count  # besides the frames of the wrong length the cycle dropped
         bus.shutdown()
 
 
@@ -343,6 +344,7 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
     import can
 
     slot = {cob: j for j, cob in enumerate(spec.rx_ids)}
+    rx_len = spec.rx_len
     counts = [0] * len(spec.rx_ids)
     fd = {"is_fd": True, "bitrate_switch": True} if spec.fd else {}
     msgs = [can.Message(arbitration_id=cob, data=bytes(length), is_extended_id=cob > 0x7FF, **fd)
@@ -369,6 +371,9 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
             return
         j = slot.get(msg.arbitration_id)
         if j is None or msg.is_remote_frame or not ctl[_SENT]:  # frames before the first trigger: not ours
+            return
+        if rx_len and len(msg.data) != rx_len[j]:
+            ctl[_MALFORMED] += 1  # a frame of the wrong length would leave invented bytes in its row (or overflow it)
             return
         k = counts[j]
         if k < n:

@@ -30,8 +30,31 @@ class Link(Protocol):
     @property
     def counters(self) -> dict[str, int]: ...
 
+    #: The protocol agreed at connect: the decoder reads payload layouts by it (set by the Amplifier).
+    protocol_version: int
 
-class SerialLink:
+
+class _Decoding:
+    """What a link tells of its decoder (``_decoder``: a FrameDecoder or a CanReassembler)."""
+
+    _decoder: p.FrameDecoder | p.CanReassembler
+
+    @property
+    def protocol_version(self) -> int:
+        """The protocol agreed at connect, in which the decoder reads payload layouts."""
+        return self._decoder.version
+
+    @protocol_version.setter
+    def protocol_version(self, version: int) -> None:
+        self._decoder.version = version
+
+    @property
+    def last_error(self) -> str:
+        """Why the last malformed frame or message was dropped ('' if none was)."""
+        return self._decoder.last_error
+
+
+class SerialLink(_Decoding):
     """Protocol link over a pyserial port.
 
     Args:
@@ -108,7 +131,7 @@ class SerialLink:
                 "crc_errors": self._decoder.crc_errors, "dropped_frames": 0}
 
 
-class CanLink:
+class CanLink(_Decoding):
     """Protocol link over a python-can bus, talking to device ``node`` (1..15).
 
     Args:
@@ -139,7 +162,7 @@ class CanLink:
             bus.set_filters([{"can_id": p.DEVICE_TO_HOST << 4 | node, "can_mask": 0x1F, "extended": False}])
         except (can.CanError, NotImplementedError):
             pass  # the reassembler filters anyway
-        self._reassembler = p.CanReassembler(p.DEVICE_TO_HOST, node)
+        self._decoder = self._reassembler = p.CanReassembler(p.DEVICE_TO_HOST, node)
         self.frames_tx = 0
 
     def send(self, msg: p.Message) -> None:

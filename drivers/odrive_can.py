@@ -9,6 +9,8 @@ from __future__ import annotations
 import enum
 import struct
 
+from hilbench.drivers.errors import ProtocolError
+
 
 class Cmd(enum.IntEnum):
     HEARTBEAT = 0x01            # axis -> host: axis error u32, axis state u8, procedure result u8, traj done u8
@@ -78,3 +80,11 @@ FLOAT2 = struct.Struct("<ff")
 U32 = struct.Struct("<I")
 U32x2 = struct.Struct("<II")
 SDO = struct.Struct("<BHBI")
+
+
+def unpack(layout: struct.Struct, data: bytes, what: str) -> tuple:
+    """The fields of ``layout`` at the start of ``data`` (an ODrive frame carries them first; a classic frame may be
+    padded to 8 bytes). Raises only :class:`ProtocolError`, for a frame too short to hold them."""
+    if len(data) < layout.size:
+        raise ProtocolError(f"ODrive {what}: {len(data)} data bytes, needs {layout.size}")
+    return layout.unpack_from(data)

@@ -205,7 +205,8 @@ class OdriveDrive(HostClockedDevice):
         spec = CanCycleSpec(self.interface, self.channel, self.bus_kwargs, float(cfg.sample_rate),
                             (o.can_id(self.node_id, o.Cmd.SET_INPUT_TORQUE),), (4,),
                             (o.can_id(self.node_id, o.Cmd.GET_ENCODER_ESTIMATES),
-                             o.can_id(self.node_id, o.Cmd.GET_TORQUES)), (zero,), (zero,), guards=self._guards(cfg))
+                             o.can_id(self.node_id, o.Cmd.GET_TORQUES)), (zero,), (zero,), guards=self._guards(cfg),
+                            rx_len=(o.FLOAT2.size, o.FLOAT2.size))
         return spec, tx
 
     def _poll(self, cycle: CanCycle, n: int) -> str:

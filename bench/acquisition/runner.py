@@ -362,7 +362,7 @@ class Bench:
                 writer.append({"sample_index": blk.index, "t": t, "current_cmd": blk.current_cmd,
                                "current": blk.current_meas, "torque": torque, "position": measured,
                                "counts": blk.counts, **reference, **extra})
-                if n and "temperature" in extra:
+                if n and "temperature" in extra and math.isfinite(extra["temperature"][-1]):  # NaN: flagged
                     reading = float(extra["temperature"][-1])
                     seen = self._temperatures
                     self._temperatures = [seen[0], reading, max(seen[2], reading)] if seen else [reading] * 3

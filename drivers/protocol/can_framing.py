@@ -12,7 +12,7 @@ from __future__ import annotations
 import struct
 
 from hilbench.drivers.errors import ProtocolError
-from hilbench.drivers.protocol.messages import Message, MsgType, decode_message
+from hilbench.drivers.protocol.messages import PROTOCOL_VERSION, Message, MsgType, decode_message
 
 HOST_TO_DEVICE = 0
 DEVICE_TO_HOST = 1
@@ -62,10 +62,12 @@ class CanReassembler:
 
     Only frames for ``direction`` and ``node`` are considered (others are ignored, not counted).
     ``dropped_frames`` counts messages lost to missing or out-of-order segments; ``errors`` counts
-    complete payloads that did not decode. Never raises.
+    complete payloads that did not decode. Never raises. ``version`` is the protocol agreed at connect (the
+    link sets it); it sets the SAMPLES header layout.
     """
 
-    def __init__(self, direction: int, node: int) -> None:
+    def __init__(self, direction: int, node: int, version: int = PROTOCOL_VERSION) -> None:
+        self.version = version
         self.direction = direction
         self.node = node
         self._partial: dict[int, tuple[int, int, bytearray]] = {}  # type -> (next index, length, data)
@@ -107,7 +109,7 @@ class CanReassembler:
             self._fail(f"type 0x{msg_type:02x}: payload shorter than its length field")
             return None
         try:
-            msg = decode_message(msg_type, bytes(payload[:length]))
+            msg = decode_message(msg_type, bytes(payload[:length]), self.version)
         except ProtocolError as exc:
             self._fail(str(exc))
             return None

@@ -505,16 +505,21 @@ class SampleBlock(Message):
                          self.current_meas.tobytes(), self.status.tobytes()))
 
     @classmethod
-    def decode(cls, payload: bytes) -> SampleBlock:
-        # the v3 header is 4 bytes longer, never a whole number of 14-byte samples: its length tells the layout
-        size = cls._ST.size
-        if len(payload) >= size and (len(payload) - size) % cls.SAMPLE_BYTES:
-            size += cls._TEMPERATURE.size
-        head, body = payload[: size], payload[size:]
-        fields = _unpack(cls._ST, head[: cls._ST.size], "SAMPLES")
-        temperature = cls._TEMPERATURE.unpack(head[cls._ST.size:])[0] if size > cls._ST.size else math.nan
-        if len(body) % cls.SAMPLE_BYTES or len(head) != size:
-            raise ProtocolError("SAMPLES: body is not a whole number of samples")
+    def header_bytes(cls, version: int) -> int:
+        """Header size of a SAMPLES payload in protocol ``version``: 27 bytes, 31 from v3 (temperature)."""
+        return cls._ST.size + (cls._TEMPERATURE.size if version >= 3 else 0)
+
+    @classmethod
+    def decode(cls, payload: bytes, version: int = PROTOCOL_VERSION) -> SampleBlock:
+        """The header layout is the one of ``version``, the protocol agreed at connect, never guessed from the
+        payload's length: a v3 block cut by 4 bytes would otherwise read as a v2 block with invented counts."""
+        size = cls.header_bytes(version)
+        if len(payload) < size or (len(payload) - size) % cls.SAMPLE_BYTES:
+            raise ProtocolError(f"SAMPLES: {len(payload)} bytes are not a protocol {version} header of {size} "
+                                f"bytes and whole samples of {cls.SAMPLE_BYTES}")
+        fields = cls._ST.unpack_from(payload)
+        temperature = cls._TEMPERATURE.unpack_from(payload, cls._ST.size)[0] if version >= 3 else math.nan
+        body = payload[size:]
         n = len(body) // cls.SAMPLE_BYTES
         counts = np.frombuffer(body, "<i4", n, 0)
         cmd = np.frombuffer(body, "<f4", n, 4 * n)
@@ -534,11 +539,14 @@ def encode_message(msg: Message) -> tuple[int, bytes]:
     return int(msg.TYPE), msg.encode()
 
 
-def decode_message(msg_type: int, payload: bytes) -> Message:
-    """Message from its type byte and payload; raises :class:`ProtocolError` for anything invalid."""
+def decode_message(msg_type: int, payload: bytes, version: int = PROTOCOL_VERSION) -> Message:
+    """Message from its type byte and payload in protocol ``version`` (the one agreed at connect; it sets
+    the SAMPLES header layout); raises :class:`ProtocolError` for anything invalid, and nothing else."""
     cls = MESSAGE_CLASSES.get(msg_type)
     if cls is None:
         raise ProtocolError(f"unknown message type 0x{msg_type:02x}")
+    if cls is SampleBlock:
+        return SampleBlock.decode(bytes(payload), version)
     return cls.decode(bytes(payload))
 
 

@@ -41,8 +41,10 @@ def encode_frame(msg: Message, version: int | None = None) -> bytes:
     return cobs.encode(raw + _CRC.pack(zlib.crc32(raw))) + b"\x00"
 
 
-def decode_frame(data: bytes) -> Message:
-    """Message from one COBS-encoded frame without its delimiter. Raises only :class:`ProtocolError`."""
+def decode_frame(data: bytes, version: int | None = None) -> Message:
+    """Message from one COBS-encoded frame without its delimiter. ``version`` is the protocol agreed at
+    connect, which sets the payload layouts (None: the frame's own version byte, for golden frames and
+    probes). Raises only :class:`ProtocolError`."""
     try:
         raw = cobs.decode(bytes(data))
     except cobs.DecodeError as exc:
@@ -54,17 +56,20 @@ def decode_frame(data: bytes) -> Message:
         raise ProtocolError("CRC mismatch")
     if body[0] not in FRAME_VERSIONS:
         raise ProtocolError(f"protocol version {body[0]} (this host reads {FRAME_VERSIONS})")
-    return decode_message(body[1], body[2:])
+    return decode_message(body[1], body[2:], body[0] if version is None else version)
 
 
 class FrameDecoder:
     """Streaming decoder: :meth:`feed` arbitrary byte chunks, get the complete messages back.
 
     Bad frames never raise; they are counted (``crc_errors`` counts every rejected frame: bad COBS, CRC,
-    version, payload or oversize) and skipped, and decoding resumes after the next 0x00.
+    version, payload or oversize) and skipped, and decoding resumes after the next 0x00. ``version`` is the
+    protocol agreed at connect (the link sets it once the device has answered GET_IDENTITY); it, not a
+    payload's length, sets the SAMPLES header layout.
     """
 
-    def __init__(self, max_frame: int = MAX_FRAME_BYTES) -> None:
+    def __init__(self, max_frame: int = MAX_FRAME_BYTES, version: int = PROTOCOL_VERSION) -> None:
+        self.version = version
         self._buf = bytearray()
         self._max_encoded = max_frame + max_frame // 254 + 2
         self._discarding = False  # inside an oversize frame: drop bytes until the next delimiter
@@ -90,7 +95,7 @@ class FrameDecoder:
             if not frame:
                 continue  # empty frame: line idle / sender resync
             try:
-                msg = decode_frame(frame)
+                msg = decode_frame(frame, self.version)
             except ProtocolError as exc:
                 self.crc_errors += 1
                 self.last_error = str(exc)

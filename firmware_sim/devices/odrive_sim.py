@@ -26,6 +26,7 @@ import time
 import can
 
 from hilbench.drivers import odrive_can as o
+from hilbench.drivers.protocol import ProtocolError
 from hilbench.firmware_sim.devices import drive_sim
 from hilbench.firmware_sim.devices.drive_sim import hold_step
 from hilbench.firmware_sim.devices.sim_config import SimConfig, substeps_for
@@ -55,6 +56,7 @@ class SimOdrive:
         self._params = sim.plant_for(self.current_limit, torque_constant, counts_per_rev)
         self.plant = Plant(self._params, dt, sim.substeps or substeps_for(self._params, dt))
         self._lock = threading.Lock()
+        self.malformed_commands = 0
         self._stop = threading.Event()
         self._notifier = can.Notifier(bus, [self._on_message])
         self._thread = threading.Thread(target=self._run, name="odrive-sim", daemon=True)
@@ -64,6 +66,12 @@ class SimOdrive:
         self.bus.send(can.Message(arbitration_id=o.can_id(self.node, cmd), data=data, is_extended_id=False))
 
     def _on_message(self, msg) -> None:
+        try:
+            self._take(msg)
+        except ProtocolError:  # a command too short for its fields: counted and dropped, the axis keeps listening
+            self.malformed_commands += 1
+
+    def _take(self, msg) -> None:
         node, cmd = o.split_id(msg.arbitration_id)
         if node != self.node or msg.is_remote_frame:
             return
@@ -73,15 +81,15 @@ class SimOdrive:
             self.last_rx = time.monotonic()  # every host command for the axis feeds the watchdog
             data = bytes(msg.data)
             if cmd == o.Cmd.SET_INPUT_TORQUE:
-                self.input_torque = o.FLOAT.unpack(data[:4])[0]
+                self.input_torque = o.unpack(o.FLOAT, data, "SET_INPUT_TORQUE")[0]
             elif cmd == o.Cmd.SET_AXIS_STATE:
-                want = o.U32.unpack(data[:4])[0]
+                want = o.unpack(o.U32, data, "SET_AXIS_STATE")[0]
                 if want == o.AxisState.CLOSED_LOOP_CONTROL and not self.error:
                     self.state = o.AxisState.CLOSED_LOOP_CONTROL
                 elif want == o.AxisState.IDLE:
                     self.state = o.AxisState.IDLE
             elif cmd == o.Cmd.SET_LIMITS:
-                self.vel_limit, current_limit = o.FLOAT2.unpack(data[:8])
+                self.vel_limit, current_limit = o.unpack(o.FLOAT2, data, "SET_LIMITS")
                 if current_limit != self.current_limit:
                     self.current_limit = current_limit
                     state = self.plant.get_state()

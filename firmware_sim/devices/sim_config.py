@@ -11,7 +11,17 @@ import tomllib
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-from hilbench.firmware_sim.engine.drift import Drift
+import numpy as np
+
+from hilbench.drivers.protocol import SAMPLE_RATES
+from hilbench.firmware_sim.engine.drift import (
+    MAX_DISTANCE,
+    MAX_TEMPERATURE,
+    Drift,
+    drift_keys,
+    reachable_extremes,
+    scaled_params,
+)
 from hilbench.firmware_sim.engine.friction_models import dc_motor, paper_system
 from hilbench.firmware_sim.engine.plant import (
     MAX_ELEMENTS,
@@ -42,9 +52,25 @@ class SimConfig:
     drift: Drift | None = None   # None: no thermal model, no wear, no temperature sensor
     ambient: float = 23.0        # degC, the winding's temperature when the device starts
     drift_block: float = 0.05    # s between updates of the drifted friction parameters
+    max_temperature: float = MAX_TEMPERATURE  # degC: the hottest winding the drift laws are checked at
+    max_distance: float = MAX_DISTANCE        # rad: the farthest sliding distance they are checked at
+
+    def reachable_plants(self) -> list[tuple[float, float, PlantParams]]:
+        """(temperature degC, distance rad, plant) at the extremes of the drift laws over the range a device can
+        reach (firmware_sim.engine.drift.reachable_extremes); [] without [drift]."""
+        if self.drift is None:
+            return []
+        return [(t, s, scaled_params(self.plant, level, viscous)) for t, s, level, viscous in
+                reachable_extremes(self.drift, self.ambient, self.max_temperature, self.max_distance)]
 
     def substeps_at(self, sample_rate: int) -> int:
-        return self.substeps or substeps_for(self.plant, 1.0 / sample_rate)
+        """RK4 sub-steps per sample at ``sample_rate``: as configured, else the fewest stable for the plant and
+        for every plant the drift laws reach (a warm motor's viscous term or a worn contact's stiffness may be
+        stiffer than the cold, new one)."""
+        if self.substeps:
+            return self.substeps
+        dt = 1.0 / sample_rate
+        return max(substeps_for(params, dt) for params in [self.plant, *(p for *_, p in self.reachable_plants())])
 
     def plant_for(self, current_limit: float, torque_constant: float, counts_per_rev: int) -> PlantParams:
         """The plant a CONFIG runs: the motor takes the host's declared calibration (torque constant,
@@ -55,10 +81,16 @@ class SimConfig:
 
 
 def substeps_for(params: PlantParams, dt: float) -> int:
-    """Fewest RK4 sub-steps per sample that keep the stiffest mode stable: ceil(|lambda|*dt / 2.5)."""
+    """Fewest RK4 sub-steps per sample that keep the stiffest mode stable: ceil(|lambda|*dt / 2.5); above
+    MAX_SUBSTEPS (or for a non-finite mode) MAX_SUBSTEPS + 1, which validation then refuses."""
     from hilbench.firmware_sim.engine.plant import RK4_STABLE_RADIUS
 
-    return max(1, math.ceil(stiffest_eigenvalue(params) * dt / RK4_STABLE_RADIUS * (1 + 1e-12)))
+    try:
+        with np.errstate(all="ignore"):
+            need = stiffest_eigenvalue(params) * dt / RK4_STABLE_RADIUS * (1 + 1e-12)
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError):  # a non-finite parameter: validation names it
+        return MAX_SUBSTEPS + 1
+    return max(1, math.ceil(need)) if need <= MAX_SUBSTEPS else MAX_SUBSTEPS + 1
 
 
 def load_sim_config(path: str | Path | None = None, seed: int | None = None) -> SimConfig:
@@ -118,20 +150,57 @@ def sim_config_from_dict(data: dict, seed: int | None = None, source: str = "con
         validate(params, dt, int(substeps) or substeps_for(params, dt))
     except (PlantParameterError, TypeError) as exc:
         raise SimConfigError(f"{source}: bad [plant]: {exc}") from exc
-    drift, ambient, block = _drift(data.get("drift"), source)
-    return SimConfig(plant=params, substeps=int(substeps), model=str(device.get("model", "HB-SIM-1")),
-                     serial=str(device.get("serial", "SIM-0001")), buffer_capacity=capacity,
-                     drift=drift, ambient=ambient, drift_block=block)
+    drift, extra = _drift(data.get("drift"), source)
+    config = SimConfig(plant=params, substeps=int(substeps), model=str(device.get("model", "HB-SIM-1")),
+                       serial=str(device.get("serial", "SIM-0001")), buffer_capacity=capacity,
+                       drift=drift, ambient=extra["ambient"], drift_block=extra["block"],
+                       max_temperature=extra["max_temperature"], max_distance=extra["max_distance"])
+    _check_drift_range(config, source)
+    return config
 
 
-#: [drift] keys beyond the laws' constants (firmware_sim.engine.drift.Drift)
-DRIFT_EXTRA = {"ambient": 23.0, "block": 0.05}
+#: [drift] keys beyond the laws' constants (firmware_sim.engine.drift.Drift): the winding's temperature at start
+#: (degC), the period of the friction updates (s), and the range the laws are checked over (degC, rad)
+DRIFT_EXTRA = {"ambient": 23.0, "block": 0.05, "max_temperature": MAX_TEMPERATURE, "max_distance": MAX_DISTANCE}
 
 
-def _drift(table, source: str) -> tuple[Drift | None, float, float]:
-    """The [drift] table: the constants of :class:`Drift` plus ``ambient`` (degC) and ``block`` (s)."""
+def _check_drift_range(config: SimConfig, source: str) -> None:
+    """Refuse, in one line naming the key, drift laws that leave what a motor can be anywhere in the range a device
+    can reach before it starts (not at the first run that gets there): every extreme plant of that range must be
+    valid and stable at every sample rate the device accepts."""
+    drift = config.drift
+    if drift is None:
+        return
+    try:
+        extremes = reachable_extremes(drift, config.ambient, config.max_temperature, config.max_distance)
+    except PlantParameterError as exc:
+        raise SimConfigError(f"{source}: [drift] {exc}") from None
+    for rate in SAMPLE_RATES:
+        dt = 1.0 / rate
+        try:
+            validate(config.plant, dt, config.substeps or substeps_for(config.plant, dt))
+        except PlantParameterError:
+            continue  # the device refuses a CONFIG at this rate anyway (INVALID_CONFIG)
+        substeps = config.substeps_at(rate)
+        for temperature, distance, level, viscous in extremes:
+            params = scaled_params(config.plant, level, viscous)
+            try:  # non-finite parameters first, then stability at the sub-steps the device will use (at most 10 000)
+                validate(params, dt, min(substeps, MAX_SUBSTEPS))
+            except PlantParameterError as exc:
+                why = str(exc)
+                if why.startswith("unstable step") and substeps_for(params, dt) > MAX_SUBSTEPS:
+                    why = (f"its stiffest mode ({stiffest_eigenvalue(params):.3g} 1/s) needs more than {MAX_SUBSTEPS} "
+                           f"RK4 sub-steps per sample")
+                raise SimConfigError(
+                    f"{source}: [drift] {drift_keys(level, viscous, drift)}: at {temperature:.4g} degC and "
+                    f"{distance:.4g} rad slid (friction level x{level:.3g}, viscous x{viscous:.3g}) the plant is "
+                    f"refused at {rate} Hz: {why}") from None
+
+
+def _drift(table, source: str) -> tuple[Drift | None, dict[str, float]]:
+    """The [drift] table: the constants of :class:`Drift` plus the keys of :data:`DRIFT_EXTRA`."""
     if table is None:
-        return None, DRIFT_EXTRA["ambient"], DRIFT_EXTRA["block"]
+        return None, dict(DRIFT_EXTRA)
     if not isinstance(table, dict):
         raise SimConfigError(f"{source}: [drift] must be a table")
     laws = {f.name for f in fields(Drift)}
@@ -142,14 +211,11 @@ def _drift(table, source: str) -> tuple[Drift | None, float, float]:
     for key, value in table.items():
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise SimConfigError(f"{source}: [drift] {key} must be a number, got {value!r}")
-    ambient = float(table.get("ambient", DRIFT_EXTRA["ambient"]))
-    block = float(table.get("block", DRIFT_EXTRA["block"]))
-    if not math.isfinite(ambient) or not 0.0 < block <= 10.0:
-        raise SimConfigError(f"{source}: [drift] ambient must be finite and block in (0, 10] s, "
-                             f"got {ambient!r} and {block!r}")
+    extra = {key: float(table.get(key, default)) for key, default in DRIFT_EXTRA.items()}
+    if not 0.0 < extra["block"] <= 10.0:
+        raise SimConfigError(f"{source}: [drift] block in (0, 10] s is required, got {extra['block']!r}")
     try:
         drift = Drift(**{k: float(v) for k, v in table.items() if k in laws})
-        drift.level_factor(ambient, 0.0)  # the level law must hold at the start
     except PlantParameterError as exc:
-        raise SimConfigError(f"{source}: bad [drift]: {exc}") from exc
-    return drift, ambient, block
+        raise SimConfigError(f"{source}: [drift] {str(exc).removeprefix('drift ')}") from exc
+    return drift, extra

@@ -31,6 +31,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from hilbench.common.physical_bounds import ABSOLUTE_ZERO_DEGC, WINDING_TEMPERATURE_MAX_DEGC
 from hilbench.firmware_sim.engine.plant import Plant, PlantOutput, PlantParameterError, PlantParams
 
 #: unit of the temperatures here (and of the run files' ``temperature`` channel)
@@ -89,8 +90,76 @@ class DriftState:
 
 def drifted_params(params: PlantParams, drift: Drift, state: DriftState) -> PlantParams:
     """``params`` with the friction level and viscous term of ``state`` (Maxwell-slip slip displacements kept)."""
-    level = drift.level_factor(state.temperature, state.distance)
-    visc = drift.viscous_factor(state.temperature)
+    return scaled_params(params, drift.level_factor(state.temperature, state.distance),
+                         drift.viscous_factor(state.temperature))
+
+
+#: Defaults of the range the laws are checked over (docs/campaign-analysis.md, "Drift physics"): the hottest the
+#: winding is taken to get (degC; class H insulation is rated 180 degC) and the farthest it slides (rad).
+MAX_TEMPERATURE = 180.0
+MAX_DISTANCE = 1e6
+
+
+def reachable_extremes(drift: Drift, ambient: float, max_temperature: float = MAX_TEMPERATURE,
+                       max_distance: float = MAX_DISTANCE) -> list[tuple[float, float, float, float]]:
+    """``(temperature degC, distance rad, L, b/b_ref)`` at the states where the laws take their extreme values over
+    every state a device can reach: the winding between ``ambient`` (it starts there and only cools towards it)
+    and ``max_temperature``, the distance slid between 0 and ``max_distance``. L is linear in T and monotone in s
+    between the wear step's two sides, b/b_ref monotone in T, so these corners bound both.
+
+    Raises :class:`PlantParameterError`, naming the [drift] key, for a value a motor cannot have: an ambient at or
+    below absolute zero or not below ``max_temperature``, a ``max_temperature`` at which copper has melted, a
+    friction level that reaches zero or a factor that is not finite."""
+    for key, value in (("ambient", ambient), ("reference_temperature", drift.reference_temperature)):
+        if not (math.isfinite(value) and ABSOLUTE_ZERO_DEGC < value < WINDING_TEMPERATURE_MAX_DEGC):
+            raise PlantParameterError(f"{key} = {value!r} degC is not a temperature a winding has (it must lie "
+                                      f"above absolute zero, {ABSOLUTE_ZERO_DEGC} degC, and below "
+                                      f"{WINDING_TEMPERATURE_MAX_DEGC:g} degC, where copper melts)")
+    if not (math.isfinite(max_temperature) and ambient < max_temperature < WINDING_TEMPERATURE_MAX_DEGC):
+        raise PlantParameterError(f"max_temperature = {max_temperature!r} degC must lie above ambient ({ambient:g} "
+                                  f"degC) and below {WINDING_TEMPERATURE_MAX_DEGC:g} degC, where copper melts")
+    if not (math.isfinite(max_distance) and max_distance >= 0):
+        raise PlantParameterError(f"max_distance = {max_distance!r} rad must be finite and >= 0")
+    distances = {0.0, max_distance} | ({math.nextafter(drift.wear_step_distance, 0.0), drift.wear_step_distance}
+                                       if drift.wear_step_distance <= max_distance else set())
+    out = []
+    for temperature in (ambient, max_temperature):
+        thermal = 1.0 + drift.level_temperature_coefficient * (temperature - drift.reference_temperature)
+        if not thermal > 0:
+            raise PlantParameterError(
+                f"level_temperature_coefficient = {drift.level_temperature_coefficient!r} 1/K makes the friction "
+                f"level 1 + alpha*(T - T_ref) = {thermal:.3g} <= 0 at {temperature:.4g} degC, within the winding's "
+                f"range {ambient:g}..{max_temperature:g} degC")
+        with np.errstate(over="ignore"):
+            viscous = float(np.exp(-drift.viscous_temperature_coefficient
+                                   * (temperature - drift.reference_temperature)))
+        if not (math.isfinite(viscous) and viscous > 0):
+            raise PlantParameterError(
+                f"viscous_temperature_coefficient = {drift.viscous_temperature_coefficient!r} 1/K makes the viscous "
+                f"factor exp(-beta*(T - T_ref)) = {viscous:.3g} at {temperature:.4g} degC, within the winding's range "
+                f"{ambient:g}..{max_temperature:g} degC")
+        for distance in sorted(distances):
+            level = drift.level_factor(temperature, distance)
+            if not (math.isfinite(level) and level > 0):
+                raise PlantParameterError(f"wear_rate = {drift.wear_rate!r} 1/rad makes the friction level {level:.3g} "
+                                          f"after {distance:.4g} rad slid (max_distance {max_distance:g} rad)")
+            out.append((temperature, distance, level, viscous))
+    return out
+
+
+def drift_keys(level: float, viscous: float, drift: Drift) -> str:
+    """The [drift] keys, with their values, that moved the plant to friction level ``level`` and viscous factor
+    ``viscous`` (for a one-line refusal), e.g. ``viscous_temperature_coefficient = -1.0``."""
+    keys = []
+    if level != 1.0:
+        keys += [k for k in ("level_temperature_coefficient", "wear_rate", "wear_step") if getattr(drift, k)]
+    if viscous != 1.0:
+        keys.append("viscous_temperature_coefficient")
+    return ", ".join(f"{k} = {getattr(drift, k)!r}" for k in keys)
+
+
+def scaled_params(params: PlantParams, level: float, viscous: float) -> PlantParams:
+    """``params`` at friction level ``level`` and viscous factor ``viscous`` (what :func:`drifted_params` does)."""
     return replace(
         params,
         ms_stiffness=tuple(level * k for k in params.ms_stiffness),
@@ -98,8 +167,8 @@ def drifted_params(params: PlantParams, drift: Drift, state: DriftState) -> Plan
         coulomb=level * params.coulomb,
         coulomb_neg=None if params.coulomb_neg is None else level * params.coulomb_neg,
         static=None if params.static is None else level * params.static,
-        viscous=visc * params.viscous,
-        viscous_neg=None if params.viscous_neg is None else visc * params.viscous_neg,
+        viscous=viscous * params.viscous,
+        viscous_neg=None if params.viscous_neg is None else viscous * params.viscous_neg,
     )
 
 

@@ -637,16 +637,40 @@ static inline __attribute__((always_inline)) void substep(const hb_params *p, hb
     if (ft.models) model_commit(p, s, th_new - th, h, om_new);
 }
 
+/* the Maxwell-slip cache fits the caller's storage (C99: a negative array size if not) */
+typedef char hb_run_cache_fits[sizeof(ms_cache) <= sizeof(((hb_run_cache *)0)->words) ? 1 : -1];
+
+static int run_samples(const hb_params *p, hb_state *s, ms_cache *c, const double *u, int64_t n, double dt,
+                       int substeps, int mode, hb_outputs *out);
+
 int hb_run(const hb_params *p, hb_state *s, const double *u, int64_t n, double dt, int substeps,
            int mode, hb_outputs *out) {
+    ms_cache cache;
+    ms_fill(p, s, &cache);
+    return run_samples(p, s, &cache, u, n, dt, substeps, mode, out);
+}
+
+int hb_run_cached(const hb_params *p, hb_state *s, hb_run_cache *cache, const double *u, int64_t n, double dt,
+                  int substeps, int mode, hb_outputs *out) {
+    ms_cache *c = (ms_cache *)(void *)cache->words;
+    if (!cache->valid) {
+        ms_fill(p, s, c);
+        cache->valid = 1;
+    }
+    int rc = run_samples(p, s, c, u, n, dt, substeps, mode, out);
+    if (rc != 0) cache->valid = 0;  /* a non-finite state: whatever comes next starts from a fresh cache */
+    return rc;
+}
+
+/* hb_run from a filled Maxwell-slip cache `c` of the state `s` (kept up to date as the state advances). */
+static int run_samples(const hb_params *p, hb_state *s, ms_cache *c, const double *u, int64_t n, double dt,
+                       int substeps, int mode, hb_outputs *out) {
     const double h = dt / substeps;
     const double kt_true = p->torque_constant * (1.0 + p->torque_constant_error);
     const double lag_a = p->current_lag > 0.0 ? exp(-dt / p->current_lag) : 0.0;
     const double lag_avg = p->current_lag > 0.0 ? p->current_lag / dt * (1.0 - lag_a) : 0.0;
     const hb_features ft = features_of(p);
-    ms_cache cache;
-    ms_fill(p, s, &cache);
-    ms_segments(&cache, s->ms_offset);
+    ms_segments(c, s->ms_offset);
 
     for (int64_t k = 0; k < n; k++) {
         /* 1. measure at t_k */
@@ -663,7 +687,7 @@ int hb_run(const hb_params *p, hb_state *s, const double *u, int64_t n, double d
         } else {
             pos = th_noisy;
         }
-        double friction = friction_now(p, s, &cache);
+        double friction = friction_now(p, s, c);
 
         /* 2. command */
         double i_cmd;
@@ -714,7 +738,7 @@ int hb_run(const hb_params *p, hb_state *s, const double *u, int64_t n, double d
         out->counts[k] = counts;
 
         /* 4. mechanics over [t_k, t_k+1) */
-        for (int j = 0; j < substeps; j++) substep(p, s, &cache, ft, tau, h);
+        for (int j = 0; j < substeps; j++) substep(p, s, c, ft, tau, h);
         s->time += dt;
         if (!isfinite(s->theta) || !isfinite(s->omega)) return -1;
     }

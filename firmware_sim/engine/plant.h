@@ -120,6 +120,19 @@ void hb_state_init(hb_state *s, const hb_params *p, double theta0, double omega0
 int hb_run(const hb_params *p, hb_state *s, const double *u, int64_t n, double dt, int substeps,
            int mode, hb_outputs *out);
 
+/* hb_run's per-call set-up (the Maxwell-slip cache: O(N) in the elements, more than the sample's RK4 step at 16
+ * elements) kept from one call to the next, for a caller that steps the plant a sample at a time (the device's
+ * plant HAL). The results are hb_run's, bit for bit: a run split into calls is exact. Set `valid` to 0 whenever
+ * the parameters change or the state changes other than through hb_run_cached. */
+#define HB_RUN_CACHE_WORDS 160
+typedef struct {
+    int32_t valid;
+    double words[HB_RUN_CACHE_WORDS];
+} hb_run_cache;
+
+int hb_run_cached(const hb_params *p, hb_state *s, hb_run_cache *cache, const double *u, int64_t n, double dt,
+                  int substeps, int mode, hb_outputs *out);
+
 /* Friction along an imposed motion: position x[k] (rad) and velocity v[k] (rad/s), the path linear between
  * samples. out[k] is the friction at sample k (as the `friction` output of hb_run, with the Coulomb force
  * sgn(v)*level and 0 at v = 0). The state's theta/omega follow the path. */

@@ -106,9 +106,30 @@ def test_sample_block_layout_by_hand(version, head):
     assert struct.unpack_from("<4i", payload, head) == (0, -1, 2**31 - 1, -(2**31))
     assert struct.unpack_from("<4f", payload, head + 16) == (0.5, 0.0, -0.25, 1.0)
     assert struct.unpack_from("<4H", payload, head + 48) == (1, 1, 3, 5)
-    back = p.SampleBlock.decode(payload)  # the header's length tells the layout: 27 + 14n or 31 + 14n bytes
+    back = p.SampleBlock.decode(payload, version)  # the agreed version tells the layout, not the length
     assert back == blk
     assert math.isnan(back.temperature) if version < 3 else back.temperature == 36.625
+    other = 5 - version  # the same bytes read in the other version's layout are refused, never misread
+    with pytest.raises(ProtocolError, match="whole samples"):
+        p.SampleBlock.decode(payload, other)
+
+
+def test_a_v3_block_cut_by_4_bytes_is_refused():
+    """Was read as a v2 block (the layout was chosen by length) whose counts began with the last 4 bytes of the
+    header: invented samples."""
+    payload = canonical_messages(3)["samples"].encode(3)
+    with pytest.raises(ProtocolError):
+        p.SampleBlock.decode(payload[:-4], 3)
+    assert p.decode_frame(p.encode_frame(canonical_messages(3)["samples"])[:-1], 3) == canonical_messages(3)["samples"]
+
+
+@pytest.mark.parametrize("n", [28, 29, 30])
+def test_a_samples_payload_of_28_to_30_bytes_is_a_protocol_error(n):
+    """It raised struct.error (the v3 header picked by length, its temperature unpacked before the length check),
+    which killed the link's receiver thread."""
+    for version in (2, 3):
+        with pytest.raises(ProtocolError):
+            p.decode_message(p.MsgType.SAMPLES, bytes(n), version)
 
 
 def test_identity_v3_names_its_sensors():
@@ -122,8 +143,9 @@ def test_identity_v3_names_its_sensors():
     with pytest.raises(ProtocolError, match="sensors byte"):
         p.Identity.decode(bad)
     for n in (1, 2, 3, 5):  # a body of a non-whole number of samples is refused under either header
-        with pytest.raises(ProtocolError, match="whole number"):
-            p.SampleBlock.decode(bytes(27 + 14 + n))
+        for version in (2, 3):
+            with pytest.raises(ProtocolError, match="whole samples"):
+                p.SampleBlock.decode(bytes(27 + 14 + n), version)
 
 
 def test_config_problems_are_specific():

@@ -31,7 +31,7 @@ def v1_host_reads(data: bytes) -> list[p.Message]:
         raw = cobs.decode(chunk)
         assert zlib.crc32(raw[:-4]) == int.from_bytes(raw[-4:], "little")
         assert raw[0] == 1, f"a v1 host cannot read a frame of version {raw[0]}"
-        out.append(p.decode_message(raw[1], raw[2:-4]))
+        out.append(p.decode_message(raw[1], raw[2:-4], 1))  # a v1 host reads the v1 layouts
     return out
 
 

@@ -155,3 +155,23 @@ def test_cli_bad_config_is_one_line(tmp_path, starts_devices):
                          capture_output=True, text=True, timeout=30)
     assert res.returncode == 2
     assert res.stderr.count("\n") == 1 and "error" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_the_device_plant_is_the_plant_bit_for_bit_sample_by_sample():
+    """The HAL steps the plant one sample per call and carries hb_run's Maxwell-slip cache from call to call
+    (hb_run_cached) instead of rebuilding it: the counts and measured currents are those of one hb_run over the
+    whole input (firmware_sim.engine.plant.Plant, an independent call path), bit for bit, through reversals that
+    make the cache rebuild itself (16 elements, current noise, position noise)."""
+    from hilbench.firmware_sim.engine.plant import Plant
+
+    sim = sim_config_from_dict({"device": {"buffer_capacity": 4096},
+                                "plant": {"elements": 16, "seed": 11, "noise_current": 0.01, "noise_position": 2e-5}})
+    rate, n = 2000, 3000
+    u = (1.5 * np.sin(2 * np.pi * 3.0 * np.arange(n) / rate) * np.exp(-np.arange(n) / 1500)).astype(np.float32)
+    host = fresh(sim=sim, sample_rate=rate, current_limit=4.0)
+    got = _accelerate(host, u, 128)
+    plant = Plant(sim.plant_for(4.0, 0.2, 4096), 1.0 / rate, sim.substeps_at(rate), "current")
+    want = plant.run(u.astype(np.float64))
+    assert np.array_equal(got["counts"], want.counts.astype(np.int32))
+    assert np.array_equal(got["current_meas"], want.current_meas.astype(np.float32))
+    assert len(np.unique(np.sign(np.diff(want.theta[want.theta != 0])))) > 1  # the motion reversed

@@ -116,8 +116,9 @@ def test_the_device_drifts_as_the_python_drift_laws_do():
 
     laws = {"thermal_time_constant": 2.0, "thermal_resistance": 2.0, "winding_resistance": 1.0,
             "level_temperature_coefficient": -0.01, "viscous_temperature_coefficient": 0.02, "wear_rate": 2e-4}
-    host, dev = device(ambient=23.0, **laws)
-    sim = sim_config_from_dict({"drift": {"ambient": 23.0, **laws}})
+    # the level law reaches zero at 123 degC: the winding is declared to stay below 100 degC (5 A heat it to 73)
+    host, dev = device(ambient=23.0, max_temperature=100.0, **laws)
+    sim = sim_config_from_dict({"drift": {"ambient": 23.0, "max_temperature": 100.0, **laws}})
     i, n = 5.0, 4 * RATE
     u = np.full(n, i, dtype=np.float32)
     blocks = stream(host, u)

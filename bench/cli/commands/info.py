@@ -44,6 +44,9 @@ def describe(amp) -> list[str]:
         f"current applied: {status.current_applied:.6g} A",
         f"counters: crc_errors={status.crc_errors} dropped_frames={status.dropped_frames} "
         f"rx_frames={status.rx_frames} tx_frames={status.tx_frames}",
+        "host counters: " + " ".join(f"{k.removeprefix('host_')}={v}" for k, v in amp.counters.items()
+                                     if k.startswith("host_"))
+        + " (crc_errors: malformed frames counted and dropped)",
     ]
     cfg = amp.config
     if cfg is None:

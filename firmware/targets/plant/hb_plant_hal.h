@@ -35,6 +35,7 @@ typedef struct {
     double dt;
     int substeps;
     int plant_failed;          /* the plant state became non-finite */
+    hb_run_cache run_cache;    /* hb_run's set-up kept between samples; invalid after CONFIG and each drift update */
     hb_drift drift;
     hb_params nominal;         /* base + CONFIG, before the drift laws */
     double drift_decay;        /* exp(-dt/tau_th) */
