@@ -24,9 +24,11 @@ from typing import Any
 import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
-from hilbench.analysis.runfile import (
+from hilbench.common.runfile import (
     LINEAR_ALIASES,
     SAMPLE_KINDS,
+    Run,
+    RunFileError,
     host_sampled,
     open_run,
     record_kind,
@@ -40,6 +42,16 @@ TORQUE_CHANNELS = ("torque", "torque_cmd")
 MAX_ABS_VALUE = 1e100
 #: the CLI option that lets an incomplete record through
 ALLOW_OPTION = "--allow-incomplete"
+
+
+def _open(path: Path) -> Run:
+    """The run at ``path`` through the one reader; a file it refuses is an :class:`AnalysisError` here (one line)."""
+    try:
+        return open_run(path)
+    except RunFileError as exc:
+        raise AnalysisError(str(exc)) from None
+    except OSError as exc:
+        raise AnalysisError(f"{path}: cannot open: {' '.join(str(exc).split())}") from None
 
 
 class IncompleteRecordError(AnalysisError):
@@ -172,7 +184,7 @@ def numeric(values: Any, name: str, path: object) -> np.ndarray:
 
 
 def completeness(run) -> str | None:
-    """Why an open :class:`hilbench.analysis.runfile.Run` is not a complete record, or None.
+    """Why an open :class:`hilbench.common.runfile.Run` is not a complete record, or None.
 
     Incomplete: a status other than ``completed`` (with the abort or fault event's message when there is one);
     fewer samples than the protocol's ``setpoints`` (the plan; only its shape is read); an ``info`` event of the
@@ -210,11 +222,7 @@ def load_record(path: str | Path, *, torque_channel: str | None = None, timing: 
     path = Path(path)
     if not path.exists():
         raise AnalysisError(f"{path}: no such run file")
-    try:
-        run = open_run(path)
-    except OSError as exc:
-        raise AnalysisError(f"{path}: cannot open: {' '.join(str(exc).split())}") from None
-    with run:
+    with _open(path) as run:
         reason = _checked_completeness(run, path, allow_incomplete)
         if need_position and "position" not in run.channels:
             raise AnalysisError(f"{path}: no position channel (has: {', '.join(run.channels)})")
@@ -271,7 +279,7 @@ class ChannelReader:
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
-        self._run = open_run(self.path)
+        self._run = _open(self.path)
 
     def __enter__(self) -> ChannelReader:
         return self
@@ -329,7 +337,7 @@ def stream_record(path: str | Path, *, torque_channel: str | None = None, timing
         raise AnalysisError(f"{path}: no such run file")
     if chunk < 1:
         raise AnalysisError(f"chunk size must be >= 1, got {chunk}")
-    with open_run(path) as run:
+    with _open(path) as run:
         if host_sampled(run.device, run.channels):
             return load_record(path, torque_channel=torque_channel, timing=timing,
                                allow_incomplete=allow_incomplete), None

@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from hilbench.analysis.runfile import DEVICE_CHANNELS, RunFileError, RunWriter
 from hilbench.bench.acquisition.protocols import Protocol
 from hilbench.bench.errors import BenchError
+from hilbench.common.runfile import DEVICE_CHANNELS, RunFileError, RunWriter
 from hilbench.drivers import protocol as wire
 from hilbench.drivers.amplifier import Amplifier
 from hilbench.drivers.device import HOST_CLOCKED_CHANNELS, HOST_CLOCKED_CUSTOM, Device, refusal

@@ -88,7 +88,7 @@ def run_figure(path: Path) -> str | None:
     """The run's torque and position against time as a data URI (None when the file cannot be read)."""
     import matplotlib.pyplot as plt
 
-    from hilbench.analysis.runfile import open_run
+    from hilbench.common.runfile import open_run
 
     try:
         with open_run(path) as run:

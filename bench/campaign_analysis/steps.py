@@ -273,6 +273,6 @@ def steps_for(protocol: str, wanted: tuple[str, ...]) -> list[str]:
 
 def run_meta(path: str) -> dict[str, Any]:
     """The run file's own identity: run id, start time and operator (its root attributes alone)."""
-    from hilbench.analysis.runfile.identity import run_identity
+    from hilbench.common.runfile.identity import run_identity
 
     return run_identity(path)

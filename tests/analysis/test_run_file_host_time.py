@@ -130,8 +130,8 @@ def test_identification_on_host_time_matches_the_device_clocked_run(runs):
 
 
 def test_identify_command_resamples_a_host_sampled_run(runs, tmp_path, capsys):
-    from hilbench.analysis.runfile import RunWriter
     from hilbench.bench.cli import main
+    from hilbench.common.runfile import RunWriter
 
     tau, x = runs["jittered"]
     host_time = runs["host_time"]

@@ -1,12 +1,12 @@
-"""``hilbench identify`` end to end on run files written with analysis.runfile (bench uses analysis)."""
+"""``hilbench identify`` end to end on run files written with hilbench.common.runfile (bench uses analysis)."""
 
 import json
 import re
 
 import numpy as np
 
-from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.cli import main
+from hilbench.common.runfile import RunWriter
 from hilbench.firmware_sim.engine.friction_models import dc_motor
 from hilbench.firmware_sim.engine.plant import simulate
 from tests import real_data

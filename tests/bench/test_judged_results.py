@@ -9,9 +9,9 @@ import h5py
 import numpy as np
 import pytest
 
-from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.cli import main
 from hilbench.bench.verdict import FAIR_TORQUE_PCT, GOOD_TORQUE_PCT, judge
+from hilbench.common.runfile import RunWriter
 from hilbench.firmware_sim.engine.friction_models import dc_motor
 from hilbench.firmware_sim.engine.plant import simulate
 from tests.analysis.identification.test_identification import random_enveloped
@@ -140,7 +140,7 @@ def test_skeleton_bins_bounded_before_allocation(tmp_path, capsys):
 
 def test_skeleton_never_returns_a_negative_stiffness_silently(tmp_path, capsys):
     # the paper's system without its spring, and --spring subtracting one it does not have: k_eq < 0
-    from hilbench.analysis.runfile import RunWriter as Writer
+    from hilbench.common.runfile import RunWriter as Writer
     from hilbench.firmware_sim.engine.friction_models import paper_system
 
     p = paper_system(spring=0.0)

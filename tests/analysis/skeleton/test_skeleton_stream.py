@@ -10,8 +10,8 @@ import pytest
 
 from hilbench.analysis import skeleton as sk
 from hilbench.analysis.record import load_record
-from hilbench.analysis.runfile import RunWriter
 from hilbench.analysis.skeleton.streaming import Decimator, centred_chunks, decimation_factor
+from hilbench.common.runfile import RunWriter
 from hilbench.firmware_sim.engine.friction_models import paper_system
 from hilbench.firmware_sim.engine.plant import PlantParams, simulate
 

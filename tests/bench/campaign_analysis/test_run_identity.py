@@ -4,9 +4,9 @@ reader (open_run) gives, and a file that is no run file is refused in one line."
 import h5py
 import pytest
 
-from hilbench.analysis.runfile import RunFileError, open_run
-from hilbench.analysis.runfile.identity import run_identity
 from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
+from hilbench.common.runfile import RunFileError, open_run
+from hilbench.common.runfile.identity import run_identity
 
 
 def test_identity_is_what_open_run_reads(tmp_path):

@@ -1,6 +1,6 @@
 """A run file's identity (uid, start time, operator) from its root attributes alone.
 
-A campaign row names its run by these; :class:`hilbench.analysis.runfile.Run` reads and checks the whole layout
+A campaign row names its run by these; :class:`hilbench.common.runfile.Run` reads and checks the whole layout
 (channels, units, JSON groups), which took 17 ms a file against 1 ms for the three attributes: a sixth of a short
 run's analysis when every row opened its file twice."""
 
@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import os
 
-from hilbench.analysis.runfile.schema import SCHEMA, SCHEMA_VERSIONS, RunFileError, _text
-from hilbench.analysis.runfile.store import _open_h5
+from hilbench.common.runfile.schema import SCHEMA, SCHEMA_VERSIONS, RunFileError, _text
+from hilbench.common.runfile.store import _open_h5
 
 
 def run_identity(path: str | os.PathLike) -> dict[str, str]:

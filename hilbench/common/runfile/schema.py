@@ -1,10 +1,10 @@
 """The run-file contract, owned here and only here: the schema's name and versions, the channel catalogue with
 units, statuses, event kinds, record kinds, torque timings and size bounds (docs/run-file.md).
 
-The writer and the reader (:mod:`hilbench.analysis.runfile.store`), the record loader
+The writer and the reader (:mod:`hilbench.common.runfile.store`), the record loader
 (:mod:`hilbench.analysis.record`), the bench, importers and every analysis take these names from this module.
-It lives under ``analysis`` so that both ``bench`` (which writes runs) and ``analysis`` (which reads them) can
-import it while the dependency arrows stay one-way (bench -> analysis).
+It lives in the bottom layer (``hilbench.common``) so that drivers, the simulated devices, ``bench`` (which writes
+runs) and ``analysis`` (which reads them) share one definition; it imports nothing else of hilbench.
 """
 
 from __future__ import annotations
@@ -13,8 +13,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-
-from hilbench.analysis.errors import AnalysisError
 
 SCHEMA = "hilbench-run"
 #: root attribute ``record``: what drives the run (absent in older files: torque-driven)
@@ -81,8 +79,9 @@ EVENT_DTYPE = np.dtype(
 )
 
 
-class RunFileError(AnalysisError):
-    """A run file cannot be created, read or repaired (the message names the file and the reason)."""
+class RunFileError(ValueError):
+    """A run file cannot be created, read or repaired, or breaks the schema (the message names the file and the
+    reason, in one line)."""
 
 
 #: How sample k of the torque channel relates to the plant's input convention (torque held over
@@ -98,22 +97,22 @@ MAX_SAMPLES = 1 << 28
 
 
 def check_size(path: Any, name: str, shape: tuple[int, ...]) -> None:
-    """Raise :class:`AnalysisError` if a dataset of ``shape`` holds more than :data:`MAX_SAMPLES` values."""
+    """Raise :class:`RunFileError` if a dataset of ``shape`` holds more than :data:`MAX_SAMPLES` values."""
     size = 1
     for n in shape:
         size *= int(n)
     if size > MAX_SAMPLES:
-        raise AnalysisError(f"{path}: {name} claims {size} values, above the bound of {MAX_SAMPLES} "
+        raise RunFileError(f"{path}: {name} claims {size} values, above the bound of {MAX_SAMPLES} "
                             f"(MAX_SAMPLES); refusing to read it")
 
 
 def record_kind(value: object, path: object = "") -> str:
-    """The record kind from a ``record`` attribute value (None: torque-driven); AnalysisError if unknown."""
+    """The record kind from a ``record`` attribute value (None: torque-driven); RunFileError if unknown."""
     if value is None:
         return RECORDS[0]
     text = _text(value)
     if text not in RECORDS:
-        raise AnalysisError(f"{path}: unknown record kind {text!r} (expected {' or '.join(RECORDS)})")
+        raise RunFileError(f"{path}: unknown record kind {text!r} (expected {' or '.join(RECORDS)})")
     return text
 
 
@@ -121,7 +120,7 @@ def torque_timing_for(source: str, timing: str = "auto", channel: str = "torque"
     """The torque timing for ``channel`` of a run whose file says ``source``: ``timing`` unless it is
     ``auto``. A commanded channel (``*_cmd``) is held over the next interval wherever it comes from."""
     if timing not in TIMINGS:
-        raise AnalysisError(f"torque timing must be one of {', '.join(TIMINGS)}, got {timing!r}")
+        raise RunFileError(f"torque timing must be one of {', '.join(TIMINGS)}, got {timing!r}")
     if timing != "auto":
         return timing
     if channel.endswith("_cmd"):
@@ -142,7 +141,7 @@ def run_torque_timing(attrs: Any, timing: str = "auto", channel: str = "torque")
     if declared is not None and not channel.endswith("_cmd"):
         declared = _text(declared)
         if declared not in TIMINGS or declared == "auto":
-            raise AnalysisError(f"run file declares an unknown torque timing {declared!r}")
+            raise RunFileError(f"run file declares an unknown torque timing {declared!r}")
         return declared, "declared in the run file"
     return resolved, f"default for {source} runs"
 

@@ -4,7 +4,7 @@
 class, live refresh included) or, for an analysis, through :func:`hilbench.analysis.record.load_record`.
 """
 
-from hilbench.analysis.runfile.schema import (
+from hilbench.common.runfile.schema import (
     AXES,
     CHANNELS,
     DEVICE_CHANNELS,
@@ -35,7 +35,7 @@ from hilbench.analysis.runfile.schema import (
     run_torque_timing,
     torque_timing_for,
 )
-from hilbench.analysis.runfile.store import (
+from hilbench.common.runfile.store import (
     Run,
     RunWriter,
     channel_summary,

@@ -1,4 +1,4 @@
-"""HDF5 run files (schema in :mod:`hilbench.analysis.runfile.schema`): the crash-safe incremental writer, the one
+"""HDF5 run files (schema in :mod:`hilbench.common.runfile.schema`): the crash-safe incremental writer, the one
 reader (:class:`Run`, live refresh included) and repair.
 
 The layout is documented in ``docs/run-file.md``; plain h5py can read every part of it. In short::
@@ -38,8 +38,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from hilbench.analysis.errors import AnalysisError
-from hilbench.analysis.runfile.schema import (
+from hilbench.common.runfile.schema import (
     AXES,
     CHANNELS,
     DEVICE_CHANNELS,
@@ -245,11 +244,13 @@ class RunWriter:
             _check_text(self.path, name, text)
         if os.path.lexists(self.path) and not overwrite:
             raise RunFileError(f"{self.path}: file exists (choose another name, or pass --overwrite to replace it)")
-        from hilbench.analysis.output_files import require_regular
-
-        require_regular(self.path, "a run file")  # never renamed over /dev/null or a FIFO (issue 30 item 17)
-        if os.path.isdir(self.path):
-            raise RunFileError(f"{self.path}: is a directory")
+        try:  # never renamed over /dev/null, a FIFO or a folder (issue 30 item 17)
+            mode = os.stat(self.path).st_mode
+        except FileNotFoundError:
+            mode = stat.S_IFREG
+        if not stat.S_ISREG(mode):
+            raise RunFileError(f"{self.path} is not a regular file; a run file is written as a file and would "
+                               "replace it: choose a file name")
         self._take_lock()
         # The file is built under a temporary name and appears at its path only once its layout is complete
         # and it is in SWMR mode, by an atomic rename (overwrite) or link (no overwrite): an old file is never
@@ -716,10 +717,7 @@ class Run:
         self.n_samples = min(self._samples[name].shape[0] for name in self.channels)
 
     def _check_size(self, what: str, shape: tuple[int, ...]) -> None:
-        try:
-            check_size(self.path, what, shape)
-        except AnalysisError as exc:
-            raise RunFileError(str(exc)) from None
+        check_size(self.path, what, shape)
 
     def _json(self, name: str) -> dict[str, Any]:
         raw = self._file[name][()]
