@@ -25,6 +25,7 @@ import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
 from hilbench.common.runfile import (
+    HOST_TIME,
     LINEAR_ALIASES,
     SAMPLE_KINDS,
     Run,
@@ -238,7 +239,7 @@ def load_record(path: str | Path, *, torque_channel: str | None = None, timing: 
                 extra[key] = numeric(run.channel(key), key, path)
         notes: list[str] = []
         if host_sampled(run.device, run.channels):  # a drive sampled at each SYNC: on its real times
-            host_time = numeric(run.channel("host_time"), "host_time", path)
+            host_time = numeric(run.channel(HOST_TIME), HOST_TIME, path)
             group: dict[str, tuple[np.ndarray, str]] = {}
             if position is not None:
                 group["position"] = (position, "instant")
@@ -425,11 +426,6 @@ def resample_host_clocked(host_time: np.ndarray, rate: float, channels: dict[str
 DECIMATED_BYTES_PER_SAMPLE = 24
 #: how the note of a record cut to a bounded span starts (:func:`decimated_record` with ``max_samples``)
 SPAN_NOTE = "analysed the first"
-
-
-def mib(nbytes: float) -> str:
-    """Bytes as a whole number of MiB, for the memory budget's one-line messages."""
-    return f"{nbytes / (1 << 20):.0f} MiB"
 
 
 def bounded_span(budget: int, fixed: int, per_sample: int, runs: int) -> int:

@@ -29,6 +29,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
+from hilbench.common.runfile.schema import DRIVE_CLOCK, HOST_TIME, DeviceIdentity
 from hilbench.drivers import odrive_can as o
 from hilbench.drivers import protocol as p
 from hilbench.drivers.amplifier import check_setpoints
@@ -130,10 +131,11 @@ class OdriveDrive(HostClockedDevice):
                                  f"{self.timeout:g} s (axis state {self.axis_state}, errors: "
                                  f"{o.describe_errors(self.axis_error)})")
 
-    def info(self) -> dict:
+    def info(self) -> DeviceIdentity:
         # the ODrive samples on its own timer: host_time is when a sample arrived, t = k/rate is its time
-        return {"protocol": "ODrive CAN Simple", "url": self.name, "node": self.node_id, "sample_times": "drive",
-                "axis_state": self.axis_state, "axis_error": f"0x{self.axis_error:08X}"}
+        return DeviceIdentity(protocol="ODrive CAN Simple", url=self.name, sample_times=DRIVE_CLOCK,
+                              details={"node": self.node_id, "axis_state": self.axis_state,
+                                       "axis_error": f"0x{self.axis_error:08X}"})
 
     def state(self) -> str:
         names = {int(s): s.name.lower().replace("_", " ") for s in o.AxisState}
@@ -291,7 +293,7 @@ class OdriveDrive(HostClockedDevice):
             cycle.stop()
             cycle.join()
             if cycle.sent:
-                self._timing = timing_summary(a["host_time"][:cycle.sent], a["scheduled"][:cycle.sent], rate)
+                self._timing = timing_summary(a[HOST_TIME][:cycle.sent], a["scheduled"][:cycle.sent], rate)
             self._cycle = None
             self._malformed_cycle += cycle.malformed
             cycle.close()

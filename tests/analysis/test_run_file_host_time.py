@@ -138,8 +138,8 @@ def test_identify_command_resamples_a_host_sampled_run(runs, tmp_path, capsys):
     n = x.size
     path = tmp_path / "drive.h5"
     w = RunWriter(path, sample_rate=float(RATE), channels=("t", "sample_index", "current_cmd", "current",
-                                                           "torque", "position", "counts"),
-                  custom_channels={"host_time": "s"}, device={"protocol": "CiA 402 over CANopen",
+                                                           "torque", "position", "counts", "host_time"),
+                  device={"protocol": "CiA 402 over CANopen",
                                                               "sample_times": "host_time"},
                   calibration={"torque_constant": KT}, protocol_name="identification")
     k = np.arange(n)

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from hilbench.bench.cli import main
-from hilbench.bench.verdict import FAIR_TORQUE_PCT, GOOD_TORQUE_PCT, judge
+from hilbench.bench.verdict import judge
+from hilbench.common.metrics import FAIR_TORQUE_PCT, GOOD_TORQUE_PCT
 from hilbench.common.runfile import RunWriter
 from hilbench.firmware_sim.engine.friction_models import dc_motor
 from hilbench.firmware_sim.engine.plant import simulate
@@ -84,7 +85,7 @@ def test_verdict_bands():
     assert judge(FAIR_TORQUE_PCT).startswith("verdict: fair") and "hilbench residual" in judge(FAIR_TORQUE_PCT)
     assert judge(FAIR_TORQUE_PCT + 1).startswith("verdict: poor")
     drift = judge(3.0, 205.0, 12.0)  # the position NRMSE of 2.05, which got no comment
-    assert "drifts (NRMSE 205 %, segmented 12 %)" in drift and "try:" in drift
+    assert "drifts (position NRMSE 205 %, segmented 12 %)" in drift and "try:" in drift
     assert "no torque error" in judge(None)
 
 

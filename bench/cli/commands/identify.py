@@ -84,7 +84,8 @@ def _streamed(args, budget: int):
     samples = train[0].n_samples + (val[0].n_samples if val else 0)
     if array_cost(samples) <= budget:
         return None
-    mib = lambda b: f"{b / (1 << 20):.0f} MiB"  # noqa: E731
+    from hilbench.common.units import mib
+
     if train[1] is None or (val is not None and val[1] is None):
         raise BenchError(f"{samples} samples need about {mib(array_cost(samples))} read whole, over --memory "
                          f"{mib(budget)}; a host-clocked run is resampled whole: raise --memory")

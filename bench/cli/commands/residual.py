@@ -68,13 +68,14 @@ def _headers(args: argparse.Namespace) -> list:
 def run(args: argparse.Namespace) -> int:
     from hilbench.analysis.models.families import FAMILIES
     from hilbench.analysis.models.model_file import read_model
-    from hilbench.analysis.record import decimation_factor, mib, span_note
+    from hilbench.analysis.record import decimation_factor, span_note
     from hilbench.analysis.residual import record_analysis
     from hilbench.analysis.residual.report import report_dict
     from hilbench.bench.analysis_input import check_cutoff, memory_budget, read_decimated
     from hilbench.bench.errors import BenchError
     from hilbench.bench.storage import outputs
     from hilbench.bench.verdict import judge
+    from hilbench.common.units import mib
 
     model_file = args.start if args.start.strip().lower().endswith(".json") else None
     outputs.refuse_inputs({"--json": args.json, "--report": args.report}, [args.run, *args.validate, model_file])

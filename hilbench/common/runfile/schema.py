@@ -9,7 +9,10 @@ runs) and ``analysis`` (which reads them) share one definition; it imports nothi
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import json
+import math
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -62,8 +65,20 @@ CHANNELS: dict[str, ChannelSpec] = {
     "current_ff": ChannelSpec("A", "A", "f8", "feed-forward current streamed with the position reference"),
     "temperature": ChannelSpec("degC", "degC", "f8", "winding temperature the device reports (one reading per "
                                                         "sample block, held over its samples)"),
+    # what a host-clocked drive adds (docs/drives.md): when each cycle's trigger left the host, the cycle count
+    # and the drive's status word
+    "host_time": ChannelSpec("s", "s", "f8", "host monotonic time at which the cycle's trigger (SYNC) was sent"),
+    "cycle": ChannelSpec("1", "1", "f8", "cycle counter of a host-clocked drive (SYNC or cyclic message count)"),
+    "drive_status": ChannelSpec("1", "1", "f8", "the drive's status word per sample (CiA 402 0x6041, ODrive "
+                                                "axis state); 0 when it reports none"),
 }
+#: the host-clocked drive's time channel: the one spelling of its key
+HOST_TIME = "host_time"
+#: the channel names of a sample block (channel -> array) a device yields, named once
+SAMPLE_INDEX, TIME, CYCLE, DRIVE_STATUS = "sample_index", "t", "cycle", "drive_status"
 DEVICE_CHANNELS = ("sample_index", "t", "current_cmd", "current", "torque", "position", "counts")
+#: the channels a host-clocked drive adds to :data:`DEVICE_CHANNELS`
+HOST_CLOCKED_CHANNELS = ("velocity", "torque_cmd", HOST_TIME, CYCLE, DRIVE_STATUS)
 REQUIRED_CHANNELS = ("sample_index", "t")
 # On a linear axis analysis may ask for the honest names; they are the same datasets.
 LINEAR_ALIASES = {"force": "torque", "force_cmd": "torque_cmd"}
@@ -146,17 +161,104 @@ def run_torque_timing(attrs: Any, timing: str = "auto", channel: str = "torque")
     return resolved, f"default for {source} runs"
 
 
-#: ``/device/identity`` key of a host-clocked drive saying when its samples were taken: ``host_time`` (the
-#: drive samples at each trigger: CiA 402 SYNC) or ``drive`` (the drive's own clock: ODrive cyclic messages)
+#: ``/device/identity`` key saying when a device's samples were taken (:data:`SAMPLE_TIMES`)
 SAMPLE_TIMES_KEY = "sample_times"
+#: its values: ``device`` (the device owns the sample clock: the hilbench protocol), ``host_time`` (a host-clocked
+#: drive samples at each trigger the host sends: CiA 402 SYNC; the analysis resamples on the host_time channel),
+#: ``drive`` (a host-clocked drive samples on its own timer: ODrive cyclic messages)
+DEVICE_CLOCK, DRIVE_CLOCK = "device", "drive"
+SAMPLE_TIMES = (DEVICE_CLOCK, HOST_TIME, DRIVE_CLOCK)
 #: resampled channels keep the timing of their record; these are the conventions (see ``TIMINGS``)
 SAMPLE_KINDS = ("instant", "hold_next", "hold_previous")
+
+
+@dataclass(frozen=True)
+class DeviceIdentity(Mapping[str, Any]):
+    """Who recorded a run: the ``/device/identity`` of a run file, written as one flat JSON object.
+
+    The named fields are the keys every device kind may fill (text; "" when unknown); ``sample_times`` says whose
+    clock timed the samples (:data:`SAMPLE_TIMES`); ``details`` holds what one device kind adds (a drive's device
+    type, an amplifier's buffer size...), JSON-able values under keys that are not field names. It reads as a
+    mapping of its stored keys (``identity["serial"]``, ``dict(identity)``). Construction validates it: a bad
+    identity is a :class:`RunFileError` in one line, before any file is touched.
+    """
+
+    name: str = ""
+    model: str = ""
+    serial: str = ""
+    firmware: str = ""
+    protocol: str = ""
+    url: str = ""
+    description: str = ""
+    source: str = ""
+    sample_times: str = DEVICE_CLOCK
+    details: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for f in fields(self)[:-1]:
+            value = getattr(self, f.name)
+            if not isinstance(value, str):
+                raise RunFileError(f"device identity: {f.name} must be text, got {type(value).__name__}")
+        if self.sample_times not in SAMPLE_TIMES:
+            raise RunFileError(f"device identity: {SAMPLE_TIMES_KEY} must be one of {', '.join(SAMPLE_TIMES)}, "
+                               f"got {self.sample_times!r}")
+        if not isinstance(self.details, Mapping):
+            raise RunFileError(f"device identity: details must be a mapping, got {type(self.details).__name__}")
+        named = {f.name for f in fields(self)}
+        for key, value in self.details.items():
+            if not isinstance(key, str) or key in named:
+                raise RunFileError(f"device identity: detail key {key!r} must be text and not a field name")
+            try:
+                json.dumps(value, allow_nan=True, default=_json_scalar)
+            except (TypeError, ValueError) as exc:
+                raise RunFileError(f"device identity: {key} is not JSON-serialisable ({exc})") from None
+        object.__setattr__(self, "details", dict(self.details))
+
+    @classmethod
+    def from_mapping(cls, value: Mapping[str, Any] | None) -> DeviceIdentity:
+        """The identity a flat mapping (a file's JSON, a device's report) describes; None: an empty one."""
+        if isinstance(value, DeviceIdentity):
+            return value
+        if value is None:
+            return cls()
+        if not isinstance(value, Mapping):
+            raise RunFileError(f"device identity must be a mapping, got {type(value).__name__}")
+        named = {f.name for f in fields(cls)} - {"details"}
+        known = {k: v for k, v in value.items() if k in named}
+        return cls(**known, details={k: v for k, v in value.items() if k not in named})
+
+    def as_json(self) -> dict[str, Any]:
+        """The flat JSON object stored in the file: the fields that say something (not empty; ``sample_times``
+        when it is not the default ``device``: a file without it was timed by its device), then the details."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)[:-1]
+               if getattr(self, f.name) != ("" if f.name != SAMPLE_TIMES_KEY else DEVICE_CLOCK)}
+        return {**out, **self.details}
+
+    def __getitem__(self, key: str) -> Any:
+        return self.as_json()[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.as_json())
+
+    def __len__(self) -> int:
+        return len(self.as_json())
+
+
+def _json_scalar(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, float) and not math.isfinite(value):
+        return value
+    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
 
 
 def host_sampled(identity: Any, channels: Any) -> bool:
     """Whether a run's samples were taken at its ``host_time`` (a CiA 402 drive samples at each SYNC), so
     that the analysis must resample them (``identity``: the run's ``/device/identity``; ``channels``: names)."""
-    return isinstance(identity, dict) and identity.get(SAMPLE_TIMES_KEY) == "host_time" and "host_time" in channels
+    return (isinstance(identity, Mapping) and identity.get(SAMPLE_TIMES_KEY) == HOST_TIME
+            and HOST_TIME in channels)
 
 
 def _text(value: Any) -> str:
