@@ -26,11 +26,7 @@ import numpy as np
 from hilbench.common.runfile.schema import CYCLE, DRIVE_STATUS, HOST_TIME, DeviceIdentity
 
 CLOCKS = ("device", "host")
-#: Control modes a device may offer. ``current`` is torque/current control (setpoints in A, turned into a
-#: torque command with the host's torque constant where the drive takes torque); ``velocity`` setpoints are
-#: rad/s; ``position`` setpoints are rad (no protocol uses it yet).
-MODE_UNITS = {"current": "A", "velocity": "rad/s", "position": "rad"}
-
+#: Control modes a device may offer and their setpoint units: ``MODE_UNITS`` (hilbench.common.units).
 
 @dataclass(frozen=True)
 class Capabilities:

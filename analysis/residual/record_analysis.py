@@ -225,7 +225,7 @@ def _hysteresis(result: ResidualAnalysis, directory: str | Path, title: str) -> 
     """Friction against displacement on the first training run: measured (torque - J*acceleration, J of the final
     model) against the starting and the final model (measured minus each one's residual)."""
     from hilbench.analysis.identification.plots import hysteresis_figure
-    from hilbench.analysis.models.friction_model import AXES
+    from hilbench.common.units import AXIS_UNITS as AXES
 
     loop = result.loop
     fixed = result.fixed_inertia

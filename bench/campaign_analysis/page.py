@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from hilbench.bench.campaign_analysis.table import column_units
 from hilbench.bench.storage import outputs
 from hilbench.common.metrics import UNIT, label, percent
 
@@ -223,6 +224,7 @@ def write_pages(rows: list[dict[str, Any]], units: dict[str, str], drift_pngs: l
     paths = []
     for campaign, rs in sorted(by_campaign.items()):
         path = out / f"campaign-{campaign}.html"
-        outputs.write_text(path, campaign_page(campaign, rs, units, drift_pngs, summary))
+        axis = next((str(r["axis"]) for r in rs if r.get("axis")), "rotary")  # the units follow the runs' axis
+        outputs.write_text(path, campaign_page(campaign, rs, {**units, **column_units(axis)}, drift_pngs, summary))
         paths.append(path)
     return paths

@@ -96,12 +96,12 @@ def identification(run, options: dict | None = None) -> AnalysisResult:
     u = d["units"]
     numbers = [
         ("inertia J", f"{m.inertia:.6g}", u["inertia"]),
-        ("viscous b", f"{m.viscous:.6g}", u["viscous"]),
-        ("Coulomb Fc", f"{m.coulomb:.6g}", u["coulomb"]),
+        ("viscous coefficient b", f"{m.viscous:.6g}", u["viscous"]),
+        ("Coulomb level Fc", f"{m.coulomb:.6g}", u["coulomb"]),
         ("offset c0", f"{m.offset:.6g}", u["offset"]),
         ("spring K", f"{m.spring:.6g}", u["spring"]),
         ("Maxwell-slip elements N", str(m.ms_stiffness.size), ""),
-        ("breakaway sum W_i + Fc", f"{m.breakaway:.6g}", u["coulomb"]),
+        ("break-away torque (sum W_i + Fc)", f"{m.breakaway:.6g}", u["coulomb"]),
         ("train torque NRMSE", f"{percent(res.figures['train_torque_nrmse']):.3g}", "%"),
         ("filter cut-off", f"{fit.cutoff:.4g}", "Hz"),
     ]

@@ -15,8 +15,9 @@ COLUMNS = ("run", "protocol", "duration (s)", "state", "progress")
 #: the results table: (header, column of results.parquet, scale to the shown unit); identify rows,
 #: numbered in start order
 RESULT_COLUMNS = (("#", "order", 1.0), ("run", "key", None), ("repeat", "repeat", None), ("status", "status", None),
-                  ("J (kg*m^2)", "inertia", 1.0), ("break-away (N*m)", "breakaway", 1.0),
-                  ("b (N*m*s/rad)", "viscous", 1.0), ("validation torque NRMSE (%)", "validation_torque_nrmse", 100.0),
+                  ("inertia J (kg*m^2)", "inertia", 1.0), ("break-away torque (N*m)", "breakaway", 1.0),
+                  ("viscous coefficient b (N*m*s/rad)", "viscous", 1.0),
+                  ("validation torque NRMSE (%)", "validation_torque_nrmse", 100.0),
                   ("winding (degC)", "temperature_mean", 1.0), ("verdict / reason", "verdict", None))
 
 

@@ -32,6 +32,7 @@ from hilbench.analysis.reproductions.emps import EMPS_VARIABLES, parse_emps
 from hilbench.bench.errors import BenchError
 from hilbench.bench.storage.import_units import COUNTS, factor_to_si
 from hilbench.common.runfile import CHANNELS, TORQUE_TIMINGS, RunWriter
+from hilbench.common.units import AXIS_UNITS
 
 EMPS_CITATION = (
     "A. Janot, M. Gautier, M. Brunot, 'Data Set and Reference Models of EMPS', 2019 Workshop on Nonlinear "
@@ -262,8 +263,8 @@ def load_hsm150(path: str | os.PathLike) -> ImportedRun:
             custom[name.lower()] = "unknown"
     calibration: dict[str, Any] = {}
     units = {
-        "J": "kg*m^2",
-        "B": "N*m*s/rad",
+        "J": AXIS_UNITS["rotary"]["inertia"],
+        "B": AXIS_UNITS["rotary"]["viscous"],
         "Cu": "N*m/A",
         "N": "lines/rev",
         "Tvz": "s",

@@ -23,3 +23,24 @@ def test_the_page_shows_the_validation_torque_nrmse_in_percent_never_as_a_fracti
     assert mean, "the repeat summary shows percent"
     for head in ("inertia J (kg*m^2)", "break-away torque (N*m)", "viscous coefficient b (N*m*s/rad)"):
         assert head in text
+
+
+class _Result:
+    """The smallest residual-loop result markdown_summary reads (its to_dict), with round figures."""
+
+    def to_dict(self):
+        err = {"torque_rel_pct": 1.283, "torque_nrmse": 0.01283, "position_nrmse": 0.25, "velocity_nrmse": None}
+        return {"verdict": "adequate", "start": ["maxwell_slip"], "validation_mode": "the held-out 30 %",
+                "record": "torque-driven", "error_before": {"train": err, "validation": err},
+                "error_after": {"train": err, "validation": err}, "published_metric": None,
+                "effects_added": [], "unexplained": [], "rounds": []}
+
+
+def test_the_residual_summary_names_every_error_once_and_shows_percent():
+    from hilbench.analysis.residual.report import markdown_summary
+
+    text = markdown_summary(_Result())
+    assert "| validation | torque NRMSE (%) | 1.283 | 1.283 |" in text
+    assert "| validation | torque relative error (%) | 1.283 | 1.283 |" in text
+    assert "| validation | position NRMSE (%) | 25 | 25 |" in text
+    assert "0.01283" not in text and "torque_nrmse" not in text and "torque_rel_pct" not in text

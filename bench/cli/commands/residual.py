@@ -124,7 +124,8 @@ def run(args: argparse.Namespace) -> int:
         say(f"report: {args.report} ({', '.join(p.name for p in paths)})")
     channel, timing = rec.torque_channel, rec.timing
     before, after = result.error_before["validation"], result.error_after["validation"]
-    pct = lambda v: None if v is None else 100.0 * v  # noqa: E731
+    from hilbench.common.metrics import percent as pct
+
     if (figure := res.start_figure()) is not None:  # the start model's own figure, as identify reports it
         where, value = figure
         say(f"start model ({res.start_model['source']}): {where} torque NRMSE {pct(value):.3g} %")

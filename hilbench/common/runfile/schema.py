@@ -17,13 +17,14 @@ from typing import Any
 
 import numpy as np
 
+from hilbench.common.units import AXES, AXIS_UNITS
+
 SCHEMA = "hilbench-run"
 #: root attribute ``record``: what drives the run (absent in older files: torque-driven)
 RECORDS = ("torque-driven", "displacement-driven")
 SCHEMA_VERSION = 2
 #: Versions this reader opens (2 added the position-mode channels position_cmd and current_ff).
 SCHEMA_VERSIONS = (1, 2)
-AXES = ("rotary", "linear")
 FINAL_STATUSES = ("completed", "aborted")
 #: ``failed``: the writer itself could not go on (disk full, I/O error); the file keeps every flushed sample.
 STATUSES = ("running", "completed", "aborted", "failed", "crashed")
@@ -47,7 +48,12 @@ class ChannelSpec:
     description: str
 
     def unit(self, axis: str) -> str:
-        return self.rotary_unit if axis == "rotary" else self.linear_unit
+        return self.rotary_unit if axis == AXES[0] else self.linear_unit
+
+
+def _axis(quantity: str) -> tuple[str, str]:
+    """(rotary unit, linear unit) of ``quantity`` (hilbench.common.units)."""
+    return AXIS_UNITS["rotary"][quantity], AXIS_UNITS["linear"][quantity]
 
 
 CHANNELS: dict[str, ChannelSpec] = {
@@ -55,13 +61,13 @@ CHANNELS: dict[str, ChannelSpec] = {
     "t": ChannelSpec("s", "s", "f8", "device time of the sample"),
     "current_cmd": ChannelSpec("A", "A", "f8", "commanded motor current"),
     "current": ChannelSpec("A", "A", "f8", "measured motor current"),
-    "torque": ChannelSpec("N*m", "N", "f8", "motor torque (force on a linear axis)"),
-    "torque_cmd": ChannelSpec("N*m", "N", "f8", "commanded torque (force on a linear axis)"),
-    "position": ChannelSpec("rad", "m", "f8", "measured position"),
-    "position_cmd": ChannelSpec("rad", "m", "f8", "position reference"),
+    "torque": ChannelSpec(*_axis("torque"), "f8", "motor torque (force on a linear axis)"),
+    "torque_cmd": ChannelSpec(*_axis("torque"), "f8", "commanded torque (force on a linear axis)"),
+    "position": ChannelSpec(*_axis("position"), "f8", "measured position"),
+    "position_cmd": ChannelSpec(*_axis("position"), "f8", "position reference"),
     "counts": ChannelSpec("counts", "counts", "i8", "raw encoder counts"),
-    "velocity": ChannelSpec("rad/s", "m/s", "f8", "measured velocity"),
-    "velocity_cmd": ChannelSpec("rad/s", "m/s", "f8", "commanded velocity (velocity mode)"),
+    "velocity": ChannelSpec(*_axis("velocity"), "f8", "measured velocity"),
+    "velocity_cmd": ChannelSpec(*_axis("velocity"), "f8", "commanded velocity (velocity mode)"),
     "current_ff": ChannelSpec("A", "A", "f8", "feed-forward current streamed with the position reference"),
     "temperature": ChannelSpec("degC", "degC", "f8", "winding temperature the device reports (one reading per "
                                                         "sample block, held over its samples)"),

@@ -13,7 +13,8 @@ def test_identity_is_what_open_run_reads(tmp_path):
     write_campaign(tmp_path / "c", SyntheticCampaign(runs=2, duration=0.2, seed=4, operator="ab"))
     for path in sorted((tmp_path / "c").glob("*.h5")):
         with open_run(path) as run:
-            expected = {"run_id": run.uid, "start_time": str(run.start_time), "operator": str(run.meta["operator"])}
+            expected = {"run_id": run.uid, "start_time": str(run.start_time), "operator": str(run.meta["operator"]),
+                        "axis": run.axis}
         assert run_identity(path) == expected and expected["operator"] == "ab"
 
 
