@@ -47,8 +47,9 @@ from hilbench.analysis.identification.regressors import (
     triangle_average,
     zero_phase_lowpass,
 )
-from hilbench.analysis.models.friction_model import AXES, check_axis
+from hilbench.analysis.models.friction_model import check_axis
 from hilbench.common.metrics import nrmse
+from hilbench.common.units import AXIS_UNITS as AXES
 from hilbench.firmware_sim.engine.plant import (
     GMS,
     RK4_STABLE_RADIUS,

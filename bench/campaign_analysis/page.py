@@ -19,6 +19,7 @@ import numpy as np
 from hilbench.bench.campaign_analysis.table import column_units
 from hilbench.bench.storage import outputs
 from hilbench.common.metrics import UNIT, label, percent
+from hilbench.common.units import EFFORT
 
 #: (column, header) of the runs table; a parameter is shown with its standard error
 RUN_COLUMNS = [("key", "run"), ("repeat", "repeat"), ("start_time", "start (UTC)"), ("status", "status"),
@@ -94,7 +95,8 @@ def _is_fraction(col: str) -> bool:
     return col.endswith("_nrmse")
 
 
-def _header(col: str, head: str, units: dict[str, str]) -> str:
+def _header(col: str, head: str, units: dict[str, str], axis: str = "rotary") -> str:
+    head = head.replace("torque", EFFORT[axis]) if col == "breakaway" else head
     unit = UNIT if _is_fraction(col) else units.get(col, "")
     return f"{head} ({unit})" if unit and unit != "1" and col != "start_time" else head
 
@@ -145,8 +147,8 @@ def repeat_summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, str], drift_pngs: list[Path],
-                  summary: dict[str, Any] | None) -> str:
-    """The HTML text of one campaign's page."""
+                  summary: dict[str, Any] | None, axis: str = "rotary") -> str:
+    """The HTML text of one campaign's page (``axis``: the runs' axis, which names the break-away torque/force)."""
     rows = sorted(rows, key=lambda r: (str(r.get("start_time")), str(r.get("key"))))
     folder = Path(rows[0]["folder"]) if rows and rows[0].get("folder") else None
     plan = []
@@ -175,7 +177,7 @@ def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, st
                  "<table id='runs'><thead><tr>")
     for col, head in RUN_COLUMNS:
         cls = " class='t'" if col in ("key", "start_time", "status", "verdict", "error") else ""
-        parts.append(f"<th data-sort='1'{cls}>{e(_header(col, head, units))}</th>")
+        parts.append(f"<th data-sort='1'{cls}>{e(_header(col, head, units, axis))}</th>")
     parts.append("</tr></thead><tbody>")
     for i, r in enumerate(rows):
         rid = f"r{i}"
@@ -197,7 +199,7 @@ def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, st
     parts.append("</tbody></table>")
     parts.append("<h2>Mean &plusmn; standard deviation over repeats</h2><details open><summary>per planned run"
                  "</summary><table><thead><tr><th class='t'>run</th>"
-                 "<th>repeats</th>" + "".join(f"<th>{e(_header(p, HEADERS[p], units))}</th>"
+                 "<th>repeats</th>" + "".join(f"<th>{e(_header(p, HEADERS[p], units, axis))}</th>"
                                               for p in SUMMARY_PARAMETERS) + "</tr></thead><tbody>")
     for s in repeat_summary(rows):
         parts.append(f"<tr><td class='t'>{e(s['name'])}</td><td>{s['n']}</td>" + "".join(
@@ -225,6 +227,7 @@ def write_pages(rows: list[dict[str, Any]], units: dict[str, str], drift_pngs: l
     for campaign, rs in sorted(by_campaign.items()):
         path = out / f"campaign-{campaign}.html"
         axis = next((str(r["axis"]) for r in rs if r.get("axis")), "rotary")  # the units follow the runs' axis
-        outputs.write_text(path, campaign_page(campaign, rs, {**units, **column_units(axis)}, drift_pngs, summary))
+        outputs.write_text(path, campaign_page(campaign, rs, {**units, **column_units(axis)}, drift_pngs, summary,
+                                               axis))
         paths.append(path)
     return paths

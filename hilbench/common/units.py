@@ -33,3 +33,6 @@ def axis_unit(quantity: str, axis: str) -> str:
     if axis not in AXIS_UNITS:
         raise ValueError(f"axis must be one of {', '.join(AXES)}, got {axis!r}")
     return AXIS_UNITS[axis][quantity]
+
+#: what drives an axis, by name: a torque on a rotary axis, a force on a linear one ("break-away torque/force")
+EFFORT = {"rotary": "torque", "linear": "force"}

@@ -54,7 +54,7 @@ def test_identify_cli_writes_model_and_plots(tmp_path, capsys):
     assert abs(doc["parameters"]["inertia"] / p.inertia - 1) < 0.02
     assert doc["figures"]["validation_torque_nrmse"] < 0.05
     assert (tmp_path / "plots" / "virgin_curve.png").is_file()
-    assert "validation NRMSE" in capsys.readouterr().out
+    assert "validation torque NRMSE" in capsys.readouterr().out
 
 
 def test_identify_cli_missing_torque_is_a_one_line_error(tmp_path, capsys):

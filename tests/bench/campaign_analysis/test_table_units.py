@@ -25,5 +25,6 @@ def test_a_linear_run_row_keeps_its_axis_and_its_page_shows_linear_units():
     row = {"campaign": "c", "key": "r1", "axis": "linear", "status": "ok", "name": "r1", "inertia": 2.1,
            "breakaway": 20.0, "viscous": 200.0, "validation_torque_nrmse": 0.03}
     assert to_table([row]).to_pylist()[0]["axis"] == "linear"
-    text = campaign_page("c", [row], column_units("linear"), [], None)
+    text = campaign_page("c", [row], column_units("linear"), [], None, "linear")
     assert "inertia J (kg)" in text and "viscous coefficient b (N*s/m)" in text and "kg*m^2" not in text
+    assert "break-away force (N)" in text and "break-away torque" not in text
