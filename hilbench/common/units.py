@@ -1,6 +1,7 @@
 """Units, named once: of each axis kind's quantities, of each control mode's setpoint, and of memory sizes.
 
-Every dataset, summary line, table column and axis label takes its unit from here (SI; docs/units.md).
+Every dataset, summary line, table column and axis label takes its unit from here (SI; the glossary in
+docs/metrics.md names the quantities).
 """
 
 from __future__ import annotations

@@ -10,7 +10,6 @@ runs) and ``analysis`` (which reads them) share one definition; it imports nothi
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
@@ -201,7 +200,7 @@ class DeviceIdentity(Mapping[str, Any]):
     details: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        for f in fields(self)[:-1]:
+        for f in _text_fields():
             value = getattr(self, f.name)
             if not isinstance(value, str):
                 raise RunFileError(f"device identity: {f.name} must be text, got {type(value).__name__}")
@@ -229,14 +228,14 @@ class DeviceIdentity(Mapping[str, Any]):
             return cls()
         if not isinstance(value, Mapping):
             raise RunFileError(f"device identity must be a mapping, got {type(value).__name__}")
-        named = {f.name for f in fields(cls)} - {"details"}
+        named = {f.name for f in _text_fields()}
         known = {k: v for k, v in value.items() if k in named}
         return cls(**known, details={k: v for k, v in value.items() if k not in named})
 
     def as_json(self) -> dict[str, Any]:
         """The flat JSON object stored in the file: the fields that say something (not empty; ``sample_times``
         when it is not the default ``device``: a file without it was timed by its device), then the details."""
-        out = {f.name: getattr(self, f.name) for f in fields(self)[:-1]
+        out = {f.name: getattr(self, f.name) for f in _text_fields()
                if getattr(self, f.name) != ("" if f.name != SAMPLE_TIMES_KEY else DEVICE_CLOCK)}
         return {**out, **self.details}
 
@@ -250,13 +249,17 @@ class DeviceIdentity(Mapping[str, Any]):
         return len(self.as_json())
 
 
+def _text_fields() -> list[Any]:
+    """The named text fields of :class:`DeviceIdentity` (all but ``details``)."""
+    return [f for f in fields(DeviceIdentity) if f.name != "details"]
+
+
 def _json_scalar(value: Any) -> Any:
+    """JSON for the numpy values a device or a protocol reports (``json.dumps`` ``default``)."""
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, np.ndarray):
         return value.tolist()
-    if isinstance(value, float) and not math.isfinite(value):
-        return value
     raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
 
 
