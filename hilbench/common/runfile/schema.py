@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from hilbench.common.errors import InputError
 from hilbench.common.units import AXES, AXIS_UNITS
 
 SCHEMA = "hilbench-run"
@@ -99,9 +100,10 @@ EVENT_DTYPE = np.dtype(
 )
 
 
-class RunFileError(ValueError):
+class RunFileError(InputError):
     """A run file cannot be created, read or repaired, or breaks the schema (the message names the file and the
-    reason, in one line)."""
+    reason, in one line). An :class:`~hilbench.common.errors.InputError`, so an analysis catches it as its own
+    ``AnalysisError``."""
 
 
 #: How sample k of the torque channel relates to the plant's input convention (torque held over
