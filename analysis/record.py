@@ -24,9 +24,12 @@ from typing import Any
 import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
-from hilbench.analysis.runfile import (
+from hilbench.common.runfile import (
+    HOST_TIME,
     LINEAR_ALIASES,
     SAMPLE_KINDS,
+    Run,
+    RunFileError,
     host_sampled,
     open_run,
     record_kind,
@@ -40,6 +43,16 @@ TORQUE_CHANNELS = ("torque", "torque_cmd")
 MAX_ABS_VALUE = 1e100
 #: the CLI option that lets an incomplete record through
 ALLOW_OPTION = "--allow-incomplete"
+
+
+def _open(path: Path) -> Run:
+    """The run at ``path`` through the one reader; a file it refuses is an :class:`AnalysisError` here (one line)."""
+    try:
+        return open_run(path)
+    except RunFileError as exc:
+        raise AnalysisError(str(exc)) from None
+    except OSError as exc:
+        raise AnalysisError(f"{path}: cannot open: {' '.join(str(exc).split())}") from None
 
 
 class IncompleteRecordError(AnalysisError):
@@ -172,7 +185,7 @@ def numeric(values: Any, name: str, path: object) -> np.ndarray:
 
 
 def completeness(run) -> str | None:
-    """Why an open :class:`hilbench.analysis.runfile.Run` is not a complete record, or None.
+    """Why an open :class:`hilbench.common.runfile.Run` is not a complete record, or None.
 
     Incomplete: a status other than ``completed`` (with the abort or fault event's message when there is one);
     fewer samples than the protocol's ``setpoints`` (the plan; only its shape is read); an ``info`` event of the
@@ -210,11 +223,7 @@ def load_record(path: str | Path, *, torque_channel: str | None = None, timing: 
     path = Path(path)
     if not path.exists():
         raise AnalysisError(f"{path}: no such run file")
-    try:
-        run = open_run(path)
-    except OSError as exc:
-        raise AnalysisError(f"{path}: cannot open: {' '.join(str(exc).split())}") from None
-    with run:
+    with _open(path) as run:
         reason = _checked_completeness(run, path, allow_incomplete)
         if need_position and "position" not in run.channels:
             raise AnalysisError(f"{path}: no position channel (has: {', '.join(run.channels)})")
@@ -230,7 +239,7 @@ def load_record(path: str | Path, *, torque_channel: str | None = None, timing: 
                 extra[key] = numeric(run.channel(key), key, path)
         notes: list[str] = []
         if host_sampled(run.device, run.channels):  # a drive sampled at each SYNC: on its real times
-            host_time = numeric(run.channel("host_time"), "host_time", path)
+            host_time = numeric(run.channel(HOST_TIME), HOST_TIME, path)
             group: dict[str, tuple[np.ndarray, str]] = {}
             if position is not None:
                 group["position"] = (position, "instant")
@@ -271,7 +280,7 @@ class ChannelReader:
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
-        self._run = open_run(self.path)
+        self._run = _open(self.path)
 
     def __enter__(self) -> ChannelReader:
         return self
@@ -329,7 +338,7 @@ def stream_record(path: str | Path, *, torque_channel: str | None = None, timing
         raise AnalysisError(f"{path}: no such run file")
     if chunk < 1:
         raise AnalysisError(f"chunk size must be >= 1, got {chunk}")
-    with open_run(path) as run:
+    with _open(path) as run:
         if host_sampled(run.device, run.channels):
             return load_record(path, torque_channel=torque_channel, timing=timing,
                                allow_incomplete=allow_incomplete), None
@@ -417,11 +426,6 @@ def resample_host_clocked(host_time: np.ndarray, rate: float, channels: dict[str
 DECIMATED_BYTES_PER_SAMPLE = 24
 #: how the note of a record cut to a bounded span starts (:func:`decimated_record` with ``max_samples``)
 SPAN_NOTE = "analysed the first"
-
-
-def mib(nbytes: float) -> str:
-    """Bytes as a whole number of MiB, for the memory budget's one-line messages."""
-    return f"{nbytes / (1 << 20):.0f} MiB"
 
 
 def bounded_span(budget: int, fixed: int, per_sample: int, runs: int) -> int:

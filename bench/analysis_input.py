@@ -113,11 +113,6 @@ def check_count(value: int, option: str, minimum: int, maximum: int, why: str) -
         raise BenchError(f"{option} {value}: must lie in [{minimum}, {maximum}] ({why})")
 
 
-def mib(nbytes: float) -> str:
-    """Bytes as a whole number of MiB, for the budget's one-line messages."""
-    return f"{nbytes / (1 << 20):.0f} MiB"
-
-
 def read_decimated(path: str, args: argparse.Namespace, read, n_samples: int, timing: str | None = None) -> Record:
     """``read(path, ..., progress=...)`` (a decimating reader such as
     :func:`hilbench.analysis.residual.record_analysis.read`) with the command's loader options and a progress bar

@@ -140,7 +140,7 @@ def moteus_mode(group: str, port: int, controller: int) -> int:
 
 def check_drive_file(path: Path, kind: str, killed: bool, drive_killed: bool) -> dict[str, int]:
     """Lost and invented samples of one drive run file, and whether it opened and says what happened."""
-    from hilbench.analysis.runfile import RunFileError, open_run, repair
+    from hilbench.common.runfile import RunFileError, open_run, repair
 
     out = {"lost": 0, "invented": 0, "unreadable": 0, "samples": 0, "absent": 0, "short_completed": 0,
            "drive_ended": 0}
@@ -181,7 +181,7 @@ def check_drive_file(path: Path, kind: str, killed: bool, drive_killed: bool) ->
 
 def _wait_streaming(out: Path, host: subprocess.Popen, samples: int = 50, timeout: float = 60.0) -> None:
     """Wait until the run file holds ``samples`` flushed samples (the stream runs), or the host has ended."""
-    from hilbench.analysis.runfile import RunFileError, open_run
+    from hilbench.common.runfile import RunFileError, open_run
 
     deadline = time.monotonic() + timeout
     while host.poll() is None and time.monotonic() < deadline:

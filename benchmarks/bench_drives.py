@@ -62,7 +62,7 @@ def identification_errors(path: Path) -> tuple[float, float]:
     from hilbench.analysis.identification.regressors import reversal_travels
     from hilbench.analysis.models.friction_model import FrictionModel
     from hilbench.analysis.record import on_host_time
-    from hilbench.analysis.runfile import host_sampled
+    from hilbench.common.runfile import host_sampled
     from hilbench.firmware_sim.devices.sim_config import load_sim_config
 
     with h5py.File(path) as f:

@@ -165,8 +165,8 @@ def write_run_file(path: Path, duration: float, fs: float, seed: int = 0) -> int
     the measured current, hold_previous), generated and written in blocks of 10 s; returns the sample count."""
     import numpy as np
 
-    from hilbench.analysis.runfile import RunWriter
     from hilbench.bench.acquisition.protocols import Identification
+    from hilbench.common.runfile import RunWriter
     from hilbench.firmware_sim.engine.friction_models import dc_motor
     from hilbench.firmware_sim.engine.plant import Plant
 
@@ -223,7 +223,7 @@ def analyses(quick: bool = False, long_s: float = LONG_S, files: dict | None = N
     20 kHz against a 60 s run of the same protocol (quick: 1 s against 0.5 s), each validated on a second run of
     another seed: peak RSS and cost per sample, with the issue's targets. ``files`` ({"short": (train, validation),
     "long": (...)}): existing run files (e.g. recorded by ``hilbench run`` in lockstep) instead of writing them."""
-    from hilbench.analysis.runfile import open_run
+    from hilbench.common.runfile import open_run
 
     short, long = (0.5, 1.0) if quick else (60.0, long_s)
     rows = []

@@ -47,7 +47,7 @@ def _blocks(data: dict[str, np.ndarray], n: int) -> list[dict[str, np.ndarray]]:
 
 
 def _runwriter_rate(path: str, blocks, n: int, compression: str) -> tuple[float, int]:
-    from hilbench.analysis.runfile import RunWriter
+    from hilbench.common.runfile import RunWriter
 
     t0 = time.perf_counter()
     with RunWriter(path, sample_rate=FS, compression=compression, overwrite=True) as w:

@@ -33,7 +33,7 @@ def _hilbench(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
 
 def check_file(path: Path, killed: bool) -> dict[str, int]:
     """Lost and invented samples of one run file, and whether it opened (after repair if it crashed)."""
-    from hilbench.analysis.runfile import RunFileError, open_run, repair
+    from hilbench.common.runfile import RunFileError, open_run, repair
 
     out = {"lost": 0, "invented": 0, "unreadable": 0, "samples": 0, "absent": 0}
     if not path.exists():

@@ -69,7 +69,7 @@ def _write_device_run(path: Path, u, fs: float, protocol: str, params: dict, arr
     """The DC motor driven by current ``u`` (A), written as a device run in blocks of 10 s."""
     import numpy as np
 
-    from hilbench.analysis.runfile import RunWriter
+    from hilbench.common.runfile import RunWriter
     from hilbench.firmware_sim.engine.friction_models import dc_motor
     from hilbench.firmware_sim.engine.plant import Plant
 
@@ -113,7 +113,7 @@ def _write_presliding(path: Path, duration: float, fs: float) -> int:
     exactly: the first two repeats are simulated and the second one tiled."""
     import numpy as np
 
-    from hilbench.analysis.runfile import RunWriter
+    from hilbench.common.runfile import RunWriter
     from hilbench.firmware_sim.engine.friction_models import dc_motor
     from hilbench.firmware_sim.engine.plant import stop_operator
 

@@ -16,11 +16,14 @@ BOXES = {  # name: (x, y, w, h, lines)
                                    "cli/: main.py, commands/   gui/   campaign_analysis/ (thin adapters)"]),
     "drivers": (0.5, 2.6, 4.2, 2.6, ["drivers/", "device interface (device.py)", "open_device(url): sim, serial,",
                                      "can, canopen (CiA 402), odrive", "wire protocol, links, host cycle"]),
-    "analysis": (5.3, 2.6, 4.2, 2.6, ["analysis/", "runfile/: schema, writer, reader", "record.py: load_record",
-                                      "metrics.py: error vocabulary", "identification, models, skeleton, afrf,",
+    "analysis": (5.3, 2.6, 4.2, 2.6, ["analysis/", "record.py: load_record (the one loader)",
+                                      "identification, models, skeleton, afrf,",
                                       "residual, presliding, compensation"]),
     "firmware_sim": (2.9, 0.1, 4.2, 1.7, ["firmware_sim/", "engine/: the C plant (plant.c, plant.py), drift",
                                           "devices/: simulated peers, own process, pty or CAN"]),
+    "common": (0.5, -1.9, 9.0, 1.5, ["hilbench/common/  (bottom layer: all import it, it imports none)",
+                                     "runfile/: schema, keys, DeviceIdentity, writer, reader   units.py: axis, mode",
+                                     "metrics.py: nrmse, relative error, percent, names, verdict bands   errors.py"]),
 }
 ARROWS = [("bench", "drivers", "uses"), ("bench", "analysis", "uses"), ("analysis", "firmware_sim", "simulates with"),
           ("firmware_sim", "drivers", "protocol definitions only")]
@@ -30,9 +33,9 @@ OUT = Path(__file__).with_name("architecture.png")
 
 
 def main(out: Path = OUT) -> None:
-    fig, ax = plt.subplots(figsize=(10, 8.8))
+    fig, ax = plt.subplots(figsize=(10, 10.9))
     ax.set_xlim(0, 10)
-    ax.set_ylim(0, 8.8)
+    ax.set_ylim(-2.1, 8.8)
     ax.axis("off")
     centre = {}
     for name, (x, y, w, h, lines) in BOXES.items():

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hilbench.common.physical_bounds import ABSOLUTE_ZERO_DEGC, WINDING_TEMPERATURE_MAX_DEGC, temperature_possible
+from hilbench.common.runfile.schema import DeviceIdentity
 from hilbench.drivers import protocol as p
 from hilbench.drivers.calibration import Calibration, CountUnwrapper
 from hilbench.drivers.device import Capabilities, Device, SampleBlock
@@ -387,8 +388,11 @@ class Amplifier(Device):
         """Clear every latched fault (the only way to clear them)."""
         self._command(p.ClearFaults())
 
-    def info(self) -> dict:
-        return {k: getattr(self.identity, k) for k in self.identity.__slots__}
+    def info(self) -> DeviceIdentity:
+        i = self.identity
+        return DeviceIdentity(model=i.model, serial=i.serial, firmware=i.firmware,
+                              details={"protocol_version": i.protocol_version, "buffer_capacity": i.buffer_capacity,
+                                       "max_block": i.max_block, "sensors": int(i.sensors)})
 
     def state(self) -> str:
         return p.State(self.status().state).name

@@ -35,6 +35,7 @@ import time
 
 import numpy as np
 
+from hilbench.common.runfile.schema import HOST_TIME, DeviceIdentity
 from hilbench.drivers import cia402 as c
 from hilbench.drivers import protocol as p
 from hilbench.drivers.calibration import Calibration, CountUnwrapper
@@ -241,20 +242,22 @@ class CanopenDrive(HostClockedDevice):
         self.counts_per_rev = inc // max(revs, 1)
         self._units()
         self._cob_ids()
-        # the drive samples at each SYNC: the analysis resamples on host_time (analysis/record.py)
-        self._info = {"protocol": "CiA 402 over CANopen", "url": self.name, "sample_times": "host_time",
-                      "device_type": f"0x{device_type:08X}", "supported_modes": f"0x{supported:08X}",
-                      "rated_torque_Nm": self.rated_torque, "encoder_counts_per_rev": self.counts_per_rev,
-                      "units": self._adopted[0].removeprefix("units adopted from the drive: ")}
+        details = {"device_type": f"0x{device_type:08X}", "supported_modes": f"0x{supported:08X}",
+                   "rated_torque_Nm": self.rated_torque, "encoder_counts_per_rev": self.counts_per_rev,
+                   "units": self._adopted[0].removeprefix("units adopted from the drive: ")}
         try:
-            self._info["model"] = str(self._read(c.DEVICE_NAME, what="device name"))
+            model = str(self._read(c.DEVICE_NAME, what="device name"))
         except (CommandRefusedError, KeyError):
-            self._info["model"] = "unknown"
+            model = "unknown"
         for sub, key in ((1, "vendor_id"), (2, "product_code"), (3, "revision"), (4, "serial")):
             try:
-                self._info[key] = int(self._read(c.IDENTITY, sub, key))
+                details[key] = int(self._read(c.IDENTITY, sub, key))
             except (CommandRefusedError, KeyError):
                 pass
+        serial = details.pop("serial", "")
+        # the drive samples at each SYNC: the analysis resamples on host_time (analysis/record.py)
+        self._info = DeviceIdentity(protocol="CiA 402 over CANopen", url=self.name, sample_times=HOST_TIME,
+                                    model=model, serial=str(serial), details=details)
 
     def _read_optional(self, index: int, sub: int | None = None, what: str = "") -> int | None:
         """An optional object's value, None where the EDS or the drive lacks it."""
@@ -303,8 +306,8 @@ class CanopenDrive(HostClockedDevice):
             self._adopted.append(f"COB-IDs from the drive: SYNC 0x{self.sync_id:03X} (0x1005), EMCY {emcy_text} "
                                  f"(0x1014)")
 
-    def info(self) -> dict:
-        return dict(self._info)
+    def info(self) -> DeviceIdentity:
+        return self._info
 
     # ------------------------------------------------------------------ EMCY, state
     def _on_emcy(self, err) -> None:
@@ -568,7 +571,7 @@ class CanopenDrive(HostClockedDevice):
             ready = done + first + (0 if ours and not self._estop_requested else 1)
             t1, t2 = t1[: ready - done], t2[: ready - done]
             end = True
-        block = self._block(done, ready, t1, t2, arrays["host_time"]) if ready > done else None
+        block = self._block(done, ready, t1, t2, arrays[HOST_TIME]) if ready > done else None
         return block, ready, end
 
     def _answer_slack(self, rate: float) -> float:

@@ -23,12 +23,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-CLOCKS = ("device", "host")
-#: Control modes a device may offer. ``current`` is torque/current control (setpoints in A, turned into a
-#: torque command with the host's torque constant where the drive takes torque); ``velocity`` setpoints are
-#: rad/s; ``position`` setpoints are rad (no protocol uses it yet).
-MODE_UNITS = {"current": "A", "velocity": "rad/s", "position": "rad"}
+from hilbench.common.runfile.schema import CYCLE, DRIVE_STATUS, HOST_TIME, DeviceIdentity
 
+CLOCKS = ("device", "host")
+#: Control modes a device may offer and their setpoint units: ``MODE_UNITS`` (hilbench.common.units).
 
 @dataclass(frozen=True)
 class Capabilities:
@@ -110,15 +108,10 @@ class CycleSamples(SampleBlock):
 
     def extra(self) -> dict[str, np.ndarray]:
         """Channels beyond the device-clocked set, for the run file."""
-        out = {"host_time": self.host_time, "cycle": self.cycle.astype(np.float64), "velocity": self.velocity,
-               "torque_cmd": self.torque_cmd}
-        out["drive_status"] = (self.status if self.status is not None else np.zeros(len(self))).astype(np.float64)
+        status = self.status if self.status is not None else np.zeros(len(self))
+        out = {HOST_TIME: self.host_time, CYCLE: self.cycle.astype(np.float64), "velocity": self.velocity,
+               "torque_cmd": self.torque_cmd, DRIVE_STATUS: status.astype(np.float64)}
         return out
-
-
-#: Run-file channels a host-clocked device adds: catalogue channels and custom ones (name: unit).
-HOST_CLOCKED_CHANNELS = ("velocity", "torque_cmd")
-HOST_CLOCKED_CUSTOM = {"host_time": "s", "cycle": "1", "drive_status": "1"}
 
 
 class Device(abc.ABC):
@@ -135,8 +128,9 @@ class Device(abc.ABC):
         return ()
 
     @abc.abstractmethod
-    def info(self) -> dict:
-        """Identity of the device (model, serial, firmware...), JSON-able."""
+    def info(self) -> DeviceIdentity:
+        """Identity of the device (model, serial, firmware, whose clock times the samples...), as the run file
+        stores it."""
 
     @abc.abstractmethod
     def configure(self, config) -> None:

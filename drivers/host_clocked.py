@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hilbench.common.can import drop_malformed_frames, enlarge_receive_buffer
+from hilbench.common.runfile.schema import HOST_TIME
 from hilbench.drivers import protocol as p
 from hilbench.drivers.amplifier import check_setpoints
 from hilbench.drivers.device import CycleSamples, Device, refusal
@@ -316,7 +317,7 @@ class HostClockedDevice(Device):
             cycle.join()
             sent = cycle.sent
             if sent:
-                self._timing = timing_summary(arrays["host_time"][:sent], arrays["scheduled"][:sent], rate,
+                self._timing = timing_summary(arrays[HOST_TIME][:sent], arrays["scheduled"][:sent], rate,
                                               cycle.echoed if spec.echo_id is not None else None)
             self._cycle = None
             self._malformed_cycle += cycle.malformed

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hilbench.common.can import drop_malformed_frames, enlarge_receive_buffer
+from hilbench.common.runfile.schema import HOST_TIME
 from hilbench.drivers.errors import DeviceTimeoutError
 
 LATE_FRACTION = 0.25
@@ -173,7 +174,7 @@ class CanCycle:
 
     @staticmethod
     def _layout(n: int, ntx: int, m: int, width: int = 8) -> list[tuple[str, int, int, tuple, str]]:
-        parts = [("ctl", (_RX + m,), "i8"), ("host_time", (n,), "f8"), ("scheduled", (n,), "f8"),
+        parts = [("ctl", (_RX + m,), "i8"), (HOST_TIME, (n,), "f8"), ("scheduled", (n,), "f8"),
                  ("rx", (m, n, width), "u1"), ("rx_time", (m, n), "f8"),
                  ("tx", (n, ntx, width), "u1")]
         out, offset = [], 0
@@ -330,7 +331,7 @@ def _cycle_with_bus(bus, spec: CanCycleSpec, a: dict, n: int, start_delay: float
     enlarge_receive_buffer(bus)
     malformed = drop_malformed_frames(bus)
     try:
-        _cycle_loop(bus, spec, n, start_delay, ctl, a["host_time"], a["scheduled"], (a["rx"], a["rx_time"]), a["tx"],
+        _cycle_loop(bus, spec, n, start_delay, ctl, a[HOST_TIME], a["scheduled"], (a["rx"], a["rx_time"]), a["tx"],
                     parent)
     finally:
         ctl[_MALFORMED] += malformed.count  # besides the frames of the wrong length the cycle dropped

@@ -40,6 +40,7 @@ import time
 import numpy as np
 
 from hilbench.common.can import pad_fd
+from hilbench.common.runfile.schema import HOST_TIME, DeviceIdentity
 from hilbench.drivers import errors as e
 from hilbench.drivers import protocol as p
 from hilbench.drivers.device import Capabilities, CycleSamples
@@ -181,14 +182,15 @@ class MoteusDrive(HostClockedDevice):
                                   f"0x{heard[-1]:X}, on the bus); nothing was sent to it: stop that host's run first")
 
     # ------------------------------------------------------------------ what every device answers
-    def info(self) -> dict:
+    def info(self) -> DeviceIdentity:
         ident = self._identity
         serial = "".join(f"{ident.get(k, 0):08x}" for k in ("serial1", "serial2", "serial3"))
         # the controller samples when a command arrives: host_time (its echo from the bus) is the sample time
-        return {"protocol": "moteus register protocol over CAN-FD (moteus library, python-can transport)",
-                "url": self.name, "id": self.id, "sample_times": "host_time", "model": f"0x{ident.get('model', 0):X}",
-                "firmware": f"0x{ident.get('firmware', 0):X}", "register_map": ident.get("register_map", 0),
-                "serial": serial, "watchdog": "the controller's servo.default_timeout_s (0x027 never written)"}
+        return DeviceIdentity(
+            protocol="moteus register protocol over CAN-FD (moteus library, python-can transport)", url=self.name,
+            sample_times=HOST_TIME, model=f"0x{ident.get('model', 0):X}", firmware=f"0x{ident.get('firmware', 0):X}",
+            serial=serial, details={"id": self.id, "register_map": ident.get("register_map", 0),
+                                    "watchdog": "the controller's servo.default_timeout_s (0x027 never written)"})
 
     def state(self) -> str:
         values = self._state()
@@ -355,7 +357,7 @@ class MoteusDrive(HostClockedDevice):
         torque = v[TORQUE]
         self._last_cmd = float(torque_cmd[-1] / kt)
         counts = np.rint(turns * cfg.counts_per_rev).astype(np.int64)
-        return CycleSamples(np.arange(a, b, dtype=np.int64), arrays["host_time"][a:b].copy(), counts,
+        return CycleSamples(np.arange(a, b, dtype=np.int64), arrays[HOST_TIME][a:b].copy(), counts,
                             torque_cmd / kt, torque / kt, torque_cmd * ratio, torque * ratio,
                             2 * math.pi * turns / ratio, 2 * math.pi * v[VELOCITY] / ratio, cfg.sample_rate,
                             v[MODE].astype(np.uint16))

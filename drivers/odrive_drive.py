@@ -28,6 +28,7 @@ import time
 
 import numpy as np
 
+from hilbench.common.runfile.schema import DRIVE_CLOCK, DeviceIdentity
 from hilbench.drivers import odrive_can as o
 from hilbench.drivers import protocol as p
 from hilbench.drivers.device import Capabilities, CycleSamples
@@ -118,10 +119,11 @@ class OdriveDrive(HostClockedDevice):
                                  f"{self.timeout:g} s (axis state {self.axis_state}, errors: "
                                  f"{o.describe_errors(self.axis_error)})")
 
-    def info(self) -> dict:
+    def info(self) -> DeviceIdentity:
         # the ODrive samples on its own timer: host_time is when a sample arrived, t = k/rate is its time
-        return {"protocol": "ODrive CAN Simple", "url": self.name, "node": self.node_id, "sample_times": "drive",
-                "axis_state": self.axis_state, "axis_error": f"0x{self.axis_error:08X}"}
+        return DeviceIdentity(protocol="ODrive CAN Simple", url=self.name, sample_times=DRIVE_CLOCK,
+                              details={"node": self.node_id, "axis_state": self.axis_state,
+                                       "axis_error": f"0x{self.axis_error:08X}"})
 
     def state(self) -> str:
         names = {int(s): s.name.lower().replace("_", " ") for s in o.AxisState}

@@ -12,6 +12,7 @@ from hilbench.analysis.identification.maxwell_fit import LipSettings
 from hilbench.analysis.record import load_record
 from hilbench.bench.acquisition.protocols import Identification
 from hilbench.bench.acquisition.runner import Bench
+from hilbench.common.metrics import percent
 
 
 def main(out: Path) -> None:
@@ -26,8 +27,8 @@ def main(out: Path) -> None:
     for path in files[1:]:
         fit = identify(train.arrays(), validate=load_record(path).arrays(), settings=LipSettings(timing=train.timing))
         m = fit.model
-        print(f"{path.name}: J = {m.inertia:.6g} kg*m^2, break-away {m.breakaway:.4f} N*m, "
-              f"validation position NRMSE {fit.figures['validation_position_nrmse']:.3f}")
+        print(f"{path.name}: inertia J = {m.inertia:.6g} kg*m^2, break-away torque {m.breakaway:.4f} N*m, "
+              f"validation position NRMSE {percent(fit.figures['validation_position_nrmse']):.3g} %")
 
 
 if __name__ == "__main__":

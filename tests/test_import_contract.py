@@ -31,7 +31,7 @@ def test_the_reading_sees_function_level_and_relative_imports(tmp_path):
 @pytest.mark.parametrize(("where", "text", "rule"), [
     ("drivers/device.py", "from hilbench.bench.acquisition import runner", "drivers never imports"),
     ("drivers/links.py", "def f():\n    import hilbench.firmware_sim.engine.plant\n", "drivers never imports"),
-    ("analysis/metrics.py", "def f():\n    from hilbench.bench.storage.outputs import say\n", "analysis never imports"),
+    ("analysis/errors.py", "def f():\n    from hilbench.bench.storage.outputs import say\n", "analysis never imports"),
     ("analysis/record.py", "from hilbench.drivers import device", "analysis never imports"),
     ("firmware_sim/devices/device.py", "from hilbench.drivers.amplifier import Amplifier", "only protocol definitions"),
     ("firmware_sim/engine/plant.py", "def f():\n    from hilbench.analysis import record\n", "simulated device never"),

@@ -105,7 +105,7 @@ def test_a_users_own_generic_folders_do_not_shadow_ours(installed, tmp_path):
     script.write_text(
         "import analysis, bench  # the user's own, next to the script\n"
         "from hilbench.analysis.identification.regressors import held_torque\n"
-        "from hilbench.analysis.runfile import CHANNELS\n"
+        "from hilbench.common.runfile import CHANNELS\n"
         "print(held_torque([1.0, 2.0, 4.0], 'instant').tolist(), CHANNELS['torque'].unit('rotary'))\n"
     )
     for name in GENERIC:  # make the user's packages importable (their own code), not raising

@@ -27,9 +27,9 @@ import numpy as np
 from hilbench.analysis.compensation.references import Reference
 from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.models.families import substeps_for
-from hilbench.analysis.models.friction_model import AXES
 from hilbench.analysis.models.model_file import READABLE as MODEL_SCHEMAS
 from hilbench.analysis.models.model_file import check_name, check_plant, load_document, read_family, read_model
+from hilbench.common.units import AXIS_UNITS as AXES
 from hilbench.firmware_sim.engine.plant import Plant, PlantParameterError, PlantParams
 
 COMPARE_SCHEMA = "hilbench.compare/1"

@@ -114,7 +114,7 @@ def _figures(
         decimation=lip.decimation,
         timing=timing,
     )
-    from hilbench.analysis.identification.maxwell_fit import nrmse
+    from hilbench.common.metrics import nrmse
 
     if force_mode:  # the model maps the measured displacement to the force: no integration, nothing drifts
         curves[prefix] = {"t": run.t, "position": run.position, "t_rows": run.t[rows],
@@ -238,12 +238,13 @@ def identify_chunks(
     pairs, in order) sampled uniformly at ``fs`` Hz; the caller checks the time stamps. The figures are
     :func:`identify`'s; no curves are kept (``curves`` is empty)."""
     from hilbench.analysis.identification.chunked import scan
-    from hilbench.analysis.identification.maxwell_fit import fit_lip_chunks, grid_from_scan, nrmse, predict_chunks
+    from hilbench.analysis.identification.maxwell_fit import fit_lip_chunks, grid_from_scan, predict_chunks
     from hilbench.analysis.identification.output_error import (
         refine_output_error_chunks,
         segmented_simulation_error_chunks,
         simulation_error_chunks,
     )
+    from hilbench.common.metrics import nrmse
 
     check_axis(axis)
     if method not in ("lip", "oe"):

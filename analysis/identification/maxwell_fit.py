@@ -36,6 +36,7 @@ from hilbench.analysis.identification.regressors import (
 )
 from hilbench.analysis.identification.uncertainty import bootstrap_standard_errors, hac_covariance
 from hilbench.analysis.models.friction_model import FrictionModel, check_axis
+from hilbench.common.metrics import nrmse
 
 
 @dataclass(frozen=True)
@@ -88,15 +89,6 @@ class LipFit:
     def torque_nrmse(self) -> float:
         """Equation-error NRMSE = rms(L tau - prediction)/std(L tau)."""
         return nrmse(self.measured, self.predicted)
-
-
-def nrmse(y: np.ndarray, y_hat: np.ndarray) -> float:
-    """Normalised RMS error rms(y - y_hat)/std(y) (fraction; NMSE in % = 100*nrmse^2)."""
-    y = np.asarray(y, float)
-    s = float(np.std(y))
-    if s == 0:
-        raise AnalysisError("cannot normalise the error: the reference signal is constant")
-    return float(np.sqrt(np.mean((y - np.asarray(y_hat, float)) ** 2)) / s)
 
 
 def _lin_columns(blk, s: LipSettings) -> tuple[list[np.ndarray], list[str]]:

@@ -16,9 +16,9 @@ import math
 import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
-from hilbench.analysis.identification.maxwell_fit import nrmse
 from hilbench.analysis.identification.regressors import held_torque, zero_phase_lowpass
 from hilbench.analysis.models.friction_model import FrictionModel
+from hilbench.common.metrics import nrmse
 
 #: Stop-operator values held at once by segmented_simulation_error (16 MiB of float64).
 CHUNK_VALUES = 1 << 21

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from hilbench.analysis.identification.identify import Identification
-from hilbench.analysis.models.friction_model import AXES
+from hilbench.common.units import AXIS_UNITS as AXES
 
 MEASURED = {"color": "0.15", "lw": 1.4}
 #: dots per model in the whole-record panel of the hysteresis figure

@@ -213,7 +213,7 @@ def reading_plan(headers, budget: int) -> tuple[list[int], int | None] | None:
     keeps at least :data:`DECIMATED_RATE`, the bounded span in samples per run at that rate or None when the
     reduced runs fit whole). Raises :class:`AnalysisError` in one line, before any sample is read, when not even
     the first :data:`MIN_SPAN_S` s (or the shortest run) of each run fit (docs/long-runs.md, "A bounded span")."""
-    from hilbench.analysis.record import mib
+    from hilbench.common.units import mib
 
     samples = sum(h.n_samples for h in headers)
     if cost(samples) <= budget:

@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
-from hilbench.analysis.identification.maxwell_fit import LipSettings, fit_lip, nrmse
+from hilbench.analysis.identification.maxwell_fit import LipSettings, fit_lip
 from hilbench.analysis.identification.regressors import (
     FilteredData,
     effective_sample_count,
@@ -47,7 +47,9 @@ from hilbench.analysis.identification.regressors import (
     triangle_average,
     zero_phase_lowpass,
 )
-from hilbench.analysis.models.friction_model import AXES, check_axis
+from hilbench.analysis.models.friction_model import check_axis
+from hilbench.common.metrics import nrmse
+from hilbench.common.units import AXIS_UNITS as AXES
 from hilbench.firmware_sim.engine.plant import (
     GMS,
     RK4_STABLE_RADIUS,

@@ -12,17 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
-
-AXES = {
-    "rotary": {
-        "position": "rad",
-        "torque": "N*m",
-        "inertia": "kg*m^2",
-        "stiffness": "N*m/rad",
-        "viscous": "N*m*s/rad",
-    },
-    "linear": {"position": "m", "torque": "N", "inertia": "kg", "stiffness": "N/m", "viscous": "N*s/m"},
-}
+from hilbench.common.units import AXIS_UNITS as AXES
 
 
 def check_axis(axis: str) -> str:

@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
-from hilbench.analysis.models.friction_model import AXES, FrictionModel
+from hilbench.analysis.models.friction_model import FrictionModel
+from hilbench.common.units import AXIS_UNITS as AXES
 
 SCHEMA = "hilbench.friction-model/2"
 READABLE = ("hilbench.friction-model/1", SCHEMA)

@@ -12,13 +12,13 @@ import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.identification.regressors import position_resolution
-from hilbench.analysis.models.friction_model import AXES
 from hilbench.analysis.presliding.edges import EdgePoints, edge_points
 from hilbench.analysis.presliding.identify import PreslidingFit, PreslidingSettings, fit_presliding
 from hilbench.analysis.presliding.parametric import RollingFit, fit_rolling, origin_uncertainty
 from hilbench.analysis.presliding.quantities import DEFAULT_FRACTION, Resolution, bootstrap, quantities, resolution
 from hilbench.analysis.presliding.reversals import MemoryCheck, extreme_forces, find_reversals, memory_check
 from hilbench.analysis.presliding.span import plan_span, x_means
+from hilbench.common.units import AXIS_UNITS as AXES
 
 #: the reversal hysteresis, in position steps, when none is given
 HYSTERESIS_STEPS = 1.5

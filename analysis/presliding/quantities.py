@@ -24,6 +24,7 @@ from hilbench.analysis.identification.regressors import position_resolution
 from hilbench.analysis.models.friction_model import FrictionModel
 from hilbench.analysis.presliding.identify import PreslidingFit, fit_presliding
 from hilbench.analysis.presliding.parametric import RollingFit
+from hilbench.common.units import AXIS_UNITS
 
 #: default fraction of the sliding level that defines the presliding distance (see docs/presliding.md)
 DEFAULT_FRACTION = 0.9
@@ -122,8 +123,8 @@ def resolution(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, loop_travel
         source = "measured from the displacement"
     noise = position_resolution(force)  # the larger of the force quantum and its white-noise level
     q = quantities(fit.model, fraction)
-    unit = "rad" if fit.model.axis == "rotary" else "m"
-    funit, kunit = ("N*m", "N*m/rad") if fit.model.axis == "rotary" else ("N", "N/m")
+    u = AXIS_UNITS[fit.model.axis]
+    unit, funit, kunit = u["position"], u["torque"], u["stiffness"]
     lines, ok = [], {}
     xp = q["presliding_distance"]
     ok["presliding_distance"] = xp >= MIN_COUNTS * step

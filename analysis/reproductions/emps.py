@@ -29,6 +29,8 @@ from typing import Any
 import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
+from hilbench.common.metrics import percent, relative_error
+from hilbench.common.units import AXIS_UNITS
 
 #: Published IDIM-LS figures of EMPS_Description.pdf (values, standard errors).
 PUBLISHED = {
@@ -45,7 +47,7 @@ PUBLISHED = {
 }
 
 PARAMETER_NAMES = ("mass", "viscous", "coulomb", "offset")
-PARAMETER_UNITS = ("kg", "N*s/m", "N", "N")
+PARAMETER_UNITS = tuple(AXIS_UNITS["linear"][q] for q in ("inertia", "viscous", "torque", "torque"))
 
 
 #: The variables an EMPS file is read for; ``pulses_N`` is in DATA_EMPS_PULSES.mat only.
@@ -186,7 +188,7 @@ def fit_idim(w: np.ndarray, y: np.ndarray) -> IdimResult:
     return IdimResult(
         params=params,
         std_errors=np.sqrt(np.diag(cov)),
-        relative_error=100.0 * float(np.linalg.norm(r) / np.linalg.norm(y)),
+        relative_error=percent(relative_error(y, r)),
         error_norm=float(np.linalg.norm(r)),
         residual_std=float(np.sqrt(s2)),
         condition_number=float(np.linalg.cond(w)),

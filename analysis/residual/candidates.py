@@ -35,9 +35,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from hilbench.analysis.models.friction_model import AXES
 from hilbench.analysis.residual.design import Fit, Setting
 from hilbench.analysis.residual.rundata import RunData
+from hilbench.common.units import AXIS_UNITS as AXES
 
 FREE = -np.inf
 

@@ -59,7 +59,8 @@ def start_figures(model: FrictionModel, records: dict[str, Record], cutoff: floa
                   decimation: int) -> dict:
     """The model's torque NRMSE on each record (name -> record), unrefitted, by identify's definition
     (``{name}_torque_nrmse``, a fraction): rms(L[tau] - L[tau_model]) / std(L[tau]) at identify's rows."""
-    from hilbench.analysis.identification.maxwell_fit import nrmse, predict_filtered
+    from hilbench.analysis.identification.maxwell_fit import predict_filtered
+    from hilbench.common.metrics import nrmse
 
     out = {}
     for name, rec in records.items():

@@ -9,11 +9,10 @@ are fitted with its own filter; only the evaluation uses the published filtering
 
 from __future__ import annotations
 
-import numpy as np
-
 from hilbench.analysis.reproductions.emps import PUBLISHED as EMPS_PUBLISHED
 from hilbench.analysis.residual.design import Fit, predict
 from hilbench.analysis.residual.rundata import RunData, prepare_run
+from hilbench.common.metrics import percent, relative_error
 
 METRICS = {
     "import:emps": {
@@ -33,7 +32,7 @@ def _relative_error(fit: Fit, runs: list[RunData], cutoff: float, decimation: in
     again = [prepare_run(r.position, r.torque, r.fs, axis=r.axis, name=r.name, cutoff=cutoff,
                          decimation=decimation, timing=r.timing, max_rate=None) for r in runs]
     y, e = predict(fit, again)
-    return 100.0 * float(np.linalg.norm(e) / np.linalg.norm(y))
+    return percent(relative_error(y, e))
 
 
 def published_metric(source: str, fit_before: Fit, fit_after: Fit, train: list[RunData],

@@ -98,7 +98,7 @@ def span_for(headers: Sequence[Record], budget: int) -> int | None:
     loaded) within ``budget`` bytes: None when the whole runs fit (:func:`cost`), else the bounded span
     (:func:`span_samples`, samples per run at the loop's rate). Raises :class:`AnalysisError` in one line, before
     any sample is read, when not even the first :data:`MIN_SPAN_S` s (or the shortest run) of each run fit."""
-    from hilbench.analysis.record import mib
+    from hilbench.common.units import mib
 
     samples = sum(analysed_samples(h.n_samples, h.sample_rate) for h in headers)
     if cost(samples) <= budget:
@@ -225,7 +225,7 @@ def _hysteresis(result: ResidualAnalysis, directory: str | Path, title: str) -> 
     """Friction against displacement on the first training run: measured (torque - J*acceleration, J of the final
     model) against the starting and the final model (measured minus each one's residual)."""
     from hilbench.analysis.identification.plots import hysteresis_figure
-    from hilbench.analysis.models.friction_model import AXES
+    from hilbench.common.units import AXIS_UNITS as AXES
 
     loop = result.loop
     fixed = result.fixed_inertia

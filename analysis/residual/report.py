@@ -12,6 +12,7 @@ import numpy as np
 
 from hilbench.analysis.residual.diagnostics import Diagnostic, Signals, _jsonable
 from hilbench.analysis.residual.selection import LoopResult
+from hilbench.common.metrics import RELATIVE_ERROR, UNIT, percent
 
 
 def report_dict(result: LoopResult, inputs: dict | None = None) -> dict:
@@ -155,6 +156,20 @@ def _fmt(v) -> str:
     return str(v)
 
 
+def _metric_name(key: str) -> str:
+    """The glossary's name of an error key (docs/metrics.md): ``torque_nrmse`` -> ``torque NRMSE``."""
+    if key.endswith("_rel_pct"):
+        return f"{key.removesuffix('_rel_pct')} {RELATIVE_ERROR}"
+    return f"{key.removesuffix('_nrmse')} NRMSE"
+
+
+def _pct(key: str, value) -> str:
+    """An error figure in percent: ``*_nrmse`` keys hold fractions, ``*_pct`` keys percent already."""
+    if value is None or key.endswith("_pct"):
+        return _fmt(value)
+    return _fmt(percent(value))
+
+
 def markdown_summary(result: LoopResult, title: str = "Residual loop", notes: list[str] | None = None) -> str:
     d = report_dict(result)
     lines = [f"# {title}", "", f"**Verdict:** {d['verdict']}", "",
@@ -166,8 +181,8 @@ def markdown_summary(result: LoopResult, title: str = "Residual loop", notes: li
         keys = (("force_rel_pct", "force_nrmse") if d.get("record") == "displacement-driven" else
                 ("torque_rel_pct", "torque_nrmse", "position_nrmse", "velocity_nrmse"))
         for key in keys:
-            lines.append(f"| {part} | {key} | {_fmt(d['error_before'][part].get(key))} | "
-                         f"{_fmt(d['error_after'][part].get(key))} |")
+            lines.append(f"| {part} | {_metric_name(key)} ({UNIT}) | {_pct(key, d['error_before'][part].get(key))} | "
+                         f"{_pct(key, d['error_after'][part].get(key))} |")
     pm = d.get("published_metric")
     if pm:
         lines += ["", f"Published metric: {pm['metric']} ({pm['reference']}).", "",
@@ -185,8 +200,8 @@ def markdown_summary(result: LoopResult, title: str = "Residual loop", notes: li
         par = ", ".join(f"{k} = {_fmt(v)}" + (f" ± {_fmt(u.get(k))}" if u.get(k) is not None else "")
                         + (f" {units[k]}" if k in units else "") for k, v in p.items())
         lines.append(f"{i}. **{e['name']}** — {e['physics']}. {par}. Held-out MSE reduced by "
-                     f"{100 * e['validation_gain']:.1f} % (p = {e['p_value']:.2g}); validation torque error "
-                     f"{_fmt(e['error_after']['validation']['torque_rel_pct'])} %.")
+                     f"{100 * e['validation_gain']:.1f} % (p = {e['p_value']:.2g}); validation torque "
+                     f"{RELATIVE_ERROR} {_fmt(e['error_after']['validation']['torque_rel_pct'])} {UNIT}.")
     lines += ["", "## Unexplained structure", ""]
     lines += [f"- {u['description']} (effect {100 * u['effect']:.1f} % of the residual variance, "
               f"p = {u['p_value']:.2g})" for u in d["unexplained"]] or ["None."]
@@ -210,7 +225,7 @@ def write_report(result: LoopResult, directory: str | Path, title: str = "Residu
                  notes: list[str] | None = None) -> list[Path]:
     """Write diagnostics_before.png, diagnostics_after.png and summary.md into ``directory`` (and force.png
     for a displacement-driven record)."""
-    from hilbench.analysis.models.friction_model import AXES
+    from hilbench.common.units import AXIS_UNITS as AXES
 
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)

@@ -39,6 +39,7 @@ from hilbench.analysis.residual.diagnostics import (
 )
 from hilbench.analysis.residual.rundata import RunData
 from hilbench.analysis.residual.simulation_error import simulation_error
+from hilbench.common.metrics import nrmse, percent, relative_error
 
 DEFAULT_START = ("inertia", "maxwell_slip")
 EMPS_START = ("inertia", "coulomb", "viscous", "offset")
@@ -420,11 +421,11 @@ def _complexity(term: Term, nl: dict, model: list, train: list[RunData], setting
 
 
 def metrics(y: np.ndarray, e: np.ndarray) -> dict:
-    """torque_rel_pct = 100*|e|/|y| (the EMPS metric) and torque_nrmse = rms(e)/std(y)."""
-    ny = float(np.linalg.norm(y))
-    sy = float(np.std(y))
-    return {"torque_rel_pct": 100.0 * float(np.linalg.norm(e)) / ny if ny > 0 else None,
-            "torque_nrmse": float(np.sqrt(np.mean(e**2))) / sy if sy > 0 else None}
+    """torque_rel_pct = 100*|e|/|y| (the relative error, the EMPS metric) and torque_nrmse = rms(e)/std(y), as
+    ``hilbench.common.metrics`` defines them (None where ``y`` cannot normalise them)."""
+    rel = relative_error(y, e)
+    return {"torque_rel_pct": None if rel is None else percent(rel),
+            "torque_nrmse": nrmse(y, y - e) if float(np.std(y)) > 0 else None}
 
 
 def _sim_metrics(fit: Fit, runs: list[RunData], window: float | None) -> dict:

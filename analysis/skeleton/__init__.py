@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
+from hilbench.common.units import AXIS_UNITS
 
 if TYPE_CHECKING:
     from hilbench.analysis.channel_windows import Progress
@@ -162,7 +163,7 @@ def stiffness_warnings(curves: SkeletonCurves, units: dict, spring: float, mass:
         return []
     a = np.asarray(curves.amplitude, float)[neg]
     pos, trq = units["amplitude"], units["restoring_force"]
-    mass_unit = "kg*m^2" if pos == "rad" else "kg"
+    mass_unit = AXIS_UNITS["rotary" if pos == AXIS_UNITS["rotary"]["position"] else "linear"]["inertia"]
     why = (f"the restoring force is negative: --spring {spring:g} {trq}/{pos} is larger than the system's spring, "
            f"--mass {mass:g} {mass_unit} is too large, or the system has no restoring force at these amplitudes "
            "(no spring, free sliding), where the skeleton method does not apply")

@@ -142,7 +142,7 @@ def analyse_probe(path: str, window: float = 0.01, velocity_threshold: float | N
     changed by twice :data:`PRESLIDING_FRACTION` of the sliding level (Masing's rule: the virgin curve at twice
     the scale), i.e. x_p(0.9) as docs/presliding.md defines it. The sliding level is the fitted sliding current
     (:func:`_sliding_fit`, the mean of both directions); without that fit there is no presliding distance."""
-    from hilbench.analysis.runfile import open_run
+    from hilbench.common.runfile import open_run
 
     with open_run(path) as run:
         if run.protocol_name != BreakawayProbe.name:

@@ -32,7 +32,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
-from hilbench.analysis.runfile import writer_alive
 from hilbench.bench.acquisition.campaign_plan import (
     GENERAL_KEYS,
     SETTING_UNITS,
@@ -47,6 +46,7 @@ from hilbench.bench.acquisition.campaign_plan import (
 from hilbench.bench.acquisition.protocols import PROTOCOLS, Protocol, ProtocolError
 from hilbench.bench.acquisition.runner import Bench, DeviceSettings, Progress, RunControl, SettingsError
 from hilbench.bench.errors import BenchError
+from hilbench.common.runfile import writer_alive
 from hilbench.drivers.device_url import check_device_url
 from hilbench.drivers.errors import DeviceURLError
 
@@ -209,7 +209,7 @@ def _write_index(out_dir: Path, campaign: Campaign, entries: dict[str, dict]) ->
 
 
 def _file_status(path: Path) -> str:
-    from hilbench.analysis.runfile import open_run
+    from hilbench.common.runfile import open_run
 
     try:
         with open_run(path) as run:

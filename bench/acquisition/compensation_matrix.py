@@ -61,7 +61,7 @@ def check_calibration(model_doc: dict, torque_constant: float, ratio: float) -> 
     """Refuse a model identified under another calibration than the device's. The model file names its
     training run; when that run file is readable, its calibration must equal ``torque_constant`` (N*m/A) and
     ``ratio`` to 1e-9. Returns a note on what was checked."""
-    from hilbench.analysis.runfile import open_run
+    from hilbench.common.runfile import open_run
 
     data = model_doc.get("data") if isinstance(model_doc.get("data"), dict) else {}
     train = data.get("train") if isinstance(data.get("train"), dict) else None

@@ -24,7 +24,8 @@ from typing import Any
 
 import numpy as np
 
-MODES = {"current": "A", "velocity": "rad/s", "position": "rad"}  # position: angle at the encoder shaft
+from hilbench.common.units import MODE_UNITS
+
 # Sanity bounds on |u| used when the caller gives no ``limit``; the device configuration should pass its own.
 DEFAULT_LIMITS = {"current": 50.0, "velocity": 2000.0}
 
@@ -71,7 +72,7 @@ class Excitation:
     @property
     def unit(self) -> str:
         """Unit of ``u``: ``A`` (current mode) or ``rad/s`` (velocity mode)."""
-        return MODES[self.mode]
+        return MODE_UNITS[self.mode]
 
     def protocol(self) -> dict[str, Any]:
         """JSON-able protocol description: name, mode, unit, fs (Hz), n_samples and all parameters."""
@@ -111,7 +112,7 @@ def _check_limit(u: np.ndarray, mode: str, limit: float | None) -> None:
     peak = float(np.max(np.abs(u))) if u.size else 0.0
     if peak > bound * (1 + 1e-12):
         raise ValueError(
-            f"peak setpoint {peak:.6g} {MODES[mode]} exceeds the {mode}-mode limit {bound:.6g} {MODES[mode]}"
+            f"peak setpoint {peak:.6g} {MODE_UNITS[mode]} exceeds the {mode}-mode limit {bound:.6g} {MODE_UNITS[mode]}"
         )
 
 

@@ -16,6 +16,7 @@ import numpy as np
 
 from hilbench.bench.acquisition import excitations
 from hilbench.bench.errors import BenchError
+from hilbench.common.units import MODE_UNITS
 
 SAMPLE_RATES = (1000, 2000, 5000, 10000, 20000)
 MODES = ("current", "velocity", "position")
@@ -48,7 +49,7 @@ class ParameterSpec:
 
     def unit_for(self, mode: str) -> str:
         if self.unit == "setpoint":
-            return excitations.MODES[mode]
+            return MODE_UNITS[mode]
         return self.unit
 
     def check(self, name: str, value: Any, mode: str) -> Any:

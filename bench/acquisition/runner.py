@@ -17,17 +17,17 @@ import time
 import uuid
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from hilbench.analysis.runfile import DEVICE_CHANNELS, RunFileError, RunWriter
 from hilbench.bench.acquisition.protocols import Protocol
 from hilbench.bench.errors import BenchError
+from hilbench.common.runfile import DEVICE_CHANNELS, HOST_CLOCKED_CHANNELS, DeviceIdentity, RunFileError, RunWriter
 from hilbench.drivers import protocol as wire
 from hilbench.drivers.amplifier import Amplifier
-from hilbench.drivers.device import HOST_CLOCKED_CHANNELS, HOST_CLOCKED_CUSTOM, Device, refusal
+from hilbench.drivers.device import Device, refusal
 from hilbench.drivers.device_url import open_device
 from hilbench.drivers.errors import ConfigError, DeviceFaultError, DriverError, SampleLossError
 
@@ -219,7 +219,7 @@ class Bench:
     def close(self) -> None:
         self.amplifier.close()
 
-    def identity(self) -> dict:
+    def identity(self) -> DeviceIdentity:
         return self.amplifier.info()
 
     def run(self, protocol: Protocol, out: str | Path | None = None, *, operator: str = "", notes: str = "",
@@ -276,8 +276,7 @@ class Bench:
             channels=(DEVICE_CHANNELS + reference + (HOST_CLOCKED_CHANNELS if host_clocked else ())
                       + amp.reported_channels),
             record=getattr(protocol, "record", "torque-driven"),
-            custom_channels=HOST_CLOCKED_CUSTOM if host_clocked else None,
-            device={**self.identity(), "url": self.url},
+            device=replace(self.identity(), url=self.url),
             config={k: getattr(config, k) if not isinstance(getattr(config, k), float) or
                     math.isfinite(getattr(config, k)) else str(getattr(config, k)) for k in config.__slots__},
             calibration={"torque_constant": config.torque_constant, "counts_per_rev": config.counts_per_rev,

@@ -11,7 +11,7 @@ import os
 #: what the steps import (much of it inside their functions; scipy.signal alone takes a second): imported once per
 #: process before the first task, by the local cluster's fork server for all its workers
 WORKER_MODULES = ("numpy", "scipy.signal", "scipy.optimize", "scipy.interpolate", "h5py",
-                  "hilbench.analysis.runfile", "hilbench.bench.verdict", "hilbench.bench.analysis_input",
+                  "hilbench.common.runfile", "hilbench.bench.verdict", "hilbench.bench.analysis_input",
                   "hilbench.analysis.identification.identify", "hilbench.analysis.identification.maxwell_fit",
                   "hilbench.analysis.identification.output_error", "hilbench.analysis.record",
                   "hilbench.bench.campaign_analysis.engine")

@@ -16,14 +16,18 @@ from typing import Any
 
 import numpy as np
 
+from hilbench.bench.campaign_analysis.table import column_units
 from hilbench.bench.storage import outputs
+from hilbench.common.metrics import UNIT, label, percent
+from hilbench.common.units import EFFORT
 
 #: (column, header) of the runs table; a parameter is shown with its standard error
 RUN_COLUMNS = [("key", "run"), ("repeat", "repeat"), ("start_time", "start (UTC)"), ("status", "status"),
-               ("inertia", "J"), ("breakaway", "break-away"), ("viscous", "b"),
-               ("validation_torque_nrmse", "validation NRMSE"), ("verdict", "verdict"),
+               ("inertia", "inertia J"), ("breakaway", "break-away torque"), ("viscous", "viscous coefficient b"),
+               ("validation_torque_nrmse", label("validation")), ("verdict", "verdict"),
                ("temperature_mean", "temperature"), ("error", "reason")]
 SUMMARY_PARAMETERS = ("inertia", "breakaway", "viscous", "validation_torque_nrmse")
+HEADERS = dict(RUN_COLUMNS)
 
 CSS = """
 body{font-family:sans-serif;margin:1.5em;color:#222}
@@ -76,19 +80,32 @@ def _file_png(path: Path) -> str:
     return "data:image/png;base64," + base64.b64encode(path.read_bytes()).decode()
 
 
-def _fmt(v: Any, se: Any = None) -> str:
+def _fmt(v: Any, se: Any = None, col: str = "") -> str:
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
         return ""
+    if _is_fraction(col) and isinstance(v, int | float):  # an error figure: text shows percent (docs/metrics.md)
+        v, se = percent(v), percent(se) if isinstance(se, int | float) else se
     if isinstance(v, float):
         return f"{v:.4g}" + (f" &plusmn; {se:.2g}" if isinstance(se, float) and math.isfinite(se) else "")
     return html.escape(str(v))
+
+
+def _is_fraction(col: str) -> bool:
+    """An NRMSE column: the table keeps the fraction, every text shows it in percent."""
+    return col.endswith("_nrmse")
+
+
+def _header(col: str, head: str, units: dict[str, str], axis: str = "rotary") -> str:
+    head = head.replace("torque", EFFORT[axis]) if col == "breakaway" else head
+    unit = UNIT if _is_fraction(col) else units.get(col, "")
+    return f"{head} ({unit})" if unit and unit != "1" and col != "start_time" else head
 
 
 def run_figure(path: Path) -> str | None:
     """The run's torque and position against time as a data URI (None when the file cannot be read)."""
     import matplotlib.pyplot as plt
 
-    from hilbench.analysis.runfile import open_run
+    from hilbench.common.runfile import open_run
 
     try:
         with open_run(path) as run:
@@ -130,8 +147,8 @@ def repeat_summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, str], drift_pngs: list[Path],
-                  summary: dict[str, Any] | None) -> str:
-    """The HTML text of one campaign's page."""
+                  summary: dict[str, Any] | None, axis: str = "rotary") -> str:
+    """The HTML text of one campaign's page (``axis``: the runs' axis, which names the break-away torque/force)."""
     rows = sorted(rows, key=lambda r: (str(r.get("start_time")), str(r.get("key"))))
     folder = Path(rows[0]["folder"]) if rows and rows[0].get("folder") else None
     plan = []
@@ -159,10 +176,8 @@ def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, st
     parts.append("<h2>Runs</h2><p>Click a column to sort, a run to show its figure. <span id='runs-shown'></span></p>"
                  "<table id='runs'><thead><tr>")
     for col, head in RUN_COLUMNS:
-        unit = units.get(col, "")
-        label = f"{head} ({unit})" if unit and unit not in ("1", "") and col != "start_time" else head
         cls = " class='t'" if col in ("key", "start_time", "status", "verdict", "error") else ""
-        parts.append(f"<th data-sort='1'{cls}>{e(label)}</th>")
+        parts.append(f"<th data-sort='1'{cls}>{e(_header(col, head, units, axis))}</th>")
     parts.append("</tr></thead><tbody>")
     for i, r in enumerate(rows):
         rid = f"r{i}"
@@ -171,7 +186,7 @@ def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, st
         for col, _ in RUN_COLUMNS:
             v = r.get(col)
             sort_value = "" if v is None else str(v)
-            text = _fmt(v, r.get(f"{col}_se"))
+            text = _fmt(v, r.get(f"{col}_se"), col)
             if col == "key":
                 text = f"<a class='run' onclick=\"toggle('{rid}')\">{e(str(v))}</a>"
             left = " class='t'" if col in ("key", "start_time", "status", "verdict", "error") else ""
@@ -184,11 +199,11 @@ def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, st
     parts.append("</tbody></table>")
     parts.append("<h2>Mean &plusmn; standard deviation over repeats</h2><details open><summary>per planned run"
                  "</summary><table><thead><tr><th class='t'>run</th>"
-                 "<th>repeats</th>" + "".join(f"<th>{e(p)} ({e(units.get(p, ''))})</th>" for p in SUMMARY_PARAMETERS)
-                 + "</tr></thead><tbody>")
+                 "<th>repeats</th>" + "".join(f"<th>{e(_header(p, HEADERS[p], units, axis))}</th>"
+                                              for p in SUMMARY_PARAMETERS) + "</tr></thead><tbody>")
     for s in repeat_summary(rows):
         parts.append(f"<tr><td class='t'>{e(s['name'])}</td><td>{s['n']}</td>" + "".join(
-            f"<td>{_fmt(s[p][0], s[p][1])}</td>" for p in SUMMARY_PARAMETERS) + "</tr>")
+            f"<td>{_fmt(s[p][0], s[p][1], p)}</td>" for p in SUMMARY_PARAMETERS) + "</tr>")
     parts.append("</tbody></table></details>")
     if drift_pngs:
         parts.append("<h2>Drift</h2>")
@@ -211,6 +226,8 @@ def write_pages(rows: list[dict[str, Any]], units: dict[str, str], drift_pngs: l
     paths = []
     for campaign, rs in sorted(by_campaign.items()):
         path = out / f"campaign-{campaign}.html"
-        outputs.write_text(path, campaign_page(campaign, rs, units, drift_pngs, summary))
+        axis = next((str(r["axis"]) for r in rs if r.get("axis")), "rotary")  # the units follow the runs' axis
+        outputs.write_text(path, campaign_page(campaign, rs, {**units, **column_units(axis)}, drift_pngs, summary,
+                                               axis))
         paths.append(path)
     return paths

@@ -22,42 +22,44 @@ PROTOCOLS_OF_STEP = {"identify": ("identification", "chirp"), "compare": ("ident
                      "afrf": ("stepped_sine",), "skeleton": ("chirp",)}
 STEPS_DONE = tuple(PROTOCOLS_OF_STEP)
 
-#: result columns of the steps: name -> (Arrow type name, unit). Common columns: engine.BASE_COLUMNS.
+#: result columns of the steps: name -> (Arrow type name, unit). A unit that names a quantity of
+#: ``hilbench.common.units.AXIS_UNITS`` (``inertia``, ``torque``...) follows the run's axis (the row's ``axis``);
+#: the table's metadata gives both units. Common columns: table.BASE_COLUMNS.
 COLUMNS: dict[str, tuple[str, str]] = {
-    "inertia": ("float64", "kg*m^2"), "inertia_se": ("float64", "kg*m^2"),
-    "breakaway": ("float64", "N*m"), "breakaway_se": ("float64", "N*m"),
-    "viscous": ("float64", "N*m*s/rad"), "viscous_se": ("float64", "N*m*s/rad"),
-    "coulomb": ("float64", "N*m"), "coulomb_se": ("float64", "N*m"),
-    "offset": ("float64", "N*m"), "offset_se": ("float64", "N*m"),
+    "inertia": ("float64", "inertia"), "inertia_se": ("float64", "inertia"),
+    "breakaway": ("float64", "torque"), "breakaway_se": ("float64", "torque"),
+    "viscous": ("float64", "viscous"), "viscous_se": ("float64", "viscous"),
+    "coulomb": ("float64", "torque"), "coulomb_se": ("float64", "torque"),
+    "offset": ("float64", "torque"), "offset_se": ("float64", "torque"),
     "n_elements": ("int64", "1"),
     "train_torque_nrmse": ("float64", "1"), "validation_torque_nrmse": ("float64", "1"),
     "validation_position_nrmse": ("float64", "1"), "validation_position_nrmse_segmented": ("float64", "1"),
     "verdict": ("string", ""),
     # compare: the family with the lowest validation torque NRMSE; residual: the terms of the final model
     "model": ("string", ""), "validation_torque_nrmse_start": ("float64", "1"),
-    # presliding: the quantities of docs/presliding.md with their standard uncertainties (axis units: rotary
-    # N*m, N*m/rad, rad; linear N, N/m, m) and the force simulated from the displacement against the measured one
-    "presliding_breakaway": ("float64", "N*m"), "presliding_breakaway_se": ("float64", "N*m"),
-    "initial_stiffness": ("float64", "N*m/rad"), "initial_stiffness_se": ("float64", "N*m/rad"),
-    "presliding_distance": ("float64", "rad"), "presliding_distance_se": ("float64", "rad"),
+    # presliding: the quantities of docs/presliding.md with their standard uncertainties and the force simulated
+    # from the displacement against the measured one
+    "presliding_breakaway": ("float64", "torque"), "presliding_breakaway_se": ("float64", "torque"),
+    "initial_stiffness": ("float64", "stiffness"), "initial_stiffness_se": ("float64", "stiffness"),
+    "presliding_distance": ("float64", "position"), "presliding_distance_se": ("float64", "position"),
     "validation_force_relative_error": ("float64", "1"),
-    # afrf: the measured grid's extent, the first-harmonic compliance |X1/T1| (rotary rad/(N*m), linear m/N) at
+    # afrf: the measured grid's extent, the first-harmonic compliance |X1/T1| at
     # the lowest frequency of the lowest and of the highest amplitude, the largest |X3|/|X1| and period-to-period
     # change over the grid
     "afrf_steps": ("int64", "1"), "afrf_frequency_min": ("float64", "Hz"), "afrf_frequency_max": ("float64", "Hz"),
-    "afrf_compliance_low_amplitude": ("float64", "rad/(N*m)"),
-    "afrf_compliance_high_amplitude": ("float64", "rad/(N*m)"),
+    "afrf_compliance_low_amplitude": ("float64", "compliance"),
+    "afrf_compliance_high_amplitude": ("float64", "compliance"),
     "afrf_third_harmonic_ratio_max": ("float64", "1"), "afrf_convergence_max": ("float64", "1"),
-    # skeleton: the composed amplitude range (rotary rad, linear m) and the equivalent stiffness k_eq at its
-    # smallest and largest amplitude bins (rotary N*m/rad, linear N/m)
+    # skeleton: the composed amplitude range and the equivalent stiffness k_eq at its smallest and largest
+    # amplitude bins
     "skeleton_bins": ("int64", "1"),
-    "skeleton_amplitude_min": ("float64", "rad"), "skeleton_amplitude_max": ("float64", "rad"),
-    "skeleton_stiffness_low_amplitude": ("float64", "N*m/rad"),
-    "skeleton_stiffness_high_amplitude": ("float64", "N*m/rad"),
+    "skeleton_amplitude_min": ("float64", "position"), "skeleton_amplitude_max": ("float64", "position"),
+    "skeleton_stiffness_low_amplitude": ("float64", "stiffness"),
+    "skeleton_stiffness_high_amplitude": ("float64", "stiffness"),
     # afrf, skeleton, presliding: the analysis's warnings, "; "-separated (presliding: the span of a long record
     # analysed, fewer than 4 reversals)
     "warnings": ("string", ""),
-    "temperature_mean": ("float64", "degC"), "sliding_distance": ("float64", "rad"),
+    "temperature_mean": ("float64", "degC"), "sliding_distance": ("float64", "position"),
     "samples": ("int64", "1"), "duration": ("float64", "s"),
 }
 
@@ -273,6 +275,6 @@ def steps_for(protocol: str, wanted: tuple[str, ...]) -> list[str]:
 
 def run_meta(path: str) -> dict[str, Any]:
     """The run file's own identity: run id, start time and operator (its root attributes alone)."""
-    from hilbench.analysis.runfile.identity import run_identity
+    from hilbench.common.runfile.identity import run_identity
 
     return run_identity(path)

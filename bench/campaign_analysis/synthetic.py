@@ -1,5 +1,5 @@
 """Campaign folders of short simulated runs, written without a device: the C plant (with the drift laws of
-:mod:`hilbench.firmware_sim.engine.drift`) through :class:`~hilbench.analysis.runfile.RunWriter`, plus an ``index.json``
+:mod:`hilbench.firmware_sim.engine.drift`) through :class:`~hilbench.common.runfile.RunWriter`, plus an ``index.json``
 as ``hilbench campaign`` writes it. For tests and benchmarks: 200 runs take seconds, not the hours a device
 would take in real time."""
 
@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.acquisition import excitations
 from hilbench.bench.acquisition.campaign import INDEX_NAME
+from hilbench.common.runfile import RunWriter
 from hilbench.firmware_sim.engine.drift import Drift, DriftState, rest, simulate_drifting
 from hilbench.firmware_sim.engine.friction_models import dc_motor
 from hilbench.firmware_sim.engine.plant import PlantParams

@@ -25,6 +25,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from hilbench.bench.campaign_analysis.steps import COLUMNS
+from hilbench.common.units import AXIS_UNITS, axis_unit
 
 TABLE_NAME = "results.parquet"
 PARTS = "parts"
@@ -34,6 +35,7 @@ KEY_COLUMNS = ("campaign", "key", "content_hash", "step", "settings_hash", "hilb
 #: columns every row has, with their Arrow types and units
 BASE_COLUMNS: dict[str, tuple[str, str]] = {
     "campaign": ("string", ""), "folder": ("string", ""), "run_id": ("string", ""), "key": ("string", ""),
+    "axis": ("string", ""),
     "name": ("string", ""), "repeat": ("int64", "1"), "protocol": ("string", ""), "file": ("string", ""),
     "start_time": ("string", "ISO 8601 UTC"), "operator": ("string", ""), "environment": ("string", "JSON"),
     "ambient": ("float64", "degC"), "load": ("float64", "kg"),
@@ -42,7 +44,22 @@ BASE_COLUMNS: dict[str, tuple[str, str]] = {
 }
 ALL_COLUMNS = {**BASE_COLUMNS, **COLUMNS}
 _TYPES = {"string": pa.string(), "float64": pa.float64(), "int64": pa.int64()}
-SCHEMA = pa.schema([pa.field(name, _TYPES[kind], metadata={"unit": unit}) for name, (kind, unit) in
+
+
+def column_units(axis: str = "rotary") -> dict[str, str]:
+    """The unit of every column in a row of a run on ``axis``: a column of an axis quantity follows it."""
+    return {name: axis_unit(unit, axis) if unit in AXIS_UNITS[axis] else unit
+            for name, (_kind, unit) in ALL_COLUMNS.items()}
+
+
+def _metadata(unit: str) -> dict[str, str]:
+    """A column's Parquet metadata: its unit, and for an axis quantity the linear unit and the column it follows."""
+    if unit not in AXIS_UNITS["rotary"]:
+        return {"unit": unit}
+    return {"unit": axis_unit(unit, "rotary"), "unit_linear": axis_unit(unit, "linear"), "unit_follows": "axis"}
+
+
+SCHEMA = pa.schema([pa.field(name, _TYPES[kind], metadata=_metadata(unit)) for name, (kind, unit) in
                     ALL_COLUMNS.items()])
 ORDER = ("campaign", "key", "step")
 

@@ -86,7 +86,7 @@ def identification(run, options: dict | None = None) -> AnalysisResult:
     """Maxwell-slip identification of a :class:`hilbench.analysis.record.Record`, by the same call as ``hilbench
     identify`` (``hilbench.analysis.identification.analyse``), so both report the same numbers (docs/metrics.md)."""
     analyse = _entry("identification")
-    from hilbench.analysis.metrics import percent
+    from hilbench.common.metrics import percent
 
     position = run.position
     res = analyse(run)
@@ -96,12 +96,12 @@ def identification(run, options: dict | None = None) -> AnalysisResult:
     u = d["units"]
     numbers = [
         ("inertia J", f"{m.inertia:.6g}", u["inertia"]),
-        ("viscous b", f"{m.viscous:.6g}", u["viscous"]),
-        ("Coulomb Fc", f"{m.coulomb:.6g}", u["coulomb"]),
+        ("viscous coefficient b", f"{m.viscous:.6g}", u["viscous"]),
+        ("Coulomb level Fc", f"{m.coulomb:.6g}", u["coulomb"]),
         ("offset c0", f"{m.offset:.6g}", u["offset"]),
         ("spring K", f"{m.spring:.6g}", u["spring"]),
         ("Maxwell-slip elements N", str(m.ms_stiffness.size), ""),
-        ("breakaway sum W_i + Fc", f"{m.breakaway:.6g}", u["coulomb"]),
+        ("break-away torque (sum W_i + Fc)", f"{m.breakaway:.6g}", u["coulomb"]),
         ("train torque NRMSE", f"{percent(res.figures['train_torque_nrmse']):.3g}", "%"),
         ("filter cut-off", f"{fit.cutoff:.4g}", "Hz"),
     ]
@@ -215,9 +215,9 @@ def residual(run, options: dict | None = None) -> AnalysisResult:
     cross-validation (no separate validation run). ``options['start_model']``: a model file (``hilbench identify``
     or compare's maxwell_slip) to start from, unrefitted, as ``residual --start MODEL.json`` does; its own figure is
     shown as identify reports it."""
-    from hilbench.analysis.metrics import percent
     from hilbench.analysis.models.model_file import read_model
     from hilbench.analysis.residual import ResidualSettings, analyse
+    from hilbench.common.metrics import percent
 
     start_file = (options or {}).get("start_model")
     settings = ResidualSettings()

@@ -10,14 +10,31 @@ from typing import Any
 from PySide6 import QtCore, QtWidgets
 
 from hilbench.bench.gui.worker import one_line
+from hilbench.common.metrics import UNIT
+from hilbench.common.units import EFFORT
 
 COLUMNS = ("run", "protocol", "duration (s)", "state", "progress")
 #: the results table: (header, column of results.parquet, scale to the shown unit); identify rows,
-#: numbered in start order
+#: numbered in start order. The headers get their units from the runs' axis (:func:`result_headers`).
 RESULT_COLUMNS = (("#", "order", 1.0), ("run", "key", None), ("repeat", "repeat", None), ("status", "status", None),
-                  ("J (kg*m^2)", "inertia", 1.0), ("break-away (N*m)", "breakaway", 1.0),
-                  ("b (N*m*s/rad)", "viscous", 1.0), ("validation torque NRMSE (%)", "validation_torque_nrmse", 100.0),
-                  ("winding (degC)", "temperature_mean", 1.0), ("verdict / reason", "verdict", None))
+                  ("inertia J", "inertia", 1.0), ("break-away torque", "breakaway", 1.0),
+                  ("viscous coefficient b", "viscous", 1.0),
+                  ("validation torque NRMSE", "validation_torque_nrmse", 100.0),
+                  ("winding", "temperature_mean", 1.0), ("verdict / reason", "verdict", None))
+
+
+def result_headers(axis: str = "rotary") -> list[str]:
+    """The results table's headers with the units of a run on ``axis`` (a break-away force on a linear one) and
+    percent for an NRMSE (the table keeps the fraction: scale 100)."""
+    from hilbench.bench.campaign_analysis.table import column_units
+
+    units = column_units(axis)
+    out = []
+    for head, column, scale in RESULT_COLUMNS:
+        unit = UNIT if column.endswith("_nrmse") else units.get(column, "")
+        head = head.replace("torque", EFFORT[axis]) if column == "breakaway" else head
+        out.append(f"{head} ({unit})" if scale is not None and unit not in ("", "1") else head)
+    return out
 
 
 class CampaignView(QtWidgets.QWidget):
@@ -179,7 +196,7 @@ class CampaignResults(QtWidgets.QWidget):
         self.status = QtWidgets.QLabel("")
         self.status.setWordWrap(True)
         self.table = QtWidgets.QTableWidget(0, len(RESULT_COLUMNS))
-        self.table.setHorizontalHeaderLabels([c[0] for c in RESULT_COLUMNS])
+        self.table.setHorizontalHeaderLabels(result_headers())
         self.table.verticalHeader().setVisible(False)
         self.table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
         self.table.setSortingEnabled(True)
@@ -226,6 +243,8 @@ class CampaignResults(QtWidgets.QWidget):
 
     def _fill_table(self) -> None:
         self.table.setSortingEnabled(False)
+        axis = next((str(r["axis"]) for r in self.rows if r.get("axis")), "rotary")  # units follow the runs' axis
+        self.table.setHorizontalHeaderLabels(result_headers(axis))
         self.table.setRowCount(len(self.rows))
         for i, row in enumerate(self.rows):
             for j, (_header, column, scale) in enumerate(RESULT_COLUMNS):

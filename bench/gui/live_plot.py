@@ -16,19 +16,22 @@ from PySide6 import QtCore, QtWidgets
 
 from hilbench.analysis.figure_style import engineering
 from hilbench.bench.gui.display_buffer import RingBuffer, minmax_decimate
+from hilbench.common.units import AXIS_UNITS
 
 #: a setpoint: grey and dashed, drawn under the measured trace (a colour and a line style of its own)
 SETPOINT = {"color": "#7f7f7f", "width": 1.5, "style": QtCore.Qt.PenStyle.DashLine}
 
+#: a device streams at its (rotary) load: the live panels' units
+ROTARY = AXIS_UNITS["rotary"]
 #: (plot title, SI unit, [(channel, pen, legend name or None), ...]); the position setpoint comes only from a
 #: position-mode run (it is NaN, and not drawn, otherwise)
 PANELS = (
     ("current", "A", (("current_cmd", SETPOINT, "setpoint"),
                       ("current_meas", {"color": "#1f77b4", "width": 1}, "measured"))),
-    ("torque", "N*m", (("torque", {"color": "#d62728", "width": 1}, None),)),
-    ("position", "rad", (("position_cmd", SETPOINT, "setpoint"),
+    ("torque", ROTARY["torque"], (("torque", {"color": "#d62728", "width": 1}, None),)),
+    ("position", ROTARY["position"], (("position_cmd", SETPOINT, "setpoint"),
                          ("position", {"color": "#2ca02c", "width": 1}, "measured"))),
-    ("velocity", "rad/s", (("velocity", {"color": "#9467bd", "width": 1}, None),)),
+    ("velocity", ROTARY["velocity"], (("velocity", {"color": "#9467bd", "width": 1}, None),)),
 )
 CHANNELS = tuple(name for _, _, traces in PANELS for name, _, _ in traces)
 

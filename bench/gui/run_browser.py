@@ -268,7 +268,7 @@ class RunBrowser(QtWidgets.QWidget):
 
     def open(self, path: str) -> bool:
         """Open ``path``; a bad file gives a message in the window, never an exception."""
-        from hilbench.analysis.runfile import open_run
+        from hilbench.common.runfile import open_run
 
         path = str(path).strip()
         if not path:

@@ -1,7 +1,7 @@
 """Import measured data from other benches into run files (schema v1).
 
 Loaders read a source file into an :class:`ImportedRun` (arrays + metadata, nothing written);
-:func:`write_run` writes it with :class:`analysis.runfile.RunWriter`. Formats:
+:func:`write_run` writes it with :class:`hilbench.common.runfile.RunWriter`. Formats:
 
 - ``emps``: EMPS benchmark (Janot, Gautier, Brunot 2019), MAT v5, 1 kHz. A **linear** axis:
   position ``qm`` (m), reference ``qg`` (m), force = ``gtau``·``vir`` (N) in the ``torque`` channel, the raw
@@ -29,9 +29,10 @@ import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.reproductions.emps import EMPS_VARIABLES, parse_emps
-from hilbench.analysis.runfile import CHANNELS, TORQUE_TIMINGS, RunWriter
 from hilbench.bench.errors import BenchError
 from hilbench.bench.storage.import_units import COUNTS, factor_to_si
+from hilbench.common.runfile import CHANNELS, TORQUE_TIMINGS, RunWriter
+from hilbench.common.units import AXIS_UNITS
 
 EMPS_CITATION = (
     "A. Janot, M. Gautier, M. Brunot, 'Data Set and Reference Models of EMPS', 2019 Workshop on Nonlinear "
@@ -52,7 +53,7 @@ class ImportedRun:
         axis: ``rotary`` or ``linear``.
         sample_rate: Hz.
         samples: channel name -> 1-D array, equal lengths; includes ``sample_index`` and ``t`` (s).
-        custom_units: units of channels outside :data:`analysis.runfile.CHANNELS`.
+        custom_units: units of channels outside :data:`hilbench.common.runfile.CHANNELS`.
         torque_timing: the declared timing of the torque channel (docs/science.md §6), stored in the run file;
             None when the source does not say.
         device, calibration, protocol_params: JSON-able dicts; protocol_name is ``import:<format>``.
@@ -262,8 +263,8 @@ def load_hsm150(path: str | os.PathLike) -> ImportedRun:
             custom[name.lower()] = "unknown"
     calibration: dict[str, Any] = {}
     units = {
-        "J": "kg*m^2",
-        "B": "N*m*s/rad",
+        "J": AXIS_UNITS["rotary"]["inertia"],
+        "B": AXIS_UNITS["rotary"]["viscous"],
         "Cu": "N*m/A",
         "N": "lines/rev",
         "Tvz": "s",

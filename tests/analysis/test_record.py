@@ -9,7 +9,7 @@ import pytest
 
 from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.record import IncompleteRecordError, load_record
-from hilbench.analysis.runfile import RunWriter
+from hilbench.common.runfile import RunWriter
 
 
 def _write(path, n=5000, finish="completed", planned=None, events=()):

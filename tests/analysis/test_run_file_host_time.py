@@ -130,16 +130,16 @@ def test_identification_on_host_time_matches_the_device_clocked_run(runs):
 
 
 def test_identify_command_resamples_a_host_sampled_run(runs, tmp_path, capsys):
-    from hilbench.analysis.runfile import RunWriter
     from hilbench.bench.cli import main
+    from hilbench.common.runfile import RunWriter
 
     tau, x = runs["jittered"]
     host_time = runs["host_time"]
     n = x.size
     path = tmp_path / "drive.h5"
     w = RunWriter(path, sample_rate=float(RATE), channels=("t", "sample_index", "current_cmd", "current",
-                                                           "torque", "position", "counts"),
-                  custom_channels={"host_time": "s"}, device={"protocol": "CiA 402 over CANopen",
+                                                           "torque", "position", "counts", "host_time"),
+                  device={"protocol": "CiA 402 over CANopen",
                                                               "sample_times": "host_time"},
                   calibration={"torque_constant": KT}, protocol_name="identification")
     k = np.arange(n)

@@ -10,8 +10,8 @@ import time
 import numpy as np
 import pytest
 
-from hilbench.analysis.runfile import open_run
 from hilbench.bench.acquisition.campaign import CampaignError, load_campaign
+from hilbench.common.runfile import open_run
 
 GOOD = """
 [defaults]

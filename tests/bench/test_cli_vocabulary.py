@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from hilbench.analysis.runfile import open_run
 from hilbench.bench.acquisition.protocols import PROTOCOLS
 from hilbench.bench.acquisition.user_config import config_path, default_device
 from hilbench.bench.cli import build_parser, main, split_global_flags
+from hilbench.common.runfile import open_run
 from tests.bench.test_identify_command import _write_run
 
 

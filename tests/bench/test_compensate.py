@@ -8,8 +8,8 @@ import os
 import numpy as np
 import pytest
 
-from hilbench.analysis.runfile import RunWriter
 from hilbench.bench import cli
+from hilbench.common.runfile import RunWriter
 from hilbench.firmware_sim.engine.friction_models import dc_motor
 from tests.figure_checks import recording_figures
 

@@ -1,12 +1,12 @@
-"""``hilbench identify`` end to end on run files written with analysis.runfile (bench uses analysis)."""
+"""``hilbench identify`` end to end on run files written with hilbench.common.runfile (bench uses analysis)."""
 
 import json
 import re
 
 import numpy as np
 
-from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.cli import main
+from hilbench.common.runfile import RunWriter
 from hilbench.firmware_sim.engine.friction_models import dc_motor
 from hilbench.firmware_sim.engine.plant import simulate
 from tests import real_data
@@ -54,7 +54,7 @@ def test_identify_cli_writes_model_and_plots(tmp_path, capsys):
     assert abs(doc["parameters"]["inertia"] / p.inertia - 1) < 0.02
     assert doc["figures"]["validation_torque_nrmse"] < 0.05
     assert (tmp_path / "plots" / "virgin_curve.png").is_file()
-    assert "validation NRMSE" in capsys.readouterr().out
+    assert "validation torque NRMSE" in capsys.readouterr().out
 
 
 def test_identify_cli_missing_torque_is_a_one_line_error(tmp_path, capsys):

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from scipy.io import loadmat, savemat
 
-from hilbench.analysis.runfile import open_run
 from hilbench.bench.cli import main as bench_main
 from hilbench.bench.storage import importers
+from hilbench.common.runfile import open_run
 from tests import real_data
 
 EMPS, EMPS_PULSES = real_data.EMPS_TRAIN, real_data.EMPS_TEST

@@ -14,9 +14,9 @@ import pytest
 from scipy.io import savemat
 
 from hilbench.analysis.record import load_record
-from hilbench.analysis.runfile import open_run, run_torque_timing
 from hilbench.bench.cli import main
 from hilbench.bench.storage import importers
+from hilbench.common.runfile import open_run, run_torque_timing
 from tests import real_data
 from tests.bench.test_identify_command import _write_run
 

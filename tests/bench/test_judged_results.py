@@ -9,9 +9,10 @@ import h5py
 import numpy as np
 import pytest
 
-from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.cli import main
-from hilbench.bench.verdict import FAIR_TORQUE_PCT, GOOD_TORQUE_PCT, judge
+from hilbench.bench.verdict import judge
+from hilbench.common.metrics import FAIR_TORQUE_PCT, GOOD_TORQUE_PCT
+from hilbench.common.runfile import RunWriter
 from hilbench.firmware_sim.engine.friction_models import dc_motor
 from hilbench.firmware_sim.engine.plant import simulate
 from tests.analysis.identification.test_identification import random_enveloped
@@ -52,8 +53,8 @@ def test_identify_and_residual_read_the_same_channel_and_report_the_same_metric(
     assert model["data"]["train"]["torque_timing"] == report["inputs"]["timing"] == "hold_previous"
     assert "on torque (hold_previous)" in ident and "on torque (hold_previous)" in resid
     # the same metric, by name and definition: rms(error)/std(measured) in %
-    assert "validation NRMSE torque" in ident and "validation torque NRMSE" in resid
-    i_pct = float(re.search(r"validation NRMSE torque ([\d.]+) %", ident).group(1))
+    assert "validation torque NRMSE" in ident and "validation torque NRMSE" in resid
+    i_pct = float(re.search(r"validation torque NRMSE ([\d.]+) %", ident).group(1))
     assert i_pct == pytest.approx(100 * model["figures"]["validation_torque_nrmse"], rel=2e-3)
     r_pct = float(re.search(r"validation torque NRMSE ([\d.]+) %", resid).group(1))
     assert r_pct == pytest.approx(100 * report["error_before"]["validation"]["torque_nrmse"], rel=2e-3)
@@ -62,11 +63,11 @@ def test_identify_and_residual_read_the_same_channel_and_report_the_same_metric(
 def test_every_summary_number_has_a_unit(runs, capsys):
     assert main(["identify", str(runs / "a.h5"), "--json", str(runs / "m2.json"), "--coulomb"]) == 0
     line = next(ln for ln in capsys.readouterr().out.splitlines() if " J = " in ln)
-    for part in ("J = ", "break-away ", "b = ", "Fc = "):
+    for part in ("J = ", "break-away torque ", "b = ", "Fc = "):
         number = re.search(re.escape(part) + r"(-?[\d.e+-]+) (\S+)", line)
         assert number, (part, line)
         assert number.group(2).rstrip(",;") in ("kg*m^2", "N*m", "N*m*s/rad"), line
-    assert re.search(r"NRMSE torque [\d.]+ % position [\d.]+ %", line)
+    assert re.search(r"train torque NRMSE [\d.]+ %, position NRMSE [\d.]+ %", line)
 
 
 def test_a_poor_fit_gets_a_verdict_that_says_what_to_try(runs, capsys):
@@ -84,7 +85,7 @@ def test_verdict_bands():
     assert judge(FAIR_TORQUE_PCT).startswith("verdict: fair") and "hilbench residual" in judge(FAIR_TORQUE_PCT)
     assert judge(FAIR_TORQUE_PCT + 1).startswith("verdict: poor")
     drift = judge(3.0, 205.0, 12.0)  # the position NRMSE of 2.05, which got no comment
-    assert "drifts (NRMSE 205 %, segmented 12 %)" in drift and "try:" in drift
+    assert "drifts (position NRMSE 205 %, segmented 12 %)" in drift and "try:" in drift
     assert "no torque error" in judge(None)
 
 
@@ -140,7 +141,7 @@ def test_skeleton_bins_bounded_before_allocation(tmp_path, capsys):
 
 def test_skeleton_never_returns_a_negative_stiffness_silently(tmp_path, capsys):
     # the paper's system without its spring, and --spring subtracting one it does not have: k_eq < 0
-    from hilbench.analysis.runfile import RunWriter as Writer
+    from hilbench.common.runfile import RunWriter as Writer
     from hilbench.firmware_sim.engine.friction_models import paper_system
 
     p = paper_system(spring=0.0)

@@ -33,8 +33,8 @@ def test_identify_the_gui_and_a_script_give_the_same_figures(runs, capsys):
     out = capsys.readouterr().out
     doc = json.loads((runs / "m.json").read_text())["figures"]
     train, val = 100 * doc["train_torque_nrmse"], 100 * doc["validation_torque_nrmse"]
-    assert _pct(out, "train NRMSE torque") == pytest.approx(train, rel=5e-3)  # printed to 3 digits
-    assert _pct(out, "validation NRMSE torque") == pytest.approx(val, rel=5e-3)
+    assert _pct(out, "train torque NRMSE") == pytest.approx(train, rel=5e-3)  # printed to 3 digits
+    assert _pct(out, "validation torque NRMSE") == pytest.approx(val, rel=5e-3)
     script = analyse(load_record(runs / "a.h5"), validation=load_record(runs / "b.h5")).figures
     assert 100 * script["validation_torque_nrmse"] == pytest.approx(val, rel=1e-12)
     shown = {q: (v, u) for q, v, u in identification(load_record(runs / "a.h5")).numbers}

@@ -1,4 +1,4 @@
-"""``hilbench skeleton`` on run files of the paper's system under chirps (written with analysis.runfile)."""
+"""``hilbench skeleton`` on run files of the paper's system under chirps (written with hilbench.common.runfile)."""
 
 import json
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from hilbench.analysis.reproductions.paper import maxwell_slip_closed_form
-from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.cli import main
+from hilbench.common.runfile import RunWriter
 from hilbench.firmware_sim.engine.friction_models import paper_system
 from hilbench.firmware_sim.engine.plant import simulate
 

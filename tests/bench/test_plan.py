@@ -14,12 +14,12 @@ import math
 import numpy as np
 import pytest
 
-from hilbench.analysis.runfile import open_run
 from hilbench.bench.acquisition.breakaway_probe import BreakawayProbe, ProbeResult, smoothed_velocity
 from hilbench.bench.acquisition.excitations import lowpass_uniform_noise, random_enveloped
 from hilbench.bench.acquisition.planning import LIMIT_SHARE, plan_experiments, size_protocols
 from hilbench.bench.acquisition.runner import DeviceSettings
 from hilbench.bench.cli import main
+from hilbench.common.runfile import open_run
 from hilbench.firmware_sim.engine.friction_models import (
     DC_MOTOR_BREAKAWAY,
     DC_MOTOR_INERTIA,

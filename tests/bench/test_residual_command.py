@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.cli import main
+from hilbench.common.runfile import RunWriter
 from hilbench.firmware_sim.engine.friction_models import dc_motor
 from hilbench.firmware_sim.engine.plant import simulate
 from tests.analysis.residual.test_residual_loop import FS, excitation

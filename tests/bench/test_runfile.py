@@ -9,9 +9,9 @@ import h5py
 import numpy as np
 import pytest
 
-from hilbench.analysis import runfile as rf
 from hilbench.bench.acquisition.excitations import stepped_sine
 from hilbench.bench.cli import main as bench_main
+from hilbench.common import runfile as rf
 
 
 def _block(start: int, n: int, fs: float = 1000.0) -> dict[str, np.ndarray]:

@@ -14,8 +14,8 @@ import h5py
 import numpy as np
 import pytest
 
-from hilbench.analysis import runfile as rf
 from hilbench.bench.cli import main as bench_main
+from hilbench.common import runfile as rf
 
 FS = 10_000.0
 
@@ -23,7 +23,7 @@ WRITER = textwrap.dedent(
     """
     import sys
     import numpy as np
-    from hilbench.analysis.runfile import RunWriter
+    from hilbench.common.runfile import RunWriter
 
     fs = float(sys.argv[2])
     with RunWriter(sys.argv[1], sample_rate=fs, protocol_name="crash-test", operator="pytest") as w:

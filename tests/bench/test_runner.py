@@ -10,9 +10,9 @@ import time
 import numpy as np
 import pytest
 
-from hilbench.analysis.runfile import open_run
 from hilbench.bench.acquisition.protocols import Identification, ProtocolError, SteppedSine
 from hilbench.bench.acquisition.runner import Bench, DeviceSettings, RunControl
+from hilbench.common.runfile import open_run
 from hilbench.drivers import protocol as wire
 
 LOCKSTEP = "sim://?pacing=lockstep"

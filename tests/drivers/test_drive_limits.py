@@ -17,9 +17,9 @@ import h5py
 import numpy as np
 import pytest
 
-from hilbench.analysis.runfile import open_run
 from hilbench.bench.acquisition.protocols import Identification
 from hilbench.bench.acquisition.runner import Bench, DeviceSettings
+from hilbench.common.runfile import open_run
 from hilbench.drivers import cia402 as c
 from hilbench.drivers import odrive_can as o
 from hilbench.drivers import protocol as p

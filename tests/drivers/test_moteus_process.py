@@ -15,7 +15,7 @@ import pytest
 
 from hilbench.analysis.identification.identify import RunArrays, identify
 from hilbench.analysis.identification.maxwell_fit import LipSettings
-from hilbench.analysis.runfile import open_run
+from hilbench.common.runfile import open_run
 from hilbench.firmware_sim.devices.sim_config import load_sim_config, substeps_for
 from hilbench.firmware_sim.engine.plant import simulate
 

@@ -32,7 +32,7 @@ def one_line_error(proc: subprocess.CompletedProcess) -> str:
 
 def wait_for_samples(path: Path, n: int, timeout: float = 60.0) -> int:
     """Wait until the live run file at ``path`` holds ``n`` flushed samples; returns how many it holds."""
-    from hilbench.analysis.runfile import RunFileError, open_run
+    from hilbench.common.runfile import RunFileError, open_run
 
     deadline = time.monotonic() + timeout
     have = 0

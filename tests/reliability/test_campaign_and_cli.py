@@ -7,8 +7,8 @@ import time
 
 import pytest
 
-from hilbench.analysis.runfile import open_run
 from hilbench.bench.acquisition.protocols import MAX_PROTOCOL_SAMPLES, Identification, ProtocolError
+from hilbench.common.runfile import open_run
 from hilbench.drivers import protocol as p
 from hilbench.drivers.amplifier import Amplifier
 from hilbench.drivers.errors import DriverError

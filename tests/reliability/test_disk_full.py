@@ -5,7 +5,7 @@ deterministic) and nothing made up; nothing segfaults; no lock or partial file i
 import numpy as np
 import pytest
 
-from hilbench.analysis.runfile import open_run
+from hilbench.common.runfile import open_run
 
 RUN = ["run", "identify", "--device", "sim://?pacing=lockstep", "--duration", "20", "--quiet"]
 #: real-time pacing, so that a kill lands mid-run (a lockstep run of 20 s can complete between two polls)
@@ -95,7 +95,7 @@ def test_setpoints_that_do_not_fit_end_the_new_file_failed(small_disk):
     pretend to be a run in progress."""
     import pytest
 
-    from hilbench.analysis.runfile import RunFileError, RunWriter
+    from hilbench.common.runfile import RunFileError, RunWriter
 
     disk = small_disk(2 << 20, "tiny")
     if not disk.mounted:

@@ -4,7 +4,7 @@ mean something)."""
 import numpy as np
 
 from benchmarks.bench_drive_soak import KT, RATED, check_drive_file
-from hilbench.analysis.runfile import DEVICE_CHANNELS, RunWriter
+from hilbench.common.runfile import DEVICE_CHANNELS, RunWriter
 
 
 def _write(path, index, cmd, setpoints):

@@ -4,7 +4,7 @@ import signal
 
 import pytest
 
-from hilbench.analysis.runfile import lock_path, open_run
+from hilbench.common.runfile import lock_path, open_run
 from hilbench.drivers import protocol as p
 from hilbench.drivers.device_url import open_device
 from hilbench.drivers.errors import PortBusyError

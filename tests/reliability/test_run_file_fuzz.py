@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import array_shapes, arrays
 
-from hilbench.analysis.runfile import CHANNELS, RunFileError, RunWriter, open_run
+from hilbench.common.runfile import CHANNELS, RunFileError, RunWriter, open_run
 
 text = st.text(st.characters(codec=None), max_size=40)  # any code point, lone surrogates included
 scalars = st.one_of(st.none(), st.booleans(), st.integers(min_value=-(2**70), max_value=2**70),

@@ -15,7 +15,7 @@ import pytest
 
 from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.record import load_record
-from hilbench.analysis.runfile import MAX_SAMPLES, RunFileError, RunWriter, open_run, repair
+from hilbench.common.runfile import MAX_SAMPLES, RunFileError, RunWriter, open_run, repair
 from tests.reliability.cli import ENV, hilbench, one_line_error
 
 
@@ -56,7 +56,7 @@ def test_overwrite_replaces_only_with_a_complete_file(tmp_path):
 
 CREATE = r"""
 import sys, numpy as np
-from hilbench.analysis.runfile import RunWriter
+from hilbench.common.runfile import RunWriter
 u = np.random.default_rng(0).normal(size=4_000_000)  # 32 MB of setpoints: seconds to compress and write
 print("go", flush=True)
 RunWriter(sys.argv[1], sample_rate=10000.0, protocol_arrays={"setpoints": u})

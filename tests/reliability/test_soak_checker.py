@@ -3,7 +3,7 @@
 import numpy as np
 
 from benchmarks.bench_soak import check_file
-from hilbench.analysis.runfile import DEVICE_CHANNELS, RunWriter
+from hilbench.common.runfile import DEVICE_CHANNELS, RunWriter
 
 
 def _write(path, index, cmd, setpoints):

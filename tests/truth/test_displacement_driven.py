@@ -71,7 +71,7 @@ def test_residual_report_gives_force_figures(tribometer):
     assert va["force_rel_pct"] < 2.0
     assert doc["effects_added"] == []  # the truth is pure Maxwell-slip: nothing is missing
     assert (rep / "force.png").stat().st_size > 10_000
-    assert "force_rel_pct" in (rep / "summary.md").read_text()
+    assert "force relative error (%)" in (rep / "summary.md").read_text()
 
 
 def test_negative_inertia_is_one_line_and_exit_2(tribometer, capsys):

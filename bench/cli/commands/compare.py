@@ -50,9 +50,10 @@ def _records(args, budget: int) -> tuple:
     reduced by the largest whole factor that keeps at least 5 kHz while reading chunk by chunk, and cut to the
     first samples of each run that fit when even that does not (``compare.reading_plan``, docs/long-runs.md)."""
     from hilbench.analysis.models.compare import cost, reading_plan
-    from hilbench.analysis.record import decimated_record, mib, span_note, stream_record
+    from hilbench.analysis.record import decimated_record, span_note, stream_record
     from hilbench.bench.analysis_input import load, read_decimated
     from hilbench.bench.storage import outputs
+    from hilbench.common.units import mib
 
     opts = {"torque_channel": args.torque_channel, "timing": args.torque_timing or "auto",
             "allow_incomplete": args.allow_incomplete}

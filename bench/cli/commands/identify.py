@@ -84,7 +84,8 @@ def _streamed(args, budget: int):
     samples = train[0].n_samples + (val[0].n_samples if val else 0)
     if array_cost(samples) <= budget:
         return None
-    mib = lambda b: f"{b / (1 << 20):.0f} MiB"  # noqa: E731
+    from hilbench.common.units import mib
+
     if train[1] is None or (val is not None and val[1] is None):
         raise BenchError(f"{samples} samples need about {mib(array_cost(samples))} read whole, over --memory "
                          f"{mib(budget)}; a host-clocked run is resampled whole: raise --memory")
@@ -104,12 +105,13 @@ def run(args) -> int:
     from hilbench.analysis.identification import analyse, analyse_stream, report
     from hilbench.analysis.identification.maxwell_fit import LipSettings
     from hilbench.analysis.identification.plots import plot_files
-    from hilbench.analysis.models.friction_model import AXES
     from hilbench.analysis.models.model_file import model_document
     from hilbench.bench.analysis_input import MAX_THRESHOLDS, check_count, check_cutoff, memory_budget
     from hilbench.bench.errors import BenchError
     from hilbench.bench.storage import outputs
     from hilbench.bench.verdict import judge
+    from hilbench.common.units import AXIS_UNITS as AXES
+    from hilbench.common.units import EFFORT
 
     plots = plot_files(args.plots, ["train", "validation"] if args.validate else ["train"]) if args.plots else []
     outputs.refuse_inputs({"--json": args.json, "--plots": args.plots, **{f"--plots {p}": p for p in plots}},
@@ -178,8 +180,8 @@ def run(args) -> int:
         m, trq = res.model, u["torque"]
         name = METHOD_NAMES.get(res.method, res.method)
         line = (f"{name} on {channel} ({record}, J fixed at {m.inertia:.6g} {u['inertia']}): "
-                f"{m.ms_stiffness.size} elements, break-away {m.breakaway:.4g} {trq}, "
-                f"b = {m.viscous:.4g} {trq}*s/{u['position']}; force simulated from the measured displacement: "
+                f"{m.ms_stiffness.size} elements, break-away {EFFORT[m.axis]} {m.breakaway:.4g} {trq}, "
+                f"b = {m.viscous:.4g} {u['viscous']}; force simulated from the measured displacement: "
                 f"train force NRMSE {100 * f['train_force_nrmse']:.3g} % ({f['train_force_rel_pct']:.3g} % relative)")
         if val_rec is not None:
             line += (f"; validation force NRMSE {100 * f['validation_force_nrmse']:.3g} % "
@@ -200,12 +202,15 @@ def run(args) -> int:
 
 def summary_line(res, u: dict, channel: str, timing: str) -> str:
     """The identification in one line, every number with its unit."""
+    from hilbench.common.metrics import POSITION_NRMSE, label, percent
+    from hilbench.common.units import EFFORT
+
     m, f = res.model, res.figures
     pos, trq = u["position"], u["torque"]
     line = (
         f"{METHOD_NAMES.get(res.method, res.method)} on {channel} ({timing}):"
         f" J = {m.inertia:.6g} {u['inertia']}, {m.ms_stiffness.size} elements, "
-        f"break-away {m.breakaway:.4g} {trq}, b = {m.viscous:.4g} {trq}*s/{pos}"
+        f"break-away {EFFORT[m.axis]} {m.breakaway:.4g} {trq}, b = {m.viscous:.4g} {u['viscous']}"
     )
     if m.coulomb:
         line += f", Fc = {m.coulomb:.4g} {trq}"
@@ -213,12 +218,12 @@ def summary_line(res, u: dict, channel: str, timing: str) -> str:
         line += f", K = {m.spring:.4g} {trq}/{pos}"
     if m.offset:
         line += f", offset {m.offset:.4g} {trq}"
-    line += (f"; train NRMSE torque {100 * f['train_torque_nrmse']:.3g} % "
-             f"position {100 * f['train_position_nrmse']:.3g} %")
+    line += (f"; {label('train')} {percent(f['train_torque_nrmse']):.3g} %, "
+             f"{POSITION_NRMSE} {percent(f['train_position_nrmse']):.3g} %")
     if "validation_torque_nrmse" in f:
         line += (
-            f"; validation NRMSE torque {100 * f['validation_torque_nrmse']:.3g} % "
-            f"position {100 * f['validation_position_nrmse']:.3g} % "
-            f"(segmented {100 * f['validation_position_nrmse_segmented']:.3g} %)"
+            f"; {label('validation')} {percent(f['validation_torque_nrmse']):.3g} %, "
+            f"{POSITION_NRMSE} {percent(f['validation_position_nrmse']):.3g} % "
+            f"(segmented {percent(f['validation_position_nrmse_segmented']):.3g} %)"
         )
     return line

@@ -193,6 +193,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _unit(name: str, axis: str) -> str:
-    from hilbench.analysis.runfile import CHANNELS
+    from hilbench.common.runfile import CHANNELS
 
     return CHANNELS[name].unit(axis)

@@ -68,13 +68,14 @@ def _headers(args: argparse.Namespace) -> list:
 def run(args: argparse.Namespace) -> int:
     from hilbench.analysis.models.families import FAMILIES
     from hilbench.analysis.models.model_file import read_model
-    from hilbench.analysis.record import decimation_factor, mib, span_note
+    from hilbench.analysis.record import decimation_factor, span_note
     from hilbench.analysis.residual import record_analysis
     from hilbench.analysis.residual.report import report_dict
     from hilbench.bench.analysis_input import check_cutoff, memory_budget, read_decimated
     from hilbench.bench.errors import BenchError
     from hilbench.bench.storage import outputs
     from hilbench.bench.verdict import judge
+    from hilbench.common.units import mib
 
     model_file = args.start if args.start.strip().lower().endswith(".json") else None
     outputs.refuse_inputs({"--json": args.json, "--report": args.report}, [args.run, *args.validate, model_file])
@@ -123,7 +124,8 @@ def run(args: argparse.Namespace) -> int:
         say(f"report: {args.report} ({', '.join(p.name for p in paths)})")
     channel, timing = rec.torque_channel, rec.timing
     before, after = result.error_before["validation"], result.error_after["validation"]
-    pct = lambda v: None if v is None else 100.0 * v  # noqa: E731
+    from hilbench.common.metrics import percent as pct
+
     if (figure := res.start_figure()) is not None:  # the start model's own figure, as identify reports it
         where, value = figure
         say(f"start model ({res.start_model['source']}): {where} torque NRMSE {pct(value):.3g} %")

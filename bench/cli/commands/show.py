@@ -32,8 +32,8 @@ def _fmt(value: float | None) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hilbench.analysis.runfile import channel_summary, open_run, repair
     from hilbench.bench.storage import outputs
+    from hilbench.common.runfile import channel_summary, open_run, repair
 
     outputs.refuse_inputs({"--json": args.json}, [args.run])
     outputs.refuse_existing("--json", args.json, args.overwrite)

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from hilbench.analysis import runfile as rf
 from hilbench.analysis.afrf.frf import afrf_from_run
 from hilbench.analysis.errors import AnalysisError
 from hilbench.bench.acquisition.excitations import stepped_sine
 from hilbench.bench.cli import main as bench_main
+from hilbench.common import runfile as rf
 from hilbench.firmware_sim.engine.plant import PlantParams, simulate
 
 FS = 1000.0

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from hilbench.analysis import afrf
-from hilbench.analysis import runfile as rf
 from hilbench.analysis.afrf.steps import SLIDING_SLOPE, sliding_slopes
 from hilbench.bench.acquisition.excitations import stepped_sine
+from hilbench.common import runfile as rf
 from hilbench.firmware_sim.engine.friction_models import dc_motor
 from hilbench.firmware_sim.engine.plant import PlantParams, simulate
 

@@ -203,8 +203,9 @@ def test_streamed_identify_with_output_error_scores_the_refined_model():
     # method oe on chunk sources: the refined model's figures (its own equation error, not the NNLS fit's) and
     # the refinement's, against the streamed simulation of that model (the oracle of the test above)
     from hilbench.analysis.identification.identify import identify_chunks
-    from hilbench.analysis.identification.maxwell_fit import nrmse, predict_chunks
+    from hilbench.analysis.identification.maxwell_fit import predict_chunks
     from hilbench.analysis.identification.output_error import simulation_error_chunks
+    from hilbench.common.metrics import nrmse
     from tests.analysis.identification.test_identification_methods import _one_element_run
 
     _, r = _one_element_run()

@@ -10,7 +10,7 @@ import pytest
 from hilbench.analysis import presliding
 from hilbench.analysis.presliding.span import KEEP_BLOCKS_PER_BRANCH, plan_span, x_means
 from hilbench.analysis.record import load_record
-from hilbench.analysis.runfile import RunWriter
+from hilbench.common.runfile import RunWriter
 from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_D
 from tests.analysis.presliding.records import dc_elements, repeated_force, repeated_path
 

@@ -11,7 +11,7 @@ import pytest
 from hilbench.analysis import presliding
 from hilbench.analysis.presliding.streamed import NOT_STREAMED
 from hilbench.analysis.record import load_record
-from hilbench.analysis.runfile import RunWriter
+from hilbench.common.runfile import RunWriter
 from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_D
 from tests.analysis.presliding.records import dc_elements, maxwell_force, smooth_path
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from hilbench.analysis.errors import AnalysisError
-from hilbench.analysis.identification.maxwell_fit import LipSettings, fit_lip, nrmse, predict_filtered
+from hilbench.analysis.identification.maxwell_fit import LipSettings, fit_lip, predict_filtered
 from hilbench.analysis.models.friction_model import FrictionModel
 from hilbench.analysis.reproductions.emps import (
     PARAMETER_NAMES,
@@ -15,6 +15,7 @@ from hilbench.analysis.reproductions.emps import (
     idim_observation,
     load_emps,
 )
+from hilbench.common.metrics import nrmse
 from tests import real_data
 
 EMPS = real_data.EMPS  # ships in tests/data/emps (Janot, Gautier, Brunot 2019): every clone runs these

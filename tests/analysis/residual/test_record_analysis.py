@@ -9,7 +9,7 @@ import pytest
 
 from hilbench.analysis.record import load_record
 from hilbench.analysis.residual.record_analysis import ResidualSettings, analyse, cost, read
-from hilbench.analysis.runfile import RunWriter
+from hilbench.common.runfile import RunWriter
 from hilbench.firmware_sim.engine.friction_models import dc_motor
 from hilbench.firmware_sim.engine.plant import simulate
 from tests.analysis.identification.test_identification import random_enveloped

@@ -6,9 +6,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.residual.selection import _dm_two_sided, _evidence
-from hilbench.analysis.runfile import record_kind
+from hilbench.common.runfile import RunFileError, record_kind
 
 
 def test_evidence_without_a_diagnostic_is_the_held_out_test():
@@ -34,5 +33,5 @@ def test_two_sided_comparison_is_symmetric_and_detects_a_difference():
 def test_record_kind():
     assert record_kind(None) == "torque-driven"
     assert record_kind(b"displacement-driven") == "displacement-driven"
-    with pytest.raises(AnalysisError, match="unknown record kind"):
+    with pytest.raises(RunFileError, match="unknown record kind"):
         record_kind("force-driven", "x.h5")

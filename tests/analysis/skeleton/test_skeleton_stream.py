@@ -10,8 +10,8 @@ import pytest
 
 from hilbench.analysis import skeleton as sk
 from hilbench.analysis.record import load_record
-from hilbench.analysis.runfile import RunWriter
 from hilbench.analysis.skeleton.streaming import Decimator, centred_chunks, decimation_factor
+from hilbench.common.runfile import RunWriter
 from hilbench.firmware_sim.engine.friction_models import paper_system
 from hilbench.firmware_sim.engine.plant import PlantParams, simulate
 
@@ -122,8 +122,8 @@ def test_a_host_clocked_run_is_read_whole_by_the_streamed_path(tmp_path):
     t = np.arange(n) / FS
     p = paper_system()
     out = simulate(p, 5.0 * np.sin(np.pi * 0.05 * t**2), 1 / FS, substeps=4)
-    with RunWriter(path, sample_rate=FS, channels=("sample_index", "t", "torque", "position"),
-                   custom_channels={"host_time": "s"}, device={"sample_times": "host_time"},
+    with RunWriter(path, sample_rate=FS, channels=("sample_index", "t", "torque", "position", "host_time"),
+                   device={"sample_times": "host_time"},
                    calibration={"inertia": p.inertia}, protocol_name="chirp") as w:
         w.append({"sample_index": np.arange(n), "t": t, "host_time": t + 1e-5 * np.sin(t),
                   "torque": 5.0 * np.sin(np.pi * 0.05 * t**2), "position": out.theta})

@@ -11,11 +11,11 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from hilbench.analysis.runfile import RunWriter
 from hilbench.bench.campaign_analysis.engine import analyse
 from hilbench.bench.campaign_analysis.steps import StepSettings, steps_for
 from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, simulate_runs, write_campaign
 from hilbench.bench.cli import main
+from hilbench.common.runfile import RunWriter
 
 pytestmark = pytest.mark.device_free
 

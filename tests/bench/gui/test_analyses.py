@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hilbench.analysis import runfile as rf
 from hilbench.analysis.record import load_record
 from hilbench.bench.errors import BenchError
 from hilbench.bench.gui.analyses import ANALYSES, TITLES, availability, presliding
+from hilbench.common import runfile as rf
 from tests.bench.presliding_runs import run_and_analyse
 
 

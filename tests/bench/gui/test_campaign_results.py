@@ -11,7 +11,7 @@ import pytest
 
 from hilbench.analysis.drift.monitor import DriftSettings, monitor
 from hilbench.bench.campaign_analysis.table import TABLE_NAME, to_table
-from hilbench.bench.gui.campaign_view import RESULT_COLUMNS, CampaignView
+from hilbench.bench.gui.campaign_view import RESULT_COLUMNS, CampaignView, result_headers
 
 N, STEP_AT, FAILED = 60, 40, 7
 
@@ -82,3 +82,12 @@ def test_a_missing_results_folder_is_one_line_in_the_status(view, tmp_path):
     view.path_edit.setText(str(tmp_path / "nowhere"))
     assert not view.load()
     assert TABLE_NAME in view.status.text() and view.table.rowCount() == 0
+
+
+def test_the_headers_carry_the_units_of_the_runs_axis():
+    rotary, linear = result_headers("rotary"), result_headers("linear")
+    assert rotary[_column("inertia")] == "inertia J (kg*m^2)" and linear[_column("inertia")] == "inertia J (kg)"
+    assert linear[_column("breakaway")] == "break-away force (N)"
+    assert linear[_column("viscous")] == "viscous coefficient b (N*s/m)"
+    assert rotary[_column("validation_torque_nrmse")] == "validation torque NRMSE (%)"
+    assert rotary[_column("temperature_mean")] == "winding (degC)" and rotary[_column("order")] == "#"

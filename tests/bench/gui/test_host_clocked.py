@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 from PySide6 import QtCore
 
-from hilbench.analysis.runfile import open_run
 from hilbench.bench.gui.main_window import MainWindow
+from hilbench.common.runfile import open_run
 from hilbench.firmware_sim.devices.cia402_drive import EDS_PATH, SimCia402Drive
 from hilbench.firmware_sim.devices.odrive_sim import TVL_ENDPOINT, SimOdrive
 from hilbench.firmware_sim.devices.sim_config import load_sim_config

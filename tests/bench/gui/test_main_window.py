@@ -15,8 +15,8 @@ import pytest
 from PySide6 import QtCore
 
 from hilbench.analysis.record import load_record
-from hilbench.analysis.runfile import RunFileError, open_run
 from hilbench.bench.gui.main_window import MainWindow
+from hilbench.common.runfile import RunFileError, open_run
 
 pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
 

@@ -4,30 +4,40 @@
 class, live refresh included) or, for an analysis, through :func:`hilbench.analysis.record.load_record`.
 """
 
-from hilbench.analysis.runfile.schema import (
+from hilbench.common.runfile.schema import (
     AXES,
     CHANNELS,
+    CYCLE,
     DEVICE_CHANNELS,
+    DEVICE_CLOCK,
+    DRIVE_CLOCK,
+    DRIVE_STATUS,
     EVENT_DTYPE,
     EVENT_KINDS,
     EVENT_MESSAGE_BYTES,
     FINAL_STATUSES,
+    HOST_CLOCKED_CHANNELS,
+    HOST_TIME,
     LINEAR_ALIASES,
     MAX_CHUNK,
     MAX_SAMPLES,
     RECORDS,
     REQUIRED_CHANNELS,
     RESERVE_BYTES,
+    SAMPLE_INDEX,
     SAMPLE_KINDS,
+    SAMPLE_TIMES,
     SAMPLE_TIMES_KEY,
     SCHEMA,
     SCHEMA_VERSION,
     SCHEMA_VERSIONS,
     STATUSES,
+    TIME,
     TIMINGS,
     TORQUE_TIMING,
     TORQUE_TIMINGS,
     ChannelSpec,
+    DeviceIdentity,
     RunFileError,
     check_size,
     host_sampled,
@@ -35,7 +45,7 @@ from hilbench.analysis.runfile.schema import (
     run_torque_timing,
     torque_timing_for,
 )
-from hilbench.analysis.runfile.store import (
+from hilbench.common.runfile.store import (
     Run,
     RunWriter,
     channel_summary,
@@ -51,10 +61,12 @@ from hilbench.analysis.runfile.store import (
 )
 
 __all__ = [
-    "AXES", "CHANNELS", "DEVICE_CHANNELS", "EVENT_DTYPE", "EVENT_KINDS", "EVENT_MESSAGE_BYTES", "FINAL_STATUSES",
-    "LINEAR_ALIASES", "MAX_CHUNK", "MAX_SAMPLES", "RECORDS", "REQUIRED_CHANNELS", "RESERVE_BYTES", "SAMPLE_KINDS",
-    "SAMPLE_TIMES_KEY", "SCHEMA", "SCHEMA_VERSION", "SCHEMA_VERSIONS", "STATUSES", "TIMINGS", "TORQUE_TIMING",
-    "TORQUE_TIMINGS", "ChannelSpec", "Run", "RunFileError", "RunWriter", "channel_summary", "check_not_truncated",
-    "check_size", "clear_write_flags", "host_sampled", "lock_path", "lookup3", "open_run", "record_kind", "repair",
+    "AXES", "CHANNELS", "CYCLE", "ChannelSpec", "DEVICE_CHANNELS", "DEVICE_CLOCK", "DRIVE_CLOCK", "DRIVE_STATUS",
+    "DeviceIdentity", "EVENT_DTYPE", "EVENT_KINDS", "EVENT_MESSAGE_BYTES", "FINAL_STATUSES",
+    "HOST_CLOCKED_CHANNELS", "HOST_TIME", "LINEAR_ALIASES", "MAX_CHUNK", "MAX_SAMPLES", "RECORDS",
+    "REQUIRED_CHANNELS", "RESERVE_BYTES", "Run", "RunFileError", "RunWriter", "SAMPLE_INDEX", "SAMPLE_KINDS",
+    "SAMPLE_TIMES", "SAMPLE_TIMES_KEY", "SCHEMA", "SCHEMA_VERSION", "SCHEMA_VERSIONS", "STATUSES", "TIME",
+    "TIMINGS", "TORQUE_TIMING", "TORQUE_TIMINGS", "channel_summary", "check_not_truncated", "check_size",
+    "clear_write_flags", "host_sampled", "lock_path", "lookup3", "open_run", "record_kind", "repair",
     "run_torque_timing", "software_versions", "torque_timing_for", "utc_now", "writer_alive",
 ]

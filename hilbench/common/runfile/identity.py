@@ -1,6 +1,6 @@
 """A run file's identity (uid, start time, operator) from its root attributes alone.
 
-A campaign row names its run by these; :class:`hilbench.analysis.runfile.Run` reads and checks the whole layout
+A campaign row names its run by these; :class:`hilbench.common.runfile.Run` reads and checks the whole layout
 (channels, units, JSON groups), which took 17 ms a file against 1 ms for the three attributes: a sixth of a short
 run's analysis when every row opened its file twice."""
 
@@ -8,12 +8,13 @@ from __future__ import annotations
 
 import os
 
-from hilbench.analysis.runfile.schema import SCHEMA, SCHEMA_VERSIONS, RunFileError, _text
-from hilbench.analysis.runfile.store import _open_h5
+from hilbench.common.runfile.schema import AXES, SCHEMA, SCHEMA_VERSIONS, RunFileError, _text
+from hilbench.common.runfile.store import _open_h5
 
 
 def run_identity(path: str | os.PathLike) -> dict[str, str]:
-    """``run_id`` (the file's uid), ``start_time`` (ISO 8601 UTC) and ``operator`` ("" when unset) of a run file;
+    """``run_id`` (the file's uid), ``start_time`` (ISO 8601 UTC), ``operator`` ("" when unset) and ``axis`` of a
+    run file;
     :class:`RunFileError` in one line for a file that is no run file of a version this hilbench reads."""
     path = os.fspath(path)
     with _open_h5(path) as f:
@@ -28,4 +29,4 @@ def run_identity(path: str | os.PathLike) -> dict[str, str]:
         if missing:
             raise RunFileError(f"{path}: damaged or not a run file (no {', '.join(missing)} attribute)")
         return {"run_id": _text(attrs["uid"]), "start_time": _text(attrs["start_time"]),
-                "operator": _text(attrs.get("operator", ""))}
+                "operator": _text(attrs.get("operator", "")), "axis": _text(attrs.get("axis", AXES[0]))}

@@ -1,4 +1,4 @@
-"""HDF5 run files (schema in :mod:`hilbench.analysis.runfile.schema`): the crash-safe incremental writer, the one
+"""HDF5 run files (schema in :mod:`hilbench.common.runfile.schema`): the crash-safe incremental writer, the one
 reader (:class:`Run`, live refresh included) and repair.
 
 The layout is documented in ``docs/run-file.md``; plain h5py can read every part of it. In short::
@@ -38,8 +38,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from hilbench.analysis.errors import AnalysisError
-from hilbench.analysis.runfile.schema import (
+from hilbench.common.runfile.schema import (
     AXES,
     CHANNELS,
     DEVICE_CHANNELS,
@@ -57,7 +56,9 @@ from hilbench.analysis.runfile.schema import (
     SCHEMA_VERSION,
     SCHEMA_VERSIONS,
     TORQUE_TIMINGS,
+    DeviceIdentity,
     RunFileError,
+    _json_scalar,
     _text,
     check_size,
 )
@@ -106,20 +107,24 @@ def writer_alive(path: str | os.PathLike) -> bool:
     return False
 
 
-def _json_dataset(group: h5py.Group, name: str, value: Any) -> None:
+def _json_text(value: Any, what: str = "metadata") -> str:
     try:
-        text = json.dumps({} if value is None else value, sort_keys=True, default=_json_default)
+        return json.dumps({} if value is None else value, sort_keys=True, default=_json_scalar)
     except (TypeError, ValueError) as exc:
-        raise RunFileError(f"{group.name}/{name}: metadata is not JSON-serialisable ({exc})") from None
+        raise RunFileError(f"{what} is not JSON-serialisable ({exc})") from None
+
+
+def _header_field(path: str, check: Any, value: Any, *args: Any) -> Any:
+    """``check(value, *args)``, its refusal named with the file: ``path: <reason>``, one line."""
+    try:
+        return check(value, *args)
+    except RunFileError as exc:
+        raise RunFileError(f"{path}: {exc}") from None
+
+
+def _json_dataset(group: h5py.Group, name: str, value: Any) -> None:
+    text = _json_text(value, f"{group.name}/{name}")
     group.create_dataset(name, data=text, dtype=h5py.string_dtype("utf-8"))
-
-
-def _json_default(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
 
 
 def _check_text(path: str, name: str, text: Any) -> None:
@@ -154,7 +159,8 @@ class RunWriter:
         axis: ``"rotary"`` (rad, N*m) or ``"linear"`` (m, N); channel units follow it.
         channels: names from :data:`CHANNELS` to record; must include ``sample_index`` and ``t``.
         custom_channels: extra float64 channels not in the catalogue, ``{name: unit}``, e.g. ``{"vir": "V"}``.
-        device, config, calibration: device identity / configuration / calibration (JSON-able dicts).
+        device: who records the run (:class:`DeviceIdentity`, or a flat mapping it is built from).
+        config, calibration: device configuration / calibration (JSON-able dicts).
         protocol_name, protocol_params: the protocol and its parameters (JSON-able).
         protocol_arrays: arrays stored under ``/protocol`` (e.g. a stepped sine's ``step_windows``).
         operator, notes: free text.
@@ -176,7 +182,7 @@ class RunWriter:
         axis: str = "rotary",
         channels: Sequence[str] = DEVICE_CHANNELS,
         custom_channels: Mapping[str, str] | None = None,
-        device: Mapping[str, Any] | None = None,
+        device: DeviceIdentity | Mapping[str, Any] | None = None,
         config: Mapping[str, Any] | None = None,
         calibration: Mapping[str, Any] | None = None,
         protocol_name: str = "",
@@ -243,13 +249,20 @@ class RunWriter:
                            ("protocol_name", protocol_name), *((f"unit of {k!r}", u) for k, u in
                                                                (custom_channels or {}).items())):
             _check_text(self.path, name, text)
+        # the whole header is validated before anything is touched: a bad one is refused in one line
+        self.identity = _header_field(self.path, DeviceIdentity.from_mapping, device)
+        for what, value in (("device config", config), ("device calibration", calibration),
+                            ("protocol parameters", protocol_params)):
+            _header_field(self.path, _json_text, value, what)
         if os.path.lexists(self.path) and not overwrite:
             raise RunFileError(f"{self.path}: file exists (choose another name, or pass --overwrite to replace it)")
-        from hilbench.analysis.output_files import require_regular
-
-        require_regular(self.path, "a run file")  # never renamed over /dev/null or a FIFO (issue 30 item 17)
-        if os.path.isdir(self.path):
-            raise RunFileError(f"{self.path}: is a directory")
+        try:  # never renamed over /dev/null, a FIFO or a folder (issue 30 item 17)
+            mode = os.stat(self.path).st_mode
+        except FileNotFoundError:
+            mode = stat.S_IFREG
+        if not stat.S_ISREG(mode):
+            raise RunFileError(f"{self.path} is not a regular file; a run file is written as a file and would "
+                               "replace it: choose a file name")
         self._take_lock()
         # The file is built under a temporary name and appears at its path only once its layout is complete
         # and it is in SWMR mode, by an atomic rename (overwrite) or link (no overwrite): an old file is never
@@ -374,7 +387,7 @@ class RunWriter:
             f.attrs[key] = value
 
         dev = f.create_group("device")
-        _json_dataset(dev, "identity", device)
+        _json_dataset(dev, "identity", self.identity.as_json())
         _json_dataset(dev, "config", config)
         _json_dataset(dev, "calibration", calibration)
 
@@ -697,7 +710,7 @@ class Run:
         self.start_time = self.meta["start_time"]
         self.stored_status = self.meta["status"]
         self.software = {k[len("software_"):]: v for k, v in self.meta.items() if k.startswith("software_")}
-        self.device = self._json("device/identity")
+        self.device = self._json("device/identity")  # as stored; :attr:`identity` is the typed reading
         self.config = self._json("device/config")
         self.calibration = self._json("device/calibration")
         self.protocol_name = _text(f["protocol"].attrs.get("name", ""))
@@ -715,11 +728,13 @@ class Run:
         self._check_size("events", f["events"].shape)
         self.n_samples = min(self._samples[name].shape[0] for name in self.channels)
 
+    @property
+    def identity(self) -> DeviceIdentity:
+        """The typed ``/device/identity`` (:class:`RunFileError` in one line if the file's breaks the schema)."""
+        return _header_field(self.path, DeviceIdentity.from_mapping, self.device)
+
     def _check_size(self, what: str, shape: tuple[int, ...]) -> None:
-        try:
-            check_size(self.path, what, shape)
-        except AnalysisError as exc:
-            raise RunFileError(str(exc)) from None
+        check_size(self.path, what, shape)
 
     def _json(self, name: str) -> dict[str, Any]:
         raw = self._file[name][()]

@@ -1,0 +1,39 @@
+"""Units, named once: of each axis kind's quantities, of each control mode's setpoint, and of memory sizes.
+
+Every dataset, summary line, table column and axis label takes its unit from here (SI; the glossary in
+docs/metrics.md names the quantities).
+"""
+
+from __future__ import annotations
+
+
+def mib(nbytes: float) -> str:
+    """Bytes as a whole number of MiB (2**20 bytes), for the memory budget's one-line messages."""
+    return f"{nbytes / (1 << 20):.0f} MiB"
+
+
+#: The axis kinds a run may have: a rotary axis (angles, torques) or a linear one (lengths, forces).
+AXES = ("rotary", "linear")
+
+#: SI unit of every quantity, by axis kind: position, velocity, acceleration, torque (force on a linear axis),
+#: inertia (mass), stiffness, viscous coefficient and compliance.
+AXIS_UNITS: dict[str, dict[str, str]] = {
+    "rotary": {"position": "rad", "velocity": "rad/s", "acceleration": "rad/s^2", "torque": "N*m",
+               "inertia": "kg*m^2", "stiffness": "N*m/rad", "viscous": "N*m*s/rad", "compliance": "rad/(N*m)"},
+    "linear": {"position": "m", "velocity": "m/s", "acceleration": "m/s^2", "torque": "N",
+               "inertia": "kg", "stiffness": "N/m", "viscous": "N*s/m", "compliance": "m/N"},
+}
+
+#: SI unit of a setpoint in each control mode (position: the angle at the encoder shaft; a torque mode streams
+#: currents: the drive's torque constant turns them into torque)
+MODE_UNITS: dict[str, str] = {"current": "A", "velocity": "rad/s", "position": "rad"}
+
+
+def axis_unit(quantity: str, axis: str) -> str:
+    """The SI unit of ``quantity`` (a key of :data:`AXIS_UNITS`) on an ``axis`` (``rotary`` or ``linear``)."""
+    if axis not in AXIS_UNITS:
+        raise ValueError(f"axis must be one of {', '.join(AXES)}, got {axis!r}")
+    return AXIS_UNITS[axis][quantity]
+
+#: what drives an axis, by name: a torque on a rotary axis, a force on a linear one ("break-away torque/force")
+EFFORT = {"rotary": "torque", "linear": "force"}

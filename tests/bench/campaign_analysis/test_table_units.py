@@ -1,0 +1,30 @@
+"""The results table's units follow the run's axis (hilbench.common.units), not a fixed rotary set."""
+
+from hilbench.bench.campaign_analysis.page import campaign_page
+from hilbench.bench.campaign_analysis.table import SCHEMA, column_units, to_table
+from hilbench.common.units import AXIS_UNITS
+
+
+def test_an_axis_quantity_column_carries_both_units_and_says_what_it_follows():
+    meta = SCHEMA.field("inertia").metadata
+    assert meta == {b"unit": b"kg*m^2", b"unit_linear": b"kg", b"unit_follows": b"axis"}
+    assert SCHEMA.field("initial_stiffness").metadata[b"unit_linear"] == b"N/m"
+    assert SCHEMA.field("validation_torque_nrmse").metadata == {b"unit": b"1"}  # a fraction on every axis
+    assert SCHEMA.field("duration").metadata == {b"unit": b"s"}
+
+
+def test_column_units_on_each_axis_come_from_the_common_units():
+    for axis, u in AXIS_UNITS.items():
+        units = column_units(axis)
+        assert units["inertia"] == u["inertia"] and units["breakaway"] == u["torque"]
+        assert units["viscous"] == u["viscous"] and units["afrf_compliance_low_amplitude"] == u["compliance"]
+        assert units["sliding_distance"] == u["position"] and units["duration"] == "s"
+
+
+def test_a_linear_run_row_keeps_its_axis_and_its_page_shows_linear_units():
+    row = {"campaign": "c", "key": "r1", "axis": "linear", "status": "ok", "name": "r1", "inertia": 2.1,
+           "breakaway": 20.0, "viscous": 200.0, "validation_torque_nrmse": 0.03}
+    assert to_table([row]).to_pylist()[0]["axis"] == "linear"
+    text = campaign_page("c", [row], column_units("linear"), [], None, "linear")
+    assert "inertia J (kg)" in text and "viscous coefficient b (N*s/m)" in text and "kg*m^2" not in text
+    assert "break-away force (N)" in text and "break-away torque" not in text
