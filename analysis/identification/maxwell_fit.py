@@ -6,6 +6,8 @@ with the Delta_i on a log-spaced candidate grid ranged from the data (hilbench.a
 coefficients >= 0 except the offset c0 (split into two non-negative columns). Solved with
 scipy.optimize.nnls on unit-norm columns, on the triangular factor R of the regression rows, which are
 accumulated block by block (``chunked``; docs/long-runs.md), so memory does not grow with the record.
+On whole arrays the passes are kept (``_HeldPasses``): the record is filtered once for the candidate grid and
+once for the merged thresholds, and every later subset (pruning, prediction, bootstrap) picks its columns.
 Then adjacent active thresholds are merged, tiny elements pruned, and (optionally) the thresholds refined
 by variable projection (NNLS inside a Levenberg-Marquardt on log Delta).
 
@@ -21,6 +23,7 @@ Parameters at their bound (zero) get no standard error (NaN): the linearised cov
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -143,19 +146,66 @@ class _Triangular:
         return coef / norms, float(rnorm) ** 2 + float(r22) ** 2
 
 
-def _regression(source: ChunkSource, fs: float, s: LipSettings, cutoff: float, dec: int, deltas: np.ndarray,
-                block: int) -> _Triangular:
-    """One pass over the record: the triangular factor of the regression with the thresholds ``deltas``."""
-    tri: _Triangular | None = None
+@dataclass
+class _Rows:
+    """The regression of one block: A (linear columns, then one stop column per threshold), y, and what the
+    prediction needs (L[tau], L[theta''] and the global row indices)."""
+
+    a: np.ndarray
+    y: np.ndarray
+    torque: np.ndarray
+    acceleration: np.ndarray
+    rows: np.ndarray
+
+
+def _pass(source: ChunkSource, fs: float, s: LipSettings, cutoff: float, dec: int, deltas: np.ndarray,
+          block: int) -> Iterator[_Rows]:
+    """One pass over the record: the regression rows with the thresholds ``deltas``, block by block."""
     for blk in blocks(source, fs, cutoff, order=s.order, decimation=dec, timing=s.timing, deltas=deltas,
                       block=block):
         a, y = _block_system(blk, s)
+        yield _Rows(a, y, blk.torque, blk.acceleration, blk.rows)
+
+
+class _HeldPasses:
+    """The passes of a fit on whole arrays, kept: a later threshold set that is a subset of a kept one (the
+    pruned elements, the final prediction, the bootstrap's whole grid) takes its columns instead of filtering
+    the record again. Each stop column depends on its own threshold only, so the picked columns are the
+    numbers a new pass computes, bit for bit. Memory: rows x columns x 8 bytes per kept pass, as the
+    calibrated standard errors hold anyway; a record read in chunks keeps nothing."""
+
+    def __init__(self, n_linear: int):
+        self.n_linear = n_linear
+        self.kept: list[tuple[np.ndarray, list[_Rows]]] = []
+
+    def rows(self, deltas: np.ndarray, fresh: Callable[[], Iterator[_Rows]]) -> list[_Rows]:
+        for kept_deltas, parts in self.kept:
+            where = {float(d): i for i, d in enumerate(kept_deltas)}
+            if all(float(d) in where for d in deltas):
+                cols = np.concatenate([np.arange(self.n_linear), self.n_linear + np.array(
+                    [where[float(d)] for d in deltas], dtype=int)])
+                return [_Rows(p.a[:, cols], p.y, p.torque, p.acceleration, p.rows) for p in parts]
+        parts = list(fresh())
+        self.kept.append((np.array(deltas, float), parts))
+        return parts
+
+
+def _triangular(parts: Iterable[_Rows]) -> _Triangular:
+    """The triangular factor of the regression rows ``parts``."""
+    tri: _Triangular | None = None
+    for p in parts:
         if tri is None:
-            tri = _Triangular(np.zeros((0, a.shape[1] + 1)))
-        tri.add(a, y)
+            tri = _Triangular(np.zeros((0, p.a.shape[1] + 1)))
+        tri.add(p.a, p.y)
     if tri is None:
         raise AnalysisError("run too short: no regression rows after dropping the filter start-up samples")
     return tri
+
+
+def _regression(source: ChunkSource, fs: float, s: LipSettings, cutoff: float, dec: int, deltas: np.ndarray,
+                block: int) -> _Triangular:
+    """One pass over the record: the triangular factor of the regression with the thresholds ``deltas``."""
+    return _triangular(_pass(source, fs, s, cutoff, dec, deltas, block))
 
 
 def _covariance(r11: np.ndarray, n: int, residual: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, float, float]:
@@ -184,15 +234,6 @@ def _hac_covariance(a: np.ndarray, residual: np.ndarray, active: np.ndarray) -> 
     norms[norms == 0] = 1.0
     cov, _ = hac_covariance(aa, residual)  # the scores' own autocorrelation
     return cov, effective_sample_count(residual), float(np.linalg.cond(aa / norms))
-
-
-def _rows(source: ChunkSource, fs: float, s: LipSettings, cutoff: float, dec: int, deltas: np.ndarray,
-          block: int) -> tuple[np.ndarray, np.ndarray]:
-    """The whole regression (A, y) at every row for the thresholds ``deltas`` (rows x columns x 8 bytes: for the
-    uncertainty of a fit on whole arrays only)."""
-    parts = [_block_system(blk, s) for blk in blocks(source, fs, cutoff, order=s.order, decimation=dec,
-                                                      timing=s.timing, deltas=deltas, block=block)]
-    return np.concatenate([a for a, _ in parts]), np.concatenate([y for _, y in parts])
 
 
 def _merge_adjacent(deltas: np.ndarray, k: np.ndarray) -> np.ndarray:
@@ -291,8 +332,17 @@ def fit_lip_chunks(
     _, names = _lin_columns(_EmptyRows(), s)
     nl = len(names)
 
+    # whole arrays: the passes are kept, and the later threshold sets (all subsets) pick their columns
+    held = _HeldPasses(nl) if calibrated else None
+
+    def rows_with(deltas: np.ndarray) -> Iterable[_Rows]:
+        def fresh() -> Iterator[_Rows]:
+            return _pass(source, fs, s, cutoff, dec, deltas, block)
+
+        return fresh() if held is None else held.rows(deltas, fresh)
+
     def solve_with(deltas: np.ndarray) -> tuple[_Triangular, np.ndarray, float]:
-        tri = _regression(source, fs, s, cutoff, dec, deltas, block)
+        tri = _triangular(rows_with(deltas))
         coef, rss = tri.solve()
         return tri, coef, rss
 
@@ -317,16 +367,14 @@ def fit_lip_chunks(
     # last pass: the prediction at every row (the plots' curves, the residual's colour)
     measured, predicted, rows, a_rows = [], [], [], []
     acc_sum = acc_sq = 0.0
-    for blk in blocks(source, fs, cutoff, order=s.order, decimation=dec, timing=s.timing, deltas=deltas,
-                      block=block):
-        a, y = _block_system(blk, s)
+    for part in rows_with(deltas):
         if calibrated:
-            a_rows.append(a)
-        measured.append(blk.torque)
-        predicted.append(a @ coef + (blk.torque - y))  # plus the known J*acceleration, if any
-        rows.append(blk.rows)
-        acc_sum += float(np.sum(blk.acceleration))
-        acc_sq += float(blk.acceleration @ blk.acceleration)
+            a_rows.append(part.a)
+        measured.append(part.torque)
+        predicted.append(part.a @ coef + (part.torque - part.y))  # plus the known J*acceleration, if any
+        rows.append(part.rows)
+        acc_sum += float(np.sum(part.acceleration))
+        acc_sq += float(part.acceleration @ part.acceleration)
     measured_a, predicted_a, rows_a = np.concatenate(measured), np.concatenate(predicted), np.concatenate(rows)
     residual = measured_a - predicted_a
     active = coef > 0
@@ -354,7 +402,9 @@ def fit_lip_chunks(
     grad = np.concatenate([[1.0 if n == "coulomb" else 0.0 for n in names], deltas])[active]
     std_errors["breakaway"] = float(np.sqrt(max(grad @ cov @ grad, 0.0)))
     if calibrated and grid.size:  # the larger of the two (uncertainty.bootstrap_standard_errors)
-        a_grid, y_grid = _rows(source, fs, s, cutoff, dec, grid, block)
+        grid_rows = rows_with(grid)  # the first pass's, kept
+        a_grid = np.concatenate([p.a for p in grid_rows])
+        y_grid = np.concatenate([p.y for p in grid_rows])
         bootstrap_standard_errors(std_errors, a_grid, y_grid, residual, names, grid)
         del a_grid, y_grid
     model = FrictionModel(

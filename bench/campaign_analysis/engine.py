@@ -167,8 +167,12 @@ def execute(path: str, step: str, settings: StepSettings, function: StepFunction
 
 def execute_chunk(items: list[tuple[str, str]], settings: StepSettings,
                   functions: dict[str, StepFunction]) -> list[dict[str, Any]]:
-    """Run the (path, step) items of one task, in order; one row each."""
-    return [execute(path, step, settings, functions.get(step)) for path, step in items]
+    """Run the (path, step) items of one task, in order; one row each; under the execution policy (one BLAS
+    thread: analysis.execution), in the serial loop and on any worker, ours or a remote scheduler's."""
+    from hilbench.analysis.execution import limited
+
+    with limited():
+        return [execute(path, step, settings, functions.get(step)) for path, step in items]
 
 
 def chunk(todo: list[Task], workers: int) -> list[list[Task]]:
@@ -229,16 +233,12 @@ def analyse(folders: list[Path], out: Path, steps: tuple[str, ...] = ("identify"
     bar = tqdm(total=len(todo), unit="run", desc="analyse", disable=not progress or not todo, dynamic_ncols=True)
     try:
         if serial:
-            from threadpoolctl import threadpool_limits
-
             warm_up()
             summary.startup_time = time.perf_counter() - t0
-            # one BLAS thread, as each Dask worker has (OMP_NUM_THREADS=1): the fits' matrices are small, and
-            # OpenBLAS's second thread spun a second core for nothing (200 short runs: 29.9 s of CPU in 15.3 s,
-            # against 14.8 s of CPU in 13.9 s with one thread)
-            with threadpool_limits(limits=1, user_api="blas"):
-                for part in chunk(todo, 1):
-                    record(part, execute_chunk(_items(part), settings, fn))
+            # execute_chunk runs under the execution policy (one BLAS thread; 200 short runs with OpenBLAS's two:
+            # 29.9 s of CPU in 15.3 s, against 14.8 s of CPU in 13.9 s with one thread)
+            for part in chunk(todo, 1):
+                record(part, execute_chunk(_items(part), settings, fn))
         elif todo:
             _on_cluster(todo, settings, fn, record, summary, workers, scheduler, scheduler_file, say, verbose,
                         dashboard, t0)

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import os
 
+from hilbench.analysis.execution import ENVIRONMENT
+
 #: what the steps import (much of it inside their functions; scipy.signal alone takes a second): imported once per
 #: process before the first task, by the local cluster's fork server for all its workers
 WORKER_MODULES = ("numpy", "scipy.signal", "scipy.optimize", "scipy.interpolate", "h5py",
@@ -15,14 +17,13 @@ WORKER_MODULES = ("numpy", "scipy.signal", "scipy.optimize", "scipy.interpolate"
                   "hilbench.analysis.identification.identify", "hilbench.analysis.identification.maxwell_fit",
                   "hilbench.analysis.identification.output_error", "hilbench.analysis.record",
                   "hilbench.bench.campaign_analysis.engine")
-#: one BLAS/OpenMP thread per worker, as Dask's pre-spawn environment gives a spawned worker
-THREAD_LIMITS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
 
 
 def start_fork_server() -> None:
     """Start multiprocessing's fork server now, preloading distributed and :data:`WORKER_MODULES`, so that its
     imports overlap the client's own start (its imports, the planning, the scheduler); with one BLAS thread per
-    worker. A server already running (an earlier analysis in this process) is kept.
+    worker (the execution policy's environment, analysis.execution). A server already running (an earlier
+    analysis in this process) is kept.
 
     The thread counts are set here, not read from Dask's config (``distributed.nanny.pre-spawn-environ``): its
     defaults load only when distributed is imported, after this, and importing dask alone costs 0.2 s on the
@@ -36,8 +37,8 @@ def start_fork_server() -> None:
     import multiprocessing
     from multiprocessing import forkserver
 
-    saved = {k: os.environ.get(k) for k in THREAD_LIMITS}
-    os.environ.update({k: "1" for k in THREAD_LIMITS})
+    saved = {k: os.environ.get(k) for k in ENVIRONMENT}
+    os.environ.update(ENVIRONMENT)
     try:
         multiprocessing.get_context("forkserver").set_forkserver_preload(["distributed", *WORKER_MODULES])
         forkserver.ensure_running()  # launches the server and returns: it imports while this process goes on

@@ -10,7 +10,7 @@ import re
 import sys
 
 import hilbench.bench.cli.commands as commands
-from hilbench.analysis import output_files
+from hilbench.analysis import execution, output_files
 from hilbench.bench import __version__
 from hilbench.bench.errors import BenchError
 from hilbench.bench.storage import outputs
@@ -113,6 +113,7 @@ def _run(args: argparse.Namespace, show_tb: bool) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     argv, flags = split_global_flags(list(sys.argv[1:] if argv is None else argv))
+    execution.limit_process()  # one BLAS thread, here and in what the command starts (analysis.execution)
     if argv[:1] == ["analyse"]:  # its cluster's fork server starts before the parser is built
         from hilbench.bench.cli.commands.analyse import start_early
 

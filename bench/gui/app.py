@@ -33,7 +33,10 @@ def run_app(device: str = "sim://", runs_dir: str | Path = "runs", autoconnect: 
     import pyqtgraph as pg
     from PySide6 import QtCore, QtWidgets
 
+    from hilbench.analysis.execution import limit_process
     from hilbench.bench.gui.main_window import MainWindow
+
+    limit_process()  # one BLAS thread in every thread of the GUI (analysis.execution), set from the main thread
 
     app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(sys.argv[:1])
     app.setApplicationName("hilbench")

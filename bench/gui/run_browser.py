@@ -10,6 +10,7 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
+from hilbench.analysis.execution import limited
 from hilbench.bench.gui import analyses
 from hilbench.bench.gui.elided_label import ElidedLabel
 from hilbench.bench.gui.worker import one_line
@@ -57,6 +58,7 @@ class AnalysisWorker(QtCore.QThread):
         super().__init__()
         self.name, self.path, self.options = name, path, options
 
+    @limited()  # one BLAS thread (analysis.execution): the GUI thread and a running stream share the cores
     def run(self) -> None:
         from types import SimpleNamespace
 

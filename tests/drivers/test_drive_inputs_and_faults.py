@@ -11,8 +11,6 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import threading
 import uuid
 
@@ -98,6 +96,7 @@ class ShortDevice(Device):
         yield CycleSamples(np.arange(n), z, z.astype(np.int64), z, z, z, z, z, z, 1000)
 
 
+@pytest.mark.device_free  # no device: the parallel part
 def test_the_runner_never_calls_a_short_stream_completed(tmp_path):
     bench = Bench(ShortDevice(), "short://")
     with pytest.raises(SampleLossError, match="returned 1000 of the 3000 samples of step 0"):
@@ -157,6 +156,7 @@ def test_info_and_fault_on_an_odrive_through_the_base_class():
         bus.shutdown()
 
 
+@pytest.mark.device_free  # no device: the parallel part
 def test_no_message_names_a_python_method():
     import pathlib
     import re
@@ -168,6 +168,7 @@ def test_no_message_names_a_python_method():
 
 
 # ---------------------------------------------------------------- item 10
+@pytest.mark.device_free  # no device: the parallel part
 @pytest.mark.parametrize("data_type, name", [("0x0008", "REAL32"), ("0x0015", "INTEGER64")])
 def test_an_eds_with_a_wrong_pdo_type_is_refused_before_anything_is_sent(tmp_path, data_type, name):
     text = EDS_PATH.read_text()
@@ -187,6 +188,7 @@ def test_an_eds_with_a_wrong_pdo_type_is_refused_before_anything_is_sent(tmp_pat
                               f"PDO mapping take it as INTEGER16")
 
 
+@pytest.mark.device_free  # no device: the parallel part
 @pytest.mark.parametrize("endpoint", ["-1", "65536", "70000"])
 def test_a_tvl_endpoint_out_of_range_is_one_line(endpoint):
     channel = uuid.uuid4().hex[:8]
@@ -199,6 +201,7 @@ def test_a_tvl_endpoint_out_of_range_is_one_line(endpoint):
         listener.shutdown()
 
 
+@pytest.mark.device_free  # no device: the parallel part
 def test_canopen_node_127_is_the_hosts_heartbeat_id():
     check_device_url(f"canopen://virtual/x?node=126&eds={EDS_PATH}")
     with pytest.raises(DeviceURLError, match=r"node must be 1..126 \(127 is the host's own heartbeat id\)"):
@@ -214,14 +217,20 @@ def test_canopen_node_127_is_the_hosts_heartbeat_id():
     (["--canopen", "vcan0", "--interface", "nonsense"], "is not a python-can interface"),
     (["--can", "vcan0", "--node", "16"], "--node must be 1..15 for --can"),
 ])
-def test_bad_sim_arguments_are_one_line_exit_2(args, words):
+@pytest.mark.device_free  # refused before any device starts (hilbench sim would exec one: the guard would see it)
+def test_bad_sim_arguments_are_one_line_exit_2(args, words, capsys):
     line = one_line_error(hilbench("sim", *args, timeout=60))
     assert line.startswith("hilbench sim: error: ") and words in line, line
-    direct = subprocess.run([sys.executable, "-m", "hilbench.firmware_sim", *args], capture_output=True, text=True,
-                            timeout=60)
-    assert direct.returncode == 2 and words in direct.stderr and "Traceback" not in direct.stderr, direct.stderr
+    # the simulator's own entry point (python -m hilbench.firmware_sim runs sys.exit(main())), in this process:
+    # a simulator process, even one that only refuses its arguments, counts as a device started
+    from hilbench.firmware_sim.__main__ import main as firmware_main
+
+    assert firmware_main(list(args)) == 2
+    err = capsys.readouterr().err
+    assert words in err and err.count("\n") == 1 and "Traceback" not in err, err
 
 
+@pytest.mark.device_free  # no device: the parallel part
 def test_sim_passes_the_drive_behaviours_to_the_simulated_drive():
     from hilbench.bench.cli import build_parser
     from hilbench.bench.cli.commands.sim import firmware_argv

@@ -22,6 +22,7 @@ from hilbench.firmware_sim.devices.odrive_sim import TVL_ENDPOINT, SimOdrive
 from hilbench.firmware_sim.devices.sim_config import load_sim_config
 
 pytestmark = [pytest.mark.drives, pytest.mark.usefixtures("starts_devices")]  # starts a device
+@pytest.mark.device_free  # no drive: the parallel part
 def test_ids_and_errors():
     assert o.can_id(3, o.Cmd.SET_INPUT_TORQUE) == 0x06E  # 3 << 5 | 0x0E
     assert o.split_id(0x06E) == (3, 0x0E)
@@ -83,6 +84,7 @@ def test_stream_commands_reach_the_axis_and_samples_come_back(odrive):
     assert host.timing is not None and host.timing.cycles == u.size
 
 
+@pytest.mark.device_free  # no drive: the parallel part
 def test_absent_odrive_is_one_line():
     channel = uuid.uuid4().hex[:8]
     bus = can.Bus(interface="virtual", channel=channel)

@@ -4,7 +4,6 @@ plant run directly: independent implementations of the same protocol and the sam
 import zlib
 
 import numpy as np
-import pytest
 from cobs import cobs
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -16,7 +15,8 @@ from hilbench.firmware_sim.devices.sim_config import sim_config_from_dict
 from hilbench.firmware_sim.engine.plant import simulate
 from tests.firmware.host import Host, samples
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
+# The C core is driven here with explicit times (tests/firmware/host.py): nothing runs on a clock, so these tests
+# start no device paced in real time and run in the parallel part of make test.
 
 SIM = sim_config_from_dict({"device": {"buffer_capacity": 4096},
                             "plant": {"elements": 4, "seed": 3, "noise_current": 0.01, "noise_position": 1e-4,

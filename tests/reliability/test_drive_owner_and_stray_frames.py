@@ -116,6 +116,7 @@ def test_stray_datagrams_on_the_group_are_counted_and_dropped(kind, tmp_path):
     assert "Traceback" not in err, err[-2000:]
 
 
+@pytest.mark.device_free  # buses of this process, no drive: the parallel part
 def test_dropping_counts_only_frames_that_do_not_decode():
     """Unit: on a udp_multicast bus, three stray datagrams between two frames: recv returns both frames, the
     counter says 3; a python-can frame is never dropped."""

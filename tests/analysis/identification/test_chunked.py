@@ -80,6 +80,39 @@ def test_streamed_with_tiny_chunks_equals_the_whole_record(run, settings):
     assert tiny.n_eff == pytest.approx(whole.n_eff, rel=1e-6)
 
 
+@pytest.mark.parametrize("settings", [LipSettings(timing="hold_previous"),
+                                      LipSettings(timing="hold_previous", coulomb=True, offset=True),
+                                      LipSettings(timing="hold_previous", fixed_inertia=0.0022)])
+def test_whole_arrays_filter_the_record_once_per_new_threshold_set(run, settings, monkeypatch):
+    # fit_lip keeps its passes and picks the columns of a later threshold subset (pruned elements, the final
+    # prediction, the bootstrap's grid; each setting here prunes) instead of filtering the record again: 2
+    # passes (grid, merged) where it made 5, with the model, the prediction and the equation-error figure of
+    # a fit that keeps nothing (the streamed path, every pass fresh) to 1e-9 relative (measured: bit for bit)
+    from hilbench.analysis.identification import maxwell_fit
+
+    x, tau = run.position, run.torque
+    passes = []
+    counted = maxwell_fit.blocks
+
+    def counting(*args, **kwargs):
+        passes.append(np.size(kwargs.get("deltas")))
+        return counted(*args, **kwargs)
+
+    monkeypatch.setattr(maxwell_fit, "blocks", counting)
+    whole = fit_lip(x, tau, FS, settings=settings)
+    assert len(passes) == 2, passes  # the 64 candidates, then the merged elements
+    monkeypatch.setattr(maxwell_fit, "blocks", counted)
+    fresh = fit_lip_chunks(array_chunks(x, tau), FS, settings=settings, grid=whole.candidate_deltas)
+    assert whole.model.ms_delta.size == fresh.model.ms_delta.size > 2
+    np.testing.assert_allclose(whole.model.ms_delta, fresh.model.ms_delta, rtol=1e-9)
+    np.testing.assert_allclose(whole.model.ms_stiffness, fresh.model.ms_stiffness, rtol=1e-9)
+    for name in ("inertia", "viscous", "coulomb", "offset"):
+        assert getattr(whole.model, name) == pytest.approx(getattr(fresh.model, name), rel=1e-9, abs=1e-15), name
+    np.testing.assert_array_equal(whole.rows, fresh.rows)
+    np.testing.assert_allclose(whole.predicted, fresh.predicted, rtol=0, atol=1e-9 * np.std(fresh.measured))
+    assert whole.torque_nrmse == pytest.approx(fresh.torque_nrmse, rel=1e-9)
+
+
 def test_scan_gives_the_whole_record_grid(run):
     # a record of one noise block and at most 2x20000 points: the scan's resolution and thinned path are the
     # whole array's, so the grid is threshold_grid's to rounding

@@ -187,9 +187,11 @@ from pathlib import Path
 from hilbench.bench.campaign_analysis.engine import analyse
 
 def blas_threads(path, settings):
-    from threadpoolctl import threadpool_info
-    # carried in a numeric column of the table's fixed schema
-    return {"inertia": float(max((i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"), default=0))}
+    from hilbench.analysis.execution import blas_threads
+    # carried in numeric columns of the table's fixed schema: the most threads of any library (numpy's and scipy's
+    # own OpenBLAS), and how many libraries
+    threads = blas_threads()
+    return {"inertia": float(max(threads.values(), default=0)), "viscous": float(len(threads))}
 
 if __name__ == "__main__":
     mode = sys.argv[3]
@@ -204,7 +206,8 @@ def test_every_run_is_analysed_with_one_blas_thread(campaign, tmp_path, mode):
     """A fresh `hilbench analyse` (distributed not imported before it starts the workers' fork server) ran each worker's
     OpenBLAS on two threads: Dask's pre-spawn environment was read before distributed had loaded its config.
     That spun a second core per worker (200 runs: 32 s of CPU against 15 s serial) and made the tables differ
-    from the serial ones in the last bits. The serial loop, too, now limits BLAS to one thread."""
+    from the serial ones in the last bits. The serial loop, too, now limits BLAS to one thread; every chunk runs
+    under the execution policy (analysis.execution), which limits every BLAS library, scipy's own included."""
     script = tmp_path / "child.py"  # a file, not -c: the fork server re-imports the main module
     script.write_text(_BLAS_CHILD)
     # without the thread limits make test sets for its own processes: the analysis must set them itself
@@ -215,3 +218,4 @@ def test_every_run_is_analysed_with_one_blas_thread(campaign, tmp_path, mode):
     assert done.returncode == 0, done.stderr[-2000:]
     rows = [r for r in _rows(tmp_path / "r" / "results.parquet") if r["status"] == "ok"]
     assert len(rows) == 8 and {r["inertia"] for r in rows} == {1.0}, [r["inertia"] for r in rows]  # BLAS threads
+    assert min(r["viscous"] for r in rows) >= 2  # libraries: numpy's and scipy's OpenBLAS

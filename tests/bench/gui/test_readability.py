@@ -33,6 +33,7 @@ def test_counter_names_and_units_are_not_cut_off(qtbot):
         assert table.columnWidth(2) >= metrics.horizontalAdvance(unit)
 
 
+@pytest.mark.device_free  # refused before the GUI or any device starts: the parallel part
 @pytest.mark.parametrize("env", [{"QT_QPA_PLATFORM": "xcb"}, {"QT_QPA_PLATFORM": "xcb", "DISPLAY": ":97"}])
 def test_gui_without_a_display_is_one_line_and_exit_2(env, tmp_path):
     base = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")}
