@@ -43,6 +43,33 @@ def add_record_options(parser: argparse.ArgumentParser) -> None:
                         "device (refused by default); every report then says the record is incomplete")
 
 
+def read_options(args: argparse.Namespace, budget: int | None, progress=None):
+    """The command's reading options (``--torque-channel``, ``--torque-timing``, ``--allow-incomplete``) and its
+    memory budget as :class:`hilbench.analysis.protocol.ReadOptions`."""
+    from hilbench.analysis.protocol import ReadOptions
+
+    timing = getattr(args, "torque_timing", None) or getattr(args, "timing", None) or "auto"
+    return ReadOptions(memory=budget, torque_channel=getattr(args, "torque_channel", None), timing=timing,
+                       allow_incomplete=bool(getattr(args, "allow_incomplete", False)), progress=progress)
+
+
+def read_runs(name: str, args: argparse.Namespace, paths: list, validation: list, budget: int | None,
+              progress=None, warn: bool = True):
+    """(entry, training inputs, validation inputs or None) of registry analysis ``name``
+    (:func:`hilbench.analysis.protocol.read_runs`), read within ``budget`` bytes; an incomplete record let
+    through is said on standard error (unless ``warn`` is False: the command says it itself)."""
+    from hilbench.analysis.protocol import entry
+    from hilbench.analysis.protocol import read_runs as read_both
+
+    analysis = entry(name)
+    inputs, val = read_both(analysis, paths, validation, read_options(args, budget, progress))
+    for rec in inputs.records + (val.records if val is not None else []):
+        line = rec.incomplete_line()
+        if line and warn:
+            print(f"warning: {line}", file=sys.stderr)
+    return analysis, inputs, val
+
+
 def load(path: str, args: argparse.Namespace, **options: Any) -> Record:
     """:func:`hilbench.analysis.record.load_record` with the command's ``--torque-channel``, ``--torque-timing``
     and ``--allow-incomplete``; an incomplete record let through is said on standard error."""

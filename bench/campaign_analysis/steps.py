@@ -1,37 +1,28 @@
 """The analysis steps ``hilbench analyse`` runs on one run file, each returning one small flat dict.
 
-This is the one adapter between the campaign engine and the analysis packages: a step reads the file itself
-through the one record loader (it runs inside a worker process; hilbench.analysis.record.load_record, so a run
-reads as the CLI and the GUI read it), cuts it into the head it fits and the tail it validates on
-(hilbench.analysis.record_split), calls the analysis package's front door ``analyse`` as the CLI command does, and
-flattens its result into the columns of :data:`COLUMNS`.
+A step is an entry of the analysis registry (hilbench.analysis.protocol.ANALYSES) and its row flattening: the step
+reads the file through the entry's ``read`` (inside a worker process, within :data:`STEP_MEMORY`; a run reads as
+the CLI and the GUI read it), cuts it into the head it fits and the tail it validates on
+(``protocol.held_out``) when the analysis takes a validation run, calls the entry's ``analyse``, and takes the
+columns of its report's summary (``Analysis.columns``), with the campaign's own columns (:data:`STEP_COLUMNS`:
+the run's size, its temperature, the grade of the verdict). Any registered analysis is a step.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import asdict, dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
 
-#: step -> protocols whose runs it can analyse (a run gets the steps its protocol supports)
-PROTOCOLS_OF_STEP = {"identify": ("identification", "chirp"), "compare": ("identification", "chirp"),
-                     "residual": ("identification", "chirp"), "presliding": ("presliding",),
-                     "afrf": ("stepped_sine",), "skeleton": ("chirp",)}
-STEPS_DONE = tuple(PROTOCOLS_OF_STEP)
+from hilbench.analysis import protocol
 
-#: result columns of the steps: name -> (Arrow type name, unit). Common columns: engine.BASE_COLUMNS.
-COLUMNS: dict[str, tuple[str, str]] = {
-    "inertia": ("float64", "kg*m^2"), "inertia_se": ("float64", "kg*m^2"),
-    "breakaway": ("float64", "N*m"), "breakaway_se": ("float64", "N*m"),
-    "viscous": ("float64", "N*m*s/rad"), "viscous_se": ("float64", "N*m*s/rad"),
-    "coulomb": ("float64", "N*m"), "coulomb_se": ("float64", "N*m"),
-    "offset": ("float64", "N*m"), "offset_se": ("float64", "N*m"),
-    "n_elements": ("int64", "1"),
-    "train_torque_nrmse": ("float64", "1"), "validation_torque_nrmse": ("float64", "1"),
-    "validation_position_nrmse": ("float64", "1"), "validation_position_nrmse_segmented": ("float64", "1"),
+#: the campaign's own columns besides each analysis's (``Analysis.columns``): name -> (Arrow type name, unit).
+#: Common columns: table.BASE_COLUMNS.
+STEP_COLUMNS: dict[str, tuple[str, str]] = {
     "verdict": ("string", ""),
     # compare: the family with the lowest validation torque NRMSE; residual: the terms of the final model
     "model": ("string", ""), "validation_torque_nrmse_start": ("float64", "1"),
@@ -41,25 +32,33 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "initial_stiffness": ("float64", "N*m/rad"), "initial_stiffness_se": ("float64", "N*m/rad"),
     "presliding_distance": ("float64", "rad"), "presliding_distance_se": ("float64", "rad"),
     "validation_force_relative_error": ("float64", "1"),
-    # afrf: the measured grid's extent, the first-harmonic compliance |X1/T1| (rotary rad/(N*m), linear m/N) at
-    # the lowest frequency of the lowest and of the highest amplitude, the largest |X3|/|X1| and period-to-period
-    # change over the grid
-    "afrf_steps": ("int64", "1"), "afrf_frequency_min": ("float64", "Hz"), "afrf_frequency_max": ("float64", "Hz"),
-    "afrf_compliance_low_amplitude": ("float64", "rad/(N*m)"),
-    "afrf_compliance_high_amplitude": ("float64", "rad/(N*m)"),
-    "afrf_third_harmonic_ratio_max": ("float64", "1"), "afrf_convergence_max": ("float64", "1"),
     # skeleton: the composed amplitude range (rotary rad, linear m) and the equivalent stiffness k_eq at its
     # smallest and largest amplitude bins (rotary N*m/rad, linear N/m)
     "skeleton_bins": ("int64", "1"),
     "skeleton_amplitude_min": ("float64", "rad"), "skeleton_amplitude_max": ("float64", "rad"),
     "skeleton_stiffness_low_amplitude": ("float64", "N*m/rad"),
     "skeleton_stiffness_high_amplitude": ("float64", "N*m/rad"),
-    # afrf, skeleton, presliding: the analysis's warnings, "; "-separated (presliding: the span of a long record
-    # analysed, fewer than 4 reversals)
+    # the analyses' warnings, "; "-separated
     "warnings": ("string", ""),
     "temperature_mean": ("float64", "degC"), "sliding_distance": ("float64", "rad"),
     "samples": ("int64", "1"), "duration": ("float64", "s"),
 }
+
+
+def _columns() -> dict[str, tuple[str, str]]:
+    """Every column a step can fill: the campaign's and each registered analysis's (one type and unit each)."""
+    out = dict(STEP_COLUMNS)
+    for e in protocol.entries().values():
+        for name, kind in e.columns.items():
+            if out.setdefault(name, kind) != kind:
+                raise ValueError(f"column {name!r}: {e.name} declares {kind}, another step {out[name]}")
+    return out
+
+
+#: result columns of the steps: name -> (Arrow type name, unit)
+COLUMNS: dict[str, tuple[str, str]] = _columns()
+#: bytes a step may use to read its run (a worker's share of a lab PC); over it the entry streams or refuses
+STEP_MEMORY = 2 << 30
 
 
 @dataclass(frozen=True)
@@ -99,53 +98,84 @@ def sliding_distance(position: np.ndarray, fs: float) -> float:
 
 
 def _breakaway_se(model) -> float:
-    """Standard error of the break-away sum k_i*Delta_i from the elements' own errors (their covariance is not
-    kept in the model, so correlations are ignored: an approximation that says so in docs/campaign-analysis.md)."""
-    se = np.asarray(model.std_errors.get("ms_stiffness", []), dtype=float)
-    if se.size != model.ms_stiffness.size:
-        return math.nan
-    return float(np.sqrt(np.sum((se * np.asarray(model.ms_delta)) ** 2)))
+    from hilbench.analysis.identification.entry import breakaway_se
+
+    return breakaway_se(model)
 
 
-def identify_step(path: str, settings: StepSettings) -> dict[str, Any]:
-    """``hilbench identify`` on one run: ``analysis.identification.analyse`` fitted on the head, validated on the
-    held-out tail (analysis.record_split)."""
-    from hilbench.analysis.identification import analyse
-    from hilbench.analysis.identification.maxwell_fit import LipSettings
-    from hilbench.analysis.record import load_record
-    from hilbench.analysis.record_split import split
-    from hilbench.bench.verdict import judge
+def step_settings(name: str, s: StepSettings) -> Any:
+    """The analysis settings of step ``name`` from the campaign's :class:`StepSettings` (the entry's defaults for
+    an analysis the campaign sets nothing of)."""
+    if name == "identify":
+        from hilbench.analysis.identification.entry import IdentifySettings
+        from hilbench.analysis.identification.maxwell_fit import LipSettings
 
-    rec = load_record(path, channels=("temperature",))  # the one loader: an aborted or short run is a failed row
-    head, tail = split(rec, settings.validation_fraction)
-    lip = LipSettings(n_thresholds=settings.thresholds, coulomb=settings.coulomb, offset=settings.offset)
-    res = analyse(head, lip, method=settings.method, validation=tail)
-    m, f, se = res.model, res.figures, res.model.std_errors
-    row: dict[str, Any] = {
-        "inertia": m.inertia, "inertia_se": se.get("inertia", math.nan),
-        "breakaway": m.breakaway, "breakaway_se": se.get("breakaway", _breakaway_se(m)),
-        "viscous": m.viscous, "viscous_se": se.get("viscous", math.nan),
-        "coulomb": m.coulomb, "coulomb_se": se.get("coulomb", math.nan),
-        "offset": m.offset, "offset_se": se.get("offset", math.nan),
-        "n_elements": int(m.ms_stiffness.size),
-        "train_torque_nrmse": f.get("train_torque_nrmse"),
-        "validation_torque_nrmse": f.get("validation_torque_nrmse"),
-        "validation_position_nrmse": f.get("validation_position_nrmse"),
-        "validation_position_nrmse_segmented": f.get("validation_position_nrmse_segmented"),
-        **_size(rec), "sliding_distance": sliding_distance(rec.position, rec.sample_rate),
-    }
-    where = "validation" if tail is not None else "train"
-    verdict = judge(100 * f[f"{where}_torque_nrmse"], 100 * f[f"{where}_position_nrmse"],
-                    100 * f[f"{where}_position_nrmse_segmented"], where, residual_hint=False)
-    grade = verdict.split(":", 1)[1].split()[0] if verdict.startswith("verdict:") else "none"
-    row["verdict"] = grade + ("; the open-loop position drifts" if "position drifts" in verdict else "")
-    if "temperature" in rec.channels:
-        row["temperature_mean"] = float(np.mean(rec.channels["temperature"]))
-    return row
+        return IdentifySettings(LipSettings(n_thresholds=s.thresholds, coulomb=s.coulomb, offset=s.offset),
+                                method=s.method)
+    return None
 
 
 def _size(rec) -> dict[str, Any]:
-    return {"samples": int(rec.t.size), "duration": float(rec.t[-1] - rec.t[0])}
+    n = int(rec.n_samples)
+    return {"samples": n, "duration": float(rec.t[-1] - rec.t[0]) if rec.t is not None and rec.t.size
+            else (n - 1) / rec.sample_rate}
+
+
+def _temperature(path: str) -> dict[str, Any]:
+    """The mean of the run's temperature channel (degC), when it has one."""
+    from hilbench.analysis.record import load_record
+
+    rec = load_record(path, need_torque=False, need_position=False, channels=("temperature",),
+                      allow_incomplete=True)
+    t = rec.channels.get("temperature")
+    return {"temperature_mean": float(np.mean(t))} if t is not None and t.size else {}
+
+
+def _identify_row(result: protocol.Result, path: str) -> dict[str, Any]:
+    """identify's own columns: the grade of the verdict, the distance slid and the temperature."""
+    from hilbench.bench.verdict import judge
+
+    f = result.value.figures
+    where = "validation" if result.validation is not None else "train"
+    row: dict[str, Any] = {}
+    if f"{where}_torque_nrmse" in f:
+        verdict = judge(100 * f[f"{where}_torque_nrmse"], 100 * f[f"{where}_position_nrmse"],
+                        100 * f[f"{where}_position_nrmse_segmented"], where, residual_hint=False)
+        grade = verdict.split(":", 1)[1].split()[0] if verdict.startswith("verdict:") else "none"
+        row["verdict"] = grade + ("; the open-loop position drifts" if "position drifts" in verdict else "")
+    rec = result.inputs.record if result.validation is None else None
+    whole = rec if rec is not None and not result.inputs.streamed else None
+    if whole is None:  # the head was fitted: the distance slid is the whole run's
+        whole = protocol.whole([path], protocol.ReadOptions()).record
+    return {**row, "sliding_distance": sliding_distance(whole.position, whole.sample_rate), **_temperature(path)}
+
+
+#: step -> its own columns beside the analysis's summary: (result, run file) -> dict
+ROWS: dict[str, Callable[[protocol.Result, str], dict[str, Any]]] = {"identify": _identify_row}
+
+
+def run_step(name: str, path: str, settings: StepSettings) -> dict[str, Any]:
+    """Step ``name`` on one run file: the registry entry's read, held-out split, analyse and summary (module
+    docstring); one flat row of :data:`COLUMNS`."""
+    from hilbench.analysis.errors import AnalysisError
+
+    entry = protocol.entry(name)
+    inputs = entry.read([path], protocol.ReadOptions(memory=STEP_MEMORY))
+    head, tail = inputs, None
+    if entry.matches is not None and settings.validation_fraction > 0:
+        head, tail = protocol.held_out(inputs, settings.validation_fraction)
+    elif entry.needs_validation:
+        raise AnalysisError(f"{name} scores models on the held-out tail: --validation-fraction must be > 0")
+    result = entry.analyse(head, step_settings(name, settings), tail)
+    summary = entry.report(result)[1]
+    row = {k: v for k, v in summary.items() if k in entry.columns}
+    row.update(_size(inputs.record))
+    row.update(ROWS.get(name, lambda _r, _p: {})(result, path))
+    return row
+
+
+identify_step = partial(run_step, "identify")
+afrf_step = partial(run_step, "afrf")
 
 
 def _held_out(path: str, settings: StepSettings, step: str):
@@ -177,7 +207,7 @@ def compare_step(path: str, settings: StepSettings) -> dict[str, Any]:
     best = min(scored, key=lambda r: r.validation["torque_nrmse"])
     return {"model": best.name, "train_torque_nrmse": best.train["torque_nrmse"],
             "validation_torque_nrmse": best.validation["torque_nrmse"],
-            "validation_position_nrmse_segmented": best.validation["position_nrmse_segmented"], **_size(rec)}
+            "validation_position_nrmse_segmented": best.validation["position_nrmse_segmented"], **_old_size(rec)}
 
 
 def residual_step(path: str, settings: StepSettings) -> dict[str, Any]:
@@ -193,7 +223,7 @@ def residual_step(path: str, settings: StepSettings) -> dict[str, Any]:
             "validation_torque_nrmse_start": before["torque_nrmse"],
             "validation_torque_nrmse": after["torque_nrmse"],
             "validation_position_nrmse": after.get("position_nrmse"),
-            "verdict": loop.verdict, **_size(rec)}
+            "verdict": loop.verdict, **_old_size(rec)}
 
 
 def presliding_step(path: str, settings: StepSettings) -> dict[str, Any]:
@@ -208,31 +238,11 @@ def presliding_step(path: str, settings: StepSettings) -> dict[str, Any]:
     res = presliding.analyse(rec, replicates=settings.presliding_replicates)
     q, e = res.quantities, res.uncertainties
     row: dict[str, Any] = {"validation_force_relative_error": res.fit.relative_rms,
-                           "warnings": "; ".join(res.warnings), **_size(rec)}
+                           "warnings": "; ".join(res.warnings), **_old_size(rec)}
     for name, column in (("breakaway", "presliding_breakaway"), ("initial_stiffness", "initial_stiffness"),
                          ("presliding_distance", "presliding_distance")):
         row[column], row[f"{column}_se"] = q[name], e[name]
     return row
-
-
-def afrf_step(path: str, settings: StepSettings) -> dict[str, Any]:
-    """``hilbench afrf RUN.h5`` on one stepped-sine run: ``analysis.afrf.analyse`` on the record its ``load``
-    reads; the row summarises the grid (:data:`COLUMNS`)."""
-    from hilbench.analysis import afrf
-
-    rec = afrf.load(path)
-    res = afrf.analyse(rec)
-    c1, c3 = res.response[..., 0], res.response[..., min(2, res.n_harmonics - 1)]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        compliance = np.abs(c1 / res.drive)
-        third = np.abs(c3) / np.abs(c1) if res.n_harmonics >= 3 else np.full(c1.shape, math.nan)
-    lowest_f = int(np.argmin(res.frequencies))
-    return {"afrf_steps": int(np.isfinite(c1).sum()), "afrf_frequency_min": float(res.frequencies.min()),
-            "afrf_frequency_max": float(res.frequencies.max()),
-            "afrf_compliance_low_amplitude": float(compliance[int(np.argmin(res.amplitudes)), lowest_f]),
-            "afrf_compliance_high_amplitude": float(compliance[int(np.argmax(res.amplitudes)), lowest_f]),
-            "afrf_third_harmonic_ratio_max": _nanmax(third), "afrf_convergence_max": _nanmax(res.convergence),
-            "warnings": "; ".join(res.warnings), **_size(rec)}
 
 
 def skeleton_step(path: str, settings: StepSettings) -> dict[str, Any]:
@@ -253,22 +263,49 @@ def skeleton_step(path: str, settings: StepSettings) -> dict[str, Any]:
     return {"skeleton_bins": int(a.size), "skeleton_amplitude_min": float(a.min()),
             "skeleton_amplitude_max": float(a.max()), "skeleton_stiffness_low_amplitude": float(k[np.argmin(a)]),
             "skeleton_stiffness_high_amplitude": float(k[np.argmax(a)]), "warnings": "; ".join(res.warnings),
-            **_size(rec)}
+            **_old_size(rec)}
 
 
-def _nanmax(a: np.ndarray) -> float:
-    a = np.asarray(a, float)
-    return float(np.nanmax(a)) if np.isfinite(a).any() else math.nan
+def _old_size(rec) -> dict[str, Any]:
+    return {"samples": int(rec.t.size), "duration": float(rec.t[-1] - rec.t[0])}
 
 
-STEPS: dict[str, Callable[[str, StepSettings], dict[str, Any]]] = {
-    "identify": identify_step, "compare": compare_step, "residual": residual_step, "presliding": presliding_step,
-    "afrf": afrf_step, "skeleton": skeleton_step}
+LEGACY = {"compare": compare_step, "residual": residual_step, "presliding": presliding_step,
+          "skeleton": skeleton_step}
+LEGACY_PROTOCOLS = {"compare": ("identification", "chirp"), "residual": ("identification", "chirp"),
+                    "presliding": ("presliding",), "skeleton": ("chirp",)}
 
 
-def steps_for(protocol: str, wanted: tuple[str, ...]) -> list[str]:
-    """The wanted steps a run of ``protocol`` supports."""
-    return [s for s in wanted if protocol in PROTOCOLS_OF_STEP.get(s, ())]
+class _Steps(Mapping):
+    """Step name -> step function, read live from the registry (a registered analysis is a step at once)."""
+
+    def __getitem__(self, name: str) -> Callable[[str, StepSettings], dict[str, Any]]:
+        if name in LEGACY:
+            return LEGACY[name]
+        if name not in protocol.ANALYSES:
+            raise KeyError(name)
+        return partial(run_step, name)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(dict.fromkeys([*protocol.ANALYSES, *LEGACY]))
+
+    def __len__(self) -> int:
+        return len(list(iter(self)))
+
+
+STEPS: Mapping[str, Callable[[str, StepSettings], dict[str, Any]]] = _Steps()
+
+
+def steps_for(protocol_name: str, wanted: tuple[str, ...]) -> list[str]:
+    """The wanted steps a run of ``protocol_name`` supports (the entry's ``protocols``)."""
+    out = []
+    for s in wanted:
+        if s in LEGACY:
+            if protocol_name in LEGACY_PROTOCOLS.get(s, ()):
+                out.append(s)
+        elif s in protocol.ANALYSES and protocol_name in protocol.entry(s).protocols:
+            out.append(s)
+    return out
 
 
 def run_meta(path: str) -> dict[str, Any]:
