@@ -228,6 +228,8 @@ class Analysis:
 #: every analysis: name -> (module, attribute) of its :class:`Analysis` entry, imported on first use
 ANALYSES: dict[str, tuple[str, str]] = {
     "identify": ("hilbench.analysis.identification.entry", "ENTRY"),
+    "compare": ("hilbench.analysis.models.entry", "ENTRY"),
+    "residual": ("hilbench.analysis.residual.entry", "ENTRY"),
     "afrf": ("hilbench.analysis.afrf.entry", "ENTRY"),
 }
 _LOADED: dict[str, Analysis] = {}

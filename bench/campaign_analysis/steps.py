@@ -10,7 +10,6 @@ the run's size, its temperature, the grade of the verdict). Any registered analy
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import asdict, dataclass
 from functools import partial
@@ -112,6 +111,14 @@ def step_settings(name: str, s: StepSettings) -> Any:
 
         return IdentifySettings(LipSettings(n_thresholds=s.thresholds, coulomb=s.coulomb, offset=s.offset),
                                 method=s.method)
+    if name == "compare":
+        from hilbench.analysis.models.compare import CompareSettings
+
+        return CompareSettings(families=s.compare_families)
+    if name == "residual":
+        from hilbench.analysis.residual import ResidualSettings
+
+        return ResidualSettings(start=s.residual_start)
     return None
 
 
@@ -176,54 +183,8 @@ def run_step(name: str, path: str, settings: StepSettings) -> dict[str, Any]:
 
 identify_step = partial(run_step, "identify")
 afrf_step = partial(run_step, "afrf")
-
-
-def _held_out(path: str, settings: StepSettings, step: str):
-    """The record's head and tail for a step that needs a validation set (compare, residual)."""
-    from hilbench.analysis.errors import AnalysisError
-    from hilbench.analysis.record import load_record
-    from hilbench.analysis.record_split import split
-
-    if settings.validation_fraction <= 0:
-        raise AnalysisError(f"{step} scores models on the held-out tail: --validation-fraction must be > 0")
-    rec = load_record(path)
-    head, tail = split(rec, settings.validation_fraction)
-    return rec, head, tail
-
-
-def compare_step(path: str, settings: StepSettings) -> dict[str, Any]:
-    """``hilbench compare`` on one run: ``analysis.models.compare.analyse`` with every family of
-    ``compare_families`` fitted on the head and scored on the tail; the row is the family with the lowest
-    validation torque NRMSE."""
-    from hilbench.analysis.errors import AnalysisError
-    from hilbench.analysis.models.compare import CompareSettings, analyse
-
-    rec, head, tail = _held_out(path, settings, "compare")
-    result = analyse(head, tail, CompareSettings(families=settings.compare_families))
-    scored = [r for r in result.rows if r.error is None and math.isfinite(r.validation["torque_nrmse"])]
-    if not scored:
-        raise AnalysisError("compare: no family could be fitted (" + "; ".join(
-            f"{r.name}: {r.error}" for r in result.rows) + ")")
-    best = min(scored, key=lambda r: r.validation["torque_nrmse"])
-    return {"model": best.name, "train_torque_nrmse": best.train["torque_nrmse"],
-            "validation_torque_nrmse": best.validation["torque_nrmse"],
-            "validation_position_nrmse_segmented": best.validation["position_nrmse_segmented"], **_old_size(rec)}
-
-
-def residual_step(path: str, settings: StepSettings) -> dict[str, Any]:
-    """``hilbench residual`` on one run: ``analysis.residual.analyse`` from ``residual_start``, fitted on the head
-    and judged on the tail; the row has the validation torque NRMSE of the start and of the final model and the
-    loop's verdict."""
-    from hilbench.analysis.residual import ResidualSettings, analyse
-
-    rec, head, tail = _held_out(path, settings, "residual")
-    loop = analyse(head, ResidualSettings(start=settings.residual_start), validation=[tail]).loop
-    before, after = loop.error_before["validation"], loop.error_after["validation"]
-    return {"model": ",".join([*loop.start, *loop.names_added]),
-            "validation_torque_nrmse_start": before["torque_nrmse"],
-            "validation_torque_nrmse": after["torque_nrmse"],
-            "validation_position_nrmse": after.get("position_nrmse"),
-            "verdict": loop.verdict, **_old_size(rec)}
+compare_step = partial(run_step, "compare")
+residual_step = partial(run_step, "residual")
 
 
 def presliding_step(path: str, settings: StepSettings) -> dict[str, Any]:
@@ -270,10 +231,9 @@ def _old_size(rec) -> dict[str, Any]:
     return {"samples": int(rec.t.size), "duration": float(rec.t[-1] - rec.t[0])}
 
 
-LEGACY = {"compare": compare_step, "residual": residual_step, "presliding": presliding_step,
+LEGACY = {"presliding": presliding_step,
           "skeleton": skeleton_step}
-LEGACY_PROTOCOLS = {"compare": ("identification", "chirp"), "residual": ("identification", "chirp"),
-                    "presliding": ("presliding",), "skeleton": ("chirp",)}
+LEGACY_PROTOCOLS = {"presliding": ("presliding",), "skeleton": ("chirp",)}
 
 
 class _Steps(Mapping):
