@@ -230,7 +230,9 @@ ANALYSES: dict[str, tuple[str, str]] = {
     "identify": ("hilbench.analysis.identification.entry", "ENTRY"),
     "compare": ("hilbench.analysis.models.entry", "ENTRY"),
     "residual": ("hilbench.analysis.residual.entry", "ENTRY"),
+    "presliding": ("hilbench.analysis.presliding.entry", "ENTRY"),
     "afrf": ("hilbench.analysis.afrf.entry", "ENTRY"),
+    "skeleton": ("hilbench.analysis.skeleton.entry", "ENTRY"),
 }
 _LOADED: dict[str, Analysis] = {}
 

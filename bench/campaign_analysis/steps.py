@@ -22,23 +22,7 @@ from hilbench.analysis import protocol
 #: the campaign's own columns besides each analysis's (``Analysis.columns``): name -> (Arrow type name, unit).
 #: Common columns: table.BASE_COLUMNS.
 STEP_COLUMNS: dict[str, tuple[str, str]] = {
-    "verdict": ("string", ""),
-    # compare: the family with the lowest validation torque NRMSE; residual: the terms of the final model
-    "model": ("string", ""), "validation_torque_nrmse_start": ("float64", "1"),
-    # presliding: the quantities of docs/presliding.md with their standard uncertainties (axis units: rotary
-    # N*m, N*m/rad, rad; linear N, N/m, m) and the force simulated from the displacement against the measured one
-    "presliding_breakaway": ("float64", "N*m"), "presliding_breakaway_se": ("float64", "N*m"),
-    "initial_stiffness": ("float64", "N*m/rad"), "initial_stiffness_se": ("float64", "N*m/rad"),
-    "presliding_distance": ("float64", "rad"), "presliding_distance_se": ("float64", "rad"),
-    "validation_force_relative_error": ("float64", "1"),
-    # skeleton: the composed amplitude range (rotary rad, linear m) and the equivalent stiffness k_eq at its
-    # smallest and largest amplitude bins (rotary N*m/rad, linear N/m)
-    "skeleton_bins": ("int64", "1"),
-    "skeleton_amplitude_min": ("float64", "rad"), "skeleton_amplitude_max": ("float64", "rad"),
-    "skeleton_stiffness_low_amplitude": ("float64", "N*m/rad"),
-    "skeleton_stiffness_high_amplitude": ("float64", "N*m/rad"),
-    # the analyses' warnings, "; "-separated
-    "warnings": ("string", ""),
+    "verdict": ("string", ""),  # identify: the grade of hilbench.bench.verdict; residual: the loop's verdict
     "temperature_mean": ("float64", "degC"), "sliding_distance": ("float64", "rad"),
     "samples": ("int64", "1"), "duration": ("float64", "s"),
 }
@@ -119,6 +103,14 @@ def step_settings(name: str, s: StepSettings) -> Any:
         from hilbench.analysis.residual import ResidualSettings
 
         return ResidualSettings(start=s.residual_start)
+    if name == "presliding":
+        from hilbench.analysis.presliding.entry import PreslidingAnalysis
+
+        return PreslidingAnalysis(replicates=s.presliding_replicates)
+    if name == "skeleton":
+        from hilbench.analysis.skeleton import SkeletonSettings
+
+        return SkeletonSettings(mass=s.skeleton_mass)
     return None
 
 
@@ -181,76 +173,29 @@ def run_step(name: str, path: str, settings: StepSettings) -> dict[str, Any]:
     return row
 
 
-identify_step = partial(run_step, "identify")
-afrf_step = partial(run_step, "afrf")
-compare_step = partial(run_step, "compare")
-residual_step = partial(run_step, "residual")
 
 
-def presliding_step(path: str, settings: StepSettings) -> dict[str, Any]:
-    """``hilbench presliding`` on one displacement-driven run with the command's defaults (fraction 0.9, 48
-    thresholds, the protocol's inertia, ``presliding_replicates`` bootstrap replicates): ``analysis.presliding
-    .analyse``; the row has the quantities with their standard uncertainties, the relative rms error of the
-    force simulated from the measured displacement and the warnings (e.g. the span of a long record analysed)."""
-    from hilbench.analysis import presliding
-    from hilbench.analysis.record import load_record
-
-    rec = load_record(path)
-    res = presliding.analyse(rec, replicates=settings.presliding_replicates)
-    q, e = res.quantities, res.uncertainties
-    row: dict[str, Any] = {"validation_force_relative_error": res.fit.relative_rms,
-                           "warnings": "; ".join(res.warnings), **_old_size(rec)}
-    for name, column in (("breakaway", "presliding_breakaway"), ("initial_stiffness", "initial_stiffness"),
-                         ("presliding_distance", "presliding_distance")):
-        row[column], row[f"{column}_se"] = q[name], e[name]
-    return row
+def step(name: str) -> Callable[[str, StepSettings], dict[str, Any]]:
+    """The step function of analysis ``name`` (picklable: a worker process runs it)."""
+    return partial(run_step, name)
 
 
-def skeleton_step(path: str, settings: StepSettings) -> dict[str, Any]:
-    """``hilbench skeleton RUN.h5 [--mass skeleton_mass]`` on one chirp run: ``analysis.skeleton.analyse`` of the
-    record alone (a campaign row is one run; composing several gains is the command's job)."""
-    from hilbench.analysis import skeleton
-    from hilbench.analysis.record import load_record
-
-    rec = load_record(path)
-    res = skeleton.analyse([rec], skeleton.SkeletonSettings(mass=settings.skeleton_mass))
-    a, k = np.asarray(res.curves.amplitude, float), np.asarray(res.curves.stiffness, float)
-    ok = np.isfinite(a) & np.isfinite(k)
-    if not ok.any():
-        from hilbench.analysis.errors import AnalysisError
-
-        raise AnalysisError(f"{path}: no amplitude bin has a skeleton point")
-    a, k = a[ok], k[ok]
-    return {"skeleton_bins": int(a.size), "skeleton_amplitude_min": float(a.min()),
-            "skeleton_amplitude_max": float(a.max()), "skeleton_stiffness_low_amplitude": float(k[np.argmin(a)]),
-            "skeleton_stiffness_high_amplitude": float(k[np.argmax(a)]), "warnings": "; ".join(res.warnings),
-            **_old_size(rec)}
-
-
-def _old_size(rec) -> dict[str, Any]:
-    return {"samples": int(rec.t.size), "duration": float(rec.t[-1] - rec.t[0])}
-
-
-LEGACY = {"presliding": presliding_step,
-          "skeleton": skeleton_step}
-LEGACY_PROTOCOLS = {"presliding": ("presliding",), "skeleton": ("chirp",)}
+identify_step = step("identify")
 
 
 class _Steps(Mapping):
     """Step name -> step function, read live from the registry (a registered analysis is a step at once)."""
 
     def __getitem__(self, name: str) -> Callable[[str, StepSettings], dict[str, Any]]:
-        if name in LEGACY:
-            return LEGACY[name]
         if name not in protocol.ANALYSES:
             raise KeyError(name)
-        return partial(run_step, name)
+        return step(name)
 
     def __iter__(self) -> Iterator[str]:
-        return iter(dict.fromkeys([*protocol.ANALYSES, *LEGACY]))
+        return iter(protocol.ANALYSES)
 
     def __len__(self) -> int:
-        return len(list(iter(self)))
+        return len(protocol.ANALYSES)
 
 
 STEPS: Mapping[str, Callable[[str, StepSettings], dict[str, Any]]] = _Steps()
@@ -258,14 +203,7 @@ STEPS: Mapping[str, Callable[[str, StepSettings], dict[str, Any]]] = _Steps()
 
 def steps_for(protocol_name: str, wanted: tuple[str, ...]) -> list[str]:
     """The wanted steps a run of ``protocol_name`` supports (the entry's ``protocols``)."""
-    out = []
-    for s in wanted:
-        if s in LEGACY:
-            if protocol_name in LEGACY_PROTOCOLS.get(s, ()):
-                out.append(s)
-        elif s in protocol.ANALYSES and protocol_name in protocol.entry(s).protocols:
-            out.append(s)
-    return out
+    return [s for s in wanted if s in protocol.ANALYSES and protocol_name in protocol.entry(s).protocols]
 
 
 def run_meta(path: str) -> dict[str, Any]:
