@@ -107,6 +107,31 @@ def whole(paths: Sequence[str | Path], options: ReadOptions, **loader: Any) -> I
     return Inputs([load_record(p, **kw) for p in paths], budget=options.memory)
 
 
+def one_run_whole(paths: Sequence[str | Path], options: ReadOptions, what: str, fixed: int, per_sample: int,
+                  **loader: Any) -> Inputs:
+    """One short run read whole (:func:`whole` with ``loader``), refused in one line before its samples are read
+    when ``fixed + per_sample * samples`` bytes exceed ``options.memory``; ``what`` names the analysis."""
+    from hilbench.analysis.record import mib, stream_record
+
+    if len(paths) != 1:
+        raise AnalysisError(f"{what} reads one run, got {len(paths)}")
+    n = stream_record(paths[0], allow_incomplete=options.allow_incomplete)[0].n_samples
+    need = fixed + per_sample * n
+    if options.memory is not None and need > options.memory:
+        raise AnalysisError(f"{paths[0]}: {n} samples need about {mib(need)} read whole, over --memory "
+                            f"{mib(options.memory)}: raise --memory")
+    return whole(paths, options, **loader)
+
+
+def write_json(path: Path, document: Any) -> Path:
+    """``document`` as strict, indented JSON at ``path``, complete or absent (output_files.atomic_path)."""
+    from hilbench.analysis.output_files import atomic_path, dumps
+
+    with atomic_path(path) as tmp:
+        tmp.write_text(dumps(document, indent=2))
+    return path
+
+
 def read_runs(entry: Analysis, paths: Sequence[str | Path], validation: Sequence[str | Path],
               options: ReadOptions) -> tuple[Inputs, Inputs | None]:
     """The training runs and the validation runs read together by ``entry.read`` (one memory budget for all of
@@ -233,6 +258,8 @@ ANALYSES: dict[str, tuple[str, str]] = {
     "presliding": ("hilbench.analysis.presliding.entry", "ENTRY"),
     "afrf": ("hilbench.analysis.afrf.entry", "ENTRY"),
     "skeleton": ("hilbench.analysis.skeleton.entry", "ENTRY"),
+    "compensation": ("hilbench.analysis.compensation.entry", "ENTRY"),
+    "breakaway": ("hilbench.analysis.breakaway.entry", "ENTRY"),
 }
 _LOADED: dict[str, Analysis] = {}
 
