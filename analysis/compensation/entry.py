@@ -73,5 +73,5 @@ COLUMNS = {"rms_error_rad": ("float64", "rad"), "max_error_rad": ("float64", "ra
            "glitch_mean_rad": ("float64", "rad"), "glitch_max_rad": ("float64", "rad"),
            "effort_rms_a": ("float64", "A"), "settling_max_s": ("float64", "s")}
 
-ENTRY = Analysis("compensation", "Tracking with feed-forward (compensation metrics)", read, compute, summarise,
+ENTRY = Analysis("compensation", "Tracking metrics (compensated run)", read, compute, summarise,
                  TrackingSettings, write=write, protocols=("compensated",), columns=COLUMNS)
