@@ -44,6 +44,8 @@ class AnalysisResult:
     warnings: list[str] = field(default_factory=list)
     #: an identification's model file document (``hilbench identify``'s JSON), for "Save model..."
     model_document: dict | None = None
+    #: the registry entry's report summary (figures unrounded: fractions, SI), as campaign rows hold them
+    summary: dict = field(default_factory=dict)
 
 
 def _gui_names() -> list[str]:
@@ -110,6 +112,7 @@ def run_analysis(name: str, path: str | Path, options: dict | None = None) -> An
                                                allow_incomplete=bool(options.get("allow_incomplete", False))))
     result = analysis.analyse(inputs, settings_for(name, options, inputs))
     shown = ANALYSES.get(name, summary_table)(result, options)
+    shown.summary = analysis.report(result)[1]
     line = inputs.record.incomplete_line()
     if line and line not in shown.warnings:
         shown.warnings.insert(0, line)
