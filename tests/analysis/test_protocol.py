@@ -215,3 +215,38 @@ def test_the_residual_loop_reports_one_figure_everywhere(tmp_path, capsys):
     assert row["validation_torque_nrmse"] == pytest.approx(split["validation_torque_nrmse"], rel=RTOL)
     assert row["validation_torque_nrmse_start"] == pytest.approx(split["validation_torque_nrmse_start"], rel=RTOL)
     capsys.readouterr()
+
+
+def test_the_afrf_reports_one_figure_everywhere(tmp_path, capsys):
+    """A stepped-sine run of a linear system: the first-harmonic compliance of the lowest amplitude (the campaign
+    row's column) from the Python API, the CLI's JSON, the GUI's result and the Parquet row, to 1e-6; whole, and
+    read one step window at a time under a small budget (the same bit for bit)."""
+    from hilbench.firmware_sim.engine.plant import PlantParams
+    from tests.analysis.afrf.test_afrf_run import _write_run
+
+    folder = tmp_path / "c"
+    folder.mkdir()
+    run = folder / "afrf.h5"
+    _write_run(run, PlantParams(inertia=1.0, spring=50.0, viscous=10.0), [1.0, 3.0], [0.5, 2.0], settle=4)
+    (folder / "index.json").write_text(json.dumps({"runs": [{"key": "a", "file": "afrf.h5", "status": "completed",
+                                                             "protocol": "stepped_sine"}]}))
+    afrf = protocol.entry("afrf")
+    summary = afrf.report(afrf.analyse(afrf.read([run], protocol.ReadOptions())))[1]
+    compliance = summary["afrf_compliance_low_amplitude"]
+    # the closed form: |X1/T1| of m x'' + c x' + k x = T at the lowest frequency, within the sampling's 1e-3
+    w = 2 * np.pi * 1.0
+    assert compliance == pytest.approx(1 / abs(50.0 - w * w + 10j * w), rel=1e-3)
+    assert main(["-q", "afrf", str(run), "--json", str(tmp_path / "a.json")]) == 0
+    doc = json.loads((tmp_path / "a.json").read_text())
+    i, j = int(np.argmin(doc["amplitudes"])), int(np.argmin(doc["frequencies"]))
+    assert doc["magnitude"][i][j][0] / doc["drive_magnitude"][i][j] == pytest.approx(compliance, rel=RTOL)
+    assert run_analysis("afrf", run).summary["afrf_compliance_low_amplitude"] == pytest.approx(compliance, rel=RTOL)
+    row = _campaign_row(folder, tmp_path / "row", "afrf", 0.0)
+    assert row["afrf_compliance_low_amplitude"] == pytest.approx(compliance, rel=RTOL)
+    from hilbench.analysis.afrf import array_cost
+
+    streamed = afrf.read([run], protocol.ReadOptions(memory=array_cost(load_record(run).n_samples) - 1))
+    assert streamed.streamed
+    assert afrf.report(afrf.analyse(streamed))[1]["afrf_compliance_low_amplitude"] == pytest.approx(compliance,
+                                                                                                   rel=RTOL)
+    capsys.readouterr()
