@@ -13,6 +13,7 @@ from typing import Any
 from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.identification.maxwell_fit import LipSettings
 from hilbench.analysis.protocol import STREAMED, Analysis, Inputs, ReadOptions, Result, check_validation, whole
+from hilbench.analysis.record import mib
 
 
 @dataclass(frozen=True)
@@ -21,12 +22,6 @@ class IdentifySettings:
 
     lip: LipSettings = field(default_factory=LipSettings)
     method: str = "lip"
-
-
-def mib(nbytes: float) -> str:
-    from hilbench.analysis.record import mib as as_mib
-
-    return as_mib(nbytes)
 
 
 def read(paths: Sequence[str | Path], options: ReadOptions) -> Inputs:
