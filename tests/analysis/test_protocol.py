@@ -250,3 +250,20 @@ def test_the_afrf_reports_one_figure_everywhere(tmp_path, capsys):
     assert afrf.report(afrf.analyse(streamed))[1]["afrf_compliance_low_amplitude"] == pytest.approx(compliance,
                                                                                                    rel=RTOL)
     capsys.readouterr()
+
+
+def test_the_gui_goes_through_the_entries_refusals_and_fallbacks(tmp_path):
+    """The run browser once refused a skeleton without J where `hilbench skeleton` takes the run's declared inertia,
+    and skipped presliding's check of the force channel; through the entries it does what the command does."""
+    from hilbench.firmware_sim.engine.friction_models import paper_system
+    from tests.analysis.skeleton.test_skeleton_stream import _write_chirp
+
+    path = tmp_path / "chirp.h5"
+    _write_chirp(path, paper_system(), 5.0, duration=20.0)
+    shown = run_analysis("skeleton", path, {})  # no J typed: the run's calibration inertia, as the CLI
+    assert main(["-q", "skeleton", str(path), "--json", str(tmp_path / "s.json")]) == 0
+    doc = json.loads((tmp_path / "s.json").read_text())
+    assert shown.summary["mass"] == doc["mass"] == paper_system().inertia
+    assert shown.summary["skeleton_amplitude_max"] == pytest.approx(max(doc["amplitude"]), rel=RTOL)
+    with pytest.raises(AnalysisError, match="a torque-driven record; presliding needs a displacement-driven one"):
+        run_analysis("presliding", path)
