@@ -130,8 +130,9 @@ def _temperature(path: str) -> dict[str, Any]:
     return {"temperature_mean": float(np.mean(t))} if t is not None and t.size else {}
 
 
-def _identify_row(result: protocol.Result, path: str) -> dict[str, Any]:
-    """identify's own columns: the grade of the verdict, the distance slid and the temperature."""
+def _identify_row(result: protocol.Result, inputs: protocol.Inputs, path: str) -> dict[str, Any]:
+    """identify's own columns: the grade of the verdict, the distance slid over the whole run (``inputs``, before
+    the split) and the temperature."""
     from hilbench.bench.verdict import judge
 
     f = result.value.figures
@@ -142,15 +143,13 @@ def _identify_row(result: protocol.Result, path: str) -> dict[str, Any]:
                         100 * f[f"{where}_position_nrmse_segmented"], where, residual_hint=False)
         grade = verdict.split(":", 1)[1].split()[0] if verdict.startswith("verdict:") else "none"
         row["verdict"] = grade + ("; the open-loop position drifts" if "position drifts" in verdict else "")
-    rec = result.inputs.record if result.validation is None else None
-    whole = rec if rec is not None and not result.inputs.streamed else None
-    if whole is None:  # the head was fitted: the distance slid is the whole run's
-        whole = protocol.whole([path], protocol.ReadOptions()).record
-    return {**row, "sliding_distance": sliding_distance(whole.position, whole.sample_rate), **_temperature(path)}
+    if not inputs.streamed:
+        row["sliding_distance"] = sliding_distance(inputs.record.position, inputs.record.sample_rate)
+    return {**row, **_temperature(path)}
 
 
-#: step -> its own columns beside the analysis's summary: (result, run file) -> dict
-ROWS: dict[str, Callable[[protocol.Result, str], dict[str, Any]]] = {"identify": _identify_row}
+#: step -> its own columns beside the analysis's summary: (result, the run's inputs, run file) -> dict
+ROWS: dict[str, Callable[[protocol.Result, protocol.Inputs, str], dict[str, Any]]] = {"identify": _identify_row}
 
 
 def run_step(name: str, path: str, settings: StepSettings) -> dict[str, Any]:
@@ -169,7 +168,7 @@ def run_step(name: str, path: str, settings: StepSettings) -> dict[str, Any]:
     summary = entry.report(result)[1]
     row = {k: v for k, v in summary.items() if k in entry.columns}
     row.update(_size(inputs.record))
-    row.update(ROWS.get(name, lambda _r, _p: {})(result, path))
+    row.update(ROWS.get(name, lambda _r, _i, _p: {})(result, inputs, path))
     return row
 
 
