@@ -1,7 +1,8 @@
-"""The analysis commands' shared options, a thin adapter over :func:`hilbench.analysis.record.load_record`.
+"""The analysis commands' shared options, a thin adapter over the analysis registry (hilbench.analysis.protocol).
 
-- Every analysis command reads its runs through :func:`load` (channel choice, torque timing, host-clock resampling,
-  numeric and completeness checks all live in the loader, so the CLI, the GUI and campaigns read a run alike).
+- Every analysis command reads its runs through its registry entry (:func:`read_runs`, hilbench.analysis.protocol:
+  the one loader's channel choice, torque timing, host-clock resampling, numeric and completeness checks, and the
+  analysis's choice of whole, streamed or decimated reading within ``--memory``), as the GUI and campaigns do.
 - Option values that size an allocation are checked against a stated bound before anything is allocated.
 """
 
@@ -11,12 +12,8 @@ import argparse
 import math
 import re
 import sys
-from typing import TYPE_CHECKING, Any
 
 from hilbench.bench.errors import BenchError
-
-if TYPE_CHECKING:
-    from hilbench.analysis.record import Record
 
 # --thresholds: candidate Maxwell-slip thresholds; each one is a regressor column of the record's length, and
 # a fitted model must fit the C plant, whose element limit is 1024.
@@ -43,18 +40,31 @@ def add_record_options(parser: argparse.ArgumentParser) -> None:
                         "device (refused by default); every report then says the record is incomplete")
 
 
-def load(path: str, args: argparse.Namespace, **options: Any) -> Record:
-    """:func:`hilbench.analysis.record.load_record` with the command's ``--torque-channel``, ``--torque-timing``
-    and ``--allow-incomplete``; an incomplete record let through is said on standard error."""
-    from hilbench.analysis.record import load_record
+def read_options(args: argparse.Namespace, budget: int | None, progress=None):
+    """The command's reading options (``--torque-channel``, ``--torque-timing``, ``--allow-incomplete``) and its
+    memory budget as :class:`hilbench.analysis.protocol.ReadOptions`."""
+    from hilbench.analysis.protocol import ReadOptions
 
-    options.setdefault("torque_channel", getattr(args, "torque_channel", None))
-    options.setdefault("timing", getattr(args, "torque_timing", None) or "auto")
-    rec = load_record(path, allow_incomplete=bool(getattr(args, "allow_incomplete", False)), **options)
-    line = rec.incomplete_line()
-    if line:
-        print(f"warning: {line}", file=sys.stderr)
-    return rec
+    timing = getattr(args, "torque_timing", None) or getattr(args, "timing", None) or "auto"
+    return ReadOptions(memory=budget, torque_channel=getattr(args, "torque_channel", None), timing=timing,
+                       allow_incomplete=bool(getattr(args, "allow_incomplete", False)), progress=progress)
+
+
+def read_runs(name: str, args: argparse.Namespace, paths: list, validation: list, budget: int | None,
+              progress=None, warn: bool = True):
+    """(entry, training inputs, validation inputs or None) of registry analysis ``name``
+    (:func:`hilbench.analysis.protocol.read_runs`), read within ``budget`` bytes; an incomplete record let
+    through is said on standard error (unless ``warn`` is False: the command says it itself)."""
+    from hilbench.analysis.protocol import entry
+    from hilbench.analysis.protocol import read_runs as read_both
+
+    analysis = entry(name)
+    inputs, val = read_both(analysis, paths, validation, read_options(args, budget, progress))
+    for rec in inputs.records + (val.records if val is not None else []):
+        line = rec.incomplete_line()
+        if line and warn:
+            print(f"warning: {line}", file=sys.stderr)
+    return analysis, inputs, val
 
 
 #: the memory budget's bounds, bytes: below the floor no analysis of a real record fits; the cap keeps a shared
@@ -111,20 +121,3 @@ def check_count(value: int, option: str, minimum: int, maximum: int, why: str) -
     """An option that sizes an allocation, checked before anything is allocated."""
     if not (minimum <= value <= maximum):
         raise BenchError(f"{option} {value}: must lie in [{minimum}, {maximum}] ({why})")
-
-
-def read_decimated(path: str, args: argparse.Namespace, read, n_samples: int, timing: str | None = None) -> Record:
-    """``read(path, ..., progress=...)`` (a decimating reader such as
-    :func:`hilbench.analysis.residual.record_analysis.read`) with the command's loader options and a progress bar
-    over the file's ``n_samples``; an incomplete record let through is said on standard error."""
-    from hilbench.bench.analysis_progress import progress_bar
-
-    with progress_bar(f"read {path}") as progress:
-        rec = read(path, torque_channel=getattr(args, "torque_channel", None),
-                   timing=timing or getattr(args, "torque_timing", None) or "auto",
-                   allow_incomplete=bool(getattr(args, "allow_incomplete", False)),
-                   progress=lambda done: progress(done, n_samples))
-    line = rec.incomplete_line()
-    if line:
-        print(f"warning: {line}", file=sys.stderr)
-    return rec

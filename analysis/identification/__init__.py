@@ -30,18 +30,12 @@ def analyse(record: Record, settings: LipSettings | None = None, *, method: str 
     """Identify the Maxwell-slip model (J, k_i, Delta_i, b, options of ``settings``) of ``record``; score it on
     ``validation`` when given (never fitted). The torque timing is the record's (the loader resolved it); a
     displacement-driven record is fitted with J = 0 unless ``settings.fixed_inertia`` says otherwise."""
-    from hilbench.analysis.errors import AnalysisError
     from hilbench.analysis.identification.identify import identify
+    from hilbench.analysis.protocol import Inputs, check_validation
 
     settings = _settings_for(record, settings)
-    if validation is not None:
-        if validation.axis != record.axis:
-            raise AnalysisError(f"{validation.path}: a {validation.axis} axis; {record.path} is {record.axis}")
-        if validation.kind != record.kind:
-            raise AnalysisError(f"{validation.path} is {validation.kind}; {record.path} is {record.kind}")
-        if validation.timing != record.timing:  # each run's torque is aligned by its own timing
-            raise AnalysisError(f"{validation.path}: torque timing {validation.timing}, {record.path}: "
-                                f"{record.timing}; give both runs the same --torque-timing")
+    if validation is not None:  # each run's torque is aligned by its own timing
+        check_validation(Inputs([record]), Inputs([validation]), ("axis", "kind", "timing"))
     return identify(record.arrays(), method=method, validate=validation.arrays() if validation else None,
                     settings=settings, record=record.kind)
 
@@ -70,17 +64,14 @@ def analyse_stream(record: Record, source, settings: LipSettings | None = None, 
     """:func:`analyse` on records read chunk by chunk (``hilbench.analysis.record.stream_record``): the same model
     and figures to 1e-9 (tests/analysis/identification/test_chunked.py), in memory bounded by the block size
     whatever the record's length; no curves for the figures (docs/long-runs.md)."""
-    from hilbench.analysis.errors import AnalysisError
     from hilbench.analysis.identification.identify import identify_chunks
+    from hilbench.analysis.protocol import Inputs, check_validation
 
     settings = _settings_for(record, settings)
     val_source = None
-    if validation is not None:
+    if validation is not None:  # both runs' chunks are read at one rate
         val, val_source = validation
-        if (val.axis, val.kind, val.timing) != (record.axis, record.kind, record.timing):
-            raise AnalysisError(f"{val.path}: axis, record kind or torque timing differ from {record.path}'s")
-        if abs(val.sample_rate - record.sample_rate) > 1e-9 * record.sample_rate:
-            raise AnalysisError(f"{val.path}: {val.sample_rate:g} Hz; {record.path}: {record.sample_rate:g} Hz")
+        check_validation(Inputs([record]), Inputs([val]), ("axis", "kind", "timing", "sample_rate"))
     return identify_chunks(source, record.sample_rate, axis=record.axis, validate=val_source, settings=settings,
                            record=record.kind, method=method)
 

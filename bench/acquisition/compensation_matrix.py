@@ -126,19 +126,17 @@ def predict_case(case: Case, plant, gains: PositionGains, settings: MatrixSettin
 
 
 def measured_case(case: Case, run_file: str | Path, settings: MatrixSettings) -> CaseResult:
-    """Metrics of a played case from its run file (position rad, commanded current A)."""
-    from hilbench.analysis.record import load_record
+    """Metrics of a played case from its run file (position rad, commanded current A), by the registry's
+    ``compensation`` analysis (hilbench.analysis.protocol), which rebuilds the reference from the run file."""
+    from hilbench.analysis.compensation.entry import TrackingSettings
+    from hilbench.analysis.protocol import ReadOptions, entry
 
+    analysis = entry("compensation")
+    inputs = analysis.read([run_file], ReadOptions(allow_incomplete=True))
+    m = analysis.analyse(inputs, TrackingSettings(settings.window, settings.tolerance)).value
     ref = case.reference_path
-    rf = load_record(run_file, need_torque=False, channels=("current_cmd",), allow_incomplete=True)
-    q = rf.position
-    current = rf.channel("current_cmd")
-    if q.size != ref.n:
-        raise BenchError(f"{run_file}: {q.size} samples recorded, the reference has {ref.n}; the run did not "
-                         f"complete")
     ff = case.feedforward_result(settings.current_limit)
-    m = tracking_metrics(ref, q, current, window=settings.window, tolerance=settings.tolerance)
-    return CaseResult(ref, case.compensation, m, ref.position - q, ff.clipped, str(run_file))
+    return CaseResult(ref, case.compensation, m, ref.position - inputs.record.position, ff.clipped, str(run_file))
 
 
 def write_report(results: list[CaseResult], out: Path, settings: dict) -> list[Path]:

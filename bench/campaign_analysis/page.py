@@ -146,6 +146,42 @@ def repeat_summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
+def step_sections(rows: list[dict[str, Any]], units: dict[str, str]) -> list[str]:
+    """One section per analysis of the registry (hilbench.analysis.protocol.ANALYSES) that has rows in the table,
+    in the registry's order: its title, then a sortable table of its rows (run, repeat, status, the entry's
+    columns with their units, the reason of a failure)."""
+    from hilbench.analysis.protocol import ANALYSES, entry
+
+    e = html.escape
+    present = {str(r.get("step")) for r in rows}
+    parts = []
+    for name in ANALYSES:
+        if name not in present:
+            continue
+        analysis = entry(name)
+        mine = [r for r in rows if r.get("step") == name]
+        columns = [c for c in analysis.columns if any(r.get(c) is not None for r in mine)]
+        parts.append(f"<h3 id='step-{e(name)}'>{e(analysis.title)} ({e(name)}): {len(mine)} rows, "
+                     f"{sum(r.get('status') == 'ok' for r in mine)} ok</h3><table class='step'><thead><tr>"
+                     "<th data-sort='1' class='t'>run</th><th data-sort='1'>repeat</th>"
+                     "<th data-sort='1' class='t'>status</th>")
+        for c in columns:
+            unit = units.get(c, "")
+            label = f"{c} ({unit})" if unit and unit != "1" else c
+            parts.append(f"<th data-sort='1'>{e(label)}</th>")
+        parts.append("<th data-sort='1' class='t'>reason</th></tr></thead><tbody>")
+        for r in mine:
+            cls = "step-row" + (" failed" if r.get("status") != "ok" else "")
+            cells = [f"<td class='t' data-v='{e(str(r.get('key')))}'>{e(str(r.get('key')))}</td>",
+                     f"<td data-v='{e(str(r.get('repeat')))}'>{_fmt(r.get('repeat'))}</td>",
+                     f"<td class='t' data-v='{e(str(r.get('status')))}'>{_fmt(r.get('status'))}</td>"]
+            cells += [f"<td data-v='{e(str(r.get(c)))}'>{_fmt(r.get(c), r.get(f'{c}_se'))}</td>" for c in columns]
+            cells.append(f"<td class='t'>{_fmt(r.get('error'))}</td>")
+            parts.append(f"<tr class='{cls}'>{''.join(cells)}</tr>")
+        parts.append("</tbody></table>")
+    return parts
+
+
 def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, str], drift_pngs: list[Path],
                   summary: dict[str, Any] | None, axis: str = "rotary") -> str:
     """The HTML text of one campaign's page (``axis``: the runs' axis, which names the break-away torque/force)."""
@@ -197,6 +233,11 @@ def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, st
         parts.append(f"<tr id='fig-{rid}' class='fig' style='display:none'><td colspan='{len(RUN_COLUMNS)}'>"
                      f"{body}</td></tr>")
     parts.append("</tbody></table>")
+    sections = step_sections(rows, units)
+    if sections:
+        parts.append("<h2>Analyses</h2><p>One section per analysis step in the table (the analysis registry's "
+                     "order); click a column to sort.</p>")
+        parts += sections
     parts.append("<h2>Mean &plusmn; standard deviation over repeats</h2><details open><summary>per planned run"
                  "</summary><table><thead><tr><th class='t'>run</th>"
                  "<th>repeats</th>" + "".join(f"<th>{e(_header(p, HEADERS[p], units, axis))}</th>"

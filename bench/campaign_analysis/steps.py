@@ -1,67 +1,48 @@
 """The analysis steps ``hilbench analyse`` runs on one run file, each returning one small flat dict.
 
-This is the one adapter between the campaign engine and the analysis packages: a step reads the file itself
-through the one record loader (it runs inside a worker process; hilbench.analysis.record.load_record, so a run
-reads as the CLI and the GUI read it), cuts it into the head it fits and the tail it validates on
-(hilbench.analysis.record_split), calls the analysis package's front door ``analyse`` as the CLI command does, and
-flattens its result into the columns of :data:`COLUMNS`.
+A step is an entry of the analysis registry (hilbench.analysis.protocol.ANALYSES) and its row flattening: the step
+reads the file through the entry's ``read`` (inside a worker process, within :data:`STEP_MEMORY`; a run reads as
+the CLI and the GUI read it), cuts it into the head it fits and the tail it validates on
+(``protocol.held_out``) when the analysis takes a validation run, calls the entry's ``analyse``, and takes the
+columns of its report's summary (``Analysis.columns``), with the campaign's own columns (:data:`STEP_COLUMNS`:
+the run's size, its temperature, the grade of the verdict). Any registered analysis is a step.
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import asdict, dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
 
-#: step -> protocols whose runs it can analyse (a run gets the steps its protocol supports)
-PROTOCOLS_OF_STEP = {"identify": ("identification", "chirp"), "compare": ("identification", "chirp"),
-                     "residual": ("identification", "chirp"), "presliding": ("presliding",),
-                     "afrf": ("stepped_sine",), "skeleton": ("chirp",)}
-STEPS_DONE = tuple(PROTOCOLS_OF_STEP)
+from hilbench.analysis import protocol
 
-#: result columns of the steps: name -> (Arrow type name, unit). A unit that names a quantity of
-#: ``hilbench.common.units.AXIS_UNITS`` (``inertia``, ``torque``...) follows the run's axis (the row's ``axis``);
-#: the table's metadata gives both units. Common columns: table.BASE_COLUMNS.
-COLUMNS: dict[str, tuple[str, str]] = {
-    "inertia": ("float64", "inertia"), "inertia_se": ("float64", "inertia"),
-    "breakaway": ("float64", "torque"), "breakaway_se": ("float64", "torque"),
-    "viscous": ("float64", "viscous"), "viscous_se": ("float64", "viscous"),
-    "coulomb": ("float64", "torque"), "coulomb_se": ("float64", "torque"),
-    "offset": ("float64", "torque"), "offset_se": ("float64", "torque"),
-    "n_elements": ("int64", "1"),
-    "train_torque_nrmse": ("float64", "1"), "validation_torque_nrmse": ("float64", "1"),
-    "validation_position_nrmse": ("float64", "1"), "validation_position_nrmse_segmented": ("float64", "1"),
-    "verdict": ("string", ""),
-    # compare: the family with the lowest validation torque NRMSE; residual: the terms of the final model
-    "model": ("string", ""), "validation_torque_nrmse_start": ("float64", "1"),
-    # presliding: the quantities of docs/presliding.md with their standard uncertainties and the force simulated
-    # from the displacement against the measured one
-    "presliding_breakaway": ("float64", "torque"), "presliding_breakaway_se": ("float64", "torque"),
-    "initial_stiffness": ("float64", "stiffness"), "initial_stiffness_se": ("float64", "stiffness"),
-    "presliding_distance": ("float64", "position"), "presliding_distance_se": ("float64", "position"),
-    "validation_force_relative_error": ("float64", "1"),
-    # afrf: the measured grid's extent, the first-harmonic compliance |X1/T1| at
-    # the lowest frequency of the lowest and of the highest amplitude, the largest |X3|/|X1| and period-to-period
-    # change over the grid
-    "afrf_steps": ("int64", "1"), "afrf_frequency_min": ("float64", "Hz"), "afrf_frequency_max": ("float64", "Hz"),
-    "afrf_compliance_low_amplitude": ("float64", "compliance"),
-    "afrf_compliance_high_amplitude": ("float64", "compliance"),
-    "afrf_third_harmonic_ratio_max": ("float64", "1"), "afrf_convergence_max": ("float64", "1"),
-    # skeleton: the composed amplitude range and the equivalent stiffness k_eq at its smallest and largest
-    # amplitude bins
-    "skeleton_bins": ("int64", "1"),
-    "skeleton_amplitude_min": ("float64", "position"), "skeleton_amplitude_max": ("float64", "position"),
-    "skeleton_stiffness_low_amplitude": ("float64", "stiffness"),
-    "skeleton_stiffness_high_amplitude": ("float64", "stiffness"),
-    # afrf, skeleton, presliding: the analysis's warnings, "; "-separated (presliding: the span of a long record
-    # analysed, fewer than 4 reversals)
-    "warnings": ("string", ""),
+#: the campaign's own columns besides each analysis's (``Analysis.columns``): name -> (Arrow type name, unit).
+#: A unit that names a quantity of ``hilbench.common.units.AXIS_UNITS`` (``inertia``, ``torque``...) follows the
+#: run's axis (the row's ``axis``); the table's metadata gives both units. Common columns: table.BASE_COLUMNS.
+STEP_COLUMNS: dict[str, tuple[str, str]] = {
+    "verdict": ("string", ""),  # identify: the grade of hilbench.bench.verdict; residual: the loop's verdict
     "temperature_mean": ("float64", "degC"), "sliding_distance": ("float64", "position"),
     "samples": ("int64", "1"), "duration": ("float64", "s"),
 }
+
+
+def _columns() -> dict[str, tuple[str, str]]:
+    """Every column a step can fill: the campaign's and each registered analysis's (one type and unit each)."""
+    out = dict(STEP_COLUMNS)
+    for e in protocol.entries().values():
+        for name, kind in e.columns.items():
+            if out.setdefault(name, kind) != kind:
+                raise ValueError(f"column {name!r}: {e.name} declares {kind}, another step {out[name]}")
+    return out
+
+
+#: result columns of the steps: name -> (Arrow type name, unit)
+COLUMNS: dict[str, tuple[str, str]] = _columns()
+#: bytes a step may use to read its run (a worker's share of a lab PC); over it the entry streams or refuses
+STEP_MEMORY = 2 << 30
 
 
 @dataclass(frozen=True)
@@ -101,176 +82,128 @@ def sliding_distance(position: np.ndarray, fs: float) -> float:
 
 
 def _breakaway_se(model) -> float:
-    """Standard error of the break-away sum k_i*Delta_i from the elements' own errors (their covariance is not
-    kept in the model, so correlations are ignored: an approximation that says so in docs/campaign-analysis.md)."""
-    se = np.asarray(model.std_errors.get("ms_stiffness", []), dtype=float)
-    if se.size != model.ms_stiffness.size:
-        return math.nan
-    return float(np.sqrt(np.sum((se * np.asarray(model.ms_delta)) ** 2)))
+    from hilbench.analysis.identification.entry import breakaway_se
+
+    return breakaway_se(model)
 
 
-def identify_step(path: str, settings: StepSettings) -> dict[str, Any]:
-    """``hilbench identify`` on one run: ``analysis.identification.analyse`` fitted on the head, validated on the
-    held-out tail (analysis.record_split)."""
-    from hilbench.analysis.identification import analyse
-    from hilbench.analysis.identification.maxwell_fit import LipSettings
-    from hilbench.analysis.record import load_record
-    from hilbench.analysis.record_split import split
-    from hilbench.bench.verdict import judge
+def step_settings(name: str, s: StepSettings) -> Any:
+    """The analysis settings of step ``name`` from the campaign's :class:`StepSettings` (the entry's defaults for
+    an analysis the campaign sets nothing of)."""
+    if name == "identify":
+        from hilbench.analysis.identification.entry import IdentifySettings
+        from hilbench.analysis.identification.maxwell_fit import LipSettings
 
-    rec = load_record(path, channels=("temperature",))  # the one loader: an aborted or short run is a failed row
-    head, tail = split(rec, settings.validation_fraction)
-    lip = LipSettings(n_thresholds=settings.thresholds, coulomb=settings.coulomb, offset=settings.offset)
-    res = analyse(head, lip, method=settings.method, validation=tail)
-    m, f, se = res.model, res.figures, res.model.std_errors
-    row: dict[str, Any] = {
-        "inertia": m.inertia, "inertia_se": se.get("inertia", math.nan),
-        "breakaway": m.breakaway, "breakaway_se": se.get("breakaway", _breakaway_se(m)),
-        "viscous": m.viscous, "viscous_se": se.get("viscous", math.nan),
-        "coulomb": m.coulomb, "coulomb_se": se.get("coulomb", math.nan),
-        "offset": m.offset, "offset_se": se.get("offset", math.nan),
-        "n_elements": int(m.ms_stiffness.size),
-        "train_torque_nrmse": f.get("train_torque_nrmse"),
-        "validation_torque_nrmse": f.get("validation_torque_nrmse"),
-        "validation_position_nrmse": f.get("validation_position_nrmse"),
-        "validation_position_nrmse_segmented": f.get("validation_position_nrmse_segmented"),
-        **_size(rec), "sliding_distance": sliding_distance(rec.position, rec.sample_rate),
-    }
-    where = "validation" if tail is not None else "train"
-    verdict = judge(100 * f[f"{where}_torque_nrmse"], 100 * f[f"{where}_position_nrmse"],
-                    100 * f[f"{where}_position_nrmse_segmented"], where, residual_hint=False)
-    grade = verdict.split(":", 1)[1].split()[0] if verdict.startswith("verdict:") else "none"
-    row["verdict"] = grade + ("; the open-loop position drifts" if "position drifts" in verdict else "")
-    if "temperature" in rec.channels:
-        row["temperature_mean"] = float(np.mean(rec.channels["temperature"]))
-    return row
+        return IdentifySettings(LipSettings(n_thresholds=s.thresholds, coulomb=s.coulomb, offset=s.offset),
+                                method=s.method)
+    if name == "compare":
+        from hilbench.analysis.models.compare import CompareSettings
+
+        return CompareSettings(families=s.compare_families)
+    if name == "residual":
+        from hilbench.analysis.residual import ResidualSettings
+
+        return ResidualSettings(start=s.residual_start)
+    if name == "presliding":
+        from hilbench.analysis.presliding.entry import PreslidingAnalysis
+
+        return PreslidingAnalysis(replicates=s.presliding_replicates)
+    if name == "skeleton":
+        from hilbench.analysis.skeleton import SkeletonSettings
+
+        return SkeletonSettings(mass=s.skeleton_mass)
+    return None
 
 
 def _size(rec) -> dict[str, Any]:
-    return {"samples": int(rec.t.size), "duration": float(rec.t[-1] - rec.t[0])}
+    n = int(rec.n_samples)
+    return {"samples": n, "duration": float(rec.t[-1] - rec.t[0]) if rec.t is not None and rec.t.size
+            else (n - 1) / rec.sample_rate}
 
 
-def _held_out(path: str, settings: StepSettings, step: str):
-    """The record's head and tail for a step that needs a validation set (compare, residual)."""
-    from hilbench.analysis.errors import AnalysisError
-    from hilbench.analysis.record import load_record
-    from hilbench.analysis.record_split import split
-
-    if settings.validation_fraction <= 0:
-        raise AnalysisError(f"{step} scores models on the held-out tail: --validation-fraction must be > 0")
-    rec = load_record(path)
-    head, tail = split(rec, settings.validation_fraction)
-    return rec, head, tail
-
-
-def compare_step(path: str, settings: StepSettings) -> dict[str, Any]:
-    """``hilbench compare`` on one run: ``analysis.models.compare.analyse`` with every family of
-    ``compare_families`` fitted on the head and scored on the tail; the row is the family with the lowest
-    validation torque NRMSE."""
-    from hilbench.analysis.errors import AnalysisError
-    from hilbench.analysis.models.compare import CompareSettings, analyse
-
-    rec, head, tail = _held_out(path, settings, "compare")
-    result = analyse(head, tail, CompareSettings(families=settings.compare_families))
-    scored = [r for r in result.rows if r.error is None and math.isfinite(r.validation["torque_nrmse"])]
-    if not scored:
-        raise AnalysisError("compare: no family could be fitted (" + "; ".join(
-            f"{r.name}: {r.error}" for r in result.rows) + ")")
-    best = min(scored, key=lambda r: r.validation["torque_nrmse"])
-    return {"model": best.name, "train_torque_nrmse": best.train["torque_nrmse"],
-            "validation_torque_nrmse": best.validation["torque_nrmse"],
-            "validation_position_nrmse_segmented": best.validation["position_nrmse_segmented"], **_size(rec)}
-
-
-def residual_step(path: str, settings: StepSettings) -> dict[str, Any]:
-    """``hilbench residual`` on one run: ``analysis.residual.analyse`` from ``residual_start``, fitted on the head
-    and judged on the tail; the row has the validation torque NRMSE of the start and of the final model and the
-    loop's verdict."""
-    from hilbench.analysis.residual import ResidualSettings, analyse
-
-    rec, head, tail = _held_out(path, settings, "residual")
-    loop = analyse(head, ResidualSettings(start=settings.residual_start), validation=[tail]).loop
-    before, after = loop.error_before["validation"], loop.error_after["validation"]
-    return {"model": ",".join([*loop.start, *loop.names_added]),
-            "validation_torque_nrmse_start": before["torque_nrmse"],
-            "validation_torque_nrmse": after["torque_nrmse"],
-            "validation_position_nrmse": after.get("position_nrmse"),
-            "verdict": loop.verdict, **_size(rec)}
-
-
-def presliding_step(path: str, settings: StepSettings) -> dict[str, Any]:
-    """``hilbench presliding`` on one displacement-driven run with the command's defaults (fraction 0.9, 48
-    thresholds, the protocol's inertia, ``presliding_replicates`` bootstrap replicates): ``analysis.presliding
-    .analyse``; the row has the quantities with their standard uncertainties, the relative rms error of the
-    force simulated from the measured displacement and the warnings (e.g. the span of a long record analysed)."""
-    from hilbench.analysis import presliding
+def _temperature(path: str) -> dict[str, Any]:
+    """The mean of the run's temperature channel (degC), when it has one."""
     from hilbench.analysis.record import load_record
 
-    rec = load_record(path)
-    res = presliding.analyse(rec, replicates=settings.presliding_replicates)
-    q, e = res.quantities, res.uncertainties
-    row: dict[str, Any] = {"validation_force_relative_error": res.fit.relative_rms,
-                           "warnings": "; ".join(res.warnings), **_size(rec)}
-    for name, column in (("breakaway", "presliding_breakaway"), ("initial_stiffness", "initial_stiffness"),
-                         ("presliding_distance", "presliding_distance")):
-        row[column], row[f"{column}_se"] = q[name], e[name]
+    rec = load_record(path, need_torque=False, need_position=False, channels=("temperature",),
+                      allow_incomplete=True)
+    t = rec.channels.get("temperature")
+    return {"temperature_mean": float(np.mean(t))} if t is not None and t.size else {}
+
+
+def _identify_row(result: protocol.Result, inputs: protocol.Inputs, path: str) -> dict[str, Any]:
+    """identify's own columns: the grade of the verdict, the distance slid over the whole run (``inputs``, before
+    the split) and the temperature."""
+    from hilbench.bench.verdict import judge
+
+    f = result.value.figures
+    where = "validation" if result.validation is not None else "train"
+    row: dict[str, Any] = {}
+    if f"{where}_torque_nrmse" in f:
+        verdict = judge(100 * f[f"{where}_torque_nrmse"], 100 * f[f"{where}_position_nrmse"],
+                        100 * f[f"{where}_position_nrmse_segmented"], where, residual_hint=False)
+        grade = verdict.split(":", 1)[1].split()[0] if verdict.startswith("verdict:") else "none"
+        row["verdict"] = grade + ("; the open-loop position drifts" if "position drifts" in verdict else "")
+    if not inputs.streamed:
+        row["sliding_distance"] = sliding_distance(inputs.record.position, inputs.record.sample_rate)
+    return {**row, **_temperature(path)}
+
+
+#: step -> its own columns beside the analysis's summary: (result, the run's inputs, run file) -> dict
+ROWS: dict[str, Callable[[protocol.Result, protocol.Inputs, str], dict[str, Any]]] = {"identify": _identify_row}
+
+
+def run_step(name: str, path: str, settings: StepSettings) -> dict[str, Any]:
+    """Step ``name`` on one run file: the registry entry's read, held-out split, analyse and summary (module
+    docstring); one flat row of :data:`COLUMNS`."""
+    from hilbench.analysis.errors import AnalysisError
+
+    entry = protocol.entry(name)
+    inputs = entry.read([path], protocol.ReadOptions(memory=STEP_MEMORY))
+    head, tail = inputs, None
+    if entry.matches is not None and settings.validation_fraction > 0:
+        head, tail = protocol.held_out(inputs, settings.validation_fraction)
+    elif entry.needs_validation:
+        raise AnalysisError(f"{name} scores models on the held-out tail: --validation-fraction must be > 0")
+    result = entry.analyse(head, step_settings(name, settings), tail)
+    summary = entry.report(result)[1]
+    row = {k: v for k, v in summary.items() if k in entry.columns}
+    row.update(_size(inputs.record))
+    row.update(ROWS.get(name, lambda _r, _i, _p: {})(result, inputs, path))
     return row
 
 
-def afrf_step(path: str, settings: StepSettings) -> dict[str, Any]:
-    """``hilbench afrf RUN.h5`` on one stepped-sine run: ``analysis.afrf.analyse`` on the record its ``load``
-    reads; the row summarises the grid (:data:`COLUMNS`)."""
-    from hilbench.analysis import afrf
-
-    rec = afrf.load(path)
-    res = afrf.analyse(rec)
-    c1, c3 = res.response[..., 0], res.response[..., min(2, res.n_harmonics - 1)]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        compliance = np.abs(c1 / res.drive)
-        third = np.abs(c3) / np.abs(c1) if res.n_harmonics >= 3 else np.full(c1.shape, math.nan)
-    lowest_f = int(np.argmin(res.frequencies))
-    return {"afrf_steps": int(np.isfinite(c1).sum()), "afrf_frequency_min": float(res.frequencies.min()),
-            "afrf_frequency_max": float(res.frequencies.max()),
-            "afrf_compliance_low_amplitude": float(compliance[int(np.argmin(res.amplitudes)), lowest_f]),
-            "afrf_compliance_high_amplitude": float(compliance[int(np.argmax(res.amplitudes)), lowest_f]),
-            "afrf_third_harmonic_ratio_max": _nanmax(third), "afrf_convergence_max": _nanmax(res.convergence),
-            "warnings": "; ".join(res.warnings), **_size(rec)}
 
 
-def skeleton_step(path: str, settings: StepSettings) -> dict[str, Any]:
-    """``hilbench skeleton RUN.h5 [--mass skeleton_mass]`` on one chirp run: ``analysis.skeleton.analyse`` of the
-    record alone (a campaign row is one run; composing several gains is the command's job)."""
-    from hilbench.analysis import skeleton
-    from hilbench.analysis.record import load_record
-
-    rec = load_record(path)
-    res = skeleton.analyse([rec], skeleton.SkeletonSettings(mass=settings.skeleton_mass))
-    a, k = np.asarray(res.curves.amplitude, float), np.asarray(res.curves.stiffness, float)
-    ok = np.isfinite(a) & np.isfinite(k)
-    if not ok.any():
-        from hilbench.analysis.errors import AnalysisError
-
-        raise AnalysisError(f"{path}: no amplitude bin has a skeleton point")
-    a, k = a[ok], k[ok]
-    return {"skeleton_bins": int(a.size), "skeleton_amplitude_min": float(a.min()),
-            "skeleton_amplitude_max": float(a.max()), "skeleton_stiffness_low_amplitude": float(k[np.argmin(a)]),
-            "skeleton_stiffness_high_amplitude": float(k[np.argmax(a)]), "warnings": "; ".join(res.warnings),
-            **_size(rec)}
+def step(name: str) -> Callable[[str, StepSettings], dict[str, Any]]:
+    """The step function of analysis ``name`` (picklable: a worker process runs it)."""
+    return partial(run_step, name)
 
 
-def _nanmax(a: np.ndarray) -> float:
-    a = np.asarray(a, float)
-    return float(np.nanmax(a)) if np.isfinite(a).any() else math.nan
+identify_step = step("identify")
 
 
-STEPS: dict[str, Callable[[str, StepSettings], dict[str, Any]]] = {
-    "identify": identify_step, "compare": compare_step, "residual": residual_step, "presliding": presliding_step,
-    "afrf": afrf_step, "skeleton": skeleton_step}
+class _Steps(Mapping):
+    """Step name -> step function, read live from the registry (a registered analysis is a step at once)."""
+
+    def __getitem__(self, name: str) -> Callable[[str, StepSettings], dict[str, Any]]:
+        if name not in protocol.ANALYSES:
+            raise KeyError(name)
+        return step(name)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(protocol.ANALYSES)
+
+    def __len__(self) -> int:
+        return len(protocol.ANALYSES)
 
 
-def steps_for(protocol: str, wanted: tuple[str, ...]) -> list[str]:
-    """The wanted steps a run of ``protocol`` supports."""
-    return [s for s in wanted if protocol in PROTOCOLS_OF_STEP.get(s, ())]
+STEPS: Mapping[str, Callable[[str, StepSettings], dict[str, Any]]] = _Steps()
+
+
+def steps_for(protocol_name: str, wanted: tuple[str, ...]) -> list[str]:
+    """The wanted steps a run of ``protocol_name`` supports (the entry's ``protocols``)."""
+    return [s for s in wanted if s in protocol.ANALYSES and protocol_name in protocol.entry(s).protocols]
 
 
 def run_meta(path: str) -> dict[str, Any]:

@@ -1,9 +1,11 @@
-"""Analyses the run browser offers, as plain functions: run file in, numbers and curves out.
+"""Analyses the run browser offers: every entry of the analysis registry (hilbench.analysis.protocol.ANALYSES)
+that analyses one run, run file in, numbers and curves out.
 
-Each analysis returns an :class:`AnalysisResult` (a table of numbers with units and a few figures of
-curves) computed by the public entry points of :mod:`analysis`; the browser runs them off the GUI thread
-and draws the curves with pyqtgraph. An analysis whose entry point does not exist yet reports
-"not available" through :func:`availability` instead of producing anything.
+:func:`run_analysis` reads the run through the entry's ``read`` (the GUI's memory budget: the CLI's ``--memory
+auto``), analyses it through its ``analyse`` with the settings the browser's options give (:func:`settings_for`),
+and lays the result out as an :class:`AnalysisResult` (a table of numbers with units and a few figures of curves):
+by the presentation of :data:`ANALYSES` where the GUI has one, else the entry's report summary as a table. So the
+GUI reads, refuses and computes as the CLI and the campaign steps do; the browser runs it off the GUI thread.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import importlib
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -41,40 +44,90 @@ class AnalysisResult:
     warnings: list[str] = field(default_factory=list)
     #: an identification's model file document (``hilbench identify``'s JSON), for "Save model..."
     model_document: dict | None = None
+    #: the registry entry's report summary (figures unrounded: fractions, SI), as campaign rows hold them
+    summary: dict = field(default_factory=dict)
 
 
-#: analysis name -> (module, attribute) entry points it needs
-ENTRY_POINTS: dict[str, list[tuple[str, str]]] = {
-    "identification": [("hilbench.analysis.identification", "analyse")],
-    "skeleton": [("hilbench.analysis.skeleton", "analyse")],
-    "afrf": [("hilbench.analysis.afrf.frf", "afrf_from_run")],
-    "residual": [("hilbench.analysis.residual", "analyse")],
-    "presliding": [("hilbench.analysis.presliding.analyse", "analyse")],
-}
+def _gui_names() -> list[str]:
+    """The registry's analyses of one run (an analysis that needs a validation run is the CLI's)."""
+    from hilbench.analysis.protocol import entries
+
+    return [n for n, e in entries().items() if not e.needs_validation]
+
+
 #: analyses that read the file themselves (by path): no other handle of it may be open in this process
-BY_PATH = ("afrf",)
-TITLES = {"identification": "Identification (Maxwell-slip, NNLS)", "skeleton": "Skeleton (ForceVib)",
-          "afrf": "AFRF", "residual": "Residual loop", "presliding": "Presliding (force from displacement)"}
+BY_PATH: tuple[str, ...] = ()
 
 
 def availability(name: str) -> str:
     """"" when analysis ``name`` can run, else why not (one line)."""
-    for module, attr in ENTRY_POINTS[name]:
-        try:
-            mod = importlib.import_module(module)
-        except ImportError:
-            return f"not available: {module} is not part of this installation yet"
-        if not hasattr(mod, attr):
-            return f"not available: {module}.{attr} does not exist yet"
+    from hilbench.analysis.protocol import ANALYSES
+
+    if name not in ANALYSES:
+        return f"not available: no analysis {name!r} in this installation"
+    module, attr = ANALYSES[name]
+    try:
+        mod = importlib.import_module(module)
+    except ImportError:
+        return f"not available: {module} is not part of this installation yet"
+    if not hasattr(mod, attr):
+        return f"not available: {module}.{attr} does not exist yet"
     return ""
 
 
-def _entry(name: str) -> Callable:
+def settings_for(name: str, options: dict, inputs) -> object:
+    """The analysis settings the browser's ``options`` give (None: the entry's defaults): the skeleton's mass
+    (``inertia``, empty: the run's declared inertia, as ``hilbench skeleton`` without --mass) and method, the
+    residual loop's start model file, the presliding bootstrap's replicates (default 8)."""
+    if name == "skeleton":
+        from hilbench.analysis.skeleton import SkeletonSettings
+
+        inertia = options.get("inertia")
+        return SkeletonSettings(mass=float(inertia) if inertia else None, method=options.get("method", "cwt"))
+    if name == "residual" and options.get("start_model"):
+        from hilbench.analysis.models.model_file import read_model
+        from hilbench.analysis.residual import ResidualSettings
+
+        model, document = read_model(options["start_model"])
+        return ResidualSettings(start=(), start_model=model, start_model_document=document)
+    if name == "presliding":
+        from hilbench.analysis.presliding.entry import PreslidingAnalysis
+
+        return PreslidingAnalysis(replicates=int(options.get("replicates", 8)))
+    return None
+
+
+def run_analysis(name: str, path: str | Path, options: dict | None = None) -> AnalysisResult:
+    """Analysis ``name`` of the run file ``path`` through its registry entry (module docstring); the incomplete
+    record's line first among the warnings."""
+    from hilbench.analysis.protocol import ReadOptions, entry
+    from hilbench.bench.analysis_input import memory_budget
+
     why = availability(name)
     if why:
-        raise AnalysisUnavailable(f"{TITLES[name]}: {why}")
-    module, attr = ENTRY_POINTS[name][0]
-    return getattr(importlib.import_module(module), attr)
+        raise AnalysisUnavailable(f"{name}: {why}")
+    options = options or {}
+    analysis = entry(name)
+    inputs = analysis.read([path], ReadOptions(memory=memory_budget("auto"),
+                                               allow_incomplete=bool(options.get("allow_incomplete", False))))
+    result = analysis.analyse(inputs, settings_for(name, options, inputs))
+    shown = ANALYSES.get(name, summary_table)(result, options)
+    shown.summary = analysis.report(result)[1]
+    line = inputs.record.incomplete_line()
+    if line and line not in shown.warnings:
+        shown.warnings.insert(0, line)
+    return shown
+
+
+def summary_table(result, options: dict | None = None) -> AnalysisResult:
+    """Any registered analysis: its report summary's figures as the table, no figures."""
+    from hilbench.analysis.protocol import entry
+
+    analysis = entry(result.name)
+    summary = analysis.report(result)[1]
+    numbers = [(k, f"{v:.6g}" if isinstance(v, float) else str(v), analysis.columns.get(k, ("", ""))[1])
+               for k, v in summary.items() if isinstance(v, int | float | str) and not isinstance(v, bool)]
+    return AnalysisResult(analysis.title, numbers, [])
 
 
 def _thin(x: np.ndarray, *ys: np.ndarray, n: int = 20000) -> list[np.ndarray]:
@@ -82,14 +135,14 @@ def _thin(x: np.ndarray, *ys: np.ndarray, n: int = 20000) -> list[np.ndarray]:
     return [x[::step], *[y[::step] for y in ys]]
 
 
-def identification(run, options: dict | None = None) -> AnalysisResult:
-    """Maxwell-slip identification of a :class:`hilbench.analysis.record.Record`, by the same call as ``hilbench
-    identify`` (``hilbench.analysis.identification.analyse``), so both report the same numbers (docs/metrics.md)."""
-    analyse = _entry("identification")
+def identification(result, options: dict | None = None) -> AnalysisResult:
+    """Maxwell-slip identification (the registry's ``identify``, as ``hilbench identify``), so both report the
+    same numbers (docs/metrics.md)."""
+    from hilbench.analysis.identification.entry import document
     from hilbench.common.metrics import percent
 
+    run, res = result.inputs.record, result.value
     position = run.position
-    res = analyse(run)
     fit = res.lip
     m = res.model
     d = m.to_dict()
@@ -109,7 +162,7 @@ def identification(run, options: dict | None = None) -> AnalysisResult:
         numbers.append((f"element {i + 1}: k_i, Delta_i", f"{k:.4g}, {delta:.4g}",
                         f"{u['ms_stiffness']}, {u['ms_delta']}"))
     t_rows = fit.rows / run.sample_rate
-    span = float(np.ptp(position)) / 2 if position.size else 1.0
+    span = float(np.ptp(position)) / 2 if position is not None and position.size else 1.0
     x = np.linspace(-span, span, 401)
     figures = [
         Figure("filtered torque: measured and model", "t (s)", f"torque ({u['coulomb']})",
@@ -117,22 +170,14 @@ def identification(run, options: dict | None = None) -> AnalysisResult:
         Figure("virgin curve", f"displacement ({u['ms_delta']})", f"friction ({u['coulomb']})",
                [("sum k_i clip(x, Delta_i)", x, m.virgin_curve(x))]),
     ]
-    return AnalysisResult(TITLES["identification"], numbers, figures, list(fit.warnings),
-                          model_document=identification_document(res, run))
+    # the model file `hilbench identify RUN --json` writes: the same document and provenance builder
+    return AnalysisResult(_title(result), numbers, figures, list(fit.warnings), model_document=document(result))
 
 
-def identification_document(res, record) -> dict:
-    """The model file ``hilbench identify RUN --json`` writes for this identification (docs/model-file.md):
-    the same document builder, the same ``data.train`` entry (the GUI reads the record whole)."""
-    from pathlib import Path
+def _title(result) -> str:
+    from hilbench.analysis.protocol import entry
 
-    from hilbench.analysis.models.model_file import model_document
-
-    data = {"train": {"file": str(Path(record.path).resolve()), "samples": record.n_samples,
-                      "sample_rate_hz": record.arrays().fs, "axis": record.axis, "read": "whole",
-                      "torque_channel": record.torque_channel, "torque_timing": record.timing,
-                      "incomplete": record.incomplete}}
-    return model_document(res.model, method=res.method, settings=res.settings, figures=res.figures, data=data)
+    return entry(result.name).title
 
 
 def save_model(document: dict, target: str, inputs: list[str]) -> str:
@@ -152,19 +197,12 @@ def save_model(document: dict, target: str, inputs: list[str]) -> str:
     return target
 
 
-def skeleton(run, options: dict | None = None) -> AnalysisResult:
-    """The skeleton of a record by the same call as ``hilbench skeleton`` (``analysis.skeleton.analyse``), with its
-    settings' defaults; ``options['inertia']`` in kg*m^2 (rotary) or kg (linear), ``options['method']`` (``cwt``,
-    the default, or ``hilbert``). The result carries the analysis's warnings (a run that is no chirp, a narrow
-    amplitude range, a stiffness that cannot be)."""
-    analyse = _entry("skeleton")
-    from hilbench.analysis.skeleton import SkeletonSettings
-
-    options = options or {}
-    inertia = float(options.get("inertia", 0.0))
-    if not inertia > 0:
-        raise BenchError("skeleton analysis needs the inertia J > 0 (kg*m^2); set it in the browser")
-    res = analyse([run], SkeletonSettings(mass=inertia, method=options.get("method", "cwt")))
+def skeleton(result, options: dict | None = None) -> AnalysisResult:
+    """The skeleton (the registry's ``skeleton``, as ``hilbench skeleton``); ``options['inertia']`` in kg*m^2
+    (rotary) or kg (linear), empty: the run's declared inertia; ``options['method']`` (``cwt``, the default, or
+    ``hilbert``). The result carries the analysis's warnings (a run that is no chirp, a narrow amplitude range, a
+    stiffness that cannot be)."""
+    run, res = result.inputs.record, result.value
     c = res.curves
     if c.amplitude.size == 0:
         raise BenchError("ForceVib found no valid samples in this run (is it a chirp or a sine run?)")
@@ -183,13 +221,13 @@ def skeleton(run, options: dict | None = None) -> AnalysisResult:
         Figure("damping force skeleton", f"velocity amplitude V ({pos_unit}/s)", f"F_d ({tq_unit})",
                [("c_eq V", c.velocity, c.damping_force)], scatter=True),
     ]
-    return AnalysisResult(TITLES["skeleton"], numbers, figures, list(res.warnings))
+    return AnalysisResult(_title(result), numbers, figures, list(res.warnings))
 
 
-def afrf(run, options: dict | None = None) -> AnalysisResult:
-    """AFRF (``hilbench.analysis.afrf.frf.afrf_from_run``) of a stepped-sine run: |c_k| of the position per step."""
-    afrf_from_run = _entry("afrf")
-    res = afrf_from_run(run.path, allow_incomplete=bool((options or {}).get("allow_incomplete", False)))
+def afrf(result, options: dict | None = None) -> AnalysisResult:
+    """AFRF (the registry's ``afrf``, as ``hilbench afrf RUN``) of a stepped-sine run: |c_k| of the position per
+    step."""
+    run, res = result.inputs.record, result.value
     mags = res.magnitudes
     numbers = []
     for i, a in enumerate(res.amplitudes):
@@ -207,24 +245,17 @@ def afrf(run, options: dict | None = None) -> AnalysisResult:
     why = res.settings.get("incomplete")
     name = os.path.basename(run.path)
     warnings = [f"INCOMPLETE RECORD {name}: {why} (analysed with --allow-incomplete)"] if why else []
-    return AnalysisResult(TITLES["afrf"], numbers, figures, warnings + list(res.warnings))
+    return AnalysisResult(_title(result), numbers, figures, warnings + list(res.warnings))
 
 
-def residual(run, options: dict | None = None) -> AnalysisResult:
-    """Residual loop of a record by the same call as ``hilbench residual`` (``analysis.residual.analyse``), blocked
-    cross-validation (no separate validation run). ``options['start_model']``: a model file (``hilbench identify``
-    or compare's maxwell_slip) to start from, unrefitted, as ``residual --start MODEL.json`` does; its own figure is
-    shown as identify reports it."""
-    from hilbench.analysis.models.model_file import read_model
-    from hilbench.analysis.residual import ResidualSettings, analyse
+def residual(result, options: dict | None = None) -> AnalysisResult:
+    """Residual loop (the registry's ``residual``, as ``hilbench residual``), blocked cross-validation (no separate
+    validation run). ``options['start_model']``: a model file (``hilbench identify`` or compare's maxwell_slip) to
+    start from, unrefitted, as ``residual --start MODEL.json`` does; its own figure is shown as identify reports
+    it."""
     from hilbench.common.metrics import percent
 
-    start_file = (options or {}).get("start_model")
-    settings = ResidualSettings()
-    if start_file:
-        model, document = read_model(start_file)
-        settings = ResidualSettings(start=(), start_model=model, start_model_document=document)
-    analysed = analyse(run, settings)
+    run, analysed = result.inputs.record, result.value
     res = analysed.loop
     numbers = [("verdict", str(res.verdict), ""), ("validation", str(res.validation_mode), ""),
                ("start model", ", ".join(res.start), ""),
@@ -243,28 +274,17 @@ def residual(run, options: dict | None = None) -> AnalysisResult:
                       [("before", *_thin(sb.time, sb.residual)), ("after", *_thin(sa.time, sa.residual))]),
                Figure("residual against velocity", f"velocity ({run.unit('position')}/s)", f"residual ({tq})",
                       [("after", *_thin(sa.velocity, sa.residual))], scatter=True)]
-    return AnalysisResult(TITLES["residual"], numbers, figures)
+    return AnalysisResult(_title(result), numbers, figures)
 
 
-def presliding(run, options: dict | None = None) -> AnalysisResult:
-    """The presliding analysis (``analysis.presliding.analyse.analyse``) of a displacement-driven run, with the
-    numbers ``hilbench presliding`` writes (bench/cli/commands/presliding.report): the quantities with their
+def presliding(result, options: dict | None = None) -> AnalysisResult:
+    """The presliding analysis (the registry's ``presliding``, as ``hilbench presliding``, with its record checks:
+    a displacement-driven run, a force channel) with the numbers the command writes: the quantities with their
     uncertainties, the edge-pinned sum(k), the memory checks, the reversal forces; the resolution verdicts as
     warnings. ``options['replicates']``: bootstrap replicates (default 8)."""
-    analyse = _entry("presliding")
-    from hilbench.analysis.presliding.identify import PreslidingSettings
-    from hilbench.analysis.presliding.report import protocol_inertia, report
+    from hilbench.analysis.presliding.entry import document
 
-    record = run.kind
-    if record != "displacement-driven":
-        raise BenchError(f"{os.path.basename(run.path)}: a {record} record; the presliding analysis needs a "
-                         "displacement-driven one (a presliding run, or an import with --record displacement-driven)")
-    options = options or {}
-    inertia = protocol_inertia(run.protocol_params, run.path)
-    res = analyse(run.t, run.position, run.torque, run.sample_rate, run.axis,
-                  PreslidingSettings(inertia=inertia), counts_per_rev=run.calibration.get("counts_per_rev"),
-                  replicates=int(options.get("replicates", 8)))
-    doc = report(res, str(run.path), run.torque_channel)
+    res, doc = result.value, document(result)
     resolved = doc["resolution"]["resolved"]
     numbers = [(f"{name.replace('_', ' ')} (NNLS, model-free)" + ("" if resolved.get(name, True) else
                                                                  ", NOT resolved"),
@@ -299,13 +319,18 @@ def presliding(run, options: dict | None = None) -> AnalysisResult:
     if res.edge_rolling is not None:
         virgin.curves.append((f"parametric on the edge points ({res.edge_rolling.exponent_text()})", grid,
                               res.edge_rolling.virgin_curve(grid)))
-    from hilbench.analysis.presliding import reversal_warning
-
-    few = reversal_warning(res)
-    # res.warnings: the span of a long record analysed (analysis/presliding/span.py)
-    return AnalysisResult(TITLES["presliding"], numbers, [loops, virgin],
-                          list(res.resolution.lines) + list(res.warnings) + ([few] if few else []))
+    # res.warnings: the span of a long record analysed (analysis/presliding/span.py), fewer than 4 reversals
+    return AnalysisResult(_title(result), numbers, [loops, virgin], list(res.resolution.lines) + list(res.warnings))
 
 
-ANALYSES: dict[str, Callable] = {"identification": identification, "skeleton": skeleton, "afrf": afrf,
+#: the GUI's own presentation of a registry analysis (result, options) -> AnalysisResult; any other registered
+#: analysis of one run is shown by :func:`summary_table`
+ANALYSES: dict[str, Callable] = {"identify": identification, "skeleton": skeleton, "afrf": afrf,
                                  "residual": residual, "presliding": presliding}
+
+
+def titles() -> dict[str, str]:
+    """name -> title of every analysis the browser offers, in the registry's order."""
+    from hilbench.analysis.protocol import entry
+
+    return {name: entry(name).title for name in _gui_names()}

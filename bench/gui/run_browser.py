@@ -60,21 +60,10 @@ class AnalysisWorker(QtCore.QThread):
 
     @limited()  # one BLAS thread (analysis.execution): the GUI thread and a running stream share the cores
     def run(self) -> None:
-        from types import SimpleNamespace
-
-        from hilbench.analysis.record import load_record
-
-        allow = bool(self.options.get("allow_incomplete", False))
-        try:
-            if self.name in analyses.BY_PATH:
-                result = analyses.ANALYSES[self.name](SimpleNamespace(path=self.path), self.options)
-            else:  # the one loader, as the CLI reads the run (channel, torque timing, resampling, checks)
-                record = load_record(self.path, allow_incomplete=allow)
-                result = analyses.ANALYSES[self.name](record, self.options)
-                if record.incomplete_line():
-                    result.warnings.insert(0, record.incomplete_line())
+        try:  # the registry's entry: read within the memory budget, the CLI's refusals, the same figures
+            result = analyses.run_analysis(self.name, self.path, self.options)
         except Exception as exc:  # shown in the browser; the GUI keeps running
-            self.failed.emit(f"{analyses.TITLES[self.name]} failed: {one_line(exc)}")
+            self.failed.emit(f"{analyses.titles().get(self.name, self.name)} failed: {one_line(exc)}")
             return
         self.done.emit(result)
 
@@ -125,14 +114,14 @@ class RunBrowser(QtWidgets.QWidget):
 
         # analysis controls
         self.analysis_buttons: dict[str, QtWidgets.QPushButton] = {}
-        buttons = QtWidgets.QHBoxLayout()
-        for name, title in analyses.TITLES.items():
+        buttons = QtWidgets.QGridLayout()  # one button per registry analysis, four to a row (fits 1280 px)
+        for i, (name, title) in enumerate(analyses.titles().items()):
             b = QtWidgets.QPushButton(title.split(" (")[0])
             why = analyses.availability(name)
             b.setEnabled(not why)
             b.setToolTip(why or title)
             b.clicked.connect(lambda _c=False, n=name: self.analyse(n))
-            buttons.addWidget(b)
+            buttons.addWidget(b, i // 4, i % 4)
             self.analysis_buttons[name] = b
         self.inertia_edit = QtWidgets.QLineEdit("")
         self.inertia_edit.setPlaceholderText("from identification")
@@ -242,7 +231,7 @@ class RunBrowser(QtWidgets.QWidget):
 
     @staticmethod
     def _availability_text() -> str:
-        missing = [f"{analyses.TITLES[n]}: {why}" for n in analyses.TITLES if (why := analyses.availability(n))]
+        missing = [f"{t}: {why}" for n, t in analyses.titles().items() if (why := analyses.availability(n))]
         return "<br>".join(missing)
 
     # ------------------------------------------------------------- files
@@ -390,7 +379,7 @@ class RunBrowser(QtWidgets.QWidget):
             except ValueError:
                 self.message.emit(f"J = {text!r} is not a number (kg*m^2)", True)
                 return
-        self.analysis_status.setText(f"running {analyses.TITLES[name]} ...")
+        self.analysis_status.setText(f"running {analyses.titles().get(name, name)} ...")
         self.tabs.setCurrentIndex(1)
         path = self.run.path
         if name in analyses.BY_PATH:  # HDF5 refuses a second, differently-flagged handle in one process

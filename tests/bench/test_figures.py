@@ -124,7 +124,7 @@ def _curves(amplitudes: list[np.ndarray]):
 def test_skeleton_of_two_runs_breaks_at_the_gap_with_readable_ticks_and_a_title():
     """Issue 28: the composed curve of two runs whose amplitude ranges do not meet (2-20 urad and 1-10 mrad) is not
     joined across the gap; log ticks do not overlap; small values in mrad and mN*m; the title names the runs."""
-    from hilbench.bench.cli.commands.skeleton import skeleton_figure
+    from hilbench.analysis.skeleton.figure import skeleton_figure
 
     low, high = np.geomspace(2e-6, 2e-5, 12), np.geomspace(1e-3, 1e-2, 12)
     fig = skeleton_figure(_curves([low, high]), ["g0.5.h5", "g5.h5"], "rad", "N*m")
@@ -143,7 +143,7 @@ def test_skeleton_of_two_runs_breaks_at_the_gap_with_readable_ticks_and_a_title(
 
 def test_skeleton_of_a_narrow_amplitude_range_has_ticks_apart():
     """The default chirp's 0.220-0.237 mrad (7 %): a log axis labelled it with overlapping minor labels."""
-    from hilbench.bench.cli.commands.skeleton import skeleton_figure
+    from hilbench.analysis.skeleton.figure import skeleton_figure
 
     fig = skeleton_figure(_curves([np.linspace(2.20e-4, 2.37e-4, 20)]), ["chirp.h5"], "rad", "N*m")
     fig.canvas.draw()

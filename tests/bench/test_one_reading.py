@@ -9,7 +9,7 @@ import pytest
 from hilbench.analysis.identification import analyse
 from hilbench.analysis.record import load_record
 from hilbench.bench.cli import main
-from hilbench.bench.gui.analyses import identification
+from hilbench.bench.gui.analyses import run_analysis
 from tests.bench.test_identify_command import _write_run
 
 
@@ -37,7 +37,7 @@ def test_identify_the_gui_and_a_script_give_the_same_figures(runs, capsys):
     assert _pct(out, "validation torque NRMSE") == pytest.approx(val, rel=5e-3)
     script = analyse(load_record(runs / "a.h5"), validation=load_record(runs / "b.h5")).figures
     assert 100 * script["validation_torque_nrmse"] == pytest.approx(val, rel=1e-12)
-    shown = {q: (v, u) for q, v, u in identification(load_record(runs / "a.h5")).numbers}
+    shown = {q: (v, u) for q, v, u in run_analysis("identify", runs / "a.h5").numbers}
     value, unit = shown["train torque NRMSE"]
     assert unit == "%" and float(value) == pytest.approx(train, rel=5e-3)
 

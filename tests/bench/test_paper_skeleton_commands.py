@@ -86,14 +86,13 @@ def test_centred_force(timing, expect):
 def test_the_gui_skeleton_warns_on_a_run_that_is_no_chirp(tmp_path):
     """Issue 28: the browser's skeleton of an identification run said "done" with F_k down to -2e4 N*m; it now
     carries the warning the CLI prints (the same chirp data filed under the chirp protocol has none)."""
-    from hilbench.analysis.record import load_record
-    from hilbench.bench.gui.analyses import skeleton
+    from hilbench.bench.gui.analyses import run_analysis
     from tests.analysis.skeleton.test_skeleton_stream import _write_chirp as write
 
     for protocol in ("identification", "chirp"):
         path = tmp_path / f"{protocol}.h5"
         write(path, paper_system(), 5.0, duration=20.0, protocol=protocol)
-        shown = skeleton(load_record(path), {"inertia": 1.0})
+        shown = run_analysis("skeleton", path, {"inertia": 1.0})
         assert bool(shown.warnings) == (protocol != "chirp"), shown.warnings
         assert all("not a chirp" in w for w in shown.warnings)
     # one reading: the browser's skeleton is the command's (same call, same defaults, same curves)

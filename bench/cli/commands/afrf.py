@@ -103,24 +103,14 @@ def _summary(result) -> str:
 
 
 def _measured(args):
-    """The AFRF of ``args.run``: read whole when it fits ``--memory``, else one step window at a time (the same
-    result); a one-line BenchError, before reading the samples, when neither fits."""
-    from hilbench.analysis import afrf
-    from hilbench.analysis.afrf.steps import largest_window
-    from hilbench.bench.analysis_input import memory_budget
+    """The AFRF of ``args.run`` through the registry's entry: read whole when it fits ``--memory``, else one step
+    window at a time (the same result); a one-line error, before reading the samples, when neither fits."""
+    from hilbench.bench.analysis_input import memory_budget, read_runs
     from hilbench.bench.analysis_progress import progress_bar
-    from hilbench.bench.errors import BenchError
 
-    budget = memory_budget(args.memory)
-    record, windows = afrf.stream_header(args.run, args.allow_incomplete)
+    entry, inputs, _ = read_runs("afrf", args, [args.run], [], memory_budget(args.memory), warn=False)
     with progress_bar("afrf") as progress:
-        if afrf.array_cost(record.n_samples) <= budget or record.position is not None:
-            return afrf.analyse(afrf.load(args.run, allow_incomplete=args.allow_incomplete), progress=progress)
-        window = largest_window(windows)
-        if afrf.stream_cost(window) > budget:
-            raise BenchError(f"{args.run}: its longest step window ({window} samples) needs about "
-                             f"{afrf.stream_cost(window) >> 20} MiB, over --memory {budget >> 20} MiB: raise --memory")
-        return afrf.analyse_stream(args.run, allow_incomplete=args.allow_incomplete, progress=progress)
+        return entry.analyse(inputs, progress=progress).value
 
 
 def run(args) -> int:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from hilbench.analysis.protocol import ANALYSES
     from hilbench.bench.analysis_input import whole_number
 
     p = sub.add_parser(
@@ -21,7 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="results folder (default: CAMPAIGN_DIR/analysis with one campaign; required with several)")
     p.add_argument("--steps", default="identify",
                    help="comma-separated steps, each run gets those its protocol supports (default identify; "
-                   "available: identify, compare, residual, presliding, afrf, skeleton)")
+                   f"available: the analysis registry's {', '.join(ANALYSES)})")
     engine = p.add_mutually_exclusive_group()
     engine.add_argument("--serial", action="store_true", help="run in this process (no cluster)")
     engine.add_argument("--scheduler", metavar="tcp://HOST:8786", help="use a running Dask scheduler")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from functools import partial
 from pathlib import Path
 
 #: Published models a comparison can add as a row: J (kg), Fv (N*s/m), Fc (N), offset (N). EMPS: Janot,
@@ -45,45 +44,15 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
-def _records(args, budget: int) -> tuple:
-    """(train, validation) records: whole when the comparison fits ``budget`` (bytes) at the recorded rate, else
-    reduced by the largest whole factor that keeps at least 5 kHz while reading chunk by chunk, and cut to the
-    first samples of each run that fit when even that does not (``compare.reading_plan``, docs/long-runs.md)."""
-    from hilbench.analysis.models.compare import cost, reading_plan
-    from hilbench.analysis.record import decimated_record, span_note, stream_record
-    from hilbench.bench.analysis_input import load, read_decimated
-    from hilbench.bench.storage import outputs
-    from hilbench.common.units import mib
-
-    opts = {"torque_channel": args.torque_channel, "timing": args.torque_timing or "auto",
-            "allow_incomplete": args.allow_incomplete}
-    heads = [stream_record(p, **opts)[0] for p in (args.run, args.validate)]
-    plan = reading_plan(heads, budget)
-    if plan is None:
-        recs = tuple(load(p, args) for p in (args.run, args.validate))
-    else:
-        qs, span = plan
-        recs = tuple(read_decimated(p, args, partial(decimated_record, max_rate=h.sample_rate / q, max_samples=span),
-                                    h.n_samples)
-                     for p, h, q in zip((args.run, args.validate), heads, qs, strict=True))
-        how = [n for n in recs[0].notes if n.startswith("decimated") or n == span_note(recs[0])] or ["not reduced"]
-        outputs.say(f"over --memory {mib(budget)} read whole ({mib(cost(sum(h.n_samples for h in heads)))}): "
-                    f"compared at {recs[0].sample_rate:g} Hz, read chunk by chunk ({'; '.join(how)})")
-    for p, rec in zip((args.run, args.validate), recs, strict=True):
-        outputs.say(f"{p}: torque timing of {rec.torque_channel}: {rec.timing} ({rec.timing_origin})", level=2)
-    return recs
-
-
 def run(args) -> int:
-    from hilbench.analysis.models.compare import CompareSettings, analyse, document, markdown_table
-    from hilbench.analysis.models.compare_plots import report
+    from hilbench.analysis.models.compare import CompareSettings, cost, markdown_table
     from hilbench.analysis.models.families import FAMILIES, published_plant
-    from hilbench.analysis.models.model_file import family_document
-    from hilbench.analysis.record import span_note
-    from hilbench.bench.analysis_input import memory_budget
+    from hilbench.analysis.protocol import WHOLE
+    from hilbench.bench.analysis_input import memory_budget, read_runs
     from hilbench.bench.analysis_progress import progress_bar
     from hilbench.bench.errors import BenchError
     from hilbench.bench.storage import outputs
+    from hilbench.common.units import mib
 
     families = tuple(f.strip() for f in args.families.split(",") if f.strip())
     bad = [f for f in families if f not in FAMILIES]
@@ -100,7 +69,15 @@ def run(args) -> int:
     # compare.json is written last: its presence says the folder holds a whole earlier comparison
     outputs.refuse_existing("--output", out / "compare.json", args.overwrite)
     budget = memory_budget(args.memory)
-    train_rec, val_rec = _records(args, budget)
+    with progress_bar("read") as progress:
+        entry, inputs, val_inputs = read_runs("compare", args, [args.run], [args.validate], budget, progress)
+    train_rec = inputs.record
+    if inputs.reads[0] != WHOLE:
+        samples = train_rec.n_samples + val_inputs.record.n_samples
+        outputs.say(f"over --memory {mib(budget)} read whole ({mib(cost(samples))} or more): compared at "
+                    f"{train_rec.sample_rate:g} Hz, read chunk by chunk ({inputs.reads[0]})")
+    for p, rec in ((args.run, train_rec), (args.validate, val_inputs.record)):
+        outputs.say(f"{p}: torque timing of {rec.torque_channel}: {rec.timing} ({rec.timing_origin})", level=2)
     published = {}
     for key in args.published:
         name, *values = PUBLISHED[key]
@@ -109,33 +86,13 @@ def run(args) -> int:
         published[name] = published_plant(*values)
     settings = CompareSettings(families=families, segment=args.segment, max_nfev=args.max_evaluations,
                                published=published)
-    done = iter(range(1, len(families) + 1))
     with progress_bar("compare", unit="family") as progress:
-        result = analyse(train_rec, val_rec, settings, progress=lambda _family: progress(next(done), len(families)))
-    train, val, timing = result.train, result.validation, train_rec.timing
-    out.mkdir(parents=True, exist_ok=True)
-    table = markdown_table(result)
-    outputs.write_text(out / "compare.md", table)
-    data = {"train": {"file": str(Path(args.run).resolve()), "samples": int(train.x.size),
-                      "sample_rate_hz": train.fs, "torque_channel": train_rec.torque_channel, "torque_timing": timing,
-                      "incomplete": train_rec.incomplete,
-                      "read": next((n for n in train_rec.notes if n.startswith("decimated")), "whole"),
-                      "span": span_note(train_rec)},
-            "validation": {"file": str(Path(args.validate).resolve()), "samples": int(val.x.size),
-                           "sample_rate_hz": val.fs, "incomplete": val_rec.incomplete, "span": span_note(val_rec)}}
-    outputs.write_json(out / "compare.json", document(result, data), indent=2, allow_nan=False)
-    (out / "models").mkdir(exist_ok=True)
-    written = []
-    for row in result.rows:  # one model file per fitted family (schema hilbench.friction-model/2)
-        if row.fit is not None:
-            figures = {f"train_{k}": v for k, v in row.train.items()} | {
-                f"validation_{k}": v for k, v in row.validation.items()} | {"fit_time_s": row.fit_time_s}
-            doc = family_document(row.fit, method="compare", data=data, figures=figures,
-                                  settings={"segment_s": args.segment, "max_evaluations": args.max_evaluations})
-            outputs.write_json(out / "models" / f"{row.name}.json", doc, indent=2, allow_nan=False)
-            written.append(f"{row.name}.json")
-    print(table, end="")
-    for p in report(result, out):
-        print(f"plot: {p}")
+        result = entry.analyse(inputs, settings, val_inputs, progress=progress)
+    files, _ = entry.report(result, out)
+    print(markdown_table(result.value), end="")
+    for p in files:
+        if p.suffix == ".png":
+            print(f"plot: {p}")
+    written = [p.name for p in files if p.parent.name == "models"]
     print(f"-> {out / 'compare.md'}, {out / 'compare.json'}, {out / 'models'}/ ({', '.join(written) or 'no model'})")
     return 0

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 import sys
-from pathlib import Path
 
 #: what each --method is, in the summary line (the internal names stay in the model file's "method")
 METHOD_NAMES = {"lip": "Maxwell-slip (NNLS)", "oe": "Maxwell-slip (NNLS + output error)",
@@ -62,56 +61,17 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
-def _arrays(path: str, args):
-    """The run through the one loader: (RunArrays, the record)."""
-    from hilbench.bench.analysis_input import load
-
-    rec = load(path, args)
-    return rec.arrays(), rec
-
-
-def _streamed(args, budget: int):
-    """None when the runs' whole arrays fit ``budget`` (bytes), else the chunk sources to read them by
-    (``((record, source), (val_record, val_source) or None)``); a one-line BenchError when neither fits."""
-    from hilbench.analysis.identification import array_cost, stream_cost
-    from hilbench.analysis.record import stream_record
-    from hilbench.bench.errors import BenchError
-
-    opts = {"torque_channel": args.torque_channel, "timing": args.torque_timing or "auto",
-            "allow_incomplete": args.allow_incomplete}
-    train = stream_record(args.run, **opts)
-    val = stream_record(args.validate, **opts) if args.validate else None
-    samples = train[0].n_samples + (val[0].n_samples if val else 0)
-    if array_cost(samples) <= budget:
-        return None
-    from hilbench.common.units import mib
-
-    if train[1] is None or (val is not None and val[1] is None):
-        raise BenchError(f"{samples} samples need about {mib(array_cost(samples))} read whole, over --memory "
-                         f"{mib(budget)}; a host-clocked run is resampled whole: raise --memory")
-    if args.method not in ("lip", "oe"):
-        raise BenchError(f"--method {args.method} reads the record whole ({mib(array_cost(samples))} for "
-                         f"{samples} samples, over --memory {mib(budget)}): use --method lip or oe, or raise --memory")
-    if stream_cost(samples) > budget:
-        raise BenchError(f"{samples} samples need about {mib(stream_cost(samples))} even read chunk by chunk, over "
-                         f"--memory {mib(budget)}")
-    if args.plots:
-        raise BenchError(f"--plots draws the whole record, which does not fit --memory {mib(budget)} "
-                         f"({mib(array_cost(samples))} needed): leave --plots out, or raise --memory")
-    return train, val
-
-
 def run(args) -> int:
-    from hilbench.analysis.identification import analyse, analyse_stream, report
+    from hilbench.analysis.identification import report
+    from hilbench.analysis.identification.entry import IdentifySettings, document
     from hilbench.analysis.identification.maxwell_fit import LipSettings
     from hilbench.analysis.identification.plots import plot_files
-    from hilbench.analysis.models.model_file import model_document
-    from hilbench.bench.analysis_input import MAX_THRESHOLDS, check_count, check_cutoff, memory_budget
+    from hilbench.bench.analysis_input import MAX_THRESHOLDS, check_count, check_cutoff, memory_budget, read_runs
     from hilbench.bench.errors import BenchError
     from hilbench.bench.storage import outputs
     from hilbench.bench.verdict import judge
     from hilbench.common.units import AXIS_UNITS as AXES
-    from hilbench.common.units import EFFORT
+    from hilbench.common.units import EFFORT, mib
 
     plots = plot_files(args.plots, ["train", "validation"] if args.validate else ["train"]) if args.plots else []
     outputs.refuse_inputs({"--json": args.json, "--plots": args.plots, **{f"--plots {p}": p for p in plots}},
@@ -123,15 +83,20 @@ def run(args) -> int:
     if args.inertia is not None and not (math.isfinite(args.inertia) and args.inertia >= 0):
         raise BenchError(f"--inertia must be finite and >= 0, got {args.inertia}")
     budget = memory_budget(args.memory)
-    stream = _streamed(args, budget)
-    if stream is None:
-        train, rec = _arrays(args.run, args)
-        val_rec = _arrays(args.validate, args)[1] if args.validate else None
-        val = val_rec.arrays() if val_rec is not None else None
-    else:
-        (rec, source), val_stream = stream
-        train = val = None
-        val_rec = val_stream[0] if val_stream else None
+    settings = IdentifySettings(LipSettings(
+        n_thresholds=args.thresholds,
+        cutoff=args.cutoff,
+        coulomb=args.coulomb,
+        offset=args.offset,
+        spring=args.spring,
+        refine=args.refine,
+        fixed_inertia=args.inertia,
+    ), method=args.method)
+    entry, inputs, val_inputs = read_runs("identify", args, [args.run], [args.validate], budget)
+    rec = inputs.record
+    if inputs.streamed and args.plots:
+        raise BenchError(f"--plots draws the whole record, which does not fit --memory {mib(budget)}: leave "
+                         "--plots out, or raise --memory")
     channel, timing, record = rec.torque_channel, rec.timing, rec.kind
     outputs.say(f"torque timing: {timing} ({rec.timing_origin})", args.json, level=2)
     check_cutoff(args.cutoff, rec.sample_rate)
@@ -140,39 +105,9 @@ def run(args) -> int:
             print(f"{args.run}: {text}", file=sys.stderr)
         else:
             outputs.say(f"{args.run}: {text}", args.json)
-    settings = LipSettings(
-        n_thresholds=args.thresholds,
-        cutoff=args.cutoff,
-        coulomb=args.coulomb,
-        offset=args.offset,
-        spring=args.spring,
-        refine=args.refine,
-        fixed_inertia=args.inertia,
-    )
-    if stream is None:
-        res = analyse(rec, settings, method=args.method, validation=val_rec)
-    else:
-        res = analyse_stream(rec, source, settings, method=args.method, validation=val_stream)
-    data = {
-        "train": {
-            "file": str(Path(args.run).resolve()),
-            "samples": rec.n_samples,
-            "sample_rate_hz": train.fs if train is not None else rec.sample_rate,
-            "axis": rec.axis,
-            "read": "whole" if stream is None else "chunk by chunk (--memory)",
-            "torque_channel": channel,
-            "torque_timing": timing,
-            "incomplete": rec.incomplete,
-        }
-    }
-    if val_rec is not None:
-        data["validation"] = {
-            "file": str(Path(args.validate).resolve()),
-            "samples": val_rec.n_samples,
-            "sample_rate_hz": val.fs if val is not None else val_rec.sample_rate,
-            "incomplete": val_rec.incomplete,
-        }
-    doc = model_document(res.model, method=res.method, settings=res.settings, figures=res.figures, data=data)
+    result = entry.analyse(inputs, settings, val_inputs)
+    res, val_rec = result.value, (val_inputs.record if val_inputs is not None else None)
+    doc = document(result)
     outputs.write_json(args.json, doc, indent=2, allow_nan=False)
     f, u = res.figures, AXES[res.model.axis]
     say = lambda text: outputs.say(text, args.json)  # noqa: E731

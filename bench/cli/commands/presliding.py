@@ -66,11 +66,10 @@ def _check(args) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hilbench.analysis import presliding
+    from hilbench.analysis.presliding.entry import PreslidingAnalysis, document
     from hilbench.analysis.presliding.identify import PreslidingSettings
     from hilbench.analysis.presliding.report import summary_lines
-    from hilbench.analysis.record import stream_record
-    from hilbench.bench.analysis_input import load, memory_budget
+    from hilbench.bench.analysis_input import memory_budget, read_runs
     from hilbench.bench.analysis_progress import progress_bar
     from hilbench.bench.errors import BenchError
     from hilbench.bench.storage import outputs
@@ -82,26 +81,15 @@ def run(args: argparse.Namespace) -> int:
     present = [p.name for p in targets.values() if p.exists()]
     if present and not args.overwrite:
         raise BenchError(f"{out} holds {', '.join(present)} already; use --overwrite or another folder")
-    budget = memory_budget(args.memory)
-    head, source = stream_record(args.run, torque_channel=args.torque_channel, allow_incomplete=args.allow_incomplete)
-    settings = PreslidingSettings(viscous=not args.no_viscous, coulomb=args.coulomb, n_thresholds=args.thresholds)
-    options = {"inertia": args.inertia, "counts_per_rev": args.counts_per_rev, "hysteresis": args.hysteresis,
-               "fraction": args.fraction, "replicates": args.replicates}
-    whole = presliding.array_cost(head.n_samples) <= budget or source is None
-    if not whole and presliding.stream_cost(head.n_samples) > budget:
-        raise BenchError(f"{args.run}: needs about {presliding.stream_cost(head.n_samples) >> 20} MiB even read "
-                         f"chunk by chunk, over --memory {budget >> 20} MiB: raise --memory")
+    settings = PreslidingAnalysis(PreslidingSettings(viscous=not args.no_viscous, coulomb=args.coulomb,
+                                                     n_thresholds=args.thresholds),
+                                  inertia=args.inertia, counts_per_rev=args.counts_per_rev,
+                                  hysteresis=args.hysteresis, fraction=args.fraction, replicates=args.replicates)
+    entry, inputs, _ = read_runs("presliding", args, [args.run], [], memory_budget(args.memory))
     with progress_bar("presliding") as progress:
-        if whole:
-            rec = load(args.run, args)
-            res, read = presliding.analyse(rec, settings, **options), "whole"
-        else:
-            res, rec = presliding.analyse_stream(args.run, settings, torque_channel=args.torque_channel,
-                                                 allow_incomplete=args.allow_incomplete, progress=progress,
-                                                 **options)
-            read = "chunk by chunk (--memory)"
-    doc = presliding.document(res, rec, read)
-    presliding.report(res, out, doc)
+        result = entry.analyse(inputs, settings, progress=progress)
+    res, doc = result.value, document(result)
+    entry.report(result, out)
     for line in summary_lines(doc):
         outputs.say(line)
     for line in res.warnings:

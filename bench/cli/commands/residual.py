@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import argparse
 import math
-from functools import partial
 from pathlib import Path
 
 
@@ -57,21 +56,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def _headers(args: argparse.Namespace) -> list:
-    """Each run's record without its arrays (the loader's checks, the sample count), read before any sample."""
-    from hilbench.analysis.record import stream_record
-
-    return [stream_record(p, torque_channel=args.torque_channel, timing=args.timing or "auto",
-                          allow_incomplete=args.allow_incomplete)[0] for p in [args.run, *args.validate]]
-
-
 def run(args: argparse.Namespace) -> int:
     from hilbench.analysis.models.families import FAMILIES
     from hilbench.analysis.models.model_file import read_model
-    from hilbench.analysis.record import decimation_factor, span_note
+    from hilbench.analysis.record import span_note
     from hilbench.analysis.residual import record_analysis
     from hilbench.analysis.residual.report import report_dict
-    from hilbench.bench.analysis_input import check_cutoff, memory_budget, read_decimated
+    from hilbench.bench.analysis_input import check_cutoff, memory_budget, read_runs
+    from hilbench.bench.analysis_progress import progress_bar
     from hilbench.bench.errors import BenchError
     from hilbench.bench.storage import outputs
     from hilbench.bench.verdict import judge
@@ -88,15 +80,14 @@ def run(args: argparse.Namespace) -> int:
     if args.inertia is not None and not (math.isfinite(args.inertia) and args.inertia >= 0):
         raise BenchError(f"--inertia must be finite and >= 0, got {args.inertia}")
     budget = memory_budget(args.memory)
-    headers = _headers(args)
-    span = record_analysis.span_for(headers, budget)
-    if span is not None:
-        outputs.say(f"over --memory {mib(budget)}: the loop analyses the first {span} samples of each run at its "
-                    "rate (a bounded span, docs/long-runs.md)", args.json)
-    for h in headers:  # the loop's cutoff applies at the rate it analyses (at most 2 kHz)
-        check_cutoff(args.cutoff, h.sample_rate / decimation_factor(h.sample_rate, record_analysis.MAX_RATE))
-    recs = [read_decimated(p, args, partial(record_analysis.read, max_samples=span), h.n_samples, timing=args.timing)
-            for p, h in zip([args.run, *args.validate], headers, strict=True)]
+    with progress_bar("read") as progress:
+        entry, inputs, val_inputs = read_runs("residual", args, [args.run], args.validate, budget, progress)
+    recs = inputs.records + (val_inputs.records if val_inputs is not None else [])
+    if any(span_note(r) for r in recs):
+        outputs.say(f"over --memory {mib(budget)}: the loop analyses the first {recs[0].n_samples} samples of each "
+                    "run at its rate (a bounded span, docs/long-runs.md)", args.json)
+    for h in recs:  # the loop's cutoff applies at the rate it analyses (at most 2 kHz)
+        check_cutoff(args.cutoff, h.sample_rate)
     for p, rec in zip([args.run, *args.validate], recs, strict=True):
         outputs.say(f"{p}: torque timing of {rec.torque_channel}: {rec.timing} ({rec.timing_origin})", args.json,
                     level=2)
@@ -105,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     settings = record_analysis.ResidualSettings(start=start, cutoff=args.cutoff, fixed_inertia=args.inertia,
                                                 candidates=cands, start_model=start_model[0],
                                                 start_model_document=start_model[1])
-    res = record_analysis.analyse(recs[0], settings, validation=recs[1:])
+    res = entry.analyse(inputs, settings, val_inputs).value
     result, train, rec = res.loop, res.train, recs[0]
     record = rec.kind
     inputs = {"run": args.run, "validate": list(args.validate), "start": list(result.start),

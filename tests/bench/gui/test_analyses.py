@@ -6,9 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hilbench.analysis.record import load_record
-from hilbench.bench.errors import BenchError
-from hilbench.bench.gui.analyses import ANALYSES, TITLES, availability, presliding
+from hilbench.analysis.errors import AnalysisError
+from hilbench.bench.gui.analyses import ANALYSES, availability, presliding, run_analysis, titles
 from hilbench.common import runfile as rf
 from tests.bench.presliding_runs import run_and_analyse
 
@@ -17,9 +16,9 @@ def test_the_presliding_analysis_shows_the_numbers_the_command_writes(tmp_path):
     """A short presliding run on the simulated bench (8 d/s, 2^16 counts/rev), analysed by the browser's function
     and by `hilbench presliding` with the same bootstrap: every quantity, the edge-pinned sum(k) and each reversal's
     extreme force agree to the digits shown; every number names its unit; the resolution lines are the warnings."""
-    assert availability("presliding") == "" and ANALYSES["presliding"] is presliding and "presliding" in TITLES
+    assert availability("presliding") == "" and ANALYSES["presliding"] is presliding and "presliding" in titles()
     h5, doc = run_and_analyse(tmp_path, 65536, "--rate", "8", "--settle", "0.05", replicates=8)
-    result = presliding(load_record(h5))
+    result = run_analysis("presliding", h5, {"replicates": 8})
     shown = {q: (v, u) for q, v, u in result.numbers}
     assert all(u for _q, (_v, u) in shown.items())
     resolved = doc["resolution"]["resolved"]
@@ -45,7 +44,7 @@ def test_a_torque_driven_run_is_refused_in_one_line(tmp_path):
         t = np.arange(300) / 1000.0
         w.append({"sample_index": np.arange(300), "t": t, "current_cmd": np.sin(t), "current": np.sin(t),
                   "torque": 0.05 * np.sin(t), "position": np.cos(t), "counts": np.arange(300)})
-    with pytest.raises(BenchError) as err:
-        presliding(load_record(path))
+    with pytest.raises(AnalysisError) as err:  # the analysis's own refusal, as hilbench presliding gives it
+        run_analysis("presliding", path)
     assert "torque-driven" in str(err.value) and "displacement-driven" in str(err.value)
     assert "\n" not in str(err.value)

@@ -280,7 +280,6 @@ def test_the_model_is_saved_as_identify_writes_it_and_starts_the_residual_loop(w
     """Save model... writes the document `hilbench identify RUN --json` writes (same parameters, same schema,
     read back by the model file reader); the residual loop started from that file starts from its terms."""
     from hilbench.analysis.models.model_file import read_model
-    from hilbench.analysis.record import load_record
     from hilbench.bench.cli import main
     from tests.bench.test_identify_command import _write_run as write_identification_run
 
@@ -289,7 +288,7 @@ def test_the_model_is_saved_as_identify_writes_it_and_starts_the_residual_loop(w
     browser = window.browser
     assert not browser.save_model(str(tmp_path / "none.json"))  # nothing identified yet: a message, no file
     assert not (tmp_path / "none.json").exists()
-    result = analyses.identification(load_record(str(run)))
+    result = analyses.run_analysis("identify", run)
     browser.path_edit.setText(str(run))
     browser.show_result(result)
     assert browser.save_model_button.isEnabled()
@@ -304,7 +303,7 @@ def test_the_model_is_saved_as_identify_writes_it_and_starts_the_residual_loop(w
 
     # the saved model starts the GUI's residual loop as `hilbench residual --start MODEL.json` does: same call,
     # same start figure (identify's definition), same verdict
-    res = analyses.residual(load_record(str(run)), {"start_model": str(tmp_path / "gui.json")})
+    res = analyses.run_analysis("residual", run, {"start_model": str(tmp_path / "gui.json")})
     shown = {q: v for q, v, _u in res.numbers}
     assert main(["residual", str(run), "--start", str(tmp_path / "gui.json"), "--json", str(tmp_path / "r.json"),
                  "-q"]) == 0

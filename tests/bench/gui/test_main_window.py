@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 from PySide6 import QtCore
 
-from hilbench.analysis.record import load_record
 from hilbench.bench.gui.main_window import MainWindow
 from hilbench.common.runfile import RunFileError, open_run
 
@@ -127,7 +126,7 @@ def test_identification_run_updates_live_plots_and_writes_the_file(window, qtbot
 
 
 def test_run_browser_opens_the_file_and_shows_identification(window, qtbot, runs):
-    from hilbench.bench.gui.analyses import identification
+    from hilbench.bench.gui.analyses import run_analysis
 
     _ensure_runs(window, qtbot, runs, steps=False)
     browser = window.browser
@@ -142,11 +141,11 @@ def test_run_browser_opens_the_file_and_shows_identification(window, qtbot, runs
     text = browser.info.toPlainText()
     assert "{" not in text and "current_limit" in text and " A" in text
     assert "completed" in browser.info.toPlainText()
-    browser.analyse("identification")
+    browser.analyse("identify")
     qtbot.waitUntil(lambda: browser.last_result is not None, timeout=30000)
     shown = {browser.numbers.item(r, 0).text(): browser.numbers.item(r, 1).text()
              for r in range(browser.numbers.rowCount())}
-    direct = dict((q, v) for q, v, _u in identification(load_record(runs / "id.h5")).numbers)
+    direct = dict((q, v) for q, v, _u in run_analysis("identify", runs / "id.h5").numbers)
     assert shown == direct  # the table shows what analysis computed, digit for digit
     assert float(shown["inertia J"]) > 0
     assert browser.inertia_edit.text() == shown["inertia J"]

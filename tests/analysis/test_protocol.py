@@ -1,0 +1,269 @@
+"""The analysis protocol (hilbench.analysis.protocol): one registry that every consumer iterates, and one figure
+for one model on one input whichever consumer computes it.
+
+- A toy analysis registered with one line is a campaign step (``hilbench analyse --steps toy``), a section of the
+  campaign page and an analysis of the GUI's run browser, and its figure is the closed form sum |dx|.
+- Consistency: identify, compare and the residual loop through every consumer they have (the Python API, the CLI's
+  JSON, the GUI's result, the campaign's Parquet row) on the same runs (whole, and cut 70/30 into a head and a
+  held-out tail: the CLI reads the two parts written as run files) at 2, 10 and 20 kHz and on a host-clocked
+  drive run (a ``sample_times`` channel: resampled by the one loader) report the same figure to 1e-6 relative.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from hilbench.analysis import protocol
+from hilbench.analysis.errors import AnalysisError
+from hilbench.analysis.identification.entry import IdentifySettings
+from hilbench.analysis.identification.maxwell_fit import LipSettings
+from hilbench.analysis.record import load_record
+from hilbench.bench.campaign_analysis.engine import analyse as analyse_campaign
+from hilbench.bench.campaign_analysis.steps import STEPS, StepSettings
+from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
+from hilbench.bench.cli import main
+from hilbench.bench.gui.analyses import run_analysis
+from hilbench.common.runfile import RunWriter
+
+pytestmark = pytest.mark.device_free
+
+RTOL = 1e-6
+THRESHOLDS = 16
+FRACTION = 0.3
+quiet = {"progress": False, "say": lambda _line: None}
+
+
+@pytest.fixture
+def toy():
+    protocol.register("toy", "tests.analysis.toy_analysis")  # the one line a new analysis needs
+    yield protocol.entry("toy")
+    protocol.ANALYSES.pop("toy")
+    protocol._LOADED.pop("toy", None)
+
+
+def test_a_registered_toy_is_a_campaign_step_a_page_section_and_a_gui_analysis(toy, tmp_path):
+    folder = tmp_path / "c"
+    write_campaign(folder, SyntheticCampaign(runs=1, duration=0.5, sample_rate=2000.0, seed=3))
+    run = folder / json.loads((folder / "index.json").read_text())["runs"][0]["file"]
+    x = load_record(run).position
+    expected = float(np.sum(np.abs(np.diff(x))))  # the closed form of the toy's figure
+    assert "toy" in STEPS
+    assert main(["-q", "analyse", str(folder), "--steps", "identify,toy", "--serial", "-o", str(tmp_path / "r"),
+                 "--thresholds", str(THRESHOLDS), "--quiet"]) == 0
+    rows = {r["step"]: r for r in pq.read_table(tmp_path / "r" / "results.parquet").to_pylist()}
+    assert rows["toy"]["status"] == "ok" and rows["toy"]["sliding_distance"] == pytest.approx(expected, rel=1e-12)
+    from hilbench.bench.campaign_analysis.page import step_sections
+
+    page = "".join(step_sections(list(rows.values()), {}))
+    assert "id='step-toy'" in page and "id='step-identify'" in page
+    shown = run_analysis("toy", run)
+    assert shown.title == "Toy (distance slid)" and shown.summary["sliding_distance"] == pytest.approx(expected)
+    files, summary = toy.report(toy.analyse(toy.read([run], protocol.ReadOptions())), tmp_path / "out")
+    assert [f.name for f in files] == ["toy.json"] and summary["sliding_distance"] == pytest.approx(expected)
+    with pytest.raises(AnalysisError, match="unknown analysis 'nothing'"):
+        protocol.entry("nothing")
+
+
+def test_a_validation_run_must_go_with_its_training_run(tmp_path):
+    """The one check: each analysis names what a validation run shares with the training run."""
+    folder = tmp_path / "c"
+    write_campaign(folder, SyntheticCampaign(runs=2, duration=0.5, sample_rate=2000.0, seed=4))
+    files = sorted(folder.glob("*.h5"))
+    ident = protocol.entry("identify")
+    train = ident.read([files[0]], protocol.ReadOptions())
+    other = ident.read([files[1]], protocol.ReadOptions(timing="hold_next"))
+    with pytest.raises(AnalysisError, match="torque timing hold_next") as err:
+        ident.analyse(train, IdentifySettings(LipSettings(n_thresholds=THRESHOLDS)), other)
+    assert "\n" not in str(err.value)
+    with pytest.raises(AnalysisError, match="scores its models on a validation run"):
+        protocol.entry("compare").analyse(train)
+    assert ident.matches == ("axis", "kind", "timing") and protocol.entry("afrf").matches is None
+
+
+def _write_part(record, rows: slice, path: Path) -> Path:
+    """Samples ``rows`` of a record as a run file of their own (as the campaign steps cut it)."""
+    t = record.t[rows] - record.t[rows][0]
+    with RunWriter(path, sample_rate=record.sample_rate, channels=("t", "sample_index", "position", "torque"),
+                   protocol_name="identification") as w:
+        w.append({"t": t, "sample_index": np.arange(t.size), "position": record.position[rows],
+                  "torque": record.torque[rows]})
+    return path
+
+
+def _host_clocked(folder: Path) -> Path:
+    """The synthetic campaign's run rewritten as a host-clocked drive writes it: its samples taken at jittered
+    host times (``sample_times``: ``host_time``), so the loader resamples it onto the uniform grid."""
+    entry = json.loads((folder / "index.json").read_text())["runs"][0]
+    src = load_record(folder / entry["file"])
+    n, fs = src.n_samples, src.sample_rate
+    jitter = np.random.default_rng(7).uniform(-0.2, 0.2, n) / fs
+    path = folder / "drive.h5"
+    with RunWriter(path, sample_rate=fs, channels=("t", "sample_index", "position", "torque"),
+                   custom_channels={"host_time": "s"}, protocol_name="identification",
+                   device={"protocol": "CiA 402 over CANopen", "sample_times": "host_time"}) as w:
+        w.append({"t": src.t, "sample_index": np.arange(n), "position": src.position, "torque": src.torque,
+                  "host_time": 50.0 + src.t + jitter})
+    index = {"runs": [{**entry, "file": "drive.h5", "key": "drive"}]}
+    (folder / "index.json").write_text(json.dumps(index))
+    (folder / entry["file"]).unlink()
+    return path
+
+
+def _campaign_row(folder: Path, out: Path, step: str, fraction: float) -> dict:
+    settings = StepSettings(thresholds=THRESHOLDS, validation_fraction=fraction,
+                            compare_families=("coulomb_viscous", "maxwell_slip"))
+    s = analyse_campaign([folder], out, (step,), settings, serial=True, resume=False, **quiet)
+    (row,) = pq.read_table(s.table).to_pylist()
+    assert row["status"] == "ok", row["error"]
+    return row
+
+
+CASES = [(2000.0, False), (10000.0, False), (20000.0, False), (2000.0, True)]
+
+
+@pytest.mark.parametrize(("rate", "host_clocked"), CASES, ids=["2kHz", "10kHz", "20kHz", "host-clocked"])
+def test_every_consumer_reports_the_same_figure(rate, host_clocked, tmp_path, capsys):
+    folder = tmp_path / "c"
+    write_campaign(folder, SyntheticCampaign(runs=1, duration=1.0, sample_rate=rate, seed=11))
+    run = _host_clocked(folder) if host_clocked else \
+        folder / json.loads((folder / "index.json").read_text())["runs"][0]["file"]
+    rec = load_record(run)
+    assert any(n.startswith("resampled on host_time") for n in rec.notes) == host_clocked
+    ident = protocol.entry("identify")
+    settings = IdentifySettings(LipSettings(n_thresholds=THRESHOLDS))
+
+    # whole run: the Python API, the CLI's model file, the GUI's result (its model file and summary), the row
+    api = ident.analyse(ident.read([run], protocol.ReadOptions()), settings)
+    figure = api.value.figures["train_torque_nrmse"]
+    assert main(["-q", "identify", str(run), "--thresholds", str(THRESHOLDS), "--json", str(tmp_path / "m.json")]) == 0
+    cli = json.loads((tmp_path / "m.json").read_text())
+    gui = run_analysis("identify", run)
+    row = _campaign_row(folder, tmp_path / "whole", "identify", 0.0)
+    gui_thresholds = gui.model_document["settings"]["n_thresholds"]
+    for where, value in (("cli", cli["figures"]["train_torque_nrmse"]), ("campaign", row["train_torque_nrmse"])):
+        assert value == pytest.approx(figure, rel=RTOL), where
+    assert row["inertia"] == pytest.approx(api.value.model.inertia, rel=RTOL)
+    gui_api = ident.analyse(ident.read([run], protocol.ReadOptions()),
+                            IdentifySettings(LipSettings(n_thresholds=gui_thresholds)))
+    assert gui.summary["train_torque_nrmse"] == pytest.approx(gui_api.value.figures["train_torque_nrmse"], rel=RTOL)
+    shown = {q: v for q, v, _u in gui.numbers}
+    assert float(shown["train torque NRMSE"]) == pytest.approx(100 * gui.summary["train_torque_nrmse"], rel=5e-3)
+
+    # 70/30: the head fitted, the tail held out; the CLI reads the two parts written as run files
+    head, tail = protocol.held_out(ident.read([run], protocol.ReadOptions()), FRACTION)
+    cut = head.record.n_samples
+    parts = [_write_part(rec, slice(0, cut), tmp_path / "head.h5"), _write_part(rec, slice(cut, None),
+                                                                                tmp_path / "tail.h5")]
+    split = ident.analyse(head, settings, tail).value.figures["validation_torque_nrmse"]
+    assert main(["-q", "identify", str(parts[0]), "--validate", str(parts[1]), "--thresholds", str(THRESHOLDS),
+                 "--json", str(tmp_path / "s.json")]) == 0
+    assert json.loads((tmp_path / "s.json").read_text())["figures"]["validation_torque_nrmse"] == pytest.approx(
+        split, rel=RTOL)
+    assert _campaign_row(folder, tmp_path / "split", "identify", FRACTION)["validation_torque_nrmse"] == \
+        pytest.approx(split, rel=RTOL)
+
+    # compare: validation only, so the 70/30 split; the row is the family with the lowest validation NRMSE
+    cmp = protocol.entry("compare")
+    from hilbench.analysis.models.compare import CompareSettings
+
+    families = ("coulomb_viscous", "maxwell_slip")
+    summary = cmp.report(cmp.analyse(head, CompareSettings(families=families), tail))[1]
+    assert main(["-q", "compare", str(parts[0]), "--validate", str(parts[1]), "--families", ",".join(families),
+                 "-o", str(tmp_path / "cmp")]) == 0
+    doc = {r["model"]: r for r in json.loads((tmp_path / "cmp" / "compare.json").read_text())["rows"]}
+    for family in families:
+        assert doc[family]["validation"]["torque_nrmse"] == pytest.approx(
+            summary[f"{family}.validation_torque_nrmse"], rel=RTOL), family
+    row = _campaign_row(folder, tmp_path / "cmp-row", "compare", FRACTION)
+    assert row["model"] == summary["model"]
+    assert row["validation_torque_nrmse"] == pytest.approx(summary["validation_torque_nrmse"], rel=RTOL)
+    capsys.readouterr()
+
+
+def test_the_residual_loop_reports_one_figure_everywhere(tmp_path, capsys):
+    """The residual loop (2 kHz, 70/30): the Python API, the CLI on the head and tail as files, the campaign row;
+    and on the whole run (blocked cross-validation) the API, the CLI's JSON and the GUI's result."""
+    folder = tmp_path / "c"
+    write_campaign(folder, SyntheticCampaign(runs=1, duration=1.5, sample_rate=2000.0, seed=12))
+    run = folder / json.loads((folder / "index.json").read_text())["runs"][0]["file"]
+    res = protocol.entry("residual")
+    inputs = res.read([run], protocol.ReadOptions())
+    whole = res.report(res.analyse(inputs))[1]
+    assert main(["-q", "residual", str(run), "--json", str(tmp_path / "r.json")]) == 0
+    cli = json.loads((tmp_path / "r.json").read_text())
+    assert cli["error_after"]["validation"]["torque_nrmse"] == pytest.approx(whole["validation_torque_nrmse"],
+                                                                             rel=RTOL)
+    assert run_analysis("residual", run).summary["validation_torque_nrmse"] == pytest.approx(
+        whole["validation_torque_nrmse"], rel=RTOL)
+    head, tail = protocol.held_out(inputs, FRACTION)
+    split = res.report(res.analyse(head, None, tail))[1]
+    rec, cut = load_record(run), head.record.n_samples
+    parts = [_write_part(rec, slice(0, cut), tmp_path / "head.h5"), _write_part(rec, slice(cut, None),
+                                                                                tmp_path / "tail.h5")]
+    assert main(["-q", "residual", str(parts[0]), "--validate", str(parts[1]), "--json",
+                 str(tmp_path / "s.json")]) == 0
+    cli = json.loads((tmp_path / "s.json").read_text())
+    for key, value in (("validation_torque_nrmse_start", cli["error_before"]["validation"]["torque_nrmse"]),
+                       ("validation_torque_nrmse", cli["error_after"]["validation"]["torque_nrmse"])):
+        assert value == pytest.approx(split[key], rel=RTOL), key
+    row = _campaign_row(folder, tmp_path / "row", "residual", FRACTION)
+    assert row["validation_torque_nrmse"] == pytest.approx(split["validation_torque_nrmse"], rel=RTOL)
+    assert row["validation_torque_nrmse_start"] == pytest.approx(split["validation_torque_nrmse_start"], rel=RTOL)
+    capsys.readouterr()
+
+
+def test_the_afrf_reports_one_figure_everywhere(tmp_path, capsys):
+    """A stepped-sine run of a linear system: the first-harmonic compliance of the lowest amplitude (the campaign
+    row's column) from the Python API, the CLI's JSON, the GUI's result and the Parquet row, to 1e-6; whole, and
+    read one step window at a time under a small budget (the same bit for bit)."""
+    from hilbench.firmware_sim.engine.plant import PlantParams
+    from tests.analysis.afrf.test_afrf_run import _write_run
+
+    folder = tmp_path / "c"
+    folder.mkdir()
+    run = folder / "afrf.h5"
+    _write_run(run, PlantParams(inertia=1.0, spring=50.0, viscous=10.0), [1.0, 3.0], [0.5, 2.0], settle=4)
+    (folder / "index.json").write_text(json.dumps({"runs": [{"key": "a", "file": "afrf.h5", "status": "completed",
+                                                             "protocol": "stepped_sine"}]}))
+    afrf = protocol.entry("afrf")
+    summary = afrf.report(afrf.analyse(afrf.read([run], protocol.ReadOptions())))[1]
+    compliance = summary["afrf_compliance_low_amplitude"]
+    # the closed form: |X1/T1| of m x'' + c x' + k x = T at the lowest frequency, within the sampling's 1e-3
+    w = 2 * np.pi * 1.0
+    assert compliance == pytest.approx(1 / abs(50.0 - w * w + 10j * w), rel=1e-3)
+    assert main(["-q", "afrf", str(run), "--json", str(tmp_path / "a.json")]) == 0
+    doc = json.loads((tmp_path / "a.json").read_text())
+    i, j = int(np.argmin(doc["amplitudes"])), int(np.argmin(doc["frequencies"]))
+    assert doc["magnitude"][i][j][0] / doc["drive_magnitude"][i][j] == pytest.approx(compliance, rel=RTOL)
+    assert run_analysis("afrf", run).summary["afrf_compliance_low_amplitude"] == pytest.approx(compliance, rel=RTOL)
+    row = _campaign_row(folder, tmp_path / "row", "afrf", 0.0)
+    assert row["afrf_compliance_low_amplitude"] == pytest.approx(compliance, rel=RTOL)
+    from hilbench.analysis.afrf import array_cost
+
+    streamed = afrf.read([run], protocol.ReadOptions(memory=array_cost(load_record(run).n_samples) - 1))
+    assert streamed.streamed
+    assert afrf.report(afrf.analyse(streamed))[1]["afrf_compliance_low_amplitude"] == pytest.approx(compliance,
+                                                                                                   rel=RTOL)
+    capsys.readouterr()
+
+
+def test_the_gui_goes_through_the_entries_refusals_and_fallbacks(tmp_path):
+    """The run browser once refused a skeleton without J where `hilbench skeleton` takes the run's declared inertia,
+    and skipped presliding's check of the force channel; through the entries it does what the command does."""
+    from hilbench.firmware_sim.engine.friction_models import paper_system
+    from tests.analysis.skeleton.test_skeleton_stream import _write_chirp
+
+    path = tmp_path / "chirp.h5"
+    _write_chirp(path, paper_system(), 5.0, duration=20.0)
+    shown = run_analysis("skeleton", path, {})  # no J typed: the run's calibration inertia, as the CLI
+    assert main(["-q", "skeleton", str(path), "--json", str(tmp_path / "s.json")]) == 0
+    doc = json.loads((tmp_path / "s.json").read_text())
+    assert shown.summary["mass"] == doc["mass"] == paper_system().inertia
+    assert shown.summary["skeleton_amplitude_max"] == pytest.approx(max(doc["amplitude"]), rel=RTOL)
+    with pytest.raises(AnalysisError, match="a torque-driven record; presliding needs a displacement-driven one"):
+        run_analysis("presliding", path)
