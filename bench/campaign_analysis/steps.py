@@ -166,10 +166,13 @@ def compare_step(path: str, settings: StepSettings) -> dict[str, Any]:
     ``compare_families`` fitted on the head and scored on the tail; the row is the family with the lowest
     validation torque NRMSE."""
     from hilbench.analysis.errors import AnalysisError
+    from hilbench.analysis.identification.maxwell_fit import LipSettings
     from hilbench.analysis.models.compare import CompareSettings, analyse
 
     rec, head, tail = _held_out(path, settings, "compare")
-    result = analyse(head, tail, CompareSettings(families=settings.compare_families))
+    # the maxwell_slip row fits the identify step's terms, so the two rows of one model read one figure
+    lip = LipSettings(n_thresholds=settings.thresholds, coulomb=settings.coulomb, offset=settings.offset)
+    result = analyse(head, tail, CompareSettings(families=settings.compare_families, lip=lip))
     scored = [r for r in result.rows if r.error is None and math.isfinite(r.validation["torque_nrmse"])]
     if not scored:
         raise AnalysisError("compare: no family could be fitted (" + "; ".join(
