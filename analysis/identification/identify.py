@@ -100,7 +100,7 @@ class Identification:
 
 
 #: scorer figures identify's documents do not carry (the model file's figures are fixed by docs/model-file.md)
-_NOT_REPORTED = ("position_rms_segmented",)
+_NOT_REPORTED = ("position_rms_segmented", "torque_rel_pct")
 
 
 def _score_settings(lip: LipFit, segment: float, force_mode: bool):
