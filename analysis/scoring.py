@@ -240,23 +240,26 @@ def _has_chain(params) -> bool:
 
 
 class _Carried:
-    """A stateful per-sample operator over overlapping windows: the state is saved at the next window's start
-    (``keep``), so every sample is computed once from the state the samples before it left."""
+    """A stateful per-sample operator over overlapping windows: the state is saved inside the next window
+    (``keep``), so every sample is computed once from the state the samples before it left. The friction state is
+    resumed ``lag`` samples into the next window, past the start-up transient of the window's own light low-pass of
+    the path (``_path_lag``); the samples before it lie in the window's margin and only their filtered tail, e^-39
+    of it, reaches a scored row."""
 
     def __init__(self, plant):
         self.plant = plant
+        self.resume = 0  # the run's sample the saved state belongs to
 
-    def friction(self, x: np.ndarray, v: np.ndarray, keep: int | None, marks: list[int]) -> tuple[np.ndarray, dict]:
-        """Friction along the window's path; the plant state at each of ``marks`` (window indices, increasing) and
-        at ``keep`` (saved as the next window's start)."""
+    def friction(self, x: np.ndarray, v: np.ndarray, wa: int, keep: int | None, marks: list[int]
+                 ) -> tuple[np.ndarray, dict]:
+        """Friction along the window's path (window starting at the run's sample ``wa``); the plant state at each
+        of ``marks`` (window indices, increasing) and at ``keep`` (saved for the next window)."""
         out = np.empty(x.size)
         states: dict[int, bytes] = {}
-        cuts = sorted(set([*marks, *([keep] if keep is not None else [])]))
-        lo = 0
+        lo = self.resume - wa
+        cuts = sorted({c for c in [*marks, *([keep] if keep is not None else [])] if c >= lo})
         saved = None
         for c in [*cuts, x.size - 1]:
-            if c < lo:
-                continue
             out[lo : c + 1] = self.plant.friction_path(x[lo : c + 1], v[lo : c + 1])
             state = self.plant.get_state()
             if c in marks:
@@ -264,8 +267,10 @@ class _Carried:
             if c == keep:
                 saved = state
             lo = c
+        out[: self.resume - wa] = out[self.resume - wa]
         if keep is not None:
             self.plant.set_state(saved)
+            self.resume = wa + keep
         return out, states
 
     def chain(self, u: np.ndarray, keep: int | None) -> np.ndarray:
@@ -318,6 +323,8 @@ def score_chunks(params, source: ChunkSource, fs: float, *, timing: str = "hold_
     if not 0 < cutoff < fs / 2:
         raise AnalysisError(f"filter cutoff {cutoff} Hz must be in (0, {fs / 2}) Hz (Nyquist)")
     path_cutoff = None if s.path_factor is None else min(s.path_factor * cutoff, PATH_NYQUIST_FRACTION * fs)
+    # the friction state is resumed past the start-up transient of the path's low-pass (40 of its time constants)
+    lag = 0 if path_cutoff is None else 4 * edge_samples(fs, path_cutoff)
     edge = edge_samples(fs, cutoff)
     lo_row = max(edge, start)
     lo_row += (-(lo_row - edge)) % dec
@@ -339,7 +346,7 @@ def score_chunks(params, source: ChunkSource, fs: float, *, timing: str = "hold_
     except PlantParameterError as exc:
         raise AnalysisError(f"model cannot be scored: {exc}") from None
     offset = float(params.torque_offset)
-    margin = max(default_margin(fs, cutoff), 2)
+    margin = max(default_margin(fs, cutoff), 2 * lag, 2)
     torque_sums, whole, segmented = _Sums(), _Sums(), _Sums()
     kept: dict[str, list[np.ndarray]] = {"rows": [], "measured": [], "predicted": [], "sim": [], "seg": []}
     sims: dict[str, object] = {"whole": None, "seg": None}
@@ -363,7 +370,7 @@ def score_chunks(params, source: ChunkSource, fs: float, *, timing: str = "hold_
             else:
                 xp = zero_phase_lowpass(x, fs, path_cutoff, s.order)
                 vp = np.gradient(xp, dt) if xp.size > 1 else np.zeros_like(xp)
-            friction, states = path.friction(xp, vp, nxt, marks)
+            friction, states = path.friction(xp, vp, w.wa, None if nxt is None else nxt + lag, marks)
             total = friction + mech.spring * xp + _cogging(mech, xp)
             # aligned at the samples per window, as chunked.blocks does: a window's first sample lies in its margin
             tau_m, tau_a = _aligned(h), _aligned(acting)
