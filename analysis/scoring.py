@@ -65,8 +65,8 @@ from hilbench.analysis.identification.regressors import (
     zero_phase_lowpass,
 )
 
-#: more RK4 sub-steps per sample than this means a broken model, not a stiff plant
-MAX_SUBSTEPS = 100_000
+#: more RK4 sub-steps per sample than this means a model too stiff to simulate at the rate (compare refused it there)
+MAX_SUBSTEPS = 2000
 #: the friction state follows the measured path low-passed at PATH_FACTOR x the cutoff, at most
 #: PATH_NYQUIST_FRACTION x fs (the residual loop's ``velocity_fast``; None in ScoreSettings: the raw samples)
 PATH_FACTOR = 8.0

@@ -38,7 +38,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
-from hilbench.analysis.identification.maxwell_fit import LipSettings, fit_lip, nrmse
+from hilbench.analysis.identification.maxwell_fit import LipSettings, fit_lip
 from hilbench.analysis.identification.regressors import (
     FilteredData,
     effective_sample_count,
@@ -176,17 +176,23 @@ def segmented_position(params: PlantParams, run: RunData, segment: float = 1.0) 
 
 
 def evaluate(params: PlantParams, run: RunData, segment: float = 1.0) -> dict:
-    """Figures of a model on a run: torque (equation-error) NRMSE and segmented position NRMSE."""
-    torque = predicted_torque(params, run)
+    """Figures of a model on a run from its first sample, by the one scoring function (``analysis.scoring``):
+    torque (equation-error) NRMSE, segmented position NRMSE and rms error; with the curves of the plots (the
+    prediction at the run's regression rows, the segmented simulation)."""
+    from hilbench.analysis.scoring import ScoredRun, ScoreSettings, score_run
+
+    scored = ScoredRun(run.x, run.u, run.fs, "hold_next")  # the held torque is its own hold_next record
     try:
-        sim = segmented_position(params, run, segment)
-        pos = nrmse(run.x, sim)
-        rms = float(np.sqrt(np.mean((run.x - sim) ** 2)))
-    except (PlantParameterError, FloatingPointError, AnalysisError):
-        sim, pos, rms = np.full_like(run.x, np.nan), math.nan, math.nan
-    return {"torque_nrmse": nrmse(run.data.torque, torque), "position_nrmse_segmented": pos,
-            "position_rms_segmented": rms,
-            "torque_measured": run.data.torque, "torque_predicted": torque, "position_simulated": sim}
+        sc = score_run(params, scored, ScoreSettings(segment=segment), keep=True)
+        sim = sc.position_sim_segmented
+    except AnalysisError:  # a model the plant cannot simulate keeps its torque figure
+        sc = score_run(params, scored, ScoreSettings(segment=segment, simulate=False))
+        sim = np.full_like(run.x, np.nan)
+    f = sc.figures
+    return {"torque_nrmse": f["torque_nrmse"], "position_nrmse_segmented": f.get("position_nrmse_segmented", math.nan),
+            "position_rms_segmented": f.get("position_rms_segmented", math.nan),
+            "torque_measured": run.data.torque, "torque_predicted": predicted_torque(params, run),
+            "position_simulated": sim}
 
 
 # ---- linear-in-parameters starts ----
