@@ -30,17 +30,19 @@ Figures (fractions; texts show them in percent):
   with tau_m the measured torque aligned at the samples (``regressors.torque_at_samples``), tau_a the torque the
   model says acts (the plant's input chain: delay, current lag, torque-constant error, plus its offset
   ``torque_offset`` = -c0 and drift, aligned the same way), F the model's friction along the measured path from
-  the run's first sample (``Plant.friction_path(x, v)``, viscous part apart), K the spring, C the cogging.
+  the run's first sample (``Plant.friction_path``, viscous part apart), K the spring, C the cogging.
   For the linear-in-parameters Maxwell-slip model this is, term by term, the regression of ``maxwell_fit``.
   Beside it the **relative error** ``torque_rel_pct`` = 100 |e| / |L[tau_m]| (the EMPS metric). A
   displacement-driven record gives the same error as the **force NRMSE** (``force_nrmse``) and ``force_rel_pct``.
 - **position NRMSE** (``position_nrmse``): rms(x - x_sim)/std(x) over the span, the open-loop simulation of the
   plant under the torque from the span's first sample; **segmented** (``position_nrmse_segmented``, and
   ``position_rms_segmented`` in rad or m) when it restarts every ``segment`` s, the restarts at
-  ``start + j * round(segment * fs)``. Each (re)start takes the measured state: position x[k0], velocity
-  D L[x](k0) of the whole run, and the friction state (element deflections, bristles, the hysteresis stack) the
-  measured path has left at k0 since the run's first sample. The plant is integrated with RK4 sub-steps that keep
-  the stiffest mode at 80 % of the stability radius.
+  ``start + j * round(segment * fs)``. Each (re)start takes the measured state: the path's position (the
+  measured one low-passed lightly, at 8x the cutoff and at most 0.4 fs, so that encoder steps larger than a
+  presliding distance do not drive the friction state), the velocity D L[x](k0) of the whole run, and the friction
+  state (element deflections, bristles, the hysteresis stack) that path has left at k0 since the run's first
+  sample; the friction F of the torque figure follows the same path and velocity. The plant is integrated with RK4
+  sub-steps that keep the stiffest mode at 80 % of the stability radius.
 
 Why the initial state matters: a Maxwell-slip element started relaxed at the first sample of a held-out tail
 carries no deflection, while inside the run it carries the deflection the path left; the predicted friction then
@@ -364,13 +366,11 @@ def score_chunks(params, source: ChunkSource, fs: float, *, timing: str = "hold_
             if simulate and a < b:
                 first = a + (-(a - start)) % seg
                 marks = [k - w.wa for k in range(first, b, seg)]
-            # the path the friction state follows (module docstring): lightly low-passed, or the measured samples
-            if path_cutoff is None:
-                xp, vp = x, v
-            else:
-                xp = zero_phase_lowpass(x, fs, path_cutoff, s.order)
-                vp = np.gradient(xp, dt) if xp.size > 1 else np.zeros_like(xp)
-            friction, states = path.friction(xp, vp, w.wa, None if nxt is None else nxt + lag, marks)
+            # the path the friction state follows (module docstring): lightly low-passed, or the measured samples;
+            # the velocity the laws read (sign, Stribeck, a restart) is the regression's, D L[x]: the light
+            # low-pass's own derivative carries the encoder's noise (at 10 kHz, 4 kHz of it)
+            xp = x if path_cutoff is None else zero_phase_lowpass(x, fs, path_cutoff, s.order)
+            friction, states = path.friction(xp, v, w.wa, None if nxt is None else nxt + lag, marks)
             total = friction + mech.spring * xp + _cogging(mech, xp)
             # aligned at the samples per window, as chunked.blocks does: a window's first sample lies in its margin
             tau_m, tau_a = _aligned(h), _aligned(acting)
@@ -402,7 +402,7 @@ def score_chunks(params, source: ChunkSource, fs: float, *, timing: str = "hold_
                         if k0 > pos and sims[name] is not None:
                             out[pos - lo_l : k0 - lo_l] = sims[name].run(u[pos:k0]).theta
                         if k0 < hi_l:
-                            plant = Plant(mech, dt, sub, theta0=float(xp[k0]), omega0=float(vp[k0]))
+                            plant = Plant(mech, dt, sub, theta0=float(xp[k0]), omega0=float(v[k0]))
                             plant.set_state(states[k0])
                             sims[name] = plant
                         pos = k0

@@ -74,9 +74,9 @@ def _measured_run(fs: float, seconds: float, seed: int):
 
 
 def test_a_held_out_tail_scores_as_the_same_span_inside_the_run():
-    """Continuity: the tail of a 70/30 split, its run before it carried as the record's lead, scores as samples
-    cut: of the whole run (to 1e-9; read in chunks of any size too); a tail started relaxed does not (the friction
-    state matters: it reads several times the in-run figure on this run)."""
+    """Continuity: samples cut: of the whole run score alike read in chunks of any size (torque to 1e-9, the
+    simulations to 1e-7: they amplify the windows' rounding); a tail started relaxed does not (the friction state
+    matters: it reads several times the in-run figure on this run)."""
     fs = 2000.0
     x, tau, p = _measured_run(fs, 6.0, 1)
     model = p.replace(torque_constant=1.0)
@@ -84,8 +84,8 @@ def test_a_held_out_tail_scores_as_the_same_span_inside_the_run():
     inside = score(model, x, tau, fs, timing="hold_previous", start=cut).figures
     chunked = score_chunks(model, array_chunks(x, tau, 777), fs, timing="hold_previous", start=cut, block=3000)
     for key, value in inside.items():
-        # the open-loop simulation over the whole tail amplifies the 1e-13 rounding of the windows' filters
-        assert chunked.figures[key] == pytest.approx(value, rel=1e-7 if key == "position_nrmse" else 1e-9), key
+        # a simulation over a segment amplifies the 1e-13 rounding of the windows' filters (3e-9 measured)
+        assert chunked.figures[key] == pytest.approx(value, rel=1e-7 if key.startswith("position") else 1e-9), key
     relaxed = score(model, x[cut:], tau[cut:], fs, timing="hold_previous").figures
     assert relaxed["torque_nrmse"] > 2 * inside["torque_nrmse"]
 
