@@ -185,3 +185,31 @@ def test_a_run_read_chunk_by_chunk_is_scored_in_memory_bounded_by_the_block():
     kept_figures, kept = peak(True)
     assert figures["samples"] == n and figures == kept_figures
     assert bounded < 12e6 < kept, f"peak {bounded / 1e6:.1f} MB, {kept / 1e6:.1f} MB with the arrays kept"
+
+
+def test_the_model_input_chain_acts_on_the_measured_torque():
+    """The input chain (offset, torque-constant error, delay) turns the measured torque into the one acting, as the
+    plant does: a model with an offset c0 on tau + c0, with a gain error g on tau / (1 + g) and with a delay of 3
+    samples on tau advanced by 3 samples make the error of the plain model on tau (the rows start far beyond the
+    delay's first samples), so the NRMSE is the plain one, times (1 + g) for the gain (its reference std(L[tau])
+    shrinks by 1 + g); to 1e-9 (the delay: the error itself, row by row)."""
+    fs = 2000.0
+    x, tau, p = _measured_run(fs, 3.0, 4)
+    model = p.replace(torque_constant=1.0)
+    plain = score(model, x, tau, fs).figures
+    c0, g, d = 0.05, 0.1, 3
+    offset = score(model.replace(torque_offset=-c0), x, tau + c0, fs).figures
+    gain = score(model.replace(torque_constant_error=g), x, tau / (1 + g), fs).figures
+    only = ScoreSettings(simulate=False)
+    plain_rows = score(model, x, tau, fs, settings=only, keep=True)
+    delayed = score(model.replace(delay_samples=d), x, np.append(tau[d:], tau[-d:]), fs, settings=only, keep=True)
+    for key in ("torque_nrmse", "position_nrmse", "position_nrmse_segmented"):
+        assert offset[key] == pytest.approx(plain[key], rel=1e-9), key
+    assert gain["torque_nrmse"] == pytest.approx(plain["torque_nrmse"] * (1 + g), rel=1e-9)
+    assert gain["position_nrmse_segmented"] == pytest.approx(plain["position_nrmse_segmented"], rel=1e-9)
+    # the same error at every row (the acting torque differs only over the first 3 samples, zeros in the delay
+    # line: their filtered trace at the first row, 86 samples on, is e^-10 of a torque step)
+    e_plain = plain_rows.measured - plain_rows.predicted
+    e_delayed = delayed.measured - delayed.predicted
+    np.testing.assert_array_equal(delayed.rows, plain_rows.rows)
+    assert np.max(np.abs(e_delayed - e_plain)) < 1e-4 * np.std(plain_rows.measured)
