@@ -79,6 +79,7 @@ class Record:
         calibration, device: the file's device calibration and identity (dicts).
         events: (kind, message) of every event, in order.
         notes: what the loader did that a report should mention (resampling, the device's timing figures).
+        lead: for a held-out tail, the run's samples before it (position, torque); see analysis.scoring.
     """
 
     path: Path
@@ -104,6 +105,10 @@ class Record:
     events: list[tuple[str, str]] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     n_samples: int = 0  # samples of the record (set also when the arrays are not loaded: stream_record)
+    #: (position, torque) of the same run before ``t[0]`` when the record is a held-out tail of it
+    #: (analysis.record_split): the measured path the model's friction state runs along before the scored span
+    #: (analysis.scoring); None for a record that starts its run
+    lead: tuple[np.ndarray, np.ndarray] | None = None
 
     def __post_init__(self) -> None:
         if not self.n_samples and self.t is not None:
@@ -142,7 +147,7 @@ class Record:
 
         if self.position is None:
             raise AnalysisError(f"{self.path}: no position channel loaded")
-        return RunArrays(self.t, self.torque, self.position, self.axis, self.name)
+        return RunArrays(self.t, self.torque, self.position, self.axis, self.name, self.lead)
 
     def incomplete_line(self) -> str | None:
         """One line for a report when the record is incomplete, else None."""

@@ -17,7 +17,9 @@ from hilbench.analysis.record import Record
 
 def window(record: Record, start: int, stop: int, label: str) -> Record:
     """Samples ``start:stop`` of ``record`` (every loaded channel), its time restarting at 0 s as a run file of
-    those samples would; ``label`` goes into the record's notes (reports say what part of the run they read)."""
+    those samples would; ``label`` goes into the record's notes (reports say what part of the run they read).
+    The samples before ``start`` travel along as ``Record.lead``: a model is scored on the window from the friction
+    state the measured path left (analysis.scoring), so a tail scores as the same span inside the whole run."""
     n = record.t.size
     if not 0 <= start < stop <= n:
         raise AnalysisError(f"{record.path}: samples {start}:{stop} are not a window of its {n} samples")
@@ -26,9 +28,16 @@ def window(record: Record, start: int, stop: int, label: str) -> Record:
     def cut(a: np.ndarray | None) -> np.ndarray | None:
         return None if a is None else np.asarray(a)[rows]
 
+    lead = record.lead
+    if start > 0 and record.position is not None and record.torque is not None:
+        # the run before the window (views unless the record is itself a window): a model scored on the window
+        # starts its friction state from the measured path since the run's start (analysis.scoring)
+        x0, tau0 = np.asarray(record.position)[:start], np.asarray(record.torque)[:start]
+        lead = (x0, tau0) if lead is None else (np.concatenate([lead[0], x0]), np.concatenate([lead[1], tau0]))
     return replace(record, t=record.t[rows] - record.t[start], position=cut(record.position),
                    torque=cut(record.torque), channels={k: np.asarray(v)[rows] for k, v in record.channels.items()},
-                   n_samples=stop - start, notes=[*record.notes, f"{label}: samples {start}:{stop} of {n}"])
+                   n_samples=stop - start, notes=[*record.notes, f"{label}: samples {start}:{stop} of {n}"],
+                   lead=lead)
 
 
 def split(record: Record, validation_fraction: float) -> tuple[Record, Record | None]:

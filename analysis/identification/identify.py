@@ -7,10 +7,10 @@ Methods:
 - ``oe``: ``lip`` followed by output-error refinement on the simulated position (output_error);
 - ``paper``: differential evolution then Nelder-Mead on the simulation error, N elements (paper_baseline).
 
-Figures (analysis.identification.maxwell_fit.nrmse, rms(error)/std(measured)): torque NRMSE of the equation error
-on the filtered rows, position NRMSE of the open-loop simulation over the whole record, and position
-NRMSE of the simulation restarted every ``segment`` seconds from the measured state
-(output_error.segmented_simulation_error), on the training run and on an optional validation run.
+Figures, scored by the one scoring function (analysis.scoring, rms(error)/std(measured)): torque NRMSE of the
+equation error on the filtered rows, position NRMSE of the open-loop simulation over the whole record, and
+position NRMSE of the simulation restarted every ``segment`` seconds from the measured state, on the training run
+and on an optional validation run (a held-out tail scored from the friction state the run before it left).
 """
 
 from __future__ import annotations
@@ -21,11 +21,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
-from hilbench.analysis.identification.maxwell_fit import LipFit, LipSettings, fit_lip, predict_filtered
+from hilbench.analysis.identification.maxwell_fit import LipFit, LipSettings, fit_lip
 from hilbench.analysis.identification.output_error import (
     refine_output_error,
-    segmented_simulation_error,
-    simulation_error,
 )
 from hilbench.analysis.models.friction_model import FrictionModel, check_axis
 
@@ -41,6 +39,7 @@ class RunArrays:
     position: np.ndarray
     axis: str = "rotary"
     name: str = "run"
+    lead: tuple[np.ndarray, np.ndarray] | None = None  # (position, torque) of the run before a held-out tail
 
     @property
     def fs(self) -> float:
@@ -84,7 +83,7 @@ def check_run(run: RunArrays, min_samples: int = 200) -> RunArrays:
         raise AnalysisError(f"{run.name}: the position never changes; nothing is identifiable (no motion)")
     if np.ptp(tau) == 0:
         raise AnalysisError(f"{run.name}: the torque is constant; J and the friction are unidentifiable")
-    return RunArrays(t, tau, x, run.axis, run.name)
+    return RunArrays(t, tau, x, run.axis, run.name, run.lead)
 
 
 @dataclass
@@ -100,47 +99,38 @@ class Identification:
     curves: dict = field(default_factory=dict)  # name -> arrays for the plots
 
 
+#: scorer figures identify's documents do not carry (the model file's figures are fixed by docs/model-file.md)
+_NOT_REPORTED = ("position_rms_segmented", "torque_rel_pct")
+
+
+def _score_settings(lip: LipFit, segment: float, force_mode: bool):
+    """The scoring of identify's figures: the fit's cutoff, order and row thinning (the scorer's defaults unless
+    the user set them), restarts every ``segment`` s, force figures for a force-against-displacement fit."""
+    from hilbench.analysis.scoring import ScoreSettings
+
+    return ScoreSettings(cutoff=lip.cutoff, order=lip.settings.order, decimation=lip.decimation, segment=segment,
+                         force=force_mode)
+
+
 def _figures(
     model: FrictionModel, run: RunArrays, lip: LipFit, timing: str, prefix: str, curves: dict, segment: float,
     force_mode: bool = False,
 ) -> dict:
-    meas, pred, rows = predict_filtered(
-        model,
-        run.position,
-        run.torque,
-        run.fs,
-        lip.cutoff,
-        order=lip.settings.order,
-        decimation=lip.decimation,
-        timing=timing,
-    )
-    from hilbench.common.metrics import nrmse
+    from hilbench.analysis.scoring import ScoredRun, score_run
 
+    lead = run.lead
+    scored = ScoredRun(run.position, run.torque, run.fs, timing) if lead is None else ScoredRun(
+        np.concatenate([lead[0], run.position]), np.concatenate([lead[1], run.torque]), run.fs, timing,
+        int(np.asarray(lead[0]).size))
+    sc = score_run(model.plant_params(), scored, _score_settings(lip, segment, force_mode), keep=True)
+    rows = sc.rows - scored.start  # rows of the span, indices into this run's arrays
+    curves[prefix] = {"t": run.t, "position": run.position, "torque_filtered": sc.measured,
+                      "torque_predicted": sc.predicted, "t_rows": run.t[rows]}
     if force_mode:  # the model maps the measured displacement to the force: no integration, nothing drifts
-        curves[prefix] = {"t": run.t, "position": run.position, "t_rows": run.t[rows],
-                          "position_rows": run.position[rows],
-                          "torque_filtered": meas, "torque_predicted": pred}
-        return {f"{prefix}_force_nrmse": nrmse(meas, pred),
-                f"{prefix}_force_rel_pct": 100.0 * float(np.linalg.norm(meas - pred) / np.linalg.norm(meas)),
-                f"{prefix}_samples": int(run.t.size)}
-    pos_nrmse, sim = simulation_error(model, run.position, run.torque, run.fs, timing=timing)
-    seg_nrmse, _ = segmented_simulation_error(
-        model, run.position, run.torque, run.fs, timing=timing, segment=segment
-    )
-    curves[prefix] = {
-        "t": run.t,
-        "position": run.position,
-        "position_sim": sim,
-        "torque_filtered": meas,
-        "torque_predicted": pred,
-        "t_rows": run.t[rows],
-    }
-    return {
-        f"{prefix}_torque_nrmse": nrmse(meas, pred),
-        f"{prefix}_position_nrmse": pos_nrmse,
-        f"{prefix}_position_nrmse_segmented": seg_nrmse,
-        f"{prefix}_samples": int(run.t.size),
-    }
+        curves[prefix]["position_rows"] = run.position[rows]
+    else:
+        curves[prefix]["position_sim"] = sc.position_sim
+    return sc.prefixed(prefix, _NOT_REPORTED)
 
 
 def _force_mode(record: str, s: LipSettings, method: str) -> bool:
@@ -238,13 +228,9 @@ def identify_chunks(
     pairs, in order) sampled uniformly at ``fs`` Hz; the caller checks the time stamps. The figures are
     :func:`identify`'s; no curves are kept (``curves`` is empty)."""
     from hilbench.analysis.identification.chunked import scan
-    from hilbench.analysis.identification.maxwell_fit import fit_lip_chunks, grid_from_scan, predict_chunks
-    from hilbench.analysis.identification.output_error import (
-        refine_output_error_chunks,
-        segmented_simulation_error_chunks,
-        simulation_error_chunks,
-    )
-    from hilbench.common.metrics import nrmse
+    from hilbench.analysis.identification.maxwell_fit import fit_lip_chunks, grid_from_scan
+    from hilbench.analysis.identification.output_error import refine_output_error_chunks
+    from hilbench.analysis.scoring import score_chunks
 
     check_axis(axis)
     if method not in ("lip", "oe"):
@@ -269,31 +255,13 @@ def identify_chunks(
     wall = time.perf_counter() - t0
     figures = {"wall_time_s": wall, "cutoff_hz": lip.cutoff, "decimation": lip.decimation, "n_eff": lip.n_eff,
                "condition_number": lip.condition_number, **extra}
-
-    def score(prefix: str, src, n: int, meas: np.ndarray, pred: np.ndarray) -> None:
-        if force_mode:
-            rel = 100.0 * float(np.linalg.norm(meas - pred) / np.linalg.norm(meas))
-            figures.update({f"{prefix}_force_nrmse": nrmse(meas, pred), f"{prefix}_force_rel_pct": rel,
-                            f"{prefix}_samples": n})
-            return
-        figures.update({
-            f"{prefix}_torque_nrmse": nrmse(meas, pred),
-            f"{prefix}_position_nrmse": simulation_error_chunks(model, src, fs, timing=s.timing),
-            f"{prefix}_position_nrmse_segmented": segmented_simulation_error_chunks(
-                model, src, fs, timing=s.timing, segment=segment),
-            f"{prefix}_samples": n,
-        })
-
-    if method == "lip":
-        score("train", source, sc.n, lip.measured, lip.predicted)
-    else:  # the refined model's equation error
-        meas, pred, _ = predict_chunks(model, source, fs, lip.cutoff, order=s.order, decimation=lip.decimation,
-                                       timing=s.timing)
-        score("train", source, sc.n, meas, pred)
+    scoring = _score_settings(lip, segment, force_mode)
+    params = model.plant_params()
+    train = score_chunks(params, source, fs, timing=s.timing, settings=scoring, n=sc.n)
+    figures.update(train.prefixed("train", _NOT_REPORTED))
     if validate is not None:
-        meas, pred, _ = predict_chunks(model, validate, fs, lip.cutoff, order=s.order, decimation=lip.decimation,
-                                       timing=s.timing)
-        score("validation", validate, scan(validate).n, meas, pred)
+        val = score_chunks(params, validate, fs, timing=s.timing, settings=scoring)
+        figures.update(val.prefixed("validation", _NOT_REPORTED))
     settings_dict = {"method": method, **s.to_dict(), "segment_s": float(segment), "record": record,
                      "candidate_deltas": lip.candidate_deltas.tolist()}
     return Identification(model, method, settings_dict, figures, wall, lip, {})

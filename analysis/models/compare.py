@@ -1,11 +1,12 @@
 """Every friction family fitted on one run and scored on another, side by side (``hilbench compare``).
 
-Figures on the validation run (docs/compare.md):
+Figures on the validation run (docs/compare.md), scored by the one scoring function (``analysis.scoring``), so a
+row reads as ``hilbench identify`` reads the same model on the same run:
 
 - ``torque_nrmse`` is the equation error: rms(L[tau] - L[tau_model])/std(L[tau]) on the filtered rows. The
-  model's friction is evaluated along the measured path.
-- ``position_nrmse_segmented`` is the simulation error, restarted every ``segment`` s from the measured state
-  (``families.segmented_position``).
+  model's friction is evaluated along the measured path from the run's first sample (a held-out tail: from the
+  state the run before it left).
+- ``position_nrmse_segmented`` is the simulation error, restarted every ``segment`` s from the measured state.
 - ``n_parameters`` is the parameter count. ``fit_time_s`` is the wall time of the identification on the
   training run (the Maxwell-slip NNLS fit that several families start from is timed once, in its own row).
 
@@ -25,14 +26,16 @@ from pathlib import Path
 import numpy as np
 
 from hilbench.analysis.errors import AnalysisError
+from hilbench.analysis.identification.maxwell_fit import LipSettings
 from hilbench.analysis.models.families import (
     FAMILIES,
     FamilyFit,
     RunData,
-    evaluate,
     fit_family,
     maxwell_slip_start,
+    predicted_torque,
 )
+from hilbench.analysis.scoring import ScoredRun, ScoreSettings, score_run
 from hilbench.firmware_sim.engine.plant import PlantParameterError, PlantParams
 
 SCHEMA = "hilbench.compare/1"
@@ -62,12 +65,16 @@ class Comparison:
 def compare(train: RunData, validation: RunData, *, timing: str, train_position: np.ndarray,
             train_torque: np.ndarray, families: tuple[str, ...] = FAMILIES, segment: float = 1.0,
             max_nfev: int = 40, published: dict[str, PlantParams] | None = None,
-            progress: Callable[[str], None] | None = None) -> Comparison:
+            progress: Callable[[str], None] | None = None, lip: LipSettings | None = None,
+            scored: tuple[ScoredRun, ScoredRun] | None = None) -> Comparison:
     """Fit every family in ``families`` on ``train``; score it (and each ``published`` model) on both runs;
-    ``progress(name)`` after each row."""
+    ``progress(name)`` after each row. ``lip``: the terms of the Maxwell-slip fit (identify's defaults: J, k_i,
+    Delta_i, b); ``scored``: the runs as the scorer reads them (a held-out tail with the run before it; default:
+    ``train`` and ``validation`` from their first samples)."""
     rows: list[Row] = []
     t0 = time.perf_counter()
-    ms = maxwell_slip_start(train, timing, train_position, train_torque)
+    runs = scored or (_scored(train), _scored(validation))
+    ms = maxwell_slip_start(train, timing, train_position, train_torque, lip)
     ms_time = time.perf_counter() - t0
     for family in families:
         t1 = time.perf_counter()
@@ -76,13 +83,13 @@ def compare(train: RunData, validation: RunData, *, timing: str, train_position:
                              segment=segment, max_nfev=max_nfev, ms_fit=ms)
             if family == "maxwell_slip":
                 fit.fit_time_s = ms_time
-            rows.append(_row(family, fit.n_parameters, fit.fit_time_s, fit.plant, train, validation, segment, fit))
+            rows.append(_row(family, fit.n_parameters, fit.fit_time_s, fit.plant, validation, runs, segment, fit))
         except (AnalysisError, PlantParameterError, FloatingPointError, np.linalg.LinAlgError) as exc:
             rows.append(failed_row(family, f"{type(exc).__name__}: {exc}", time.perf_counter() - t1))
         if progress is not None:
             progress(family)
     for name, plant in (published or {}).items():
-        rows.append(_row(name, 4, math.nan, plant, train, validation, segment, None))
+        rows.append(_row(name, 4, math.nan, plant, validation, runs, segment, None))
     return Comparison(train, validation, rows, segment)
 
 
@@ -92,15 +99,29 @@ def failed_row(name: str, reason: str, fit_time: float) -> Row:
     return Row(name, 0, fit_time, dict(blank), dict(blank), error=reason)
 
 
-def _row(name: str, n_par: int, fit_time: float, plant: PlantParams, train: RunData, validation: RunData,
-         segment: float, fit: FamilyFit | None) -> Row:
-    tr = evaluate(plant, train, segment)
-    va = evaluate(plant, validation, segment)
+def _scored(run: RunData) -> ScoredRun:
+    """A run of the families as the scorer reads it (the held torque with hold_next timing is the same torque)."""
+    return ScoredRun(run.x, run.u, run.fs, "hold_next")
+
+
+def _row(name: str, n_par: int, fit_time: float, plant: PlantParams, validation: RunData,
+         runs: tuple[ScoredRun, ScoredRun], segment: float, fit: FamilyFit | None) -> Row:
+    scoring = ScoreSettings(segment=segment)
     keys = ("torque_nrmse", "position_nrmse_segmented", "position_rms_segmented")
-    return Row(name, n_par, fit_time, {k: tr[k] for k in keys}, {k: va[k] for k in keys}, fit, plant,
-               curves={"torque_predicted": va["torque_predicted"], "position_simulated": va["position_simulated"],
-                       "friction_predicted": va["torque_predicted"] - plant.inertia * validation.data.acceleration
-                       + plant.torque_offset,
+    figures = []
+    sim = np.full_like(validation.x, np.nan)
+    for i, run in enumerate(runs):
+        try:
+            sc = score_run(plant, run, scoring, keep=i == 1)
+        except AnalysisError:  # a model that cannot be simulated keeps its torque figure
+            sc = score_run(plant, run, ScoreSettings(segment=segment, simulate=False))
+        figures.append({k: sc.figures.get(k, math.nan) for k in keys})
+        if i == 1 and sc.position_sim_segmented is not None:
+            sim = sc.position_sim_segmented
+    torque = predicted_torque(plant, validation)  # the plots' curves, at the validation run's own rows
+    friction = torque - plant.inertia * validation.data.acceleration + plant.torque_offset
+    return Row(name, n_par, fit_time, figures[0], figures[1], fit, plant,
+               curves={"torque_predicted": torque, "position_simulated": sim, "friction_predicted": friction,
                        "friction_measured": validation.data.torque - plant.inertia * validation.data.acceleration
                        + plant.torque_offset})
 
@@ -185,12 +206,14 @@ MIN_SPAN_S = 10.0
 @dataclass(frozen=True)
 class CompareSettings:
     """``families`` to fit; ``segment`` (s) between restarts of the segmented simulation; ``max_nfev`` output-error
-    evaluations per family; ``published`` models scored as extra rows (name -> plant)."""
+    evaluations per family; ``published`` models scored as extra rows (name -> plant); ``lip`` the terms of the
+    Maxwell-slip fit (``maxwell_slip`` row; identify's defaults when None: its row is identify's model)."""
 
     families: tuple[str, ...] = FAMILIES
     segment: float = 1.0
     max_nfev: int = 40
     published: dict[str, PlantParams] = field(default_factory=dict)
+    lip: LipSettings | None = None  # terms of the maxwell_slip row (None: identify's defaults, no offset)
 
 
 def cost(samples: int) -> int:
@@ -243,7 +266,9 @@ def analyse(record, validation, settings: CompareSettings | None = None, *,
     s = settings or CompareSettings()
     if validation.axis != record.axis:
         raise AnalysisError(f"validation run axis {validation.axis!r} differs from the training run's {record.axis!r}")
+    from hilbench.analysis.scoring import scored_run
+
     train, val = run_data(record), run_data(validation)
     return compare(train, val, timing=record.timing, train_position=train.x, train_torque=record.torque,
                    families=s.families, segment=s.segment, max_nfev=s.max_nfev, published=s.published,
-                   progress=progress)
+                   progress=progress, lip=s.lip, scored=(scored_run(record), scored_run(validation)))

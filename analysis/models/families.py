@@ -10,7 +10,7 @@ Every family is the same equation of motion with a different friction law F:
 | ``stribeck`` | (Fc + (Fs - Fc)*exp(-(v/vs)^2))*sgn(v) + b*v | J, Fc, Fs, vs, b, c0 |
 | ``dahl`` | sigma0*z, dz/dt = v - sigma0*abs(v)*z/Fc; + b*v | J, sigma0, Fc, b, c0 |
 | ``lugre`` | LuGre with a Stribeck curve (exponent 2), sigma2 = b | J, sigma0, sigma1, Fc, Fs, vs, b, c0 |
-| ``maxwell_slip`` | sum k_i*S_Delta_i[theta] + b*v (the NNLS fit of ``hilbench identify``) | J, k_i, Delta_i, b, c0 |
+| ``maxwell_slip`` | sum k_i*S_Delta_i[theta] + b*v (``hilbench identify``'s NNLS fit and terms) | J, k_i, Delta_i, b |
 | ``gms`` | generalized Maxwell-slip on the Maxwell-slip fit's k_i, alpha_i | J, kappa, Fc, Fs, vs, C, b, c0 |
 | ``continuous`` | virgin-curve hysteresis h, d (Masing, wiping-out) + b*v | J, h, d, b, c0 |
 
@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -48,7 +48,6 @@ from hilbench.analysis.identification.regressors import (
     zero_phase_lowpass,
 )
 from hilbench.analysis.models.friction_model import check_axis
-from hilbench.common.metrics import nrmse
 from hilbench.common.units import AXIS_UNITS as AXES
 from hilbench.firmware_sim.engine.plant import (
     GMS,
@@ -178,17 +177,23 @@ def segmented_position(params: PlantParams, run: RunData, segment: float = 1.0) 
 
 
 def evaluate(params: PlantParams, run: RunData, segment: float = 1.0) -> dict:
-    """Figures of a model on a run: torque (equation-error) NRMSE and segmented position NRMSE."""
-    torque = predicted_torque(params, run)
+    """Figures of a model on a run from its first sample, by the one scoring function (``analysis.scoring``):
+    torque (equation-error) NRMSE, segmented position NRMSE and rms error; with the curves of the plots (the
+    prediction at the run's regression rows, the segmented simulation)."""
+    from hilbench.analysis.scoring import ScoredRun, ScoreSettings, score_run
+
+    scored = ScoredRun(run.x, run.u, run.fs, "hold_next")  # the held torque is its own hold_next record
     try:
-        sim = segmented_position(params, run, segment)
-        pos = nrmse(run.x, sim)
-        rms = float(np.sqrt(np.mean((run.x - sim) ** 2)))
-    except (PlantParameterError, FloatingPointError, AnalysisError):
-        sim, pos, rms = np.full_like(run.x, np.nan), math.nan, math.nan
-    return {"torque_nrmse": nrmse(run.data.torque, torque), "position_nrmse_segmented": pos,
-            "position_rms_segmented": rms,
-            "torque_measured": run.data.torque, "torque_predicted": torque, "position_simulated": sim}
+        sc = score_run(params, scored, ScoreSettings(segment=segment), keep=True)
+        sim = sc.position_sim_segmented
+    except AnalysisError:  # a model the plant cannot simulate keeps its torque figure
+        sc = score_run(params, scored, ScoreSettings(segment=segment, simulate=False))
+        sim = np.full_like(run.x, np.nan)
+    f = sc.figures
+    return {"torque_nrmse": f["torque_nrmse"], "position_nrmse_segmented": f.get("position_nrmse_segmented", math.nan),
+            "position_rms_segmented": f.get("position_rms_segmented", math.nan),
+            "torque_measured": run.data.torque, "torque_predicted": predicted_torque(params, run),
+            "position_simulated": sim}
 
 
 # ---- linear-in-parameters starts ----
@@ -232,8 +237,11 @@ def stribeck_start(run: RunData, n_grid: int = 16, inertia: float | None = None)
             "offset": c[4]}
 
 
-def maxwell_slip_start(run: RunData, timing: str, position: np.ndarray, torque: np.ndarray):
-    return fit_lip(position, torque, run.fs, run.axis, LipSettings(offset=True, timing=timing))
+def maxwell_slip_start(run: RunData, timing: str, position: np.ndarray, torque: np.ndarray,
+                       settings: LipSettings | None = None):
+    """The NNLS fit of ``hilbench identify`` with its terms (``settings``, default identify's: J, k_i, Delta_i, b,
+    no offset), so the ``maxwell_slip`` row is identify's model (docs/compare.md)."""
+    return fit_lip(position, torque, run.fs, run.axis, replace(settings or LipSettings(), timing=timing))
 
 
 # ---- family definitions: parameter vector <-> plant ----
@@ -320,6 +328,7 @@ def _starts(run: RunData, ms) -> dict[str, dict[str, float]]:
     w_sum = float(np.sum(ms.ms_slip))
     sigma0 = k_sum if k_sum > 0 else fc / (1e-3 * float(np.ptp(run.x)))
     common = {"inertia": j, "offset": cv["offset"]}
+    ms_offset = float(ms.offset) if ms.offset != 0 else float(cv["offset"])  # a fit without the term: least squares
     stb = {"coulomb": fc_st, "static_excess": excess, "stribeck_velocity": v_s,
            "viscous": _pos(st["viscous"], 1e-9 * scale)}
     h = w_sum if w_sum > 0 else fc
@@ -330,10 +339,10 @@ def _starts(run: RunData, ms) -> dict[str, dict[str, float]]:
         "lugre": {**common, "sigma0": sigma0, "sigma1": math.sqrt(sigma0 * j), **stb},
         "gms": {**common, "inertia": _pos(ms.inertia, 1e-12), "stiffness_scale": 1.0, **stb,
                 "coulomb": _pos(w_sum, 1e-3 * scale), "attraction": 100.0 * _pos(w_sum, 1e-3 * scale),
-                "viscous": _pos(ms.viscous, 1e-9 * scale), "offset": ms.offset},
+                "viscous": _pos(ms.viscous, 1e-9 * scale), "offset": ms_offset},
         "continuous": {**common, "inertia": _pos(ms.inertia, 1e-12), "h": h,
                        "d": 2.0 * h / k_sum if k_sum > 0 else 1e-3 * float(np.ptp(run.x)),
-                       "viscous": _pos(ms.viscous, 1e-9 * scale), "offset": ms.offset},
+                       "viscous": _pos(ms.viscous, 1e-9 * scale), "offset": ms_offset},
     }
 
 
@@ -346,8 +355,10 @@ def _sliding_starts(run: RunData, ms, base: dict[str, dict[str, float]]) -> dict
     w_sum = float(np.sum(ms.ms_slip))
     if not (w_sum > 0 and ms.inertia > 0):
         return {}
-    sliding = {"inertia": float(ms.inertia), "offset": float(ms.offset), "coulomb": w_sum,
+    sliding = {"inertia": float(ms.inertia), "coulomb": w_sum,
                "viscous": _pos(ms.viscous, 1e-9 * (float(np.std(run.data.torque)) or 1.0))}
+    if ms.offset != 0:  # else each family keeps its least-squares offset
+        sliding["offset"] = float(ms.offset)
     return {name: {**base[name], **sliding} for name in ("coulomb_viscous", "stribeck", "dahl", "lugre")}
 
 
@@ -410,17 +421,24 @@ def fit_family(family: str, run: RunData, *, timing: str, position: np.ndarray, 
     if family not in FAMILIES:
         raise AnalysisError(f"family must be one of {', '.join(FAMILIES)}, got {family!r}")
     t0 = time.perf_counter()
-    ms = ms_fit.model if ms_fit is not None else maxwell_slip_start(run, timing, position, torque).model
+    ms_fit = ms_fit if ms_fit is not None else maxwell_slip_start(run, timing, position, torque)
+    ms = ms_fit.model
     if family == "maxwell_slip":
         u = AXES[run.axis]
+        lip = ms_fit.settings
         keep = (ms.ms_stiffness > 0) & (ms.ms_delta > 0)
         params = {"inertia": ms.inertia, "ms_stiffness": ms.ms_stiffness[keep].tolist(),
-                  "ms_delta": ms.ms_delta[keep].tolist(), "viscous": ms.viscous, "offset": ms.offset}
+                  "ms_delta": ms.ms_delta[keep].tolist()}
+        units = {"inertia": u["inertia"], "ms_stiffness": u["stiffness"], "ms_delta": u["position"]}
+        # identify's terms, no more (an offset only when the settings fit one: issue #37)
+        for term, on, unit in (("viscous", lip.viscous, "viscous"), ("coulomb", lip.coulomb, "torque"),
+                               ("spring", lip.spring, "stiffness"), ("offset", lip.offset, "torque")):
+            if on:
+                params[term], units[term] = float(getattr(ms, term)), u[unit]
         se = {key: (np.asarray(val)[keep].tolist() if np.ndim(val) else float(val))
               for key, val in ms.std_errors.items() if key in params}
-        units = {"inertia": u["inertia"], "ms_stiffness": u["stiffness"], "ms_delta": u["position"],
-                 "viscous": u["viscous"], "offset": u["torque"]}
-        return FamilyFit(family, run.axis, params, se, units, ms.plant_params(), 3 + 2 * int(keep.sum()),
+        n_par = 2 * int(keep.sum()) + len(params) - 2 - int(lip.fixed_inertia is not None)
+        return FamilyFit(family, run.axis, params, se, units, ms.plant_params(), n_par,
                          time.perf_counter() - t0, notes="NNLS (lip) fit of hilbench identify; not refined")
     fam = _build_families(ms)[family]
     starts = _starts(run, ms)

@@ -4,8 +4,8 @@ instead of refitting the start terms, so the start model the loop reports is the
 The model's friction (its Maxwell-slip elements, Coulomb term and spring, with their identified k_i, Delta_i) enters
 the loop as one fixed-shape column with a scale >= 0, as a start family does
 (:class:`hilbench.analysis.residual.family_start.FamilyFriction`); J and b stay the loop's own linear terms. The
-model's own figures, unrefitted, are scored by identify's definition (:func:`start_figures`): the torque NRMSE of
-``predict_filtered`` at identify's cutoff, order and row thinning, on the runs the loop reads.
+model's own figures, unrefitted, are scored as identify scores them (:func:`start_figures`, analysis.scoring) at
+identify's cutoff, order and row thinning, on the runs the loop reads.
 """
 
 from __future__ import annotations
@@ -57,17 +57,14 @@ def model_start(model: FrictionModel) -> list:
 
 def start_figures(model: FrictionModel, records: dict[str, Record], cutoff: float, order: int,
                   decimation: int) -> dict:
-    """The model's torque NRMSE on each record (name -> record), unrefitted, by identify's definition
-    (``{name}_torque_nrmse``, a fraction): rms(L[tau] - L[tau_model]) / std(L[tau]) at identify's rows."""
-    from hilbench.analysis.identification.maxwell_fit import predict_filtered
-    from hilbench.common.metrics import nrmse
+    """The model's torque NRMSE on each record (name -> record), unrefitted, scored by the one scoring function
+    (:mod:`hilbench.analysis.scoring`) at identify's cutoff, order and row thinning (``{name}_torque_nrmse``, a
+    fraction): rms(L[tau] - L[tau_model]) / std(L[tau]), a held-out tail from the state the run before it left."""
+    from hilbench.analysis.scoring import ScoreSettings, score_run, scored_run
 
-    out = {}
-    for name, rec in records.items():
-        meas, pred, _ = predict_filtered(model, rec.position, rec.torque, rec.sample_rate, cutoff, order=order,
-                                         decimation=decimation, timing=rec.timing)
-        out[f"{name}_torque_nrmse"] = float(nrmse(meas, pred))
-    return out
+    settings = ScoreSettings(cutoff=cutoff, order=order, decimation=decimation, simulate=False)
+    return {f"{name}_torque_nrmse": score_run(model.plant_params(), scored_run(rec), settings).figures["torque_nrmse"]
+            for name, rec in records.items()}
 
 
 def document_settings(doc: dict, fs: float) -> tuple[float, int, int]:

@@ -172,7 +172,60 @@ def analyse(record: Record, settings: ResidualSettings | None = None, *,
     loop = residual_loop(train, val or None, start=start, options=opts)
     loop.published_metric = published_metric(record.source, loop.fit_before, loop.fit_after, [train], val)
     fixed = 0.0 if record.kind == "displacement-driven" and s.fixed_inertia is None else s.fixed_inertia
+    rescore(loop, record, list(validation), fixed)
     return ResidualAnalysis(loop, train, val, record, list(validation), fixed, start_model)
+
+
+#: the figures of the start and the final model that the one scoring function gives (analysis.scoring)
+SCORED = ("torque_nrmse", "torque_rel_pct", "position_nrmse", "position_nrmse_segmented", "force_nrmse",
+          "force_rel_pct")
+
+
+def rescore(loop: LoopResult, record: Record, validation: list[Record], fixed_inertia: float | None) -> None:
+    """The start and the final model's figures (``loop.error_before`` / ``error_after``) scored by the one scoring
+    function on the records as given (their own rate; a held-out tail from the state the run before it left), as
+    identify and compare score theirs: the same model on the same data reads the same figure through every door.
+    The loop's own held-out figures, on its design rows at its rate, which chose the terms, stay under ``loop``.
+    With several validation runs a figure is the rms over the runs (as the loop's simulation figures)."""
+    import copy
+    import math
+
+    from hilbench.analysis.residual.simulation_error import plant_params
+    from hilbench.analysis.scoring import ScoreSettings, score_run, scored_run
+    from hilbench.firmware_sim.engine.plant import PlantParameterError
+
+    force = loop.record == "displacement-driven"
+    settings = ScoreSettings(force=force)
+    # the loop may hand back one dict for both (nothing added); the rounds' own figures stay the loop's
+    loop.error_before, loop.error_after = copy.deepcopy(loop.error_before), copy.deepcopy(loop.error_after)
+    for errors, fit in ((loop.error_before, loop.fit_before), (loop.error_after, loop.fit_after)):
+        try:
+            params = plant_params(fit, fixed_inertia or 0.0)
+        except (AnalysisError, PlantParameterError) as exc:  # a term the plant lacks: the loop's figures, said so
+            for part in ("train", "validation"):
+                errors[part]["scoring_note"] = f"not scored by analysis.scoring ({exc}); the loop's own figures"
+            continue
+        for part, runs in (("train", [record]), ("validation", validation)):
+            if not runs:
+                continue
+            own = {k: errors[part].pop(k) for k in list(errors[part]) if k in SCORED}
+            figures = []
+            for run in runs:
+                try:
+                    figures.append(score_run(params, scored_run(run), settings).figures)
+                except AnalysisError as exc:  # a model the plant refuses keeps its torque figure, says why
+                    figures.append(score_run(params, scored_run(run), ScoreSettings(force=force,
+                                                                                    simulate=False)).figures)
+                    errors[part]["simulation_note"] = str(exc)
+            for key in SCORED:
+                values = [f[key] for f in figures if key in f]
+                if len(values) == len(figures):
+                    errors[part][key] = float(math.sqrt(sum(v * v for v in values) / len(values)))
+            if force:  # the force figures are the torque figures of a displacement-driven record (as the loop's)
+                errors[part]["torque_nrmse"] = errors[part]["force_nrmse"]
+                errors[part]["torque_rel_pct"] = errors[part]["force_rel_pct"]
+                errors[part].update(position_nrmse=None, position_nrmse_segmented=None)
+            errors[part]["loop"] = own
 
 
 def _identified_start(record: Record, validation: list[Record], s: ResidualSettings) -> tuple[list, dict]:

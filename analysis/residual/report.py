@@ -179,7 +179,7 @@ def markdown_summary(result: LoopResult, title: str = "Residual loop", notes: li
     lines += ["## Error before and after", "", "| set | metric | before | after |", "|---|---|---|---|"]
     for part in ("train", "validation"):
         keys = (("force_rel_pct", "force_nrmse") if d.get("record") == "displacement-driven" else
-                ("torque_rel_pct", "torque_nrmse", "position_nrmse", "velocity_nrmse"))
+                ("torque_rel_pct", "torque_nrmse", "position_nrmse", "position_nrmse_segmented", "velocity_nrmse"))
         for key in keys:
             lines.append(f"| {part} | {_metric_name(key)} ({UNIT}) | {_pct(key, d['error_before'][part].get(key))} | "
                          f"{_pct(key, d['error_after'][part].get(key))} |")

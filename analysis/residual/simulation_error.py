@@ -25,8 +25,9 @@ from hilbench.analysis.residual.rundata import RunData
 MAX_SUBSTEPS = 64
 
 
-def plant_params(fit: Fit):
-    """:class:`firmware_sim.engine.plant.PlantParams` of a fitted model (torque_constant 1)."""
+def plant_params(fit: Fit, inertia: float = 0.0):
+    """:class:`firmware_sim.engine.plant.PlantParams` of a fitted model (torque_constant 1); ``inertia`` is J when
+    the model has no inertia term (a known J, 0 for a displacement-driven record)."""
     from hilbench.firmware_sim.engine.plant import PlantParams
 
     fields: dict = {}
@@ -53,6 +54,7 @@ def plant_params(fit: Fit):
         fields.pop("stribeck_velocity", None)
     if "coulomb_neg" in fields and fields.get("static") is not None:
         fields["static"] = max(fields["static"], fields["coulomb_neg"])
+    fields.setdefault("inertia", float(inertia))
     return PlantParams(torque_constant=1.0, **fields)
 
 

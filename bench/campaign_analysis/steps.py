@@ -97,9 +97,12 @@ def step_settings(name: str, s: StepSettings) -> Any:
         return IdentifySettings(LipSettings(n_thresholds=s.thresholds, coulomb=s.coulomb, offset=s.offset),
                                 method=s.method)
     if name == "compare":
+        from hilbench.analysis.identification.maxwell_fit import LipSettings
         from hilbench.analysis.models.compare import CompareSettings
 
-        return CompareSettings(families=s.compare_families)
+        # the maxwell_slip row fits the identify step's terms, so the two rows of one model read one figure
+        lip = LipSettings(n_thresholds=s.thresholds, coulomb=s.coulomb, offset=s.offset)
+        return CompareSettings(families=s.compare_families, lip=lip)
     if name == "residual":
         from hilbench.analysis.residual import ResidualSettings
 

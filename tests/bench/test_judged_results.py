@@ -55,9 +55,9 @@ def test_identify_and_residual_read_the_same_channel_and_report_the_same_metric(
     # the same metric, by name and definition: rms(error)/std(measured) in %
     assert "validation torque NRMSE" in ident and "validation torque NRMSE" in resid
     i_pct = float(re.search(r"validation torque NRMSE ([\d.]+) %", ident).group(1))
-    assert i_pct == pytest.approx(100 * model["figures"]["validation_torque_nrmse"], rel=2e-3)
+    assert i_pct == pytest.approx(100 * model["figures"]["validation_torque_nrmse"], rel=5e-3)  # printed to 3 digits
     r_pct = float(re.search(r"validation torque NRMSE ([\d.]+) %", resid).group(1))
-    assert r_pct == pytest.approx(100 * report["error_before"]["validation"]["torque_nrmse"], rel=2e-3)
+    assert r_pct == pytest.approx(100 * report["error_before"]["validation"]["torque_nrmse"], rel=5e-3)
 
 
 def test_every_summary_number_has_a_unit(runs, capsys):

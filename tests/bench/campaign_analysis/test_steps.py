@@ -1,7 +1,9 @@
 """The steps of ``hilbench analyse``: identify, compare and residual are each checked against their own command
-(``hilbench identify``, ``compare``, ``residual``) run on the same run cut into the head it fits and the tail it
-is validated on, written as two run files; and against the plant: the C plant's friction is a
-Maxwell-slip model, so that family must score best and the residual loop must find nothing missing."""
+(``hilbench identify``, ``compare``, ``residual``) run on the head the step fits, written as a run file, and against
+the front door the command calls on the head and the held-out tail cut as the step cuts them (the tail is scored
+from the friction state the head left, analysis.scoring: a tail written as a run file of its own starts relaxed
+and reads another figure); and against the plant: the C plant's friction is a Maxwell-slip model, so that family
+must score best and the residual loop must find nothing missing."""
 
 import json
 from dataclasses import replace
@@ -41,6 +43,19 @@ def _head_and_tail(spec: SyntheticCampaign, folder: Path, fraction: float) -> tu
     return paths[0], paths[1]
 
 
+def _split(spec: SyntheticCampaign, folder: Path, fraction: float):
+    """The first run of ``spec`` as one run file, loaded and cut as the steps cut it (analysis.record_split)."""
+    from hilbench.analysis.record import load_record
+    from hilbench.analysis.record_split import split
+
+    run = next(iter(simulate_runs(spec)))
+    path = folder / "whole.h5"
+    with RunWriter(path, sample_rate=spec.sample_rate, channels=list(run.channels), protocol_name="identification",
+                   protocol_params=run.params, device={"model": "synthetic", "serial": "C-plant"}) as w:
+        w.append(dict(run.channels))
+    return split(load_record(path), fraction)
+
+
 def _one_row(spec: SyntheticCampaign, tmp_path: Path, step: str) -> dict:
     folder = tmp_path / "c"
     write_campaign(folder, spec)
@@ -67,8 +82,14 @@ def test_identify_step_is_hilbench_identify_on_the_head_and_tail(tmp_path):
     doc = json.loads((tmp_path / "m.json").read_text())
     for name in ("inertia", "viscous"):
         assert row[name] == pytest.approx(doc["parameters"][name], rel=1e-9), name
+    assert row["train_torque_nrmse"] == pytest.approx(doc["figures"]["train_torque_nrmse"], rel=1e-9)
+    from hilbench.analysis.identification import analyse as identify
+    from hilbench.analysis.identification.maxwell_fit import LipSettings
+
+    h, t = _split(spec, tmp_path, SETTINGS.validation_fraction)
+    api = identify(h, LipSettings(n_thresholds=SETTINGS.thresholds), validation=t).figures
     for name in ("train_torque_nrmse", "validation_torque_nrmse", "validation_position_nrmse_segmented"):
-        assert row[name] == pytest.approx(doc["figures"][name], rel=1e-9), name
+        assert row[name] == pytest.approx(api[name], rel=1e-9), name
     # the plant's friction is Maxwell-slip and the model is fitted on 70 % of the run: the tail reads a few %
     assert row["validation_torque_nrmse"] < 0.1
 
@@ -83,13 +104,21 @@ def test_compare_step_is_hilbench_compare_on_the_head_and_tail(tmp_path):
     doc = {r["model"]: r for r in json.loads((tmp_path / "cmp" / "compare.json").read_text())["rows"]}
     # the plant's friction is Maxwell-slip: that family wins, by far, over Coulomb + viscous
     assert row["model"] == "maxwell_slip"
-    best = doc["maxwell_slip"]
-    assert best["validation"]["torque_nrmse"] < 0.5 * doc["coulomb_viscous"]["validation"]["torque_nrmse"]
-    # same data, same fit: the figures agree to rounding
-    assert row["validation_torque_nrmse"] == pytest.approx(best["validation"]["torque_nrmse"], rel=1e-9)
-    assert row["train_torque_nrmse"] == pytest.approx(best["train"]["torque_nrmse"], rel=1e-9)
+    assert doc["maxwell_slip"]["validation"]["torque_nrmse"] < 0.5 * doc["coulomb_viscous"]["validation"][
+        "torque_nrmse"]
+    # the step's row is compare's front door on the head and the tail, its maxwell_slip row fitting the identify
+    # step's terms (32 thresholds): the figures agree to rounding
+    from hilbench.analysis.identification.maxwell_fit import LipSettings
+    from hilbench.analysis.models.compare import CompareSettings
+    from hilbench.analysis.models.compare import analyse as compare
+
+    h, t = _split(spec, tmp_path, SETTINGS.validation_fraction)
+    best = {r.name: r for r in compare(h, t, CompareSettings(families=SETTINGS.compare_families, lip=LipSettings(
+        n_thresholds=SETTINGS.thresholds))).rows}["maxwell_slip"]
+    assert row["validation_torque_nrmse"] == pytest.approx(best.validation["torque_nrmse"], rel=1e-9)
+    assert row["train_torque_nrmse"] == pytest.approx(best.train["torque_nrmse"], rel=1e-9)
     assert row["validation_position_nrmse_segmented"] == pytest.approx(
-        best["validation"]["position_nrmse_segmented"], rel=1e-9)
+        best.validation["position_nrmse_segmented"], rel=1e-9)
 
 
 def test_residual_step_is_hilbench_residual_on_the_head_and_tail(tmp_path):
@@ -100,11 +129,15 @@ def test_residual_step_is_hilbench_residual_on_the_head_and_tail(tmp_path):
     out = tmp_path / "residual.json"
     assert main(["-q", "residual", str(head), "--validate", str(tail), "--json", str(out)]) == 0
     doc = json.loads(out.read_text())
-    after = doc["error_after"]["validation"]
-    assert row["validation_torque_nrmse"] == pytest.approx(after["torque_nrmse"], rel=1e-9)
-    assert row["validation_torque_nrmse_start"] == pytest.approx(doc["error_before"]["validation"]["torque_nrmse"],
-                                                                 rel=1e-9)
     assert row["verdict"] == doc["verdict"]
+    from hilbench.analysis.residual import ResidualSettings
+    from hilbench.analysis.residual import analyse as residual
+
+    h, t = _split(spec, tmp_path, SETTINGS.validation_fraction)
+    loop = residual(h, ResidualSettings(start=SETTINGS.residual_start), validation=[t]).loop
+    assert row["validation_torque_nrmse"] == pytest.approx(loop.error_after["validation"]["torque_nrmse"], rel=1e-9)
+    assert row["validation_torque_nrmse_start"] == pytest.approx(loop.error_before["validation"]["torque_nrmse"],
+                                                                 rel=1e-9)
     # the plant is the dc_motor preset (inertia, 16 Maxwell-slip elements, viscous 0.004 N*m*s/rad, current
     # noise): the loop adds the viscous term the start lacks, and nothing else; the model fits to a few %
     assert row["model"] == "inertia,maxwell_slip,viscous" and row["validation_torque_nrmse"] < 0.05
