@@ -50,6 +50,13 @@ def read_options(args: argparse.Namespace, budget: int | None, progress=None):
                        allow_incomplete=bool(getattr(args, "allow_incomplete", False)), progress=progress)
 
 
+def add_hold_out_option(parser: argparse.ArgumentParser) -> None:
+    """``--hold-out FRACTION``: fit the run's head and score its last FRACTION, as a campaign step does."""
+    parser.add_argument("--hold-out", type=float, default=None, metavar="FRACTION",
+                        help="fit the first 1 - FRACTION of the run and score the model on its last FRACTION (e.g. "
+                        "0.3), from the state the head left, as hilbench analyse's steps do; instead of --validate")
+
+
 def read_runs(name: str, args: argparse.Namespace, paths: list, validation: list, budget: int | None,
               progress=None, warn: bool = True):
     """(entry, training inputs, validation inputs or None) of registry analysis ``name``
@@ -59,7 +66,18 @@ def read_runs(name: str, args: argparse.Namespace, paths: list, validation: list
     from hilbench.analysis.protocol import read_runs as read_both
 
     analysis = entry(name)
+    hold_out = getattr(args, "hold_out", None)
+    validation = [v for v in validation if v]
+    if hold_out is not None:
+        if validation:
+            raise BenchError("--hold-out scores the run's own tail; it does not go with --validate")
+        if not (math.isfinite(hold_out) and 0 < hold_out < 1):
+            raise BenchError(f"--hold-out {hold_out:g}: the fraction of the run held out must lie in (0, 1)")
     inputs, val = read_both(analysis, paths, validation, read_options(args, budget, progress))
+    if hold_out is not None:
+        from hilbench.analysis.protocol import held_out
+
+        inputs, val = held_out(inputs, hold_out)
     for rec in inputs.records + (val.records if val is not None else []):
         line = rec.incomplete_line()
         if line and warn:

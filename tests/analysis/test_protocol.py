@@ -103,8 +103,8 @@ def _host_clocked(folder: Path) -> Path:
     n, fs = src.n_samples, src.sample_rate
     jitter = np.random.default_rng(7).uniform(-0.2, 0.2, n) / fs
     path = folder / "drive.h5"
-    with RunWriter(path, sample_rate=fs, channels=("t", "sample_index", "position", "torque"),
-                   custom_channels={"host_time": "s"}, protocol_name="identification",
+    with RunWriter(path, sample_rate=fs, channels=("t", "sample_index", "position", "torque", "host_time"),
+                   protocol_name="identification",
                    device={"protocol": "CiA 402 over CANopen", "sample_times": "host_time"}) as w:
         w.append({"t": src.t, "sample_index": np.arange(n), "position": src.position, "torque": src.torque,
                   "host_time": 50.0 + src.t + jitter})
@@ -154,18 +154,26 @@ def test_every_consumer_reports_the_same_figure(rate, host_clocked, tmp_path, ca
     shown = {q: v for q, v, _u in gui.numbers}
     assert float(shown["train torque NRMSE"]) == pytest.approx(100 * gui.summary["train_torque_nrmse"], rel=5e-3)
 
-    # 70/30: the head fitted, the tail held out; the CLI reads the two parts written as run files
+    # 70/30: the head fitted, the tail held out from the state the head left (analysis.scoring): the API, the
+    # CLI's --hold-out and the campaign row; the head and tail written as run files of their own are two other
+    # runs (the tail's file starts relaxed), read alike by the CLI and the API
     head, tail = protocol.held_out(ident.read([run], protocol.ReadOptions()), FRACTION)
     cut = head.record.n_samples
     parts = [_write_part(rec, slice(0, cut), tmp_path / "head.h5"), _write_part(rec, slice(cut, None),
                                                                                 tmp_path / "tail.h5")]
     split = ident.analyse(head, settings, tail).value.figures["validation_torque_nrmse"]
-    assert main(["-q", "identify", str(parts[0]), "--validate", str(parts[1]), "--thresholds", str(THRESHOLDS),
-                 "--json", str(tmp_path / "s.json")]) == 0
-    assert json.loads((tmp_path / "s.json").read_text())["figures"]["validation_torque_nrmse"] == pytest.approx(
+    assert main(["-q", "identify", str(run), "--hold-out", str(FRACTION), "--thresholds", str(THRESHOLDS),
+                 "--json", str(tmp_path / "h.json")]) == 0
+    assert json.loads((tmp_path / "h.json").read_text())["figures"]["validation_torque_nrmse"] == pytest.approx(
         split, rel=RTOL)
     assert _campaign_row(folder, tmp_path / "split", "identify", FRACTION)["validation_torque_nrmse"] == \
         pytest.approx(split, rel=RTOL)
+    files = ident.analyse(ident.read([parts[0]], protocol.ReadOptions()), settings,
+                          ident.read([parts[1]], protocol.ReadOptions())).value.figures["validation_torque_nrmse"]
+    assert main(["-q", "identify", str(parts[0]), "--validate", str(parts[1]), "--thresholds", str(THRESHOLDS),
+                 "--json", str(tmp_path / "s.json")]) == 0
+    assert json.loads((tmp_path / "s.json").read_text())["figures"]["validation_torque_nrmse"] == pytest.approx(
+        files, rel=RTOL)
 
     # compare: validation only, so the 70/30 split; the row is the family with the lowest validation NRMSE
     cmp = protocol.entry("compare")
@@ -173,20 +181,27 @@ def test_every_consumer_reports_the_same_figure(rate, host_clocked, tmp_path, ca
 
     families = ("coulomb_viscous", "maxwell_slip")
     summary = cmp.report(cmp.analyse(head, CompareSettings(families=families), tail))[1]
-    assert main(["-q", "compare", str(parts[0]), "--validate", str(parts[1]), "--families", ",".join(families),
+    assert main(["-q", "compare", str(run), "--hold-out", str(FRACTION), "--families", ",".join(families),
                  "-o", str(tmp_path / "cmp")]) == 0
     doc = {r["model"]: r for r in json.loads((tmp_path / "cmp" / "compare.json").read_text())["rows"]}
     for family in families:
         assert doc[family]["validation"]["torque_nrmse"] == pytest.approx(
             summary[f"{family}.validation_torque_nrmse"], rel=RTOL), family
+    # the campaign's compare step fits its maxwell_slip row with the identify step's terms (32 thresholds here),
+    # so that row reads the identify row's figure: the API with the step's settings gives the row
+    from hilbench.bench.campaign_analysis.steps import step_settings
+
+    stepped = cmp.report(cmp.analyse(head, step_settings("compare", StepSettings(
+        thresholds=THRESHOLDS, compare_families=families)), tail))[1]
     row = _campaign_row(folder, tmp_path / "cmp-row", "compare", FRACTION)
-    assert row["model"] == summary["model"]
-    assert row["validation_torque_nrmse"] == pytest.approx(summary["validation_torque_nrmse"], rel=RTOL)
+    assert row["model"] == stepped["model"]
+    assert row["validation_torque_nrmse"] == pytest.approx(stepped["validation_torque_nrmse"], rel=RTOL)
+    assert stepped["maxwell_slip.validation_torque_nrmse"] == pytest.approx(split, rel=RTOL)  # identify's figure
     capsys.readouterr()
 
 
 def test_the_residual_loop_reports_one_figure_everywhere(tmp_path, capsys):
-    """The residual loop (2 kHz, 70/30): the Python API, the CLI on the head and tail as files, the campaign row;
+    """The residual loop (2 kHz, 70/30): the Python API, the CLI's --hold-out, the campaign row;
     and on the whole run (blocked cross-validation) the API, the CLI's JSON and the GUI's result."""
     folder = tmp_path / "c"
     write_campaign(folder, SyntheticCampaign(runs=1, duration=1.5, sample_rate=2000.0, seed=12))
@@ -202,11 +217,7 @@ def test_the_residual_loop_reports_one_figure_everywhere(tmp_path, capsys):
         whole["validation_torque_nrmse"], rel=RTOL)
     head, tail = protocol.held_out(inputs, FRACTION)
     split = res.report(res.analyse(head, None, tail))[1]
-    rec, cut = load_record(run), head.record.n_samples
-    parts = [_write_part(rec, slice(0, cut), tmp_path / "head.h5"), _write_part(rec, slice(cut, None),
-                                                                                tmp_path / "tail.h5")]
-    assert main(["-q", "residual", str(parts[0]), "--validate", str(parts[1]), "--json",
-                 str(tmp_path / "s.json")]) == 0
+    assert main(["-q", "residual", str(run), "--hold-out", str(FRACTION), "--json", str(tmp_path / "s.json")]) == 0
     cli = json.loads((tmp_path / "s.json").read_text())
     for key, value in (("validation_torque_nrmse_start", cli["error_before"]["validation"]["torque_nrmse"]),
                        ("validation_torque_nrmse", cli["error_after"]["validation"]["torque_nrmse"])):

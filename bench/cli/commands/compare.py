@@ -12,7 +12,7 @@ PUBLISHED = {"emps": ("EMPS published (IDIM-LS)", 95.1089, 203.5034, 20.3935, -3
 
 def register(subparsers) -> None:
     from hilbench.analysis.models.families import FAMILIES
-    from hilbench.bench.analysis_input import add_memory_option, add_record_options
+    from hilbench.bench.analysis_input import add_hold_out_option, add_memory_option, add_record_options
 
     parser = subparsers.add_parser(
         "compare",
@@ -22,7 +22,7 @@ def register(subparsers) -> None:
         "and the fit time, as a Markdown table, JSON and plots (docs/compare.md).",
     )
     parser.add_argument("run", help="training run file (.h5) with 't', 'position' and 'torque' channels")
-    parser.add_argument("--validate", required=True, metavar="RUN2.h5", help="validation run (same axis)")
+    parser.add_argument("--validate", metavar="RUN2.h5", help="validation run (same axis); or --hold-out")
     parser.add_argument("-o", "--output", dest="out", required=True, metavar="DIR",
                         help="output folder: compare.md, compare.json, compare_*.png, models/FAMILY.json")
     parser.add_argument("--overwrite", action="store_true", help="replace an earlier comparison in the output folder")
@@ -41,6 +41,7 @@ def register(subparsers) -> None:
                         default="auto", help="what torque sample k means (as in hilbench identify)")
     add_record_options(parser)
     add_memory_option(parser)
+    add_hold_out_option(parser)
     parser.set_defaults(func=run)
 
 
@@ -63,6 +64,8 @@ def run(args) -> int:
         raise BenchError(f"--segment must be > 0 s, got {args.segment}")
     if args.max_evaluations < 1:
         raise BenchError(f"--max-evaluations must be >= 1, got {args.max_evaluations}")
+    if not args.validate and args.hold_out is None:
+        raise BenchError("compare scores every family on held-out data: give --validate RUN2.h5 or --hold-out 0.3")
     out = Path(args.out)
     outputs.refuse_inputs({"--output": out, **{f"--output {out / name}": out / name for name in OUTPUTS}},
                           [args.run, args.validate])
@@ -76,7 +79,7 @@ def run(args) -> int:
         samples = train_rec.n_samples + val_inputs.record.n_samples
         outputs.say(f"over --memory {mib(budget)} read whole ({mib(cost(samples))} or more): compared at "
                     f"{train_rec.sample_rate:g} Hz, read chunk by chunk ({inputs.reads[0]})")
-    for p, rec in ((args.run, train_rec), (args.validate, val_inputs.record)):
+    for p, rec in ((args.run, train_rec), (args.validate or f"{args.run} (held-out tail)", val_inputs.record)):
         outputs.say(f"{p}: torque timing of {rec.torque_channel}: {rec.timing} ({rec.timing_origin})", level=2)
     published = {}
     for key in args.published:

@@ -11,7 +11,13 @@ METHOD_NAMES = {"lip": "Maxwell-slip (NNLS)", "oe": "Maxwell-slip (NNLS + output
 
 
 def register(subparsers) -> None:
-    from hilbench.bench.analysis_input import MAX_THRESHOLDS, add_memory_option, add_record_options, whole_number
+    from hilbench.bench.analysis_input import (
+        MAX_THRESHOLDS,
+        add_hold_out_option,
+        add_memory_option,
+        add_record_options,
+        whole_number,
+    )
 
     parser = subparsers.add_parser(
         "identify",
@@ -58,6 +64,7 @@ def register(subparsers) -> None:
     )
     add_record_options(parser)
     add_memory_option(parser)
+    add_hold_out_option(parser)
     parser.set_defaults(func=run)
 
 
@@ -73,7 +80,8 @@ def run(args) -> int:
     from hilbench.common.units import AXIS_UNITS as AXES
     from hilbench.common.units import EFFORT, mib
 
-    plots = plot_files(args.plots, ["train", "validation"] if args.validate else ["train"]) if args.plots else []
+    validated = bool(args.validate) or args.hold_out is not None
+    plots = plot_files(args.plots, ["train", "validation"] if validated else ["train"]) if args.plots else []
     outputs.refuse_inputs({"--json": args.json, "--plots": args.plots, **{f"--plots {p}": p for p in plots}},
                           [args.run, args.validate])
     for option, path in (("--json", args.json), *(("--plots", p) for p in plots)):
@@ -130,7 +138,8 @@ def run(args) -> int:
     say(judge(100 * f[f"{where}_torque_nrmse"], 100 * f[f"{where}_position_nrmse"],
               100 * f[f"{where}_position_nrmse_segmented"], where))
     if args.plots:
-        for p in report(res, args.plots, runs={"train": args.run, "validation": args.validate}):
+        names = {"train": args.run, "validation": args.validate or f"{args.run} (held-out tail)"}
+        for p in report(res, args.plots, runs=names):
             say(f"plot: {p}")
     return 0
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from hilbench.bench.analysis_input import add_memory_option, add_record_options
+    from hilbench.bench.analysis_input import add_hold_out_option, add_memory_option, add_record_options
 
     parser = subparsers.add_parser(
         "residual",
@@ -53,6 +53,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="comma-separated candidate terms to try (default: all registered)")
     add_record_options(parser)
     add_memory_option(parser)
+    add_hold_out_option(parser)
     parser.set_defaults(func=run)
 
 
@@ -83,12 +84,13 @@ def run(args: argparse.Namespace) -> int:
     with progress_bar("read") as progress:
         entry, inputs, val_inputs = read_runs("residual", args, [args.run], args.validate, budget, progress)
     recs = inputs.records + (val_inputs.records if val_inputs is not None else [])
+    names = [args.run, *args.validate] if args.hold_out is None else [args.run, f"{args.run} (held-out tail)"]
     if any(span_note(r) for r in recs):
         outputs.say(f"over --memory {mib(budget)}: the loop analyses the first {recs[0].n_samples} samples of each "
                     "run at its rate (a bounded span, docs/long-runs.md)", args.json)
     for h in recs:  # the loop's cutoff applies at the rate it analyses (at most 2 kHz)
         check_cutoff(args.cutoff, h.sample_rate)
-    for p, rec in zip([args.run, *args.validate], recs, strict=True):
+    for p, rec in zip(names, recs, strict=True):
         outputs.say(f"{p}: torque timing of {rec.torque_channel}: {rec.timing} ({rec.timing_origin})", args.json,
                     level=2)
     if len(start) == 1 and start[0] in FAMILIES:
@@ -99,14 +101,14 @@ def run(args: argparse.Namespace) -> int:
     res = entry.analyse(inputs, settings, val_inputs).value
     result, train, rec = res.loop, res.train, recs[0]
     record = rec.kind
-    inputs = {"run": args.run, "validate": list(args.validate), "start": list(result.start),
+    inputs = {"run": args.run, "validate": list(args.validate), "hold_out": args.hold_out, "start": list(result.start),
               "start_option": args.start, "torque_channel": rec.torque_channel,
               "timing": rec.timing, "cutoff_hz": train.data.cutoff, "decimation": train.data.decimation,
               "sample_rate_hz": rec.sample_rate,
               "fixed_inertia": args.inertia if record == "torque-driven" or args.inertia is not None else 0.0,
               "record": record, "start_model": res.start_model,
-              "span": {p: span_note(r) for p, r in zip([args.run, *args.validate], recs, strict=True) if span_note(r)},
-              "incomplete": {p: r.incomplete for p, r in zip([args.run, *args.validate], recs, strict=True)
+              "span": {p: span_note(r) for p, r in zip(names, recs, strict=True) if span_note(r)},
+              "incomplete": {p: r.incomplete for p, r in zip(names, recs, strict=True)
                              if r.incomplete is not None}}
     outputs.write_json(args.json, report_dict(result, inputs), indent=2, allow_nan=False)
     say = lambda text: outputs.say(text, args.json)  # noqa: E731
@@ -138,6 +140,6 @@ def run(args: argparse.Namespace) -> int:
         say(line)
     for u in result.unexplained:
         say(f"  unexplained: {u['description']}")
-    where = "validation" if args.validate else "cross-validation"
+    where = "validation" if args.validate or args.hold_out is not None else "cross-validation"
     say(judge(pct(after["torque_nrmse"]), pct(after.get("position_nrmse")), None, where, residual_hint=False))
     return 0
