@@ -152,6 +152,7 @@ def analyse_probe(path: str, window: float = 0.01, velocity_threshold: float | N
         position = np.asarray(run.channel("position"), dtype=float)
         ramps = run.protocol_array("ramps")
         peak = float(run.protocol_params["peak"])
+        hold = float(run.protocol_params.get("hold", BreakawayProbe.hold))
         counts = float(run.calibration.get("counts_per_rev", 1 << 20))
         ratio = float(run.calibration.get("ratio", 1.0))
     count = 2 * math.pi / (counts * ratio)  # rad at the load per encoder count
@@ -163,7 +164,7 @@ def analyse_probe(path: str, window: float = 0.01, velocity_threshold: float | N
         start, stop = int(start), min(int(stop), position.size)
         if abs(velocity[start]) > threshold:
             raise ProbeError(f"{path}: the motor still moves at {velocity[start]:.3g} rad/s when ramp {j + 1} "
-                             f"starts: the slide before did not stop in the hold; give a lower peak current")
+                             f"starts: the slide before did not stop in the {hold:g} s hold at 0 A")
         moving = np.flatnonzero(sign * velocity[start:stop] > threshold)
         breakaway.append(start + int(moving[0]) if moving.size else None)
     sliding = _sliding_fit(ramps, breakaway, current, velocity, acceleration, threshold)

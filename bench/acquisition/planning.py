@@ -168,7 +168,14 @@ def probe_breakaway(bench: Bench, probe_dir: str | Path, *, sample_rate: int = 1
         played.append(str(result.path))
         if result.status != "completed":
             raise PlanError(f"the probe {result.path} ended {result.status}: {result.message}")
-        found = analyse_probe(str(result.path))
+        try:
+            found = analyse_probe(str(result.path))
+        except ProbeError as exc:
+            if "still moves" not in str(exc):
+                raise
+            raise PlanError(f"{exc}: the plan sizes a load that comes to rest at 0 A; lower --current-limit "
+                            f"(the probe's peaks stay within {LIMIT_SHARE:g} of it) or write the campaign by hand "
+                            f"(docs/campaign.md)") from None
         if on_probe is not None:
             on_probe(found)
         slid = found.positive is not None and found.negative is not None

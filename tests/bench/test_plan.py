@@ -202,3 +202,20 @@ def test_no_breakaway_within_the_limit_is_one_line_naming_the_option(tmp_path, c
         with open_run(path) as run:
             peaks.append(float(np.max(np.abs(run.channel("current_cmd")))))
     assert peaks == pytest.approx([0.6, 0.9, 1.35, 2.025, 2.7], abs=1e-6)  # A: x1.5 per probe up to the cap
+
+
+@pytest.mark.device_free
+def test_plan_checks_its_outputs_before_the_probe_moves_the_motor(tmp_path, capsys):
+    """A campaign file in a missing folder, or a probe folder holding an earlier plan's runs: refused in one line
+    before the device opens (no probe run written), not after the probe has moved the motor."""
+    missing = tmp_path / "nowhere" / "plan.toml"
+    assert main(["plan", "--device", LOCKSTEP, "-o", str(missing), "--probe-dir", str(tmp_path / "p1"), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "does not exist" in err and not (tmp_path / "p1").exists()
+    (tmp_path / "p2").mkdir()
+    (tmp_path / "p2" / "probe-2.h5").write_bytes(b"earlier")
+    out = tmp_path / "plan.toml"
+    assert main(["plan", "--device", LOCKSTEP, "-o", str(out), "--probe-dir", str(tmp_path / "p2"), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--overwrite" in err and "--probe-dir" in err
+    assert sorted(p.name for p in (tmp_path / "p2").iterdir()) == ["probe-2.h5"] and not out.exists()
