@@ -113,8 +113,10 @@ def run_mass(settings: SkeletonSettings, records: Sequence[Record]) -> float:
     else:
         declared = [r.calibration.get("inertia") for r in records]
         if any(m is None for m in declared):
-            raise AnalysisError("no --mass given and a run declares no inertia in its calibration: pass --mass J "
-                                "(kg*m^2) or --mass MODEL.json (the model of hilbench identify on this axis)")
+            raise AnalysisError("no mass given and a run declares no inertia in its calibration: give --mass J "
+                                "(kg*m^2) or --mass MODEL.json (the model of hilbench identify on this axis) to "
+                                "hilbench skeleton, --skeleton-mass to hilbench analyse, or [plant] inertia in the "
+                                "campaign file (hilbench plan writes it)")
         mass = float(declared[0])
     if not (math.isfinite(mass) and mass > 0):
         raise AnalysisError(f"--mass must be positive, got {mass}")
