@@ -191,8 +191,9 @@ def probe_breakaway(bench: Bench, probe_dir: str | Path, *, sample_rate: int = 1
         except ProbeError as exc:
             if "still moves" not in str(exc):
                 raise
-            raise PlanError(f"{exc}: the plan sizes a load that comes to rest at 0 A; lower --current-limit "
-                            f"(the probe's peaks stay within {LIMIT_SHARE:g} of it) or write the campaign by hand "
+            raise PlanError(f"{exc}. A heavy free-sliding load: lower --current-limit (the probe's peaks stay "
+                            f"within {LIMIT_SHARE:g} of it). A load with a spring or other restoring force swings "
+                            f"back at 0 A, which the break-away probe cannot size: write the campaign by hand "
                             f"(docs/campaign.md)") from None
         if on_probe is not None:
             on_probe(found)
