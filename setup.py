@@ -6,6 +6,7 @@ analysis/ -> hilbench.analysis. Nothing else lands at the top level of site-pack
 """
 
 from setuptools import find_packages, setup
+from setuptools.command.build_py import build_py
 
 SUBPACKAGES = ("bench", "drivers", "firmware_sim", "analysis")
 
@@ -21,6 +22,18 @@ for sub in SUBPACKAGES:
 package_dir["hilbench.examples"] = "examples"
 packages.append("hilbench.examples")
 
-setup(packages=packages, package_dir=package_dir,
+# The docs (docs/*.md) ship as hilbench.docs, data only: `hilbench docs [TOPIC]` lists and prints them. The
+# scripts that draw their figures (docs/make_*.py) stay in the repository.
+package_dir["hilbench.docs"] = "docs"
+packages.append("hilbench.docs")
+
+
+class BuildPy(build_py):
+    def find_package_modules(self, package, package_dir):
+        return [m for m in super().find_package_modules(package, package_dir)
+                if m[0] != "hilbench.docs" or m[1] == "__init__"]
+
+
+setup(packages=packages, package_dir=package_dir, cmdclass={"build_py": BuildPy},
       cffi_modules=["firmware_sim/engine/plant_build.py:ffibuilder",
                     "firmware/targets/host/core_build.py:ffibuilder"])

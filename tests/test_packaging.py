@@ -69,6 +69,24 @@ def test_wheel_holds_one_namespace_and_the_package_data(installed):
     assert any(n.startswith("hilbench/firmware_sim/engine/_plant") and n.endswith(".so") for n in names)
 
 
+def test_the_docs_ship_and_hilbench_docs_prints_them_from_the_wheel(installed):
+    """Issue 38: from a wheel there were no docs while --help points to docs/*.md. Every docs/*.md ships (the
+    figure scripts docs/make_*.py do not), `hilbench docs` lists the topics, `hilbench docs metrics` prints
+    docs/metrics.md as the repository holds it, and the metadata names where the docs are."""
+    names = zipfile.ZipFile(installed["wheel"]).namelist()
+    for doc in sorted((REPO / "docs").glob("*.md")):
+        assert f"hilbench/docs/{doc.name}" in names, doc.name
+    assert not [n for n in names if n.startswith("hilbench/docs/make_")]
+    exe, cwd, env = str(installed["venv"] / "bin" / "hilbench"), installed["cwd"], installed["env"]
+    listed = _run([exe, "docs"], cwd, env).stdout
+    assert re.search(r"^metrics +The error vocabulary", listed, re.M), listed
+    assert _run([exe, "docs", "metrics"], cwd, env).stdout == (REPO / "docs" / "metrics.md").read_text()
+    with zipfile.ZipFile(installed["wheel"]) as wheel:
+        (meta,) = [n for n in wheel.namelist() if n.endswith(".dist-info/METADATA")]
+        text = wheel.read(meta).decode()
+    assert "Project-URL: Documentation, hilbench://docs" in text
+
+
 def test_installed_wheel_is_what_runs_and_nothing_generic_is_importable(installed):
     import json
 

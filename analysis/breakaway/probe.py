@@ -107,6 +107,8 @@ def probe_of_record(record, window: float = 0.01, velocity_threshold: float | No
     position = np.asarray(record.position, dtype=float)
     ramps = record.protocol_arrays["ramps"]
     peak = float(record.protocol_params["peak"])
+    hold = record.protocol_params.get("hold")  # s at 0 A after each ramp, as the run file records it
+    hold_text = f"{float(hold):g} s hold" if hold is not None else "hold"
     counts = float(record.calibration.get("counts_per_rev", 1 << 20))
     ratio = float(record.calibration.get("ratio", 1.0))
     count = 2 * math.pi / (counts * ratio)  # rad at the load per encoder count
@@ -118,7 +120,7 @@ def probe_of_record(record, window: float = 0.01, velocity_threshold: float | No
         start, stop = int(start), min(int(stop), position.size)
         if abs(velocity[start]) > threshold:
             raise ProbeError(f"{path}: the motor still moves at {velocity[start]:.3g} rad/s when ramp {j + 1} "
-                             f"starts: the slide before did not stop in the hold; give a lower peak current")
+                             f"starts: the slide before did not stop in the {hold_text} at 0 A")
         moving = np.flatnonzero(sign * velocity[start:stop] > threshold)
         breakaway.append(start + int(moving[0]) if moving.size else None)
     sliding = _sliding_fit(ramps, breakaway, current, velocity, acceleration, threshold)

@@ -114,8 +114,10 @@ def run_mass(settings: SkeletonSettings, records: Sequence[Record]) -> float:
     else:
         declared = [r.calibration.get("inertia") for r in records]
         if any(m is None for m in declared):
-            raise AnalysisError("no --mass given and a run declares no inertia in its calibration: pass --mass J "
-                                "(kg*m^2) or --mass MODEL.json (the model of hilbench identify on this axis)")
+            raise AnalysisError("no mass given and a run declares no inertia in its calibration: give --mass J "
+                                "(kg*m^2) or --mass MODEL.json (the model of hilbench identify on this axis) to "
+                                "hilbench skeleton, --skeleton-mass to hilbench analyse, or [plant] inertia in the "
+                                "campaign file (hilbench plan writes it)")
         mass = float(declared[0])
     if not (math.isfinite(mass) and mass > 0):
         raise AnalysisError(f"--mass must be positive, got {mass}")
@@ -164,9 +166,11 @@ def stiffness_warnings(curves: SkeletonCurves, units: dict, spring: float, mass:
     a = np.asarray(curves.amplitude, float)[neg]
     pos, trq = units["amplitude"], units["restoring_force"]
     mass_unit = AXIS_UNITS["rotary" if pos == AXIS_UNITS["rotary"]["position"] else "linear"]["inertia"]
-    why = (f"the restoring force is negative: --spring {spring:g} {trq}/{pos} is larger than the system's spring, "
-           f"--mass {mass:g} {mass_unit} is too large, or the system has no restoring force at these amplitudes "
-           "(no spring, free sliding), where the skeleton method does not apply")
+    # quantities, not option names: the same text reaches hilbench skeleton (--spring, --mass) and the campaign
+    # step of hilbench analyse (--skeleton-mass, or the campaign's [plant] inertia)
+    why = (f"the restoring force is negative: the spring subtracted ({spring:g} {trq}/{pos}) is larger than the "
+           f"system's, the mass used ({mass:g} {mass_unit}) is too large, or the system has no restoring force at "
+           "these amplitudes (no spring, free sliding), where the skeleton method does not apply")
     if neg.all():
         raise AnalysisError(f"k_eq < 0 in every amplitude bin: {why}")
     return [f"k_eq < 0 in {int(neg.sum())} of {k.size} amplitude bins (A {a.min():.3g} .. {a.max():.3g} {pos}): "

@@ -39,7 +39,9 @@ from hilbench.bench.acquisition.campaign_plan import (
     PlannedRun,
     line_of,
     plan_changes,
+    plant_table,
     repeat_seed,
+    resolve_device_url,
     run_plan,
     value,
 )
@@ -82,10 +84,14 @@ def load_campaign(path: str | Path) -> Campaign:
         raise CampaignError(f"{path}: not valid TOML: {' '.join(str(exc).split())}") from None
     except RecursionError:
         raise CampaignError(f"{path}: not valid TOML: nested too deep") from None
-    unknown_top = sorted(set(data) - {"defaults", "run", "compensate"})
+    unknown_top = sorted(set(data) - {"defaults", "run", "compensate", "plant"})
     if unknown_top:
         raise CampaignError(f"{path}:{line_of(text, unknown_top[0], None)}: unknown table or key "
-                            f"{unknown_top[0]!r} (expected [defaults], [[run]] and [[compensate]])")
+                            f"{unknown_top[0]!r} (expected [defaults], [[run]], [[compensate]] and [plant])")
+    try:
+        plant = plant_table(data.get("plant", {}), str(path))
+    except ValueError as exc:
+        raise CampaignError(str(exc)) from None
     steps = data.get("compensate", [])
     if not isinstance(steps, list) or not all(isinstance(t, dict) for t in steps):
         raise CampaignError(f"{path}:{line_of(text, 'compensate', None)}: compensate must be an array of tables "
@@ -160,7 +166,8 @@ def load_campaign(path: str | Path) -> Campaign:
             raise fail("device", f"device must be a URL like sim:// or serial:///dev/ttyUSB0, got {device!r}")
         try:
             check_device_url(device)
-        except DeviceURLError as exc:
+            device = resolve_device_url(device, path.parent)
+        except (DeviceURLError, ValueError) as exc:
             raise fail("device", str(exc)) from None
         environment = merged.get("environment", {})
         if not isinstance(environment, dict) or not all(
@@ -173,7 +180,7 @@ def load_campaign(path: str | Path) -> Campaign:
                 played = cls.from_dict({**params, "seed": repeat_seed(protocol.seed, r)})  # type: ignore[attr-defined]
             campaign.runs.append(PlannedRun(name, r, played, settings, device,
                                             str(merged.get("operator", "")), str(merged.get("notes", "")),
-                                            environment=dict(environment)))
+                                            environment=dict(environment), plant=dict(plant)))
     if steps:  # the compensation matrix: one planned run per case (docs/compensation.md)
         from hilbench.bench.acquisition.compensation_matrix import campaign_step
 
@@ -302,7 +309,7 @@ def _play(campaign: Campaign, out_dir: Path, resume: bool, progress, control, be
             if progress:
                 progress(CampaignProgress(i, len(campaign.runs), planned.key, "running"))
             result = bench.run(planned.protocol, path, operator=planned.operator, notes=planned.notes,
-                               control=control,
+                               control=control, plant=planned.plant,
                                progress=(lambda p, i=i, k=planned.key: progress(
                                    CampaignProgress(i, len(campaign.runs), k, "running", p))) if progress else None)
             entries[planned.key] = {

@@ -8,6 +8,7 @@ import hashlib
 import json
 import re
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from hilbench.bench.acquisition.device_options import DEVICE_OPTIONS
@@ -48,6 +49,7 @@ class PlannedRun:
     notes: str = ""
     report: dict[str, float] = field(default_factory=dict)  # a [[compensate]] step's metric settings (SI)
     environment: dict[str, Any] = field(default_factory=dict)  # operator's values, e.g. {"ambient": "23 C"}
+    plant: dict[str, float] = field(default_factory=dict)  # the campaign's [plant] (SI), into the run's calibration
 
     @property
     def key(self) -> str:
@@ -117,12 +119,62 @@ def run_plan(planned: PlannedRun, cache: dict[str, str]) -> dict[str, Any]:
     return json.loads(dumps(plan))  # as it reads back from index.json (tuples as lists, NaN as null)
 
 
+#: device URL options that name a file (sim's simulator config, canopen's EDS)
+FILE_OPTIONS = ("config", "eds")
+
+
+def resolve_device_url(url: str, folder: Path) -> str:
+    """``url`` with every file it names (:data:`FILE_OPTIONS`) made absolute against ``folder`` (the campaign
+    file's), as ``[[compensate]] model`` is; ValueError names the option and the file when it does not exist."""
+    from urllib.parse import parse_qsl, urlencode, urlsplit
+
+    split = urlsplit(url)
+    query = parse_qsl(split.query, keep_blank_values=True)
+    resolved = []
+    for key, text in query:
+        if key in FILE_OPTIONS and text:
+            path = Path(text).expanduser()
+            path = path if path.is_absolute() else folder / path
+            if not path.is_file():
+                raise ValueError(f"device option {key}={text}: no file {path} (a relative path is read from the "
+                                 f"campaign file's folder)")
+            text = str(path.resolve())
+        resolved.append((key, text))
+    if resolved == query:
+        return url
+    head = url[: len(url) - len(split.query)] if url.endswith(split.query) else url.partition("?")[0] + "?"
+    return head + urlencode(resolved, safe="/")  # (geturl would drop the empty authority of sim://?...)
+
+
+def plant_table(raw: Any, where: str) -> dict[str, float]:
+    """A campaign's ``[plant]`` table (what is known of the load, e.g. ``inertia = "0.0022 kg*m^2"``, as
+    ``hilbench plan`` writes it) in SI numbers; ValueError names the key."""
+    from hilbench.bench.acquisition.runner import PLANT_UNITS
+
+    if not isinstance(raw, dict):
+        raise ValueError(f"{where}: plant must be a table ([plant]), got {raw!r}")
+    out = {}
+    for key, raw_value in raw.items():
+        if key not in PLANT_UNITS:
+            raise ValueError(f"{where}: unknown [plant] key {key!r} (known: {', '.join(PLANT_UNITS)})")
+        number = value(raw_value, PLANT_UNITS[key], f"[plant] {key}")
+        if isinstance(number, bool) or not isinstance(number, int | float) or not 0 < number < float("inf"):
+            raise ValueError(f"{where}: [plant] {key} must be a positive number in {PLANT_UNITS[key]}, "
+                             f"got {raw_value!r}")
+        out[key] = float(number)
+    return out
+
+
 def plan_changes(entry: dict, plan: dict) -> list[str]:
     """The parts of ``plan`` a stored index ``entry`` differs in (empty: the same plan). With the model's
     SHA-256 on both sides the model's path is not compared (the folder may have moved); an entry of an older
     index without it is compared on parameters and settings."""
     changed = []
     old, new = dict(entry.get("parameters") or {}), dict(plan["parameters"])
+    if entry.get("protocol") == "presliding" and "repeats" in old:  # the loop count's old name (issue 38)
+        old["cycles"] = old.pop("repeats")
+        if isinstance(old.get("units"), dict):
+            old["units"] = {("cycles" if k == "repeats" else k): v for k, v in old["units"].items()}
     if entry.get("model_sha256") and plan["model_sha256"]:
         old.pop("model", None)
         new.pop("model", None)

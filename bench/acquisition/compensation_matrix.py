@@ -276,7 +276,12 @@ def campaign_step(table: dict, defaults: dict, index: int, path: Path, text: str
         protocols = [CompensatedReference.of(c) for c in found]
     except (BenchError, AnalysisError) as exc:
         raise fail("model", str(exc)) from None
-    device = merged.get("device", "sim://")
+    try:  # a relative simulator config or EDS is read from the campaign file's folder, as the model is
+        from hilbench.bench.acquisition.campaign_plan import resolve_device_url
+
+        device = resolve_device_url(str(merged.get("device", "sim://")), path.parent)
+    except ValueError as exc:
+        raise fail("device", str(exc)) from None
     return [PlannedRun(f"{name}.{p.reference}.{p.compensation}", 1, p, settings, device,
                        str(merged.get("operator", "")), str(merged.get("notes", "")),
                        {"window": matrix.window, "tolerance": matrix.tolerance}) for p in protocols]

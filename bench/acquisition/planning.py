@@ -104,11 +104,19 @@ class Plan:
             value = getattr(self.settings, name)
             if value != getattr(defaults, name) and math.isfinite(value):
                 head.append(f"{name} = {_quantity(value, unit)}")
+        inertia = (self.probe.sliding or {}).get("inertia_per_kt", math.nan) * self.settings.torque_constant
+        if math.isfinite(inertia) and inertia > 0:  # read by the skeleton step (the run files' calibration)
+            head += ["", "# what the probe measured of the load, written into every run file's calibration",
+                     "[plant]", f"inertia = {_quantity(inertia, 'kg*m^2')}"]
         for name, proto in self.runs.items():
             head += ["", "[[run]]", f"name = {_toml(name)}", f"protocol = {_toml(proto.name)}"]
             for key, spec in proto.specs().items():
+                if key in unused_parameters(proto):
+                    continue
                 value = getattr(proto, key)
                 unit = spec.unit_for(proto.mode) if spec.unit not in ("", "unit", "periods") else None
+                if unit is not None and "unit" in unit:  # presliding's rate: in its `unit`, a plain number
+                    unit = None
                 if spec.kind in ("int", "choice", "str") or unit is None:
                     head.append(f"{key} = {_toml(value)}")
                 else:
@@ -119,6 +127,16 @@ class Plan:
         from hilbench.bench.storage.outputs import write_text
 
         write_text(path, self.toml())
+
+
+def unused_parameters(proto: Protocol) -> set[str]:
+    """Parameters the protocol as planned does not play (a log chirp's quadratic rate, m_per_rad of a run not
+    in metres): a campaign file leaves them out rather than write a placeholder."""
+    if isinstance(proto, Chirp):
+        return {"rate"} if proto.sweep != "quadratic" else {"f_start", "f_stop"}
+    if isinstance(proto, Presliding):
+        return ({"m_per_rad"} if proto.unit != "m" else set()) | ({"inertia"} if proto.inertia == 0 else set())
+    return set()
 
 
 def describe(proto: Protocol) -> str:
@@ -168,7 +186,15 @@ def probe_breakaway(bench: Bench, probe_dir: str | Path, *, sample_rate: int = 1
         played.append(str(result.path))
         if result.status != "completed":
             raise PlanError(f"the probe {result.path} ended {result.status}: {result.message}")
-        found = analyse_probe(str(result.path))
+        try:
+            found = analyse_probe(str(result.path))
+        except ProbeError as exc:
+            if "still moves" not in str(exc):
+                raise
+            raise PlanError(f"{exc}. A heavy free-sliding load: lower --current-limit (the probe's peaks stay "
+                            f"within {LIMIT_SHARE:g} of it). A load with a spring or other restoring force swings "
+                            f"back at 0 A, which the break-away probe cannot size: write the campaign by hand "
+                            f"(docs/campaign.md)") from None
         if on_probe is not None:
             on_probe(found)
         slid = found.positive is not None and found.negative is not None
@@ -207,8 +233,10 @@ def size_protocols(probe: ProbeResult, settings: DeviceSettings, *, sample_rate:
     runs["stepped_sine"] = SteppedSine(frequencies=STEP_FREQUENCIES, amplitudes=steps, settle_periods=3,
                                        measure_periods=5, sample_rate=sample_rate)
     runs["chirp"] = _chirp(probe, settings, level, clipped, sample_rate, duration)
+    inertia = fit["inertia_per_kt"] * settings.torque_constant  # J*acceleration comes off the presliding force
     runs["presliding"] = Presliding(amplitudes=PRESLIDING_MULTIPLES, unit="d",
-                                    presliding_distance=probe.presliding_distance, sample_rate=sample_rate)
+                                    presliding_distance=probe.presliding_distance, sample_rate=sample_rate,
+                                    inertia=round(inertia, 9) if 0 < inertia <= 100 else 0.0)
     return runs, notes
 
 

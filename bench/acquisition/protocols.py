@@ -344,7 +344,8 @@ class Presliding(Protocol):
                                    "or pulley radius; 0 = not set"),
         "rate": ParameterSpec("unit/s", 1e-9, 1e3, "speed of the ramps between turning points"),
         "settle": ParameterSpec("s", 0.0, 60.0, "hold at rest before the ramp and at every turning point"),
-        "repeats": ParameterSpec("", 1, 100, "times the reversal cycle (A1 back to A1) is played", kind="int"),
+        "cycles": ParameterSpec("", 1, 100, "times the reversal cycle (A1 back to A1) is played (a campaign's "
+                                "`repeats` is its number of runs)", kind="int"),
         "close_inner": ParameterSpec("", None, None, "retrace the turning points to close each inner loop "
                                      "(yes) or return to A1 at once (no)", kind="choice", choices=("yes", "no")),
         "inertia": ParameterSpec("kg*m^2", 0.0, 100.0, "J at the load to subtract J*acceleration from the "
@@ -356,11 +357,26 @@ class Presliding(Protocol):
     m_per_rad: float = 0.0
     rate: float = 2.0
     settle: float = 0.2
-    repeats: int = 1
+    cycles: int = 1
     close_inner: str = "yes"
     inertia: float = 0.0
     mode: str = "position"
     sample_rate: int = 10000
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> Protocol:
+        """As :meth:`Protocol.from_dict`; the loop count's old name ``repeats`` (run files and forms before
+        issue 38, where a campaign's ``repeats`` also meant its number of runs) is read as ``cycles``."""
+        if "repeats" in values:
+            import warnings
+
+            values = dict(values)
+            if "cycles" in values:
+                raise ProtocolError("presliding: give the loop count as cycles only (repeats is its old name)")
+            warnings.warn("presliding parameter 'repeats' is now 'cycles' (the loop count); read as cycles",
+                          DeprecationWarning, stacklevel=2)
+            values["cycles"] = values.pop("repeats")
+        return super().from_dict(values)
 
     @property
     def rad_per_unit(self) -> float:
@@ -384,7 +400,7 @@ class Presliding(Protocol):
 
     def points(self) -> np.ndarray:
         """Turning points, rad at the load, starting with 0 (excitations.nested_reversal_points)."""
-        pts = excitations.nested_reversal_points(self.amplitudes, self.close_inner == "yes", self.repeats)
+        pts = excitations.nested_reversal_points(self.amplitudes, self.close_inner == "yes", self.cycles)
         return pts * self.rad_per_unit
 
     @property

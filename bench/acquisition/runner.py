@@ -62,6 +62,10 @@ class SettingsError(BenchError, ValueError):
     """A device setting of the wrong type or out of its range (the message starts with its name)."""
 
 
+#: what a campaign's [plant] table may say of the load, and its unit (at the load)
+PLANT_UNITS = {"inertia": "kg*m^2"}
+
+
 @dataclass(frozen=True)
 class DeviceSettings:
     """Limits and calibration sent to the device with every run (units at the motor shaft).
@@ -224,8 +228,12 @@ class Bench:
 
     def run(self, protocol: Protocol, out: str | Path | None = None, *, operator: str = "", notes: str = "",
             progress: Callable[[Progress], None] | None = None, control: RunControl | None = None,
-            overwrite: bool = False) -> RunResult:
+            overwrite: bool = False, plant: dict[str, float] | None = None) -> RunResult:
         """Run ``protocol`` and log it to ``out`` (default ``runs/<protocol>-<uid>.h5``).
+
+        ``plant``: what is known of the load beyond the device's calibration, written into the run file's
+        calibration with the unit of :data:`PLANT_UNITS` (a campaign's ``[plant] inertia``, which the skeleton
+        analysis reads when no mass is given).
 
         ``progress`` is called with a :class:`Progress` after every sample block the device returns, in the
         calling thread: ``done`` (samples received so far) grows strictly from call to call, ``total`` is the
@@ -280,7 +288,9 @@ class Bench:
             config={k: getattr(config, k) if not isinstance(getattr(config, k), float) or
                     math.isfinite(getattr(config, k)) else str(getattr(config, k)) for k in config.__slots__},
             calibration={"torque_constant": config.torque_constant, "counts_per_rev": config.counts_per_rev,
-                         "ratio": config.ratio, "units": {"torque_constant": "N*m/A", "ratio": "1"}},
+                         "ratio": config.ratio, **(plant or {}),
+                         "units": {"torque_constant": "N*m/A", "ratio": "1",
+                                   **{k: PLANT_UNITS[k] for k in plant or {}}}},
             protocol_name=protocol.name, protocol_params=protocol.parameters(), protocol_arrays=arrays,
             operator=operator, notes=notes, overwrite=overwrite,
         )

@@ -1,6 +1,8 @@
 """`hilbench demo` (what `make demo` runs) end to end: the runs, the analyses, and the hidden effect found."""
 
 import json
+import re
+from pathlib import Path
 
 from hilbench.analysis.record import load_record
 from hilbench.bench.cli import main
@@ -8,7 +10,7 @@ from hilbench.bench.cli import main
 
 def test_demo_runs_everything_and_finds_the_undeclared_cogging(tmp_path, capsys):
     tmp_path = tmp_path / "a+b &c=d"  # characters that mean something in a URL query (issue 12 item 12)
-    assert main(["demo", "-o", str(tmp_path), "--duration", "10"]) == 0  # 20 s by default; 10 s finds both
+    assert main(["demo", "-o", str(tmp_path)]) == 0  # the defaults of `make demo`: the README quotes its figures
     for role in ("identification", "validation", "afrf"):
         assert load_record(tmp_path / "runs" / f"{role}.h5").status == "completed"
     model = json.loads((tmp_path / "model.json").read_text())
@@ -22,7 +24,16 @@ def test_demo_runs_everything_and_finds_the_undeclared_cogging(tmp_path, capsys)
     err = report["error_before"]["validation"]["torque_rel_pct"] / report["error_after"]["validation"]["torque_rel_pct"]
     assert err > 2.0
     assert (tmp_path / "residual" / "summary.md").exists() and (tmp_path / "afrf.png").exists()
-    assert "done: everything is in" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "done: everything is in" in out
+    # the README's demo figures are what this run prints: the torque error before and after, and the effects found
+    readme = (Path(__file__).parents[2] / "README.md").read_text()
+    before, after = re.search(r"torque error from ([0-9.]+) % to ([0-9.]+) %", readme).groups()
+    assert f"validation torque NRMSE {before} % -> {after} %" in out, (before, after)
+    figures = re.search(r"hidden cogging \(order 6, ([0-9.]+) vs .*?lacks \(([0-9.]+) vs", readme, re.S)
+    cogging, viscous = figures.groups()
+    assert f"{float(found['position_periodic']['amplitude']):.3g}" == cogging
+    assert f"{float(found['viscous']['viscous']):.3g}" == viscous
 
 
 def test_every_demo_step_replaces_the_outputs_of_an_earlier_demo(monkeypatch, tmp_path):

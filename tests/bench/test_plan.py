@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -202,3 +203,42 @@ def test_no_breakaway_within_the_limit_is_one_line_naming_the_option(tmp_path, c
         with open_run(path) as run:
             peaks.append(float(np.max(np.abs(run.channel("current_cmd")))))
     assert peaks == pytest.approx([0.6, 0.9, 1.35, 2.025, 2.7], abs=1e-6)  # A: x1.5 per probe up to the cap
+
+
+@pytest.mark.device_free
+def test_plan_checks_its_outputs_before_the_probe_moves_the_motor(tmp_path, capsys):
+    """A campaign file in a missing folder, or a probe folder holding an earlier plan's runs: refused in one line
+    before the device opens (no probe run written), not after the probe has moved the motor."""
+    missing = tmp_path / "nowhere" / "plan.toml"
+    assert main(["plan", "--device", LOCKSTEP, "-o", str(missing), "--probe-dir", str(tmp_path / "p1"), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "does not exist" in err and not (tmp_path / "p1").exists()
+    (tmp_path / "p2").mkdir()
+    (tmp_path / "p2" / "probe-2.h5").write_bytes(b"earlier")
+    out = tmp_path / "plan.toml"
+    assert main(["plan", "--device", LOCKSTEP, "-o", str(out), "--probe-dir", str(tmp_path / "p2"), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--overwrite" in err and "--probe-dir" in err
+    assert sorted(p.name for p in (tmp_path / "p2").iterdir()) == ["probe-2.h5"] and not out.exists()
+
+
+def test_plan_on_the_paper_system_preset_names_only_options_plan_has(tmp_path, capsys, starts_devices):
+    """The paper's mass-spring system (k = 50 N*m/rad) swings back after the probe's return to 0 A. plan cannot
+    size it (issue 38 leaves that open) and says so in one line; every option its advice names is one of plan's
+    (it named a 'peak current' plan lacks)."""
+    import argparse
+
+    from hilbench.bench.cli.commands import plan as plan_command
+
+    config = tmp_path / "paper.toml"
+    config.write_text('[plant]\npreset = "paper_system"\n')
+    toml = tmp_path / "plan.toml"
+    assert main(["plan", "--device", f"sim://?pacing=lockstep&config={config}", "--current-limit", "50",
+                 "-o", str(toml), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "spring" in err and "peak current" not in err and not toml.exists()
+    sub = argparse.ArgumentParser().add_subparsers()
+    plan_command.register(sub)
+    known = set(sub.choices["plan"]._option_string_actions)
+    named = set(re.findall(r"--[a-z][a-z-]+", err))
+    assert named and named <= known, named - known

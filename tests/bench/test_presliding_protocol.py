@@ -58,7 +58,7 @@ def test_reversal_path_is_constant_speed_and_ends_on_each_point():
 
 
 @pytest.mark.parametrize("values", [
-    {}, {"unit": "rad", "amplitudes": (1e-3, 4e-4), "rate": 3.3e-3, "settle": 0.0123, "repeats": 3},
+    {}, {"unit": "rad", "amplitudes": (1e-3, 4e-4), "rate": 3.3e-3, "settle": 0.0123, "cycles": 3},
     {"unit": "m", "m_per_rad": 0.01, "amplitudes": (2e-5, 2e-5, 1e-5), "rate": 1e-4, "close_inner": "no"},
     {"amplitudes": (1.0,), "sample_rate": 20000},
 ])

@@ -31,6 +31,33 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def check_outputs(out: Path, probe_dir: Path, overwrite: bool) -> None:
+    """Refuse, before anything moves, a campaign file or probe folder that could not be written at the end:
+    an existing file without --overwrite, a missing or read-only folder, a folder where a file goes."""
+    import os
+
+    from hilbench.bench.errors import BenchError
+    from hilbench.bench.storage import outputs
+
+    outputs.refuse_existing("--output", out, overwrite)
+    if out.is_dir():
+        raise BenchError(f"--output {out} is a folder; give the campaign file's path, e.g. {out / 'plan.toml'}")
+    if probe_dir.exists() and not probe_dir.is_dir():
+        raise BenchError(f"--probe-dir {probe_dir} is a file; give a folder for the probe's run files")
+    if not overwrite and probe_dir.is_dir() and any(probe_dir.glob("probe-*.h5")):
+        raise BenchError(f"--probe-dir {probe_dir} holds probe runs of an earlier plan; use --overwrite to "
+                         f"replace them, or another --probe-dir")
+    folder = out.parent if str(out.parent) else Path(".")
+    if not folder.is_dir():
+        raise BenchError(f"--output {out}: the folder {folder} does not exist")
+    probe_parent = probe_dir
+    while not probe_parent.exists() and probe_parent != probe_parent.parent:  # created with its parents
+        probe_parent = probe_parent.parent
+    for option, where in (("--output", folder), ("--probe-dir", probe_parent)):
+        if not os.access(where, os.W_OK | os.X_OK):
+            raise BenchError(f"{option}: cannot write in {where} (permission denied)")
+
+
 def run(args: argparse.Namespace) -> int:
     from hilbench.bench.acquisition.planning import plan_experiments
     from hilbench.bench.acquisition.progress import ProgressBar
@@ -43,8 +70,8 @@ def run(args: argparse.Namespace) -> int:
         raise BenchError(f"--sample-rate {args.sample_rate} Hz is not one of {', '.join(map(str, SAMPLE_RATES))} Hz")
     if not 0.1 <= args.duration <= 3600:
         raise BenchError(f"--duration {args.duration:g} s is outside [0.1, 3600] s")
-    outputs.refuse_existing("--output", args.out, args.overwrite)
     probe_dir = args.probe_dir or args.out.with_name(args.out.stem + "-probe")
+    check_outputs(args.out, probe_dir, args.overwrite)  # before the probe moves the motor
     with options_named(DEVICE_OPTIONS):
         settings = settings_from_args(args)
     bars: list[ProgressBar] = []
