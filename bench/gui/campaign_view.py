@@ -9,15 +9,21 @@ from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
+from hilbench.bench.gui.plot_style import style_plot, style_view
 from hilbench.bench.gui.worker import one_line
 
 COLUMNS = ("run", "protocol", "duration (s)", "state", "progress")
 #: the results table: (header, column of results.parquet, scale to the shown unit); identify rows,
 #: numbered in start order
 RESULT_COLUMNS = (("#", "order", 1.0), ("run", "key", None), ("repeat", "repeat", None), ("status", "status", None),
-                  ("J (kg*m^2)", "inertia", 1.0), ("break-away (N*m)", "breakaway", 1.0),
-                  ("b (N*m*s/rad)", "viscous", 1.0), ("validation torque NRMSE (%)", "validation_torque_nrmse", 100.0),
-                  ("winding (degC)", "temperature_mean", 1.0), ("verdict / reason", "verdict", None))
+                  ("J\n(kg*m^2)", "inertia", 1.0), ("break-away\n(N*m)", "breakaway", 1.0),
+                  ("b\n(N*m*s/rad)", "viscous", 1.0),
+                  ("validation torque\nNRMSE (%)", "validation_torque_nrmse", 100.0),
+                  ("winding\n(degC)", "temperature_mean", 1.0), ("verdict / reason", "verdict", None))
+#: the drift charts, stacked and x-linked as the live plots are: (key, y axis label; {unit}: the parameter's)
+CHARTS = (("value", "{name} ({unit})"), ("ewma", "EWMA of z"), ("cusum", "CUSUM of z"))
+#: rows the results table shows without scrolling (more scroll; the charts keep the rest of the height)
+TABLE_ROWS = 8
 
 
 class CampaignView(QtWidgets.QWidget):
@@ -181,30 +187,57 @@ class CampaignResults(QtWidgets.QWidget):
         self.table = QtWidgets.QTableWidget(0, len(RESULT_COLUMNS))
         self.table.setHorizontalHeaderLabels([c[0] for c in RESULT_COLUMNS])
         self.table.verticalHeader().setVisible(False)
+        # compact rows (the default section is about 1.5 lines tall), headers on two lines (name, unit): each
+        # column as wide as its widest line, so no header is cut ("reak-away (N" was)
+        self.table.verticalHeader().setDefaultSectionSize(self.table.fontMetrics().height() + 6)
+        self.table.horizontalHeader().setStretchLastSection(True)
         self.table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
         self.table.setSortingEnabled(True)
-        self.plots = {key: pg.PlotWidget(title=title) for key, title in
-                      (("value", "parameter +- standard error"), ("ewma", "EWMA of z"), ("cusum", "CUSUM of z"))}
-        for key, plot in self.plots.items():
-            plot.setLabel("bottom", "run (start order)")
-            if key != "value":
+        self.units: dict[str, str] = {}
+        self.graphics = style_view(pg.GraphicsLayoutWidget())
+        self.plots: dict[str, pg.PlotItem] = {}
+        for row, (key, _label) in enumerate(CHARTS):
+            plot = style_plot(self.graphics.addPlot(row=row, col=0))
+            plot.getAxis("left").setWidth(90)  # one width: the three charts' x axes line up
+            if row:
                 plot.setXLink(self.plots["value"])
+            if row < len(CHARTS) - 1:
+                plot.hideAxis("bottom")
+            self.plots[key] = plot
+        self.plots["cusum"].setLabel("bottom", "run (start order)")
         top = QtWidgets.QHBoxLayout()
         top.addWidget(self.path_edit, 1)
         top.addWidget(self.load_button)
         top.addWidget(QtWidgets.QLabel("parameter"))
         top.addWidget(self.parameter)
-        charts = QtWidgets.QWidget()
-        chart_layout = QtWidgets.QVBoxLayout(charts)
-        for plot in self.plots.values():
-            chart_layout.addWidget(plot)
-        split = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
-        split.addWidget(self.table)
-        split.addWidget(charts)
+        self.split = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
+        self.split.setChildrenCollapsible(False)
+        self.split.addWidget(self.table)
+        self.split.addWidget(self.graphics)
         layout = QtWidgets.QVBoxLayout(self)
         layout.addLayout(top)
         layout.addWidget(self.status)
-        layout.addWidget(split, 1)
+        layout.addWidget(self.split, 1)
+        self._label_charts()
+
+    def _label_charts(self) -> None:
+        name = self.parameter.currentText()
+        for key, label in CHARTS:
+            self.plots[key].getAxis("left").setLabel(label.format(name=name, unit=self.units.get(name) or "-"))
+
+    def _table_height(self) -> int:
+        """Pixels the header and up to TABLE_ROWS rows need (all rows of a small campaign)."""
+        rows = max(1, min(self.table.rowCount(), TABLE_ROWS))
+        bar = self.table.horizontalScrollBar().sizeHint().height()
+        header = max(self.table.horizontalHeader().height(), self.table.horizontalHeader().sizeHint().height())
+        return (header + rows * self.table.verticalHeader().defaultSectionSize()
+                + bar + 2 * self.table.frameWidth() + 6)
+
+    def _share_height(self) -> None:
+        """The table gets the height of its rows (up to TABLE_ROWS), the charts the rest (at least half)."""
+        total = sum(self.split.sizes()) or self.split.height()
+        table = min(self._table_height(), total // 2)
+        self.split.setSizes([table, total - table])
 
     def load(self) -> bool:
         """Read the table; a missing or unreadable file is said in the status line."""
@@ -215,12 +248,15 @@ class CampaignResults(QtWidgets.QWidget):
         path = Path(self.path_edit.text().strip())
         table = path if path.suffix == ".parquet" else path / TABLE_NAME
         try:
-            rows = [r for r in pq.read_table(table).to_pylist() if r.get("step") == "identify"]
+            read = pq.read_table(table)
+            rows = [r for r in read.to_pylist() if r.get("step") == "identify"]
+            units = {f.name: (f.metadata or {}).get(b"unit", b"").decode() for f in read.schema}
         except Exception as exc:
             self.status.setText(f"<span style='color:#c00000'>{table}: {one_line(exc)}</span>")
             return False
         rows.sort(key=lambda r: (str(r.get("start_time")), str(r.get("campaign")), str(r.get("key"))))
         self.rows = rows
+        self.units = units
         self._fill_table()
         return self.show_drift()
 
@@ -240,6 +276,13 @@ class CampaignResults(QtWidgets.QWidget):
                 self.table.setItem(i, j, item)
         self.table.setSortingEnabled(True)
         self.table.sortByColumn(0, QtCore.Qt.SortOrder.AscendingOrder)
+        self.table.resizeColumnsToContents()  # headers (their widest line) and values whole
+        self.table.horizontalHeader().setStretchLastSection(True)
+        self._share_height()
+
+    def resizeEvent(self, event) -> None:  # noqa: N802 - Qt API
+        super().resizeEvent(event)
+        self._share_height()
 
     def show_drift(self) -> bool:
         """The drift charts of the chosen parameter; too few runs or no spread is said in the status line."""
@@ -251,6 +294,7 @@ class CampaignResults(QtWidgets.QWidget):
         for plot in self.plots.values():
             plot.clear()
         name = self.parameter.currentText()
+        self._label_charts()
         ok = sum(r.get("status") == "ok" for r in self.rows)
         try:
             report = monitor(self.rows, DriftSettings(parameters=(name,)))
@@ -263,7 +307,8 @@ class CampaignResults(QtWidgets.QWidget):
         x = np.arange(s.value.size, dtype=float)
         value = self.plots["value"]
         value.addItem(pg.ErrorBarItem(x=x, y=s.value, height=2 * np.nan_to_num(s.se), pen="#888"))
-        value.plot(x, s.value, pen=None, symbol="o", symbolSize=5, name=name)
+        value.plot(x, s.value, pen=None, symbol="o", symbolSize=5, symbolBrush="#1f77b4", symbolPen="#1f77b4",
+                   name=name)
         value.plot(x, s.fitted, pen=pg.mkPen("#d62728", width=2), name="baseline fit")
         self.plots["ewma"].plot(x, s.ewma, pen=pg.mkPen("#1f77b4", width=2), name="EWMA")
         for sign in (1, -1):

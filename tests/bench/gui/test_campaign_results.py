@@ -73,7 +73,7 @@ def test_results_tab_shows_the_runs_table_and_the_drift_charts(view, results):
     # the step at run 40 (39 of the 59 ok runs, start order): one change point within +-3 runs, drawn on all charts
     assert len(truth.change_points) == 1 and abs(truth.change_points[0] - (STEP_AT - 1)) <= 3
     for plot in view.plots.values():
-        lines = [i for i in plot.items() if isinstance(i, pg.InfiniteLine) and i.angle == 90]
+        lines = [i for i in plot.items if isinstance(i, pg.InfiniteLine) and i.angle == 90]
         assert [line.value() for line in lines] == truth.change_points
     assert "change points at c/id" in view.status.text()
 
