@@ -1,14 +1,18 @@
 """Campaign view: load a campaign TOML, see its planned runs, play it on the connected device with per-run
-progress, and resume an interrupted one (runs whose file says ``completed`` are skipped). Its Results tab shows
-an analysed campaign (``hilbench analyse``): the runs table and the drift charts of ``hilbench drift``."""
+progress, and resume an interrupted one (runs whose file says ``completed`` are skipped). A finished campaign is
+analysed from here: *Analyse* runs ``hilbench analyse`` on its folder and *Drift* runs ``hilbench drift`` on the
+results, each in its own process (bench.gui.command_process). The Results tab shows an analysed campaign: the runs
+table and the drift charts of ``hilbench drift``."""
 
 from __future__ import annotations
 
+import html
 from pathlib import Path
 from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
+from hilbench.bench.gui.command_process import CommandProcess
 from hilbench.bench.gui.plot_style import style_plot, style_view
 from hilbench.bench.gui.worker import one_line
 
@@ -59,6 +63,23 @@ class CampaignView(QtWidgets.QWidget):
         self.table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
         self.status = QtWidgets.QLabel("")
         self.status.setWordWrap(True)
+        self.results_edit = QtWidgets.QLineEdit()
+        self.results_edit.setPlaceholderText("results folder (default: the output folder's analysis/)")
+        self.analyse_button = QtWidgets.QPushButton("Analyse")
+        self.analyse_button.setToolTip("hilbench analyse on the output folder (identify every run) into the "
+                                       "results folder, in its own process; then the Results tab")
+        self.analyse_button.clicked.connect(self.analyse)
+        self.drift_button = QtWidgets.QPushButton("Drift")
+        self.drift_button.setToolTip("hilbench drift on the results folder: drift.json, the figures and the "
+                                     "campaign page in RESULTS/drift/")
+        self.drift_button.clicked.connect(self.drift)
+        self.analysis_bar = QtWidgets.QProgressBar()
+        self.analysis_bar.setFormat("%v/%m runs")
+        self.analysis_bar.setValue(0)
+        #: options added to ``hilbench analyse`` (the Dask dashboard is not shown here: it costs seconds)
+        self.analyse_options: tuple[str, ...] = ("--no-dashboard",)
+        self.command: CommandProcess | None = None
+        self._campaign_running = False
         self._bars: dict[str, QtWidgets.QProgressBar] = {}
         self._rows: dict[str, int] = {}
 
@@ -73,10 +94,17 @@ class CampaignView(QtWidgets.QWidget):
         row2.addWidget(self.resume_box)
         row2.addWidget(self.start_button)
         row2.addWidget(self.abort_button)
+        row3 = QtWidgets.QHBoxLayout()
+        row3.addWidget(QtWidgets.QLabel("Results folder"))
+        row3.addWidget(self.results_edit, 1)
+        row3.addWidget(self.analyse_button)
+        row3.addWidget(self.drift_button)
+        row3.addWidget(self.analysis_bar)
         plan = QtWidgets.QWidget()
         layout = QtWidgets.QVBoxLayout(plan)
         layout.addLayout(row1)
         layout.addLayout(row2)
+        layout.addLayout(row3)
         layout.addWidget(self.status)
         layout.addWidget(self.table, 1)
         self.results = CampaignResults()
@@ -84,6 +112,9 @@ class CampaignView(QtWidgets.QWidget):
         self.tabs.addTab(plan, "Plan and run")
         self.tabs.addTab(self.results, "Results")
         QtWidgets.QVBoxLayout(self).addWidget(self.tabs)
+        self.out_edit.textChanged.connect(self._update_analysis_buttons)
+        self.results_edit.textChanged.connect(self._update_analysis_buttons)
+        self._update_analysis_buttons()
 
     def _browse(self) -> None:
         path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Campaign file", "", "TOML (*.toml)")
@@ -131,6 +162,7 @@ class CampaignView(QtWidgets.QWidget):
         self.status.setText(f"{len(campaign.runs)} runs, {total:.4g} s of excitation, device "
                             f"{campaign.device}" + (f"; {len(done)} already in the index" if done else ""))
         self.start_button.setEnabled(True)
+        self._update_analysis_buttons()
         return True
 
     def _on_start(self) -> None:
@@ -142,6 +174,8 @@ class CampaignView(QtWidgets.QWidget):
         self.start_button.setEnabled(not running and self.campaign is not None)
         self.load_button.setEnabled(not running)
         self.abort_button.setEnabled(running)
+        self._campaign_running = running
+        self._update_analysis_buttons()
 
     def show_progress(self, item) -> None:
         """One :class:`bench.acquisition.campaign.CampaignProgress` (GUI thread)."""
@@ -158,8 +192,103 @@ class CampaignView(QtWidgets.QWidget):
 
     def show_finished(self, text: str, error: bool = False) -> None:
         self.set_running(False)
+        self._say(text + ("" if error else "; Analyse reads its results"), error)
+
+    def _say(self, text: str, error: bool = False) -> None:
         colour = "#c00000" if error else "#008000"
-        self.status.setText(f"<span style='color:{colour}'>{text}</span>")
+        self.status.setText(f"<span style='color:{colour}'>{html.escape(text)}</span>")
+
+    # ------------------------------------------------------------------ analyse and drift
+    def campaign_folder(self) -> Path:
+        return Path(self.out_edit.text().strip())
+
+    def results_folder(self) -> Path:
+        """The results folder: as typed, else ``hilbench analyse``'s default (CAMPAIGN/analysis)."""
+        typed = self.results_edit.text().strip()
+        return Path(typed) if typed else self.campaign_folder() / "analysis"
+
+    @property
+    def busy(self) -> bool:
+        return self.command is not None and self.command.running()
+
+    def _update_analysis_buttons(self) -> None:
+        """Analyse: a campaign folder with its index and nothing running; Drift: a results table to read."""
+        from hilbench.bench.acquisition.campaign import INDEX_NAME
+        from hilbench.bench.campaign_analysis.table import TABLE_NAME
+
+        free = not self._campaign_running and not self.busy
+        has_campaign = bool(self.out_edit.text().strip()) and (self.campaign_folder() / INDEX_NAME).is_file()
+        self.analyse_button.setEnabled(free and has_campaign)
+        self.drift_button.setEnabled(free and (self.results_folder() / TABLE_NAME).is_file())
+
+    def _run_command(self, args: list[str], done) -> bool:
+        if self._campaign_running or self.busy:
+            self._say("wait until the campaign or the running analysis has finished", error=True)
+            return False
+        self.command = CommandProcess(args, self)
+        self.command.progress.connect(self._on_command_progress)
+        self.command.finished.connect(done)
+        self.command.start()
+        self._update_analysis_buttons()
+        return True
+
+    def _on_command_progress(self, done: int, total: int) -> None:
+        self.analysis_bar.setRange(0, max(total, 1))
+        self.analysis_bar.setValue(done)
+
+    def analyse(self) -> bool:
+        """``hilbench analyse CAMPAIGN -o RESULTS`` in its own process; the progress bar follows its runs."""
+        folder, results = self.campaign_folder(), self.results_folder()
+        self.analysis_bar.setRange(0, 0)  # busy until the first count: planning hashes every run file
+        started = self._run_command(["analyse", str(folder), "-o", str(results), *self.analyse_options],
+                                    self._analysed)
+        if started:
+            self._say(f"analysing {folder} into {results} (hilbench analyse, its own process)")
+        else:
+            self.analysis_bar.setRange(0, 1)
+        return started
+
+    def _analysed(self, ok: bool, text: str) -> None:
+        self.analysis_bar.setRange(0, max(self.analysis_bar.maximum(), 1))
+        self.command = None
+        self._update_analysis_buttons()
+        if not ok:
+            self._say(f"analyse failed: {text}", error=True)
+            self.message.emit(f"analyse failed: {text}", True)
+            return
+        self.analysis_bar.setValue(self.analysis_bar.maximum())
+        self._say(f"analysed: {text}; Drift writes the drift report and the campaign page")
+        self.message.emit(f"campaign analysed into {self.results_folder()}", False)
+        self.results.path_edit.setText(str(self.results_folder()))
+        self.results.load()
+        self.tabs.setCurrentWidget(self.results)
+
+    def drift(self) -> bool:
+        """``hilbench drift RESULTS`` (an earlier report in RESULTS/drift is replaced) in its own process."""
+        results = self.results_folder()
+        started = self._run_command(["drift", str(results), "--overwrite"], self._drifted)
+        if started:
+            self._say(f"drift report of {results} (hilbench drift, its own process)")
+        return started
+
+    def _drifted(self, ok: bool, text: str) -> None:
+        lines = self.command.lines if self.command is not None else []
+        self.command = None
+        self._update_analysis_buttons()
+        if not ok:
+            self._say(f"drift failed: {text}", error=True)
+            self.message.emit(f"drift failed: {text}", True)
+            return
+        report = self.results_folder() / "drift" / "drift.json"
+        pages = [line.removeprefix("page: ") for line in lines if line.startswith("page: ")]
+        where = f"drift report {report}" + (f", page {', '.join(pages)}" if pages else "")
+        self._say(f"{where}; {text}")
+        self.message.emit(where, False)
+
+    def shutdown(self) -> None:
+        """Stop a running analysis (the window closes)."""
+        if self.command is not None:
+            self.command.kill()
 
 
 class CampaignResults(QtWidgets.QWidget):
