@@ -49,7 +49,8 @@ class CampaignView(QtWidgets.QWidget):
         self.load_button.clicked.connect(self.load)
         self.out_edit = QtWidgets.QLineEdit("campaign-out")
         self.out_edit.setToolTip("folder for the run files and index.json")
-        self.resume_box = QtWidgets.QCheckBox("Resume (skip completed runs)")
+        self.resume_box = QtWidgets.QCheckBox("Resume")
+        self.resume_box.setToolTip("skip the runs the output folder's index says are completed")
         self.start_button = QtWidgets.QPushButton("Start campaign")
         self.start_button.setEnabled(False)
         self.start_button.clicked.connect(self._on_start)
@@ -64,7 +65,8 @@ class CampaignView(QtWidgets.QWidget):
         self.status = QtWidgets.QLabel("")
         self.status.setWordWrap(True)
         self.results_edit = QtWidgets.QLineEdit()
-        self.results_edit.setPlaceholderText("results folder (default: the output folder's analysis/)")
+        self.results_edit.setPlaceholderText("default: OUTPUT/analysis")
+        self.results_edit.setToolTip("results folder of hilbench analyse (default: the output folder's analysis/)")
         self.analyse_button = QtWidgets.QPushButton("Analyse")
         self.analyse_button.setToolTip("hilbench analyse on the output folder (identify every run) into the "
                                        "results folder, in its own process; then the Results tab")
@@ -74,8 +76,9 @@ class CampaignView(QtWidgets.QWidget):
                                      "campaign page in RESULTS/drift/")
         self.drift_button.clicked.connect(self.drift)
         self.analysis_bar = QtWidgets.QProgressBar()
-        self.analysis_bar.setFormat("%v/%m runs")
+        self.analysis_bar.setRange(0, 1)
         self.analysis_bar.setValue(0)
+        self.analysis_bar.setFormat("")  # "%v/%m runs" once an analysis runs
         #: options added to ``hilbench analyse`` (the Dask dashboard is not shown here: it costs seconds)
         self.analyse_options: tuple[str, ...] = ("--no-dashboard",)
         self.command: CommandProcess | None = None
@@ -83,28 +86,20 @@ class CampaignView(QtWidgets.QWidget):
         self._bars: dict[str, QtWidgets.QProgressBar] = {}
         self._rows: dict[str, int] = {}
 
-        row1 = QtWidgets.QHBoxLayout()
-        row1.addWidget(QtWidgets.QLabel("Campaign"))
-        row1.addWidget(self.path_edit, 1)
-        row1.addWidget(browse)
-        row1.addWidget(self.load_button)
-        row2 = QtWidgets.QHBoxLayout()
-        row2.addWidget(QtWidgets.QLabel("Output folder"))
-        row2.addWidget(self.out_edit, 1)
-        row2.addWidget(self.resume_box)
-        row2.addWidget(self.start_button)
-        row2.addWidget(self.abort_button)
-        row3 = QtWidgets.QHBoxLayout()
-        row3.addWidget(QtWidgets.QLabel("Results folder"))
-        row3.addWidget(self.results_edit, 1)
-        row3.addWidget(self.analyse_button)
-        row3.addWidget(self.drift_button)
-        row3.addWidget(self.analysis_bar)
         plan = QtWidgets.QWidget()
         layout = QtWidgets.QVBoxLayout(plan)
-        layout.addLayout(row1)
-        layout.addLayout(row2)
-        layout.addLayout(row3)
+        # one row each: the campaign file, its output folder and run, its results folder and analysis
+        for name, edit, *buttons in (("Campaign", self.path_edit, browse, self.load_button),
+                                     ("Output folder", self.out_edit, self.resume_box, self.start_button,
+                                      self.abort_button),
+                                     ("Results folder", self.results_edit, self.analyse_button, self.drift_button,
+                                      self.analysis_bar)):
+            row = QtWidgets.QHBoxLayout()
+            row.addWidget(QtWidgets.QLabel(name))
+            row.addWidget(edit, 1)
+            for button in buttons:
+                row.addWidget(button)
+            layout.addLayout(row)
         layout.addWidget(self.status)
         layout.addWidget(self.table, 1)
         self.results = CampaignResults()
@@ -239,6 +234,7 @@ class CampaignView(QtWidgets.QWidget):
     def analyse(self) -> bool:
         """``hilbench analyse CAMPAIGN -o RESULTS`` in its own process; the progress bar follows its runs."""
         folder, results = self.campaign_folder(), self.results_folder()
+        self.analysis_bar.setFormat("%v/%m runs")
         self.analysis_bar.setRange(0, 0)  # busy until the first count: planning hashes every run file
         started = self._run_command(["analyse", str(folder), "-o", str(results), *self.analyse_options],
                                     self._analysed)
