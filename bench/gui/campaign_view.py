@@ -25,9 +25,9 @@ RESULT_COLUMNS = (("#", "order", 1.0), ("run", "key", None), ("repeat", "repeat"
                   ("validation torque\nNRMSE (%)", "validation_torque_nrmse", 100.0),
                   ("winding\n(degC)", "temperature_mean", 1.0), ("verdict / reason", "verdict", None))
 #: the drift charts, stacked and x-linked as the live plots are: (key, y axis label; {unit}: the parameter's)
-CHARTS = (("value", "{name} ({unit})"), ("ewma", "EWMA of z"), ("cusum", "CUSUM of z"))
+CHARTS = (("value", "{name} ({unit})"), ("ewma", "EWMA (z)"), ("cusum", "CUSUM (z)"))
 #: rows the results table shows without scrolling (more scroll; the charts keep the rest of the height)
-TABLE_ROWS = 8
+TABLE_ROWS = 6
 
 
 class CampaignView(QtWidgets.QWidget):
@@ -339,6 +339,8 @@ class CampaignResults(QtWidgets.QWidget):
         self.split.setChildrenCollapsible(False)
         self.split.addWidget(self.table)
         self.split.addWidget(self.graphics)
+        self.split.setStretchFactor(0, 0)  # a taller window gives its height to the charts; the table keeps its rows
+        self.split.setStretchFactor(1, 1)
         layout = QtWidgets.QVBoxLayout(self)
         layout.addLayout(top)
         layout.addWidget(self.status)
@@ -407,6 +409,10 @@ class CampaignResults(QtWidgets.QWidget):
 
     def resizeEvent(self, event) -> None:  # noqa: N802 - Qt API
         super().resizeEvent(event)
+        self._share_height()
+
+    def showEvent(self, event) -> None:  # noqa: N802 - Qt API: loaded while hidden, sized when shown
+        super().showEvent(event)
         self._share_height()
 
     def show_drift(self) -> bool:
