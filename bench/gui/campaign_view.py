@@ -7,6 +7,7 @@ table and the drift charts of ``hilbench drift``."""
 from __future__ import annotations
 
 import html
+import math
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +25,8 @@ RESULT_COLUMNS = (("#", "order", 1.0), ("run", "key", None), ("repeat", "repeat"
                   ("b\n(N*m*s/rad)", "viscous", 1.0),
                   ("validation torque\nNRMSE (%)", "validation_torque_nrmse", 100.0),
                   ("winding\n(degC)", "temperature_mean", 1.0), ("verdict / reason", "verdict", None))
+#: a parameter's name on its chart's axis: the table's (a label longer than the chart is tall is cut)
+SHORT_NAMES = {column: header.split("\n")[0] for header, column, _scale in RESULT_COLUMNS}
 #: the drift charts, stacked and x-linked as the live plots are: (key, y axis label; {unit}: the parameter's)
 CHARTS = (("value", "{name} ({unit})"), ("ewma", "EWMA (z)"), ("cusum", "CUSUM (z)"))
 #: rows the results table shows without scrolling (more scroll; the charts keep the rest of the height)
@@ -347,10 +350,18 @@ class CampaignResults(QtWidgets.QWidget):
         layout.addWidget(self.split, 1)
         self._label_charts()
 
-    def _label_charts(self) -> None:
+    def _label_charts(self, values=()) -> None:
+        """Each chart's y label; the parameter's in the engineering unit of ``values`` (SI): 0.004 N*m*s/rad
+        reads 4 on a "(mN*m*s/rad)" axis, as the live plots do (the data stay SI, the axis scales its ticks)."""
+        from hilbench.analysis.figure_style import engineering
+
         name = self.parameter.currentText()
+        finite = [float(v) for v in values if v is not None and math.isfinite(v)]
+        factor, unit = engineering(self.units.get(name) or "", finite) if finite else (1.0, self.units.get(name))
         for key, label in CHARTS:
-            self.plots[key].getAxis("left").setLabel(label.format(name=name, unit=self.units.get(name) or "-"))
+            axis = self.plots[key].getAxis("left")
+            axis.setScale(factor if key == "value" else 1.0)
+            axis.setLabel(label.format(name=SHORT_NAMES.get(name, name), unit=unit or "-"))
 
     def _table_height(self) -> int:
         """Pixels the header and up to TABLE_ROWS rows need (all rows of a small campaign)."""
@@ -434,6 +445,7 @@ class CampaignResults(QtWidgets.QWidget):
             self.status.setText(f"{len(self.rows)} runs; no drift charts: {one_line(exc)}")
             return False
         label, s = next(iter(report.series.items()))
+        self._label_charts(s.value)
         self.drift = report.result_of(label)
         x = np.arange(s.value.size, dtype=float)
         value = self.plots["value"]

@@ -82,3 +82,19 @@ def test_a_missing_results_folder_is_one_line_in_the_status(view, tmp_path):
     view.path_edit.setText(str(tmp_path / "nowhere"))
     assert not view.load()
     assert TABLE_NAME in view.status.text() and view.table.rowCount() == 0
+
+
+def test_the_value_chart_is_labelled_in_engineering_units(view, results):
+    """The viscous coefficient (about 1e-3 N*m*s/rad) reads in mN*m*s/rad, as the live plots scale their axes: the
+    axis scales its ticks by 1000, the data stay SI."""
+    view.path_edit.setText(str(results))
+    view.parameter.setCurrentText("viscous")
+    assert view.load()
+    axis = view.plots["value"].getAxis("left")
+    assert "b (mN*m*s/rad)" in axis.labelString()
+    assert axis.scale == 1000.0
+    points = [i for i in view.plots["value"].listDataItems() if i.opts.get("symbol") == "o"][0]
+    assert np.nanmax(points.getData()[1]) < 2e-3  # SI
+    view.parameter.setCurrentText("breakaway")
+    assert "break-away (N*m)" in axis.labelString() and axis.scale == 1.0
+    assert view.plots["ewma"].getAxis("left").scale == 1.0
