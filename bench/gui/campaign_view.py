@@ -332,7 +332,7 @@ class CampaignResults(QtWidgets.QWidget):
             if row < len(CHARTS) - 1:
                 plot.hideAxis("bottom")
             self.plots[key] = plot
-        self.plots["cusum"].setLabel("bottom", "run (start order)")
+        self.plots["cusum"].setLabel("bottom", "run (# in the table: start order)")
         top = QtWidgets.QHBoxLayout()
         top.addWidget(self.path_edit, 1)
         top.addWidget(self.load_button)
@@ -447,7 +447,10 @@ class CampaignResults(QtWidgets.QWidget):
         label, s = next(iter(report.series.items()))
         self._label_charts(s.value)
         self.drift = report.result_of(label)
-        x = np.arange(s.value.size, dtype=float)
+        # x: each run's "#" in the table (start order over every row, failed ones included), so the chart and the
+        # table name a run by one number
+        order = {f"{r.get('campaign')}/{r.get('key')}": i + 1 for i, r in enumerate(self.rows)}
+        x = np.array([order.get(run, np.nan) for run in self.drift.runs], dtype=float)
         value = self.plots["value"]
         value.addItem(pg.ErrorBarItem(x=x, y=s.value, height=2 * np.nan_to_num(s.se), pen="#888"))
         value.plot(x, s.value, pen=None, symbol="o", symbolSize=5, symbolBrush="#1f77b4", symbolPen="#1f77b4",
@@ -461,7 +464,7 @@ class CampaignResults(QtWidgets.QWidget):
         self.plots["cusum"].addItem(pg.InfiniteLine(s.cusum_h, angle=0, pen="#d62728"))
         for cp in s.change_points:
             for plot in self.plots.values():
-                plot.addItem(pg.InfiniteLine(cp, angle=90, pen=pg.mkPen("#ff7f0e", width=2)))
+                plot.addItem(pg.InfiniteLine(x[cp], angle=90, pen=pg.mkPen("#ff7f0e", width=2)))
         points = ", ".join(self.drift.runs[cp] for cp in s.change_points) or "none"
         series = f" in {len(report.groups)} series, shown: {label}" if len(report.groups) > 1 else ""
         self.status.setText(f"{len(self.rows)} runs ({ok} ok){series}; {self.drift.baseline_line()}; {name}: change "

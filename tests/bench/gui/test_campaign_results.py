@@ -72,9 +72,16 @@ def test_results_tab_shows_the_runs_table_and_the_drift_charts(view, results):
     np.testing.assert_array_equal(ewma[np.isfinite(ewma)], truth.ewma[np.isfinite(truth.ewma)])
     # the step at run 40 (39 of the 59 ok runs, start order): one change point within +-3 runs, drawn on all charts
     assert len(truth.change_points) == 1 and abs(truth.change_points[0] - (STEP_AT - 1)) <= 3
+    # the x axis is the table's "#" (failed runs keep their number): the step's change point sits at the "#" of the
+    # run the status names, one past the series index after the failed run 8
+    shown = [i + 1 + (i >= FAILED) for i in truth.change_points]
     for plot in view.plots.values():
         lines = [i for i in plot.items if isinstance(i, pg.InfiniteLine) and i.angle == 90]
-        assert [line.value() for line in lines] == truth.change_points
+        assert [line.value() for line in lines] == shown
+    x = points.getData()[0]
+    assert x[0] == 1 and FAILED + 1 not in x and x[-1] == N
+    named = view.drift.runs[truth.change_points[0]].split("/")[1]
+    assert table.item(shown[0] - 1, _column("key")).text() == named
     assert "change points at c/id" in view.status.text()
 
 
