@@ -8,7 +8,7 @@ import pytest
 from PySide6 import QtCore, QtGui
 
 from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
-from hilbench.bench.campaign_analysis.table import TABLE_NAME
+from hilbench.bench.campaign_analysis.table import TABLE_NAME, to_table
 from hilbench.bench.gui.campaign_view import CampaignView
 
 RUNS = 6
@@ -80,3 +80,31 @@ def test_a_failing_analysis_is_one_red_line(view, qtbot, tmp_path):
     assert status == f"analyse failed: {camp}: is a campaign folder; the results go into a folder of their own"
     assert messages == [(status, True)]
     assert view.tabs.currentWidget() is not view.results and view.analyse_button.isEnabled()
+
+
+def test_a_failing_drift_is_one_red_line_and_writes_nothing(view, qtbot, tmp_path):
+    """Two analysed runs are too few for a baseline: the command's own reason, in red, and no report."""
+    import pyarrow.parquet as pq
+
+    from tests.bench.gui.test_campaign_results import _rows
+
+    results = tmp_path / "results"
+    results.mkdir()
+    pq.write_table(to_table(_rows()[:2]), results / TABLE_NAME)
+    view.results_edit.setText(str(results))
+    assert view.drift_button.isEnabled() and not view.analyse_button.isEnabled()  # no campaign folder given
+    assert view.drift()
+    qtbot.waitUntil(lambda: view.command is None, timeout=60000)
+    status = _plain(view.status)
+    assert "#c00000" in view.status.text() and status.startswith("drift failed: baseline of 2 runs: need 3")
+    assert not (results / "drift" / "drift.json").exists()
+
+
+def test_closing_stops_a_running_analysis(view, qtbot, tmp_path):
+    camp = tmp_path / "camp"
+    write_campaign(camp, SyntheticCampaign(runs=2, duration=0.5))
+    view.out_edit.setText(str(camp))
+    assert view.analyse() and view.busy
+    process = view.command.process
+    view.shutdown()
+    assert process.state() == QtCore.QProcess.ProcessState.NotRunning
