@@ -5,7 +5,9 @@ line the command printed (``hilbench analyse: error: ...``) without its prefix."
 
 from __future__ import annotations
 
+import os
 import re
+import signal
 import sys
 
 from PySide6 import QtCore
@@ -43,9 +45,18 @@ class CommandProcess(QtCore.QObject):
     def running(self) -> bool:
         return self.process.state() != QtCore.QProcess.ProcessState.NotRunning
 
-    def kill(self) -> None:
-        """Stop the command (the window closes); waits at most 5 s for it to go."""
-        if self.running():
+    def kill(self, grace: float = 5.0) -> None:
+        """Stop the command (the window closes): an interrupt first, as Ctrl-C would (``analyse`` then closes its
+        Dask cluster and the workers it started, and the results table keeps every finished row), then a kill
+        after ``grace`` s."""
+        if not self.running():
+            return
+        pid = self.process.processId()
+        if hasattr(signal, "SIGINT") and os.name == "posix" and pid > 0:
+            os.kill(pid, signal.SIGINT)
+        else:
+            self.process.terminate()
+        if not self.process.waitForFinished(int(grace * 1000)):
             self.process.kill()
             self.process.waitForFinished(5000)
 
