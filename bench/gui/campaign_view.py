@@ -344,6 +344,8 @@ class CampaignResults(QtWidgets.QWidget):
         self.split.addWidget(self.graphics)
         self.split.setStretchFactor(0, 0)  # a taller window gives its height to the charts; the table keeps its rows
         self.split.setStretchFactor(1, 1)
+        self._user_split = False  # the operator dragged the handle: keep their share until the next load
+        self.split.splitterMoved.connect(self._on_split_moved)
         layout = QtWidgets.QVBoxLayout(self)
         layout.addLayout(top)
         layout.addWidget(self.status)
@@ -371,8 +373,14 @@ class CampaignResults(QtWidgets.QWidget):
         return (header + rows * self.table.verticalHeader().defaultSectionSize()
                 + bar + 2 * self.table.frameWidth() + 6)
 
+    def _on_split_moved(self, *_args) -> None:
+        self._user_split = True
+
     def _share_height(self) -> None:
-        """The table gets the height of its rows (up to TABLE_ROWS), the charts the rest (at least half)."""
+        """The table gets the height of its rows (up to TABLE_ROWS), the charts the rest (at least half); not
+        after the operator moved the handle (until the next table is loaded)."""
+        if self._user_split:
+            return
         total = sum(self.split.sizes()) or self.split.height()
         table = min(self._table_height(), total // 2)
         self.split.setSizes([table, total - table])
@@ -416,6 +424,7 @@ class CampaignResults(QtWidgets.QWidget):
         self.table.sortByColumn(0, QtCore.Qt.SortOrder.AscendingOrder)
         self.table.resizeColumnsToContents()  # headers (their widest line) and values whole
         self.table.horizontalHeader().setStretchLastSection(True)
+        self._user_split = False
         self._share_height()
 
     def resizeEvent(self, event) -> None:  # noqa: N802 - Qt API

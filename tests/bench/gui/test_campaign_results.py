@@ -105,3 +105,20 @@ def test_the_value_chart_is_labelled_in_engineering_units(view, results):
     view.parameter.setCurrentText("breakaway")
     assert "break-away (N*m)" in axis.labelString() and axis.scale == 1.0
     assert view.plots["ewma"].getAxis("left").scale == 1.0
+
+
+def test_the_operator_keeps_the_height_they_gave_the_table(view, results, qtbot):
+    view.window().resize(800, 700)
+    view.window().show()
+    qtbot.waitExposed(view.window())
+    view.window().tabs.setCurrentWidget(view)  # the CampaignView holding the tab
+    view.path_edit.setText(str(results))
+    assert view.load()
+    table, charts = view.split.sizes()
+    view.split.moveSplitter(table + 120, 1)  # as a drag of the handle does (it emits splitterMoved)
+    moved = view.split.sizes()
+    assert moved[0] > table
+    view.window().resize(800, 760)
+    qtbot.wait(50)
+    assert view.split.sizes()[0] == moved[0]  # a resize gives its pixels to the charts, not back to the rule
+    assert view.load() and view.split.sizes()[0] < moved[0]  # a new table: the rule again
