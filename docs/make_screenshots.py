@@ -3,8 +3,10 @@
 Runs the real operator window offscreen, at 1280x800 (the smallest screen the layout is made for),
 against the simulated device (``sim://``): a short identification run (screenshot during the run), then
 the run browser on the file it wrote, with the identification analysis (screenshots of the channels and
-of the analysis), then the device-settings tab and the campaign tab. Nothing is staged: what the PNGs show
-is what the GUI shows.
+of the analysis), then the device-settings tab, and the campaign tab's Results after its *Analyse* button ran
+``hilbench analyse`` on a small campaign (12 simulated identification runs written by
+bench.campaign_analysis.synthetic, with a wear step at run 8: no device needed). Nothing is staged: what the PNGs
+show is what the GUI shows.
 """
 
 from __future__ import annotations
@@ -29,8 +31,10 @@ def main(argv: list[str] | None = None) -> int:
 
     from PySide6 import QtTest, QtWidgets
 
+    from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
     from hilbench.bench.gui.app import qt_problem
     from hilbench.bench.gui.main_window import MainWindow
+    from hilbench.firmware_sim.engine.drift import Drift
 
     problem = qt_problem()
     if problem:
@@ -87,6 +91,15 @@ def main(argv: list[str] | None = None) -> int:
             window.grab().save(str(args.out / SHOTS[3]))
             window.protocol.tabs.setCurrentIndex(0)
             window.tabs.setCurrentWidget(window.campaign)
+            campaign = Path(runs) / "campaign"
+            write_campaign(campaign, SyntheticCampaign(runs=12, duration=1.0, drift=Drift(wear_step=0.08),
+                                                       wear_step_at_run=8))
+            window.campaign.out_edit.setText(str(campaign))
+            window.campaign.analyse_options = ("--serial", "--no-dashboard")  # 12 short runs: no cluster
+            window.campaign.analyse_button.click()
+            if not spin(lambda: window.campaign.command is None, 120) or window.campaign.results.table.rowCount() != 12:
+                print(f"make_screenshots: analyse failed: {window.campaign.status.text()}", file=sys.stderr)
+                return 1
             spin(lambda: False, 0.3)
             window.grab().save(str(args.out / SHOTS[4]))
         finally:

@@ -16,6 +16,7 @@ from PySide6 import QtCore, QtWidgets
 
 from hilbench.analysis.figure_style import engineering
 from hilbench.bench.gui.display_buffer import RingBuffer, minmax_decimate
+from hilbench.bench.gui.plot_style import add_legend, style_plot, style_view
 from hilbench.common.units import AXIS_UNITS
 
 #: a setpoint: grey and dashed, drawn under the measured trace (a colour and a line style of its own)
@@ -61,17 +62,14 @@ class LivePlot(QtWidgets.QWidget):
         self._frozen: tuple[np.ndarray, np.ndarray] | None = None
         self._period = 1.0 / sample_rate  # s, learned from the blocks
 
-        self.graphics = pg.GraphicsLayoutWidget()
-        self.graphics.setBackground("w")
+        self.graphics = style_view(pg.GraphicsLayoutWidget())
         self.plots: list[pg.PlotItem] = []
         self.curves: dict[str, pg.PlotDataItem] = {}
         self._legends: dict[str, pg.LegendItem] = {}  # channel -> the legend of its panel
         for row, (title, unit, traces) in enumerate(PANELS):
-            plot = self.graphics.addPlot(row=row, col=0)
+            plot = style_plot(self.graphics.addPlot(row=row, col=0))
             plot.setLabel("left", title, units=None)
             plot.getAxis("left").setLabel(f"{title} ({unit})")
-            for side in ("left", "bottom"):  # the unit is the label's: never "position (rad) (x0.001)"
-                plot.getAxis(side).enableAutoSIPrefix(False)  # engineering units instead: _show_unit
             # no grid: an AxisItem with grid lines spans the plot area, so every curve update would repaint
             # (and re-render the tick labels of) all axes
             plot.setClipToView(True)
@@ -81,7 +79,7 @@ class LivePlot(QtWidgets.QWidget):
                 plot.hideAxis("bottom")
             plot.getAxis("left").setWidth(70)  # fixed: a new tick label width never re-lays out the plots
             plot.disableAutoRange()
-            legend_item = plot.addLegend(offset=(5, 5), labelTextColor="k") if len(traces) > 1 else None
+            legend_item = add_legend(plot) if len(traces) > 1 else None
             for name, pen, legend in traces:
                 self.curves[name] = plot.plot(pen=pg.mkPen(**pen), name=legend)
                 if legend_item is not None:

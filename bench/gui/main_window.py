@@ -402,6 +402,7 @@ class MainWindow(QtWidgets.QMainWindow):
             return
         self._shut = True
         self.live.timer.stop()
+        self.campaign.shutdown()  # an analysis or drift process of the campaign tab
         if self.run_worker is not None:
             self.run_worker.control.abort()
             self.run_worker.wait(10000)

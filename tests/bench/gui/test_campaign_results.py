@@ -72,9 +72,16 @@ def test_results_tab_shows_the_runs_table_and_the_drift_charts(view, results):
     np.testing.assert_array_equal(ewma[np.isfinite(ewma)], truth.ewma[np.isfinite(truth.ewma)])
     # the step at run 40 (39 of the 59 ok runs, start order): one change point within +-3 runs, drawn on all charts
     assert len(truth.change_points) == 1 and abs(truth.change_points[0] - (STEP_AT - 1)) <= 3
+    # the x axis is the table's "#" (failed runs keep their number): the step's change point sits at the "#" of the
+    # run the status names, one past the series index after the failed run 8
+    shown = [i + 1 + (i >= FAILED) for i in truth.change_points]
     for plot in view.plots.values():
-        lines = [i for i in plot.items() if isinstance(i, pg.InfiniteLine) and i.angle == 90]
-        assert [line.value() for line in lines] == truth.change_points
+        lines = [i for i in plot.items if isinstance(i, pg.InfiniteLine) and i.angle == 90]
+        assert [line.value() for line in lines] == shown
+    x = points.getData()[0]
+    assert x[0] == 1 and FAILED + 1 not in x and x[-1] == N
+    named = view.drift.runs[truth.change_points[0]].split("/")[1]
+    assert table.item(shown[0] - 1, _column("key")).text() == named
     assert "change points at c/id" in view.status.text()
 
 
@@ -86,8 +93,41 @@ def test_a_missing_results_folder_is_one_line_in_the_status(view, tmp_path):
 
 def test_the_headers_carry_the_units_of_the_runs_axis():
     rotary, linear = result_headers("rotary"), result_headers("linear")
-    assert rotary[_column("inertia")] == "inertia J (kg*m^2)" and linear[_column("inertia")] == "inertia J (kg)"
-    assert linear[_column("breakaway")] == "break-away force (N)"
-    assert linear[_column("viscous")] == "viscous coefficient b (N*s/m)"
-    assert rotary[_column("validation_torque_nrmse")] == "validation torque NRMSE (%)"
-    assert rotary[_column("temperature_mean")] == "winding (degC)" and rotary[_column("order")] == "#"
+    assert rotary[_column("inertia")] == "inertia J\n(kg*m^2)" and linear[_column("inertia")] == "inertia J\n(kg)"
+    assert linear[_column("breakaway")] == "break-away force\n(N)"
+    assert linear[_column("viscous")] == "viscous coefficient b\n(N*s/m)"
+    assert rotary[_column("validation_torque_nrmse")] == "validation torque NRMSE\n(%)"
+    assert rotary[_column("temperature_mean")] == "winding\n(degC)" and rotary[_column("order")] == "#"
+
+
+def test_the_value_chart_is_labelled_in_engineering_units(view, results):
+    """The viscous coefficient (about 1e-3 N*m*s/rad) reads in mN*m*s/rad, as the live plots scale their axes: the
+    axis scales its ticks by 1000, the data stay SI."""
+    view.path_edit.setText(str(results))
+    view.parameter.setCurrentText("viscous")
+    assert view.load()
+    axis = view.plots["value"].getAxis("left")
+    assert "b (mN*m*s/rad)" in axis.labelString()
+    assert axis.scale == 1000.0
+    points = [i for i in view.plots["value"].listDataItems() if i.opts.get("symbol") == "o"][0]
+    assert np.nanmax(points.getData()[1]) < 2e-3  # SI
+    view.parameter.setCurrentText("breakaway")
+    assert "break-away (N*m)" in axis.labelString() and axis.scale == 1.0
+    assert view.plots["ewma"].getAxis("left").scale == 1.0
+
+
+def test_the_operator_keeps_the_height_they_gave_the_table(view, results, qtbot):
+    view.window().resize(800, 700)
+    view.window().show()
+    qtbot.waitExposed(view.window())
+    view.window().tabs.setCurrentWidget(view)  # the CampaignView holding the tab
+    view.path_edit.setText(str(results))
+    assert view.load()
+    table, charts = view.split.sizes()
+    view.split.moveSplitter(table + 120, 1)  # as a drag of the handle does (it emits splitterMoved)
+    moved = view.split.sizes()
+    assert moved[0] > table
+    view.window().resize(800, 760)
+    qtbot.wait(50)
+    assert view.split.sizes()[0] == moved[0]  # a resize gives its pixels to the charts, not back to the rule
+    assert view.load() and view.split.sizes()[0] < moved[0]  # a new table: the rule again

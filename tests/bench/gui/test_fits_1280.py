@@ -362,3 +362,36 @@ def test_plan_experiments_calls_the_planner_with_the_connected_bench(window, qtb
     assert window.campaign.path_edit.text() == str(tmp_path / "plan.toml")
     assert window.banner.toolTip().splitlines() == _FakePlan().lines()
     assert "loaded in the Campaign tab" in window.banner.text() and window.tabs.currentWidget() is window.campaign
+
+
+def test_campaign_results_are_whole_and_styled_like_the_live_plots(window, qtbot, tmp_path):
+    """Issue 38: the Results tab's table showed one row, its header read "reak-away (N", its charts were black
+    while the live plots are white. At 1280x800 with a 12-run table: the first rows (up to TABLE_ROWS) are all in
+    view, every header line and every value fits its column, the charts share the live plots' background."""
+    import pyarrow.parquet as pq
+
+    from hilbench.bench.campaign_analysis.table import TABLE_NAME, to_table
+    from hilbench.bench.gui.campaign_view import TABLE_ROWS
+    from tests.bench.gui.test_campaign_results import _rows
+
+    pq.write_table(to_table(_rows()[:12]), tmp_path / TABLE_NAME)
+    results = window.campaign.results
+    window.tabs.setCurrentWidget(window.campaign)
+    window.campaign.tabs.setCurrentWidget(results)
+    results.path_edit.setText(str(tmp_path))
+    assert results.load()
+    _settle(qtbot)
+    table, header = results.table, results.table.horizontalHeader()
+    assert table.rowCount() == 12
+    for row in range(TABLE_ROWS):  # whole rows in the viewport, not one row and a scroll bar
+        assert table.rowViewportPosition(row) + table.rowHeight(row) <= table.viewport().height(), row
+    metrics = header.fontMetrics()
+    for col in range(table.columnCount()):
+        lines = table.horizontalHeaderItem(col).text().split("\n")
+        assert header.sectionSize(col) >= max(metrics.horizontalAdvance(line) for line in lines), lines
+        assert header.height() >= len(lines) * metrics.height(), lines
+        for row in range(table.rowCount()):
+            assert table.columnWidth(col) >= table.fontMetrics().horizontalAdvance(table.item(row, col).text())
+    live = window.live.graphics.backgroundBrush().color()
+    assert results.graphics.backgroundBrush().color() == live == QtGui.QColor("white")
+    assert not layout_problems(window)
