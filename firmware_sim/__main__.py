@@ -6,6 +6,7 @@ With ``--serial`` the first line on stdout is the pty path to open (nothing else
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 
 from hilbench.common.can import enlarge_receive_buffer
@@ -40,6 +41,16 @@ def check_bus_args(kind: str, interface: str, channel: str, node: int) -> None:
                              f"got {channel!r}")
 
 
+def check_pid_position(gains: list[float] | None, kind: str) -> None:
+    """Refuse --pid-position (ValueError, one line) but on a moteus, or with a gain negative or not finite."""
+    if gains is None:
+        return
+    if kind != "moteus":
+        raise ValueError("--pid-position is the simulated moteus controller's (--moteus)")
+    if not all(0.0 <= g < math.inf for g in gains):
+        raise ValueError(f"--pid-position gains must be finite and >= 0, got {' '.join(f'{g:g}' for g in gains)}")
+
+
 def build_parser(prog: str = "python -m hilbench.firmware_sim") -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=prog,
                                      description="Simulated hilbench amplifier (a real protocol peer).")
@@ -64,6 +75,9 @@ def build_parser(prog: str = "python -m hilbench.firmware_sim") -> argparse.Argu
                              "controlword received with that SYNC")
     parser.add_argument("--enable-latency", type=int, choices=range(4), default=0, metavar="{0..3}",
                         help="--canopen: SYNCs between an enable received by RPDO and operation enabled")
+    parser.add_argument("--pid-position", nargs=4, type=float, metavar=("KP", "KI", "KD", "ILIMIT"),
+                        help="--moteus: the controller's servo.pid_position kp (N*m/rev), ki (N*m/(rev*s)), kd "
+                             "(N*m*s/rev) and ilimit (N*m), closed inside it at every plant step; default 4 0 0.1 0")
     parser.add_argument("--udp-port", type=int, default=None,
                         help="--canopen, --odrive, --moteus on udp_multicast: UDP port (default 43113; buses on one "
                              "port hear each other)")
@@ -117,7 +131,9 @@ def _serve_drive(args, sim) -> int:
     if args.odrive:
         return odrive_sim.serve(args.interface, args.odrive, args.node, sim, stop, port=args.udp_port)
     if args.moteus:
-        return moteus_sim.serve(args.interface, args.moteus, args.node, sim, args.clock, stop=stop, port=args.udp_port)
+        gains = dict(zip(("kp", "ki", "kd", "ilimit"), args.pid_position or (), strict=False))
+        return moteus_sim.serve(args.interface, args.moteus, args.node, sim, args.clock, stop=stop, port=args.udp_port,
+                                **gains)
     return cia402_drive.serve(args.interface, args.canopen, args.node, sim, args.clock, stop=stop, port=args.udp_port,
                               order=args.order, enable_latency=args.enable_latency)
 
@@ -135,6 +151,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m hilbench.firmware
         if args.canopen or args.odrive or args.moteus:
             kind = "canopen" if args.canopen else "odrive" if args.odrive else "moteus"
             check_bus_args(kind, args.interface, args.canopen or args.odrive or args.moteus, args.node)
+            check_pid_position(args.pid_position, kind)
             return _serve_drive(args, sim)
         if not 0.0005 <= args.tick <= 0.1:
             raise ValueError(f"--tick must be within 0.0005..0.1 s, got {args.tick}")

@@ -641,13 +641,21 @@ static inline __attribute__((always_inline)) void substep(const hb_params *p, hb
 typedef char hb_run_cache_fits[sizeof(ms_cache) <= sizeof(((hb_run_cache *)0)->words) ? 1 : -1];
 
 static int run_samples(const hb_params *p, hb_state *s, ms_cache *c, const double *u, int64_t n, double dt,
-                       int substeps, int mode, hb_outputs *out);
+                       int substeps, int mode, hb_position_loop *loop, hb_outputs *out);
 
 int hb_run(const hb_params *p, hb_state *s, const double *u, int64_t n, double dt, int substeps,
            int mode, hb_outputs *out) {
     ms_cache cache;
     ms_fill(p, s, &cache);
-    return run_samples(p, s, &cache, u, n, dt, substeps, mode, out);
+    if (mode == HB_MODE_POSITION) return -2;  /* it needs its loop: hb_run_position */
+    return run_samples(p, s, &cache, u, n, dt, substeps, mode, NULL, out);
+}
+
+int hb_run_position(const hb_params *p, hb_state *s, hb_position_loop *loop, const double *target,
+                    int64_t n, double dt, int substeps, hb_outputs *out) {
+    ms_cache cache;
+    ms_fill(p, s, &cache);
+    return run_samples(p, s, &cache, target, n, dt, substeps, HB_MODE_POSITION, loop, out);
 }
 
 int hb_run_cached(const hb_params *p, hb_state *s, hb_run_cache *cache, const double *u, int64_t n, double dt,
@@ -657,14 +665,15 @@ int hb_run_cached(const hb_params *p, hb_state *s, hb_run_cache *cache, const do
         ms_fill(p, s, c);
         cache->valid = 1;
     }
-    int rc = run_samples(p, s, c, u, n, dt, substeps, mode, out);
+    if (mode == HB_MODE_POSITION) return -2;  /* it needs its loop: hb_run_position */
+    int rc = run_samples(p, s, c, u, n, dt, substeps, mode, NULL, out);
     if (rc != 0) cache->valid = 0;  /* a non-finite state: whatever comes next starts from a fresh cache */
     return rc;
 }
 
 /* hb_run from a filled Maxwell-slip cache `c` of the state `s` (kept up to date as the state advances). */
 static int run_samples(const hb_params *p, hb_state *s, ms_cache *c, const double *u, int64_t n, double dt,
-                       int substeps, int mode, hb_outputs *out) {
+                       int substeps, int mode, hb_position_loop *loop, hb_outputs *out) {
     const double h = dt / substeps;
     const double kt_true = p->torque_constant * (1.0 + p->torque_constant_error);
     const double lag_a = p->current_lag > 0.0 ? exp(-dt / p->current_lag) : 0.0;
@@ -705,6 +714,32 @@ static int run_samples(const hb_params *p, hb_state *s, ms_cache *c, const doubl
             } else {
                 s->pi_integral = integral;
             }
+        } else if (mode == HB_MODE_POSITION) {
+            double v_est = s->has_prev ? (pos - s->prev_position) / dt : 0.0;
+            if (!loop->est_valid || loop->est_time != s->time) {  /* (re)start from the measurement */
+                loop->est_position = pos;
+                loop->est_velocity = v_est;
+                loop->integral = 0.0;
+                loop->est_valid = 1;
+            } else if (loop->pll_hz > 0.0) {
+                const double w = HB_TWO_PI * loop->pll_hz;
+                loop->est_position += dt * loop->est_velocity;
+                const double e = pos - loop->est_position;
+                loop->est_position += 2.0 * w * dt * e;
+                loop->est_velocity += w * w * dt * e;
+            }
+            loop->est_time = s->time + dt;  /* where the loop's state stands after this sample's step */
+            if (loop->pll_hz > 0.0) v_est = loop->est_velocity;
+            double tau_cmd = loop->feedforward + loop->kd * (loop->velocity - v_est);
+            if (!isnan(u[k])) {
+                const double e = u[k] - pos;
+                loop->integral = clip(loop->integral + loop->ki * e * dt, -loop->ilimit, loop->ilimit);
+                tau_cmd += loop->kp * e + loop->integral;
+            } else {
+                tau_cmd += loop->integral;
+            }
+            tau_cmd = clip(tau_cmd, -loop->torque_limit, loop->torque_limit);
+            i_cmd = clip(tau_cmd / p->torque_constant, -p->current_limit, p->current_limit);
         } else {
             i_cmd = clip(u[k], -p->current_limit, p->current_limit);
         }

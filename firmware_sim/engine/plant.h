@@ -14,6 +14,7 @@
 #define HB_MAX_STACK 1024
 #define HB_MODE_CURRENT 0
 #define HB_MODE_VELOCITY 1
+#define HB_MODE_POSITION 2
 
 typedef struct {
     int n_elements;              /* Maxwell-slip elements, 0..HB_MAX_ELEMENTS */
@@ -116,9 +117,39 @@ typedef struct {
 void hb_state_init(hb_state *s, const hb_params *p, double theta0, double omega0, uint64_t seed);
 
 /* Run n samples of input u (A in current mode, rad/s in velocity mode), each held for dt and
- * integrated in `substeps` RK4 sub-steps. Returns 0, or -1 if the state became non-finite. */
+ * integrated in `substeps` RK4 sub-steps. Returns 0, -1 if the state became non-finite, or -2 for
+ * HB_MODE_POSITION (run by hb_run_position, with its loop). */
 int hb_run(const hb_params *p, hb_state *s, const double *u, int64_t n, double dt, int substeps,
            int mode, hb_outputs *out);
+
+/* The position loop of HB_MODE_POSITION (moteus's position PID), closed at every sample on the measured
+ * position pos: e = target - pos; I = clip(I + ki*e*dt, +-ilimit); torque = kp*e + I + kd*(velocity - v) +
+ * feedforward, clipped to +-torque_limit, then current = torque/torque_constant (nominal), clipped to
+ * +-current_limit. v is the encoder's velocity estimate: with pll_hz > 0 a critically damped second-order
+ * tracking loop on pos of natural frequency pll_hz (w = 2*pi*pll_hz: x += v*dt; e = pos - x; x += 2w*dt*e;
+ * v += w^2*dt*e), else the backward difference (pos[k] - pos[k-1])/dt. The estimate and I are kept here between
+ * calls; both restart (from the measurement, v from the backward difference, I = 0) when the plant ran
+ * otherwise since (est_time != the plant's time). A NaN target turns the proportional and integral terms off
+ * (I is held). */
+typedef struct {
+    double kp;                   /* N*m/rad */
+    double ki;                   /* N*m/(rad*s) */
+    double ilimit;               /* N*m, >= 0: the integral term's bound */
+    double kd;                   /* N*m*s/rad */
+    double velocity;             /* velocity command, rad/s */
+    double feedforward;          /* N*m */
+    double torque_limit;         /* N*m, > 0 (inf: none) */
+    double pll_hz;               /* natural frequency of the velocity estimator, Hz (0: backward difference) */
+    double integral;             /* the loop's state: the integral term, N*m, */
+    double est_position;         /* the velocity estimator's: rad, */
+    double est_velocity;         /* rad/s, */
+    double est_time;             /* and the plant time they stand at, s */
+    int32_t est_valid;
+} hb_position_loop;
+
+/* hb_run in HB_MODE_POSITION: target[k] (rad, or NaN) held for dt, the loop closed at every sample. */
+int hb_run_position(const hb_params *p, hb_state *s, hb_position_loop *loop, const double *target,
+                    int64_t n, double dt, int substeps, hb_outputs *out);
 
 /* hb_run's per-call set-up (the Maxwell-slip cache: O(N) in the elements, more than the sample's RK4 step at 16
  * elements) kept from one call to the next, for a caller that steps the plant a sample at a time (the device's

@@ -513,6 +513,7 @@ class Plant:
         self._mode = mode
         self._c = _CParams(params)
         self._state = ffi.new("hb_state *")
+        self._loop = ffi.new("hb_position_loop *")  # run_position's loop, its velocity estimate kept between calls
         lib.hb_state_init(self._state, self._c.struct, float(theta0), float(omega0), int(params.seed))
 
     @property
@@ -600,13 +601,48 @@ class Plant:
         if not np.all(np.isfinite(u)):
             bad = int(np.argmax(~np.isfinite(u)))
             raise PlantParameterError(f"input contains NaN or inf (first at sample {bad})")
+        return self._run(lambda c_u, c_out: lib.hb_run(self._c.struct, self._state, c_u, u.size, self.dt,
+                                                       self.substeps, MODES[self._mode], c_out), u)
+
+    def run_position(self, target: np.ndarray, kp: float, kd: float, velocity: float = 0.0,
+                     feedforward: float = 0.0, torque_limit: float = math.inf, pll_hz: float = 0.0,
+                     ki: float = 0.0, ilimit: float = 0.0) -> PlantOutput:
+        """Simulate ``len(target)`` samples with a position PID loop closed at every sample (at 1/dt), as a drive
+        closes it inside its controller (moteus's): ``e = target[k] - pos[k]``, ``I = clip(I + ki*e*dt,
+        +-ilimit)``, ``torque = kp*e + I + kd*(velocity - v[k]) + feedforward`` clipped to +-``torque_limit``,
+        then ``current = torque/torque_constant`` clipped to the current limit. ``pos`` is the measured
+        (quantised, noisy) position; ``v`` its backward difference over one sample, or with ``pll_hz`` > 0 the
+        estimate of a critically damped second-order tracking loop of that natural frequency (Hz) on ``pos`` (an
+        encoder PLL, as moteus's). ``I`` and the estimate are kept by this plant from one call to the next and
+        restart (I = 0) after the plant ran otherwise (plant.h, ``hb_position_loop``). A NaN ``target`` turns the
+        proportional and integral terms off (I held). Units: target rad, kp N*m/rad, ki N*m/(rad*s), ilimit N*m,
+        kd N*m*s/rad, velocity rad/s, feedforward N*m. ``current_cmd`` of the outputs is the loop's current."""
+        target = np.ascontiguousarray(target, dtype=np.float64)
+        if target.ndim != 1:
+            raise PlantParameterError(f"target must be 1-D, got shape {target.shape}")
+        if np.any(np.isinf(target)):
+            raise PlantParameterError(f"target contains inf (first at sample {int(np.argmax(np.isinf(target)))})")
+        for name, value in (("kp", kp), ("kd", kd), ("pll_hz", pll_hz), ("ki", ki), ("ilimit", ilimit)):
+            _non_negative(name, value)
+        _finite("velocity", velocity)
+        _finite("feedforward", feedforward)
+        _positive("torque_limit", torque_limit, allow_inf=True)
+        if pll_hz * self.dt > 0.1:  # 2w*dt <= 1.26: the estimator's discrete loop well inside its stable range
+            raise PlantParameterError(f"pll_hz must be at most 0.1/dt = {0.1 / self.dt:g} Hz, got {pll_hz:g}")
+        loop = self._loop
+        loop.kp, loop.kd, loop.velocity, loop.feedforward = kp, kd, velocity, feedforward
+        loop.torque_limit, loop.pll_hz, loop.ki, loop.ilimit = torque_limit, pll_hz, ki, ilimit
+        return self._run(lambda c_u, c_out: lib.hb_run_position(self._c.struct, self._state, loop, c_u,
+                                                                target.size, self.dt, self.substeps, c_out), target)
+
+    def _run(self, call, u: np.ndarray) -> PlantOutput:
+        """``call(input pointer, hb_outputs pointer)`` into outputs of ``u.size`` samples."""
         out = PlantOutput.empty(u.size)
         c_out = ffi.new("hb_outputs *")
         for name in OUTPUT_UNITS:
             ctype = "int64_t *" if name == "counts" else "double *"
             setattr(c_out, name, ffi.cast(ctype, ffi.from_buffer(getattr(out, name))))
-        rc = lib.hb_run(self._c.struct, self._state, ffi.cast("const double *", ffi.from_buffer(u)),
-                        u.size, self.dt, self.substeps, MODES[self._mode], c_out)
+        rc = call(ffi.cast("const double *", ffi.from_buffer(u)), c_out)
         if rc != 0:
             raise FloatingPointError("plant state became non-finite; check parameters and input size")
         return out

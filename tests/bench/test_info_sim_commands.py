@@ -23,6 +23,15 @@ def test_bench_info_bad_url_is_one_line(capsys):
     assert err.count("\n") == 1 and "unknown scheme" in err
 
 
+def test_bench_sim_refuses_bad_moteus_position_gains_in_one_line(capsys):
+    # before any bus opens or the simulator process starts: a negative gain, and gains given to a non-moteus drive
+    for argv, words in ((["--moteus", "239.1.2.3", "--pid-position", "4", "-1", "0.1", "0"], "finite and >= 0"),
+                        (["--odrive", "239.1.2.3", "--pid-position", "4", "0", "0.1", "0"], "(--moteus)")):
+        assert main(["sim", *argv, "--interface", "udp_multicast"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "--pid-position" in err and words in err, err
+
+
 def test_bench_sim_prints_pty_path_first():
     proc = subprocess.Popen([sys.executable, "-m", "hilbench.bench.cli", "sim", "--serial", "--pacing", "lockstep"],
                             stdout=subprocess.PIPE, cwd=ROOT)

@@ -26,6 +26,10 @@ def register(subparsers) -> None:
                              "or their count")
     parser.add_argument("--udp-port", type=int, default=None,
                         help="--canopen, --odrive, --moteus on udp_multicast: UDP port")
+    parser.add_argument("--pid-position", nargs=4, type=float, metavar=("KP", "KI", "KD", "ILIMIT"),
+                        help="--moteus: the controller's servo.pid_position kp (N*m/rev), ki (N*m/(rev*s)), kd "
+                             "(N*m*s/rev), ilimit (N*m), closed inside it at every plant step (default 4 0 0.1 0); "
+                             "a host's URL gives the same kp and kd (&kp=&kd=)")
     parser.add_argument("--order", choices=("apply-then-sample", "sample-then-apply"), default="apply-then-sample",
                         help="--canopen: a SYNC's TPDO reports the state after (default) or before its controlword")
     parser.add_argument("--enable-latency", type=int, choices=range(4), default=0, metavar="{0..3}",
@@ -52,6 +56,7 @@ def firmware_argv(args) -> list[str]:
         return argv + kind + ["--interface", args.interface, "--node", str(args.node), "--clock", args.clock] \
             + [f"--{k}={getattr(args, k)}" for k in ("config", "seed") if getattr(args, k) is not None] \
             + ([f"--udp-port={args.udp_port}"] if args.udp_port else []) \
+            + (["--pid-position", *map(repr, args.pid_position)] if args.pid_position else []) \
             + ([f"--order={args.order}", f"--enable-latency={args.enable_latency}"] if args.canopen else [])
     argv += ["--serial"] if args.serial else ["--can", args.can, "--interface", args.interface,
                                               "--node", str(args.node)]
@@ -71,10 +76,11 @@ def run(args) -> int:
 
         load_sim_config(args.config, seed=args.seed)
     if not args.serial:  # bus, channel and node refused in one line here, not as a traceback in the simulator
-        from hilbench.firmware_sim.__main__ import check_bus_args
+        from hilbench.firmware_sim.__main__ import check_bus_args, check_pid_position
 
         kind = next(k for k in ("can", "canopen", "odrive", "moteus") if getattr(args, k) is not None)
         check_bus_args(kind, args.interface, getattr(args, kind), args.node)
+        check_pid_position(args.pid_position, kind)
     sys.stdout.flush()
     os.execv(sys.executable, firmware_argv(args))
     return 0  # not reached
