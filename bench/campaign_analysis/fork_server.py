@@ -15,6 +15,8 @@ WORKER_MODULES = ("numpy", "scipy.signal", "scipy.optimize", "scipy.interpolate"
                   "hilbench.analysis.identification.identify", "hilbench.analysis.identification.maxwell_fit",
                   "hilbench.analysis.identification.output_error", "hilbench.analysis.record",
                   "hilbench.bench.campaign_analysis.engine")
+#: most local workers (each a process with its own imports; more than the host's cores only slow it down)
+MAX_WORKERS = 256
 #: one BLAS/OpenMP thread per worker, as Dask's pre-spawn environment gives a spawned worker
 THREAD_LIMITS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
 

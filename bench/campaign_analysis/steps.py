@@ -79,6 +79,7 @@ class StepSettings:
     residual_start: tuple[str, ...] = ("inertia", "maxwell_slip")
     presliding_replicates: int = 20
     skeleton_mass: float | None = None  # J (kg*m^2) or m (kg); None: the run's declared calibration inertia
+    allow_incomplete: bool = False  # analyse aborted or short runs too (--allow-incomplete), as the commands do
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -116,7 +117,8 @@ def identify_step(path: str, settings: StepSettings) -> dict[str, Any]:
     from hilbench.analysis.record_split import split
     from hilbench.bench.verdict import judge
 
-    rec = load_record(path, channels=("temperature",))  # the one loader: an aborted or short run is a failed row
+    # the one loader: an aborted or short run is a failed row (unless --allow-incomplete)
+    rec = load_record(path, channels=("temperature",), allow_incomplete=settings.allow_incomplete)
     head, tail = split(rec, settings.validation_fraction)
     lip = LipSettings(n_thresholds=settings.thresholds, coulomb=settings.coulomb, offset=settings.offset)
     res = analyse(head, lip, method=settings.method, validation=tail)
@@ -139,8 +141,9 @@ def identify_step(path: str, settings: StepSettings) -> dict[str, Any]:
                     100 * f[f"{where}_position_nrmse_segmented"], where, residual_hint=False)
     grade = verdict.split(":", 1)[1].split()[0] if verdict.startswith("verdict:") else "none"
     row["verdict"] = grade + ("; the open-loop position drifts" if "position drifts" in verdict else "")
-    if "temperature" in rec.channels:
-        row["temperature_mean"] = float(np.mean(rec.channels["temperature"]))
+    temperature = rec.channels.get("temperature")
+    if temperature is not None and np.isfinite(temperature).any():  # NaN: the protocol's "no reading"
+        row["temperature_mean"] = float(np.nanmean(temperature))
     return row
 
 
@@ -156,7 +159,7 @@ def _held_out(path: str, settings: StepSettings, step: str):
 
     if settings.validation_fraction <= 0:
         raise AnalysisError(f"{step} scores models on the held-out tail: --validation-fraction must be > 0")
-    rec = load_record(path)
+    rec = load_record(path, allow_incomplete=settings.allow_incomplete)
     head, tail = split(rec, settings.validation_fraction)
     return rec, head, tail
 
@@ -204,7 +207,7 @@ def presliding_step(path: str, settings: StepSettings) -> dict[str, Any]:
     from hilbench.analysis import presliding
     from hilbench.analysis.record import load_record
 
-    rec = load_record(path)
+    rec = load_record(path, allow_incomplete=settings.allow_incomplete)
     res = presliding.analyse(rec, replicates=settings.presliding_replicates)
     q, e = res.quantities, res.uncertainties
     row: dict[str, Any] = {"validation_force_relative_error": res.fit.relative_rms,
@@ -220,7 +223,7 @@ def afrf_step(path: str, settings: StepSettings) -> dict[str, Any]:
     reads; the row summarises the grid (:data:`COLUMNS`)."""
     from hilbench.analysis import afrf
 
-    rec = afrf.load(path)
+    rec = afrf.load(path, allow_incomplete=settings.allow_incomplete)
     res = afrf.analyse(rec)
     c1, c3 = res.response[..., 0], res.response[..., min(2, res.n_harmonics - 1)]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -241,7 +244,7 @@ def skeleton_step(path: str, settings: StepSettings) -> dict[str, Any]:
     from hilbench.analysis import skeleton
     from hilbench.analysis.record import load_record
 
-    rec = load_record(path)
+    rec = load_record(path, allow_incomplete=settings.allow_incomplete)
     res = skeleton.analyse([rec], skeleton.SkeletonSettings(mass=settings.skeleton_mass))
     a, k = np.asarray(res.curves.amplitude, float), np.asarray(res.curves.stiffness, float)
     ok = np.isfinite(a) & np.isfinite(k)
