@@ -388,6 +388,8 @@ def analyse(folders: list[Path], out: Path, steps: tuple[str, ...] = ("identify"
     if workers is not None and not 1 <= workers <= MAX_WORKERS:
         raise AnalyseError(f"--workers must be in 1..{MAX_WORKERS}, got {workers}")
     t0, cpu0 = time.perf_counter(), time.process_time()
+    if not serial and (scheduler or scheduler_file):
+        scheduler, scheduler_file = _connect(scheduler, scheduler_file), None  # a Dask scheduler, before any work
     if not (serial or scheduler or scheduler_file):
         start_fork_server()  # its imports (2 s) overlap the planning
     try:
@@ -556,7 +558,7 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
         except ImportError:
             if verbose:
                 say("dask dashboard: not available (it needs the bokeh package); going on without it")
-    address = _connect(scheduler, scheduler_file) if (scheduler or scheduler_file) else None
+    address = scheduler  # checked by _connect
     cluster = None
     # allowed-failures 1: a task whose worker dies is given to a fresh worker once. worker-saturation 1.0: a
     # worker holds only the task it runs (at the default 1.1 a one-thread worker also holds a queued task, and
