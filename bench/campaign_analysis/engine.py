@@ -392,6 +392,7 @@ def analyse(folders: list[Path], out: Path, steps: tuple[str, ...] = ("identify"
         scheduler, scheduler_file = _connect(scheduler, scheduler_file), None  # a Dask scheduler, before any work
     if not (serial or scheduler or scheduler_file):
         start_fork_server()  # its imports (2 s) overlap the planning
+    out = Path(out).absolute()  # a remote worker resolves a relative path against its own directory
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -478,8 +479,9 @@ def _died(task: Task, exc: BaseException, out: Path) -> Outcome:
     return row_key(row), row["status"], row["error"], None
 
 
-def _check_writable(results: str) -> str | None:
-    """In a worker: None if it can write the results folder, else why not (one line)."""
+def _check_writable(results: str, dask_worker: Any = None) -> str | None:
+    """In a worker (``Client.run`` passes ``dask_worker``): None if it can write the results folder, else why
+    not (one line)."""
     import uuid
 
     probe = Path(results) / f".probe-{uuid.uuid4().hex[:8]}.tmp"
@@ -487,7 +489,8 @@ def _check_writable(results: str) -> str | None:
         probe.write_bytes(b"")
         probe.unlink()
     except OSError as exc:
-        return f"{_where()} cannot write the results folder {results} ({exc.strerror})"
+        where = f"worker {dask_worker.address}" if dask_worker is not None else _where()
+        return f"{where} cannot write the results folder {results} ({exc.strerror})"
     return None
 
 
