@@ -78,6 +78,14 @@ class Summary:
     dashboard: str | None = None
     failures: list[str] = field(default_factory=list)
     client_cpu: float = 0.0    # s of this process's CPU (the client's, and on a local cluster its scheduler's)
+    startup_cpu: float = 0.0   # of client_cpu: before the first task (imports, planning, cluster start)
+    work_cpu: float = 0.0      # of client_cpu: from the first task to the table written (not the cluster's close)
+
+    @property
+    def client_cpu_per_run(self) -> float:
+        """s of this process's CPU per analysed run from the first task to the table: what limits many workers
+        (the scheduler and the client share this process and its GIL), measurable on 2 cores."""
+        return self.work_cpu / max(1, self.analysed + self.skipped)
 
 
 def one_line(exc: BaseException) -> str:
@@ -402,14 +410,14 @@ def analyse(folders: list[Path], out: Path, steps: tuple[str, ...] = ("identify"
                 "or use another -o")
     with folder_lock(out, LOCK_NAME, AnalyseError, busy, say):
         summary = _analyse_locked(folders, out, steps, settings, serial, workers, scheduler, scheduler_file,
-                                  resume, progress, functions or {}, say, verbose, dashboard, t0)
+                                  resume, progress, functions or {}, say, verbose, dashboard, t0, cpu0)
     summary.wall_time = time.perf_counter() - t0
     summary.client_cpu = time.process_time() - cpu0
     return summary
 
 
 def _analyse_locked(folders, out, steps, settings, serial, workers, scheduler, scheduler_file, resume, progress,
-                    fn, say, verbose, dashboard, t0) -> Summary:
+                    fn, say, verbose, dashboard, t0, cpu0) -> Summary:
     results = ResultsFolder(out, say)
     results.clean_leftovers()  # of a killed analysis: this one holds the lock, so none is work in progress
     existing = results.read_rows()
@@ -444,19 +452,23 @@ def _analyse_locked(folders, out, steps, settings, serial, workers, scheduler, s
             from threadpoolctl import threadpool_limits
 
             warm_up()
-            summary.startup_time = time.perf_counter() - t0
+            summary.startup_time, summary.startup_cpu = time.perf_counter() - t0, time.process_time() - cpu0
             # one BLAS thread, as each Dask worker has (OMP_NUM_THREADS=1): the fits' matrices are small, and
             # OpenBLAS's second thread spun a second core for nothing (200 short runs: 29.9 s of CPU in 15.3 s,
             # against 14.8 s of CPU in 13.9 s with one thread)
+            cpu = time.process_time()
             with threadpool_limits(limits=1, user_api="blas"):
                 for part in chunk(tasks, 1):
                     record(part, execute_chunk(_items(part), settings, fn, str(out)))
+            summary.work_cpu += time.process_time() - cpu  # (serial: the analyses themselves)
         elif tasks:
-            _on_cluster(tasks, settings, fn, record, summary, workers, scheduler, scheduler_file, say, verbose,
-                        dashboard, t0, out)
+            _on_cluster(tasks, settings, fn, record, summary, workers, scheduler, say, verbose, dashboard, t0, cpu0,
+                        out)
     finally:
         bar.close()
+    cpu = time.process_time()
     summary.table = results.compact(results.read_rows(), current, unplanned)
+    summary.work_cpu += time.process_time() - cpu
     return summary
 
 
@@ -546,8 +558,8 @@ def _connect(scheduler: str | None, scheduler_file: str | None) -> str:
 
 
 def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunction], record,
-                summary: Summary, workers: int | None, scheduler: str | None, scheduler_file: str | None,
-                say: Callable[[str], None], verbose: bool, want_dashboard: bool, t0: float, out: Path) -> None:
+                summary: Summary, workers: int | None, scheduler: str | None, say: Callable[[str], None],
+                verbose: bool, want_dashboard: bool, t0: float, cpu0: float, out: Path) -> None:
     import dask
     from distributed import Client, LocalCluster, as_completed
     from distributed.scheduler import KilledWorker
@@ -602,7 +614,7 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
                 if refused:
                     raise AnalyseError(refused[0])
             client.run(warm_up)  # a remote worker imports before the tasks (a forked one has); startup_time: how long
-            summary.startup_time = time.perf_counter() - t0
+            summary.startup_time, summary.startup_cpu = time.perf_counter() - t0, time.process_time() - cpu0
             n_workers = len(client.scheduler_info()["workers"]) or 1
             futures = as_completed()
             submitted: dict[Any, list[Task]] = {}
@@ -612,6 +624,7 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
                 submitted[future] = part
                 futures.add(future)
 
+            loop_cpu = time.process_time()
             for part in chunk(todo, n_workers):
                 submit(part)
             for future in futures:
@@ -627,6 +640,7 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
                 except Exception as exc:  # e.g. a result that cannot be unpickled: the chunk's runs fail here
                     outcomes = [_died(task, exc, out) for task in part]
                 record(part, outcomes)
+            summary.work_cpu += time.process_time() - loop_cpu
         finally:
             client.close()
             if cluster is not None:

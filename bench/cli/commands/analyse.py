@@ -115,6 +115,7 @@ def run(args: argparse.Namespace) -> int:
     for line in summary.failures:
         outputs.say(f"failed: {line}")
     outputs.say(f"{summary.analysed} analysed ({summary.failed} failed), {summary.skipped} already there, "
-                f"{summary.total} rows in all ({summary.wall_time:.1f} s, {summary.startup_time:.1f} s of it start-up) "
+                f"{summary.total} rows in all ({summary.wall_time:.1f} s, {summary.startup_time:.1f} s of it start-up; "
+                f"client CPU {1e3 * summary.client_cpu_per_run:.2f} ms per run) "
                 f"-> {summary.table}")
     return 0
