@@ -1,9 +1,11 @@
 """Analyse every run of one or more campaign folders, serially or on a Dask cluster, into a results folder.
 
-Tasks take a chunk of run files' paths (up to :data:`MAX_CHUNK`) and open each inside the worker; what comes
-back is one small dict per run. The client alone writes the table (table.ResultsFolder): one part per chunk as it
-arrives, compacted at the end. Chunks because a Dask task costs the client and the scheduler (which share one
-process and its GIL on a LocalCluster) about 30 ms of CPU, a third of a short run's analysis.
+The client reads the campaign indexes and stats the run files (it opens none: a FIFO or a device is a failed row at
+once), and holds the results folder's lock (table.LOCK_NAME) throughout. Tasks take a chunk of runs (up to
+:data:`MAX_CHUNK`); the worker hashes each file, checks its uid against the index, analyses it unless its row is
+there, writes the chunk's rows as one part of the results folder (table.write_part) and returns only their keys.
+The client compacts the parts into the table at the end. Chunks because a Dask task costs the client and the
+scheduler (which share one process and its GIL on a LocalCluster) 1-4 ms of CPU.
 
 Faults: a step that raises gives a row with status ``failed`` and the one-line reason (caught in the worker).
 A worker that dies (segfault, out of memory, ``os._exit``) loses its task; the scheduler gives it to a fresh

@@ -320,3 +320,16 @@ def test_a_run_a_worker_cannot_open_is_a_failed_row_naming_where(campaign, tmp_p
             "base": {"campaign_uid": "c", "key": "gone", "run_id": "u", "step": "identify"}}
     (outcome,) = execute_chunk([item], StepSettings(), FAST, str(tmp_path / "r"))
     assert outcome[1] == "failed" and f"cannot open on host {socket.gethostname()}" in outcome[2]
+
+
+def test_the_client_plans_without_opening_a_run_file(campaign, tmp_path, monkeypatch):
+    """The client's work per run is a stat: hashing and reading are the workers' (16 workers are fed by one client)."""
+    from hilbench.bench.campaign_analysis import engine
+
+    opened: list[str] = []
+    real_open, real_os_open = open, os.open
+    monkeypatch.setattr("builtins.open", lambda f, *a, **k: (opened.append(str(f)), real_open(f, *a, **k))[1])
+    monkeypatch.setattr(os, "open", lambda f, *a, **k: (opened.append(str(f)), real_os_open(f, *a, **k))[1])
+    tasks, own, reused, unplanned = engine.plan([campaign], ("identify",), StepSettings())
+    assert len(tasks) == 6 and not own and not reused and not unplanned
+    assert not [f for f in opened if f.endswith(".h5")], opened
