@@ -333,3 +333,15 @@ def test_the_client_plans_without_opening_a_run_file(campaign, tmp_path, monkeyp
     tasks, own, reused, unplanned = engine.plan([campaign], ("identify",), StepSettings())
     assert len(tasks) == 6 and not own and not reused and not unplanned
     assert not [f for f in opened if f.endswith(".h5")], opened
+
+
+def test_a_read_only_older_campaign_gets_a_uid_from_its_runs(campaign, tmp_path, monkeypatch):
+    from hilbench.bench.campaign_analysis.engine import campaign_uid
+
+    doc = _index(campaign)
+    # as the folder of an archive mounted read-only looks (root may write anywhere, so it is said here)
+    monkeypatch.setattr(os, "access", lambda path, mode: mode != os.W_OK)
+    uid = campaign_uid(campaign, doc)
+    copy = tmp_path / "copy"
+    shutil.copytree(campaign, copy)
+    assert uid.startswith("runs-") and "uid" not in _index(campaign) and campaign_uid(copy, _index(copy)) == uid
