@@ -171,19 +171,24 @@ def choose_torque_channel(channels: Sequence[str], requested: str | None, path: 
     raise AnalysisError(f"{path}: no torque channel (torque or torque_cmd; has: {', '.join(sorted(names))})")
 
 
-def numeric(values: Any, name: str, path: object) -> np.ndarray:
-    """``values`` as a float64 array, or a one-line :class:`AnalysisError` saying what is wrong with it."""
+#: channels of sensor readings where NaN is the protocol's "no reading" (a missing value, not a damaged record)
+READINGS = ("temperature",)
+
+
+def numeric(values: Any, name: str, path: object, missing_ok: bool = False) -> np.ndarray:
+    """``values`` as a float64 array, or a one-line :class:`AnalysisError` saying what is wrong with it.
+    ``missing_ok``: NaN (no reading) passes; an infinity does not."""
     raw = np.asarray(values)
     if raw.dtype.kind not in "biuf":
         what = "strings" if raw.dtype.kind in "SUO" else raw.dtype.name
         raise AnalysisError(f"{path}: channel {name!r} holds {what}, not numbers")
     arr = raw.astype(float)
-    bad = ~np.isfinite(arr)
+    bad = np.isinf(arr) if missing_ok else ~np.isfinite(arr)
     if bad.any():
         i = int(np.argmax(bad))
         raise AnalysisError(f"{path}: channel {name!r} has {int(bad.sum())} non-finite value(s), first at sample {i}")
-    if arr.size and float(np.max(np.abs(arr))) > MAX_ABS_VALUE:
-        i = int(np.argmax(np.abs(arr)))
+    if arr.size and float(np.nanmax(np.abs(arr), initial=0.0)) > MAX_ABS_VALUE:
+        i = int(np.nanargmax(np.abs(arr)))
         raise AnalysisError(f"{path}: channel {name!r} sample {i} is {arr[i]:.3g}, beyond the analysis bound "
                             f"+-{MAX_ABS_VALUE:g}")
     return arr
@@ -241,7 +246,7 @@ def load_record(path: str | Path, *, torque_channel: str | None = None, timing: 
         for c in channels:
             key = LINEAR_ALIASES.get(c, c) if run.axis == "linear" else c
             if key in run.channels and key not in ("position", name):
-                extra[key] = numeric(run.channel(key), key, path)
+                extra[key] = numeric(run.channel(key), key, path, missing_ok=key in READINGS)
         notes: list[str] = []
         if host_sampled(run.device, run.channels):  # a drive sampled at each SYNC: on its real times
             host_time = numeric(run.channel(HOST_TIME), HOST_TIME, path)

@@ -43,8 +43,9 @@ from multiprocessing import forkserver
 getattr(forkserver._forkserver, "_stop", lambda: None)()
 sys.exit(code)
 """
-#: the command's last line: "... rows in all (W s, S s of it start-up) -> TABLE"
-SUMMARY = re.compile(r"\((?P<wall>[0-9.]+) s, (?P<startup>[0-9.]+) s of it start-up\) -> (?P<table>.+)$")
+#: the command's last line: "... rows in all (W s, S s of it start-up; client CPU C ms per run) -> TABLE"
+SUMMARY = re.compile(r"\((?P<wall>[0-9.]+) s, (?P<startup>[0-9.]+) s of it start-up; client CPU (?P<client>[0-9.]+) "
+                     r"ms per run\) -> (?P<table>.+)$")
 
 
 def _children_cpu() -> float:
@@ -67,6 +68,7 @@ def _timed(folder: Path, out: Path, mode: str) -> dict:
         raise RuntimeError(f"hilbench analyse: no summary line in {done.stdout!r}")
     # start-up as the command counts it (cluster start, imports) plus what precedes its clock (interpreter, CLI)
     return {"wall": wall, "startup": float(m["startup"]) + wall - float(m["wall"]), "table": m["table"],
+            "client_ms": float(m["client"]),
             "cpu": _children_cpu() - cpu0, "load": max(load0, os.getloadavg()[0])}
 
 
@@ -134,10 +136,21 @@ def _speedup_rows(tmp: Path, n: int, duration: float, fs: float, target: bool) -
     pairs = sorted(s_["wall"] / c["wall"] for s_, c in zip(serials, clusters, strict=True))
     phase_serial, phase_cluster = serial["wall"] - serial["startup"], cluster["wall"] - cluster["startup"]
     goal = ">= 1.7x (quiet machine)" if target else "informational: 65 ms of work per run"
+    # the 1.7x is judged only in a round whose two serial halves reach 1.8x: below that the machine, not the
+    # cluster, decides (other jobs on a shared VM)
+    judged = target and ceiling is not None and ceiling >= 1.8
+    client_ms = max(r["client_ms"] for r in clusters)
     return [
         {"name": f"analyse_{tag}_speedup_2_workers_end_to_end", "value": speedup, "unit": "x",
          "baseline_name": f"fastest serial wall / fastest cluster wall of {len(serials)}", "baseline_value": None,
-         "ratio": None, "target": goal, "ok": speedup >= 1.7 if target else None},
+         "ratio": None, "target": goal + ("" if judged or not target else
+                                          f"; not judged: ceiling {ceiling or 0:.2f}x < 1.8x this round"),
+         "ok": speedup >= 1.7 if judged else None},
+        # the client's (and the local scheduler's: one process, one GIL) CPU per run after start-up: with 16 workers
+        # it must serve 16 runs in one run's time, so this, not the 2-core speedup, shows what limits a big host
+        {"name": f"analyse_{tag}_client_cpu_per_run", "value": client_ms, "unit": "ms",
+         "baseline_name": "worst of the cluster analyses", "baseline_value": None, "ratio": None,
+         "target": "<= 1 ms" if target else None, "ok": client_ms <= 1.0 if target else None},
         {"name": f"analyse_{tag}_speedup_2_workers_median_pair", "value": pairs[len(pairs) // 2], "unit": "x",
          "baseline_name": "median of serial/cluster over the alternating pairs",
          "baseline_value": pairs[0], "ratio": None, "target": f"pairs {', '.join(f'{v:.2f}' for v in pairs)}",
@@ -157,7 +170,8 @@ def _speedup_rows(tmp: Path, n: int, duration: float, fs: float, target: bool) -
          "baseline_value": serial["wall"], "ratio": cluster["wall"] / serial["wall"], "target": None, "ok": None},
         {"name": f"analyse_{tag}_cluster_startup", "value": cluster["startup"], "unit": "s",
          "baseline_name": "serial start-up", "baseline_value": serial["startup"],
-         "ratio": cluster["startup"] / serial["startup"] if serial["startup"] else None, "target": None, "ok": None},
+         "ratio": cluster["startup"] / serial["startup"] if serial["startup"] else None,
+         "target": "<= 1.5 s" if target else None, "ok": cluster["startup"] <= 1.5 if target else None},
         # the CPU both spent (process and workers): less sensitive to other jobs than the wall times;
         # 2 * serial / cluster is the best speedup two idle cores could give with this much work
         {"name": f"analyse_{tag}_cpu_cluster", "value": cluster["cpu"], "unit": "s", "baseline_name": "serial cpu",
@@ -176,7 +190,7 @@ def _speedup_rows(tmp: Path, n: int, duration: float, fs: float, target: bool) -
 
 
 def run(quick: bool = False) -> list[dict]:
-    n = 12 if quick else 200
+    n = int(os.environ.get("HILBENCH_BENCH_CAMPAIGN_RUNS", 0)) or (12 if quick else 200)
     quiet = {"progress": False, "say": lambda _line: None}
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

@@ -48,6 +48,7 @@ from hilbench.bench.acquisition.campaign_plan import (
 from hilbench.bench.acquisition.protocols import PROTOCOLS, Protocol, ProtocolError
 from hilbench.bench.acquisition.runner import Bench, DeviceSettings, Progress, RunControl, SettingsError
 from hilbench.bench.errors import BenchError
+from hilbench.bench.storage.folder_lock import folder_lock
 from hilbench.common.runfile import writer_alive
 from hilbench.drivers.device_url import check_device_url
 from hilbench.drivers.errors import DeviceURLError
@@ -194,25 +195,58 @@ def load_campaign(path: str | Path) -> Campaign:
     return campaign
 
 
-def read_index(out_dir: Path) -> dict[str, dict]:
+def read_index_document(out_dir: Path) -> dict:
+    """The whole index document ({} when there is none)."""
     path = out_dir / INDEX_NAME
     if not path.exists():
         return {}
     try:
-        entries = json.loads(path.read_text())["runs"]
+        doc = json.loads(path.read_text())
+        if not isinstance(doc, dict) or not isinstance(doc["runs"], list):
+            raise TypeError("its runs are not a list")
     except (ValueError, KeyError, TypeError) as exc:
         raise CampaignError(f"{path}: unreadable campaign index ({exc})") from None
-    return {e["key"]: e for e in entries}
+    return doc
 
 
-def _write_index(out_dir: Path, campaign: Campaign, entries: dict[str, dict]) -> None:
-    doc = {"campaign": str(campaign.path), "schema": "hilbench-campaign-index", "version": 1,
-           "runs": [entries[r.key] for r in campaign.runs if r.key in entries]}
+def read_index(out_dir: Path) -> dict[str, dict]:
+    return {e["key"]: e for e in read_index_document(out_dir).get("runs", [])}
+
+
+def write_index_document(out_dir: Path, doc: dict) -> None:
+    """Replace the index atomically and durably (written beside, fsynced, renamed, the folder fsynced)."""
     from hilbench.bench.storage.outputs import dumps
 
     tmp = out_dir / (INDEX_NAME + ".tmp")
-    tmp.write_text(dumps(doc, indent=2))  # strict JSON
+    with open(tmp, "w") as fh:
+        fh.write(dumps(doc, indent=2))  # strict JSON
+        fh.flush()
+        os.fsync(fh.fileno())
     os.replace(tmp, out_dir / INDEX_NAME)
+    fd = os.open(out_dir, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _write_index(out_dir: Path, campaign: Campaign, entries: dict[str, dict], uid: str) -> None:
+    """The planned runs in plan order, then the runs of an earlier plan that this one no longer has, marked
+    ``"planned": false`` (kept: their files are still there; ``hilbench analyse`` skips them)."""
+    planned = [r.key for r in campaign.runs]
+    runs = [{k: v for k, v in entries[k].items() if k != "planned"} for k in planned if k in entries]
+    runs += [{**e, "planned": False} for k, e in entries.items() if k not in set(planned)]
+    doc = {"campaign": str(campaign.path), "schema": "hilbench-campaign-index", "version": 1, "uid": uid,
+           "runs": runs}
+    write_index_document(out_dir, doc)
+
+
+def new_campaign_uid() -> str:
+    """A campaign's identity (in its index from its first run; results rows are keyed by it, not by the folder's
+    name, so that a copied or renamed campaign keeps its rows and two campaigns of one name never share them)."""
+    import uuid
+
+    return uuid.uuid4().hex
 
 
 def _file_status(path: Path) -> str:
@@ -236,47 +270,34 @@ class CampaignProgress:
 
 def run_campaign(campaign: Campaign, out_dir: str | Path, *, resume: bool = False,
                  progress: Callable[[CampaignProgress], None] | None = None,
-                 control: RunControl | None = None, bench: Bench | None = None) -> dict[str, dict]:
+                 control: RunControl | None = None, bench: Bench | None = None,
+                 say: Callable[[str], None] | None = None) -> dict[str, dict]:
     """Play every planned run; returns the index entries by run key. Stops at the first run that does not
-    complete (the index says so), unless it was skipped on resume."""
+    complete (the index says so), unless it was skipped on resume. ``say``: one line when the folder's lock of a
+    dead campaign process is taken over."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    lock_fd = _lock_folder(out_dir)  # one campaign per folder: a second --resume is refused
-    try:
+    def busy(pid):
+        return (f"{out_dir}: another campaign is playing into this folder (pid {pid}); wait for it or "
+                f"stop it first")
+    with folder_lock(out_dir, LOCK_NAME, CampaignError, busy, say):  # one campaign per folder
         entries = _play(campaign, out_dir, resume, progress, control, bench)
         from hilbench.bench.acquisition.compensation_matrix import campaign_report
 
         campaign_report(campaign, out_dir, entries)  # nothing unless the campaign has [[compensate]] steps
         return entries
-    finally:
-        os.unlink(out_dir / LOCK_NAME)
-        os.close(lock_fd)
-
-
-def _lock_folder(out_dir: Path) -> int:
-    import fcntl
-
-    lock = out_dir / LOCK_NAME
-    try:
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK, 0o644)
-    except OSError as exc:
-        raise CampaignError(f"{lock}: cannot use the campaign lock ({exc.strerror}; a symlink is refused)") from None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        holder = os.pread(fd, 64, 0).decode(errors="replace").strip() or "?"
-        os.close(fd)
-        raise CampaignError(f"{out_dir}: another campaign is playing into this folder (pid {holder}); "
-                            f"wait for it or stop it first") from None
-    os.ftruncate(fd, 0)
-    os.write(fd, f"{os.getpid()}\n".encode())
-    return fd
 
 
 def _play(campaign: Campaign, out_dir: Path, resume: bool, progress, control, bench) -> dict[str, dict]:
-    entries = read_index(out_dir)
+    doc = read_index_document(out_dir)
+    entries = {e["key"]: e for e in doc.get("runs", [])}
     if entries and not resume:
         raise CampaignError(f"{out_dir}: holds a campaign already; use --resume or another folder")
+    uid = doc.get("uid") if isinstance(doc.get("uid"), str) else new_campaign_uid()
+    planned = {r.key for r in campaign.runs}
+    marks = {k for k, e in entries.items() if (e.get("planned") is False) != (k not in planned)}
+    if marks or (entries and uid != doc.get("uid")):  # marked before anything plays (a resume may play none)
+        _write_index(out_dir, campaign, entries, uid)
     control = control or RunControl()
     own = bench is None
     bench = bench or Bench.open(campaign.device)
@@ -318,7 +339,7 @@ def _play(campaign: Campaign, out_dir: Path, resume: bool, progress, control, be
                 "samples": result.samples, "parameters": plan["parameters"], "settings": plan["settings"],
                 "model_sha256": plan["model_sha256"], "environment": planned.environment,
             }
-            _write_index(out_dir, campaign, entries)
+            _write_index(out_dir, campaign, entries, uid)
             if progress:
                 progress(CampaignProgress(i, len(campaign.runs), planned.key, result.status))
             if result.status != "completed":

@@ -1,9 +1,11 @@
 """Analyse every run of one or more campaign folders, serially or on a Dask cluster, into a results folder.
 
-Tasks take a chunk of run files' paths (up to :data:`MAX_CHUNK`) and open each inside the worker; what comes
-back is one small dict per run. The client alone writes the table (table.ResultsFolder): one part per chunk as it
-arrives, compacted at the end. Chunks because a Dask task costs the client and the scheduler (which share one
-process and its GIL on a LocalCluster) about 30 ms of CPU, a third of a short run's analysis.
+The client reads the campaign indexes and stats the run files (it opens none: a FIFO or a device is a failed row at
+once), and holds the results folder's lock (table.LOCK_NAME) throughout. Tasks take a chunk of runs (up to
+:data:`MAX_CHUNK`); the worker hashes each file, checks its uid against the index, analyses it unless its row is
+there, writes the chunk's rows as one part of the results folder (table.write_part) and returns only their keys.
+The client compacts the parts into the table at the end. Chunks because a Dask task costs the client and the
+scheduler (which share one process and its GIL on a LocalCluster) 1-4 ms of CPU.
 
 Faults: a step that raises gives a row with status ``failed`` and the one-line reason (caught in the worker).
 A worker that dies (segfault, out of memory, ``os._exit``) loses its task; the scheduler gives it to a fresh
@@ -20,6 +22,7 @@ import logging
 import math
 import os
 import re
+import stat
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -28,7 +31,7 @@ from typing import Any
 
 from hilbench import __version__
 from hilbench.bench.acquisition.campaign import INDEX_NAME
-from hilbench.bench.campaign_analysis.fork_server import start_fork_server, warm_up
+from hilbench.bench.campaign_analysis.fork_server import MAX_WORKERS, start_fork_server, warm_up
 from hilbench.bench.campaign_analysis.steps import STEPS, StepSettings, steps_for
 from hilbench.bench.campaign_analysis.table import ResultsFolder, row_key
 from hilbench.bench.errors import AnalyseError
@@ -39,24 +42,30 @@ StepFunction = Callable[[str, StepSettings], dict[str, Any]]
 MAX_CHUNK = 8
 _QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(\S*)\s*$")
 #: environment keys read into numeric columns: key -> (column, accepted units)
+#: largest campaign index read, bytes (a thousand runs are ~1 MB)
+MAX_INDEX_BYTES = 64 << 20
 ENVIRONMENT = {"ambient": ("ambient", ("C", "degC")), "load": ("load", ("kg",))}
 
 
 @dataclass
 class Task:
+    """One run and step to analyse. ``known``: content hashes this run and step already have rows for (a copy of
+    a campaign: the worker hashes the file, finds its row, and analyses nothing)."""
     folder: Path
     entry: dict[str, Any]
     step: str
-    content_hash: str
+    campaign_uid: str
     settings_hash: str
+    base: dict[str, Any]
+    known: tuple[str, ...] = ()
 
     @property
     def path(self) -> Path:
         return self.folder / self.entry["file"]
 
     @property
-    def key(self) -> tuple:
-        return (self.folder.name, self.entry["key"], self.content_hash, self.step, self.settings_hash, __version__)
+    def slot(self) -> tuple:
+        return (self.campaign_uid, self.entry["key"], self.step)
 
 
 @dataclass
@@ -70,16 +79,20 @@ class Summary:
     startup_time: float = 0.0  # of wall_time: cluster start and every worker's imports of the steps
     dashboard: str | None = None
     failures: list[str] = field(default_factory=list)
+    client_cpu: float = 0.0    # s of this process's CPU (the client's, and on a local cluster its scheduler's)
+    startup_cpu: float = 0.0   # of client_cpu: before the first task (imports, planning, cluster start)
+    work_cpu: float = 0.0      # of client_cpu: from the first task to the table written (not the cluster's close)
+
+    @property
+    def client_cpu_per_run(self) -> float:
+        """s of this process's CPU per analysed run from the first task to the table: what limits many workers
+        (the scheduler and the client share this process and its GIL), measurable on 2 cores."""
+        return self.work_cpu / max(1, self.analysed + self.skipped)
 
 
 def one_line(exc: BaseException) -> str:
     text = " ".join(str(exc).split()) or type(exc).__name__
     return (f"{type(exc).__name__}: {text}")[:400]
-
-
-def file_hash(path: Path) -> str:
-    with open(path, "rb") as fh:
-        return hashlib.file_digest(fh, "sha256").hexdigest()
 
 
 def settings_hash(step: str, settings: StepSettings) -> str:
@@ -105,74 +118,257 @@ def _environment(entry: dict[str, Any], where: str) -> dict[str, float]:
     return out
 
 
+#: index entry fields and the types they must have (None allowed where the tuple has type(None))
+ENTRY_TYPES: dict[str, tuple[type, ...]] = {
+    "key": (str,), "file": (str,), "status": (str,), "uid": (str, type(None)), "protocol": (str, type(None)),
+    "name": (str, type(None)), "repeat": (int, type(None)), "environment": (dict, type(None)),
+    "planned": (bool,)}
+
+
+def _check_entry(index: Path, i: int, e: Any) -> None:
+    """One line naming the entry for an index entry that is not what ``hilbench campaign`` writes."""
+    if not isinstance(e, dict):
+        raise AnalyseError(f"{index}: runs[{i}] is {type(e).__name__}, not an object")
+    for name, types in ENTRY_TYPES.items():
+        if name in e and (not isinstance(e[name], types) or (isinstance(e[name], bool) and bool not in types)):
+            raise AnalyseError(f"{index}: runs[{i}] ({str(e.get('key'))[:60]!r}): {name} is "
+                               f"{type(e[name]).__name__}, not {' or '.join(t.__name__ for t in types)}")
+    for name in ("key", "file"):
+        if name not in e:
+            raise AnalyseError(f"{index}: runs[{i}]: no {name}")
+    if e["file"] in ("", ".", "..") or "/" in e["file"] or "\0" in e["file"]:
+        raise AnalyseError(f"{index}: runs[{i}] ({e['key'][:60]!r}): file {e['file'][:80]!r} is not a file name "
+                           "in the campaign folder")
+
+
 def read_campaign(folder: Path) -> list[dict[str, Any]]:
+    return read_campaign_document(folder)[1]
+
+
+def read_campaign_document(folder: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """(the index document, its run entries, each type-checked); one line for anything else."""
     index = folder / INDEX_NAME
     try:
-        doc = json.loads(index.read_text())
-        runs = doc["runs"]
-        for e in runs:
-            e["key"], e["file"]  # noqa: B018 -- both are needed
+        with open(index, "rb") as fh:  # bounded: an index is kilobytes, not a FIFO that never ends
+            if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):
+                raise ValueError("not a regular file")
+            raw = fh.read(MAX_INDEX_BYTES + 1)
+        if len(raw) > MAX_INDEX_BYTES:
+            raise ValueError(f"longer than {MAX_INDEX_BYTES} bytes")
+        doc = json.loads(raw)
+        if not isinstance(doc, dict) or not isinstance(doc.get("runs"), list):
+            raise ValueError("no list of runs")
     except FileNotFoundError:
         raise AnalyseError(f"{folder}: no {INDEX_NAME}; not a campaign folder (hilbench campaign writes one)") from None
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+    except (OSError, ValueError, RecursionError) as exc:
         raise AnalyseError(f"{index}: unreadable campaign index ({one_line(exc)})") from None
-    return runs
+    for i, e in enumerate(doc["runs"]):
+        _check_entry(index, i, e)
+    if "uid" in doc and not isinstance(doc["uid"], str):
+        raise AnalyseError(f"{index}: uid is {type(doc['uid']).__name__}, not a string")
+    return doc, doc["runs"]
 
 
-def plan(folders: list[Path], steps: tuple[str, ...], settings: StepSettings) -> tuple[list[Task], list[dict]]:
-    """(tasks to run, rows of runs that did not complete). Reads every index and hashes every run file."""
-    tasks, not_run = [], []
-    folders = [f.resolve() for f in folders]  # "." has no name
-    names = [f.name for f in folders]
-    twice = sorted({n for n in names if names.count(n) > 1})
-    if twice:  # a row names its campaign by the folder's name
-        raise AnalyseError(f"two campaign folders are both named {twice[0]!r}; rename one (rows name the campaign "
-                           "by its folder)")
-    for folder in folders:
-        for entry in read_campaign(folder):
+def campaign_uid(folder: Path, doc: dict[str, Any], wait: float = 5.0) -> str:
+    """The campaign's uid; a campaign of an older hilbench gets one now, written into its index under the
+    campaign's own lock (a playing campaign holds it for a few seconds at most between runs)."""
+    if isinstance(doc.get("uid"), str):
+        return doc["uid"]
+    if not os.access(folder, os.W_OK):  # a read-only archive: a uid from its runs' uids, the same in every copy
+        runs = sorted(str(e.get("uid")) for e in doc["runs"])
+        return "runs-" + hashlib.sha256(json.dumps(runs).encode()).hexdigest()[:32]
+    from hilbench.bench.acquisition.campaign import (
+        LOCK_NAME,
+        CampaignError,
+        new_campaign_uid,
+        write_index_document,
+    )
+    from hilbench.bench.storage.folder_lock import folder_lock
+
+    deadline = time.monotonic() + wait
+    while True:
+        try:
+            with folder_lock(folder, LOCK_NAME, CampaignError, lambda pid: f"pid {pid}"):
+                doc, _ = read_campaign_document(folder)  # another analysis may have given it one meanwhile
+                if not isinstance(doc.get("uid"), str):
+                    doc["uid"] = new_campaign_uid()
+                    write_index_document(folder, doc)
+                return doc["uid"]
+        except CampaignError as exc:
+            if time.monotonic() > deadline:
+                raise AnalyseError(f"{folder}: has no campaign uid yet (an older campaign) and its lock is held "
+                                   f"({exc}); analyse it when that process ends") from None
+            time.sleep(0.1)
+
+
+def _regular(path: Path) -> str | None:
+    """Why ``path`` cannot be a run file (without opening it: a FIFO's open blocks), or None."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return "run file missing"
+    except OSError as exc:
+        return f"cannot stat: {exc.strerror}"
+    if not stat.S_ISREG(st.st_mode):
+        return f"not a regular file ({_KIND.get(stat.S_IFMT(st.st_mode), 'special file')})"
+    return None
+
+
+_KIND = {stat.S_IFDIR: "a directory", stat.S_IFIFO: "a FIFO", stat.S_IFCHR: "a character device",
+         stat.S_IFBLK: "a block device", stat.S_IFSOCK: "a socket"}
+
+
+def plan(folders: list[Path], steps: tuple[str, ...], settings: StepSettings,
+         existing: dict[tuple, dict[str, Any]] | None = None
+         ) -> tuple[list[Task], list[dict], dict[tuple, dict[str, Any]], set[tuple]]:
+    """(tasks to run, rows the client writes itself (runs not run, files that are no run file), current row keys
+    of runs whose row is there -> fields to refresh, unplanned (campaign uid, key)). Reads every index and stats
+    every run file; reads no run file: a run whose stat matches its row's (``file_stat``) is not hashed again."""
+    by_run: dict[tuple, list[dict[str, Any]]] = {}
+    for r in (existing or {}).values():
+        by_run.setdefault((r.get("campaign_uid"), r.get("key"), r.get("run_id"), r.get("step"),
+                           r.get("settings_hash"), r.get("hilbench_version")), []).append(r)
+    tasks, own_rows, reused, unplanned, seen = [], [], {}, set(), set()
+    for folder in [f.resolve() for f in folders]:  # "." has no name
+        doc, entries = read_campaign_document(folder)
+        cuid = campaign_uid(folder, doc)
+        for entry in entries:
+            where = f"{folder / INDEX_NAME}: run {entry['key'][:80]}"
+            _environment(entry, where)  # a bad unit stops before any work
+            if entry.get("planned") is False:  # a run its campaign no longer plans (resumed with fewer repeats)
+                unplanned.add((cuid, entry["key"]))
+                continue
             path = folder / entry["file"]
-            _environment(entry, f"{folder / INDEX_NAME}: run {entry['key']}")  # a bad unit stops before any work
             for step in steps_for(str(entry.get("protocol", "")), steps):
-                if entry.get("status") != "completed" or not path.exists():
-                    reason = "run file missing" if not path.exists() else f"run {entry.get('status')}"
-                    not_run.append({**_base(folder, entry, step, f"missing:{folder.name}/{entry['key']}",
-                                            settings_hash(step, settings)), "status": "not run", "error": reason})
+                shash = settings_hash(step, settings)
+                if (cuid, entry["key"], step) in seen:  # the same campaign twice (a copy beside its original)
                     continue
-                tasks.append(Task(folder, entry, step, file_hash(path), settings_hash(step, settings)))
-    return tasks, not_run
+                seen.add((cuid, entry["key"], step))
+                base = _base(folder, cuid, entry, step, shash)
+                why = _regular(path)
+                if why == "run file missing" or (why is None and entry.get("status") != "completed"
+                                                 and not settings.allow_incomplete):
+                    own_rows.append({**base, "content_hash": "", "status": "not run",
+                                     "error": why or f"run {entry.get('status')}"})
+                    continue
+                if why is not None:  # a FIFO, a device, a directory: a failed row at once, never opened
+                    own_rows.append({**base, "content_hash": "", "status": "failed", "error": f"{path}: {why}"})
+                    continue
+                rows = by_run.get((cuid, entry["key"], entry.get("uid"), step, shash, __version__), [])
+                fingerprint = file_stat(os.stat(path))
+                same = [r for r in rows if r.get("file_stat") == fingerprint]
+                if same:
+                    reused[row_key(same[0])] = _refresh(base)
+                else:
+                    tasks.append(Task(folder, entry, step, cuid, shash, base,
+                                      tuple(sorted({r["content_hash"] for r in rows if r.get("content_hash")}))))
+    return tasks, own_rows, reused, unplanned
 
 
-def _base(folder: Path, entry: dict[str, Any], step: str, content: str, shash: str) -> dict[str, Any]:
-    return {"campaign": folder.name, "folder": str(folder.resolve()), "run_id": entry.get("uid"),
+def file_stat(st: os.stat_result) -> str:
+    return f"{st.st_size}:{st.st_mtime_ns}:{st.st_ctime_ns}:{st.st_ino}"
+
+
+#: columns a reused row takes from the index as it is now (a renamed or moved campaign)
+REFRESHED = ("campaign", "folder", "name", "repeat", "protocol", "file", "environment", "ambient", "load")
+
+
+def _refresh(base: dict[str, Any]) -> dict[str, Any]:
+    return {k: base.get(k) for k in REFRESHED}
+
+
+def _base(folder: Path, cuid: str, entry: dict[str, Any], step: str, shash: str) -> dict[str, Any]:
+    return {"campaign": folder.name, "campaign_uid": cuid, "folder": str(folder), "run_id": entry.get("uid"),
             "key": entry["key"], "name": entry.get("name"), "repeat": entry.get("repeat"),
             "protocol": entry.get("protocol"), "file": entry["file"],
             "environment": json.dumps(entry.get("environment") or {}, sort_keys=True),
-            **_environment(entry, f"{folder / INDEX_NAME}: run {entry['key']}"),
-            "step": step, "content_hash": content, "settings_hash": shash, "hilbench_version": __version__}
+            **_environment(entry, f"{folder / INDEX_NAME}: run {entry['key'][:80]}"),
+            "step": step, "settings_hash": shash, "hilbench_version": __version__}
 
 
-def execute(path: str, step: str, settings: StepSettings, function: StepFunction | None = None) -> dict[str, Any]:
-    """Run one step on one file (in a worker); never raises for a failing analysis."""
+def _where() -> str:
+    """This process as a row's error names it: the Dask worker's address, or the host."""
+    try:
+        from distributed import get_worker
+
+        return f"worker {get_worker().address}"
+    except (ImportError, ValueError):
+        import socket
+
+        return f"host {socket.gethostname()}"
+
+
+def _hash_regular(path: str) -> tuple[str, str]:
+    """(sha256, file_stat) of a regular file, read through one descriptor that is checked before it is read
+    (O_NONBLOCK: a FIFO swapped in after planning does not block the open; fstat then refuses it)."""
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise OSError(f"not a regular file ({_KIND.get(stat.S_IFMT(st.st_mode), 'special file')})")
+        with os.fdopen(os.dup(fd), "rb") as fh:
+            digest = hashlib.file_digest(fh, "sha256").hexdigest()
+        return digest, file_stat(st)
+    finally:
+        os.close(fd)
+
+
+def execute(path: str, step: str, settings: StepSettings, function: StepFunction | None = None,
+            uid: str | None = None) -> dict[str, Any]:
+    """Run one step on one file (in a worker); never raises for a failing analysis. ``uid``: the run's uid in
+    its campaign index; a file of another uid (a swapped or replaced file) is a failed row saying so."""
     from hilbench.bench.campaign_analysis.steps import run_meta
 
     row: dict[str, Any] = {}
     try:
         row.update(run_meta(path))
+        if uid is not None and row["run_id"] != uid:
+            raise AnalyseError(f"{path}: the file's run uid {row['run_id']} is not its index entry's {uid} "
+                               "(a swapped or replaced file)")
         row.update((function or STEPS[step])(path, settings))
         row["status"], row["error"] = "ok", ""
     except Exception as exc:  # a failing run is a row, not the end of the campaign
         row["status"], row["error"] = "failed", one_line(exc)
+    if uid is not None:
+        row["run_id"] = uid  # the row is the index entry's run, whatever the file holds
     return row
 
 
-def execute_chunk(items: list[tuple[str, str]], settings: StepSettings,
-                  functions: dict[str, StepFunction]) -> list[dict[str, Any]]:
-    """Run the (path, step) items of one task, in order; one row each; under the execution policy (one BLAS
-    thread: analysis.execution), in the serial loop and on any worker, ours or a remote scheduler's."""
-    from hilbench.analysis.execution import limited
+#: what a task returns per run: its row's key, status, error, and the file's stat when an existing row was reused
+Outcome = tuple[tuple, str, str, str | None]
 
-    with limited():
-        return [execute(path, step, settings, functions.get(step)) for path, step in items]
+
+def execute_chunk(items: list[dict[str, Any]], settings: StepSettings, functions: dict[str, StepFunction],
+                  results: str) -> list[Outcome]:
+    """Run the items (path, step, base row, uid, known hashes) of one task in order, in the worker: hash each
+    file, analyse it unless its row is there (``known``), write the new rows as one part of the results folder,
+    and return only their keys and statuses (the client reads no run file and writes no row)."""
+    from hilbench.analysis.execution import limited
+    from hilbench.bench.campaign_analysis.table import row_key, write_part
+
+    with limited():  # the execution policy (one BLAS thread): in the serial loop and on any worker
+        return _execute_items(items, settings, functions, results, row_key, write_part)
+
+
+def _execute_items(items, settings, functions, results, row_key, write_part) -> list[Outcome]:
+    rows, out = [], []
+    for item in items:
+        try:
+            content, fstat = _hash_regular(item["path"])
+        except OSError as exc:  # gone, unreadable, swapped for a FIFO: the worker that could not open it is named
+            row = {**item["base"], "content_hash": "", "status": "failed",
+                   "error": f"{item['path']}: cannot open on {_where()}: {exc.strerror or exc}"}
+        else:
+            row = {**item["base"], "content_hash": content, "file_stat": fstat}
+            if content in item["known"]:  # a copy or a touched file: its row is there
+                out.append((row_key(row), "reused", "", fstat))
+                continue
+            row.update(execute(item["path"], item["step"], settings, functions.get(item["step"]), item["uid"]))
+        rows.append(_finite_or_none(row))
+        out.append((row_key(row), row["status"], row["error"], None))
+    if rows:
+        write_part(results, rows)
+    return out
 
 
 def chunk(todo: list[Task], workers: int) -> list[list[Task]]:
@@ -191,71 +387,186 @@ def _finite_or_none(row: dict[str, Any]) -> dict[str, Any]:
     return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()}
 
 
+#: how long a remote scheduler has to answer, s
+CONNECT_TIMEOUT = 10.0
+
+
 def analyse(folders: list[Path], out: Path, steps: tuple[str, ...] = ("identify",),
             settings: StepSettings | None = None, *, serial: bool = False, workers: int | None = None,
             scheduler: str | None = None, scheduler_file: str | None = None, resume: bool = True,
             progress: bool = True, functions: dict[str, StepFunction] | None = None,
             say: Callable[[str], None] = print, verbose: bool = False, dashboard: bool = True) -> Summary:
     """Analyse the runs of ``folders`` into the results folder ``out``; see the module docstring."""
+    from hilbench.bench.campaign_analysis.table import LOCK_NAME
+    from hilbench.bench.storage.folder_lock import folder_lock
+
     settings = settings or StepSettings()
     unknown = [s for s in steps if s not in STEPS and s not in (functions or {})]
     if unknown:
         raise AnalyseError(f"unknown step {unknown[0]!r} (available: {', '.join(STEPS)})")
-    t0 = time.perf_counter()
+    if workers is not None and not 1 <= workers <= MAX_WORKERS:
+        raise AnalyseError(f"--workers must be in 1..{MAX_WORKERS}, got {workers}")
+    t0, cpu0 = time.perf_counter(), time.process_time()
+    if not serial and (scheduler or scheduler_file):
+        scheduler, scheduler_file = _connect(scheduler, scheduler_file), None  # a Dask scheduler, before any work
     if not (serial or scheduler or scheduler_file):
-        start_fork_server()  # its imports (2 s) overlap the planning: hashing every run file
-    results = ResultsFolder(out)
-    tasks, not_run = plan(folders, steps, settings)
-    done = {row_key(r) for r in results.read_rows()} if resume else set()
-    summary = Summary(total=len(tasks) + len(not_run))
-    todo = [t for t in tasks if t.key not in done]
-    summary.skipped = len(tasks) - len(todo)
-    if not_run:
-        results.add(not_run)
-    if summary.skipped:
-        say(f"{summary.skipped} of {len(tasks)} analyses already in {out} (resume); {len(todo)} to run")
-
-    def record(done_chunk: list[Task], results_of: list[dict[str, Any]]) -> None:
-        rows = []
-        for task, result in zip(done_chunk, results_of, strict=True):
-            row = {**_base(task.folder, task.entry, task.step, task.content_hash, task.settings_hash), **result}
-            rows.append(_finite_or_none(row))
-            summary.analysed += 1
-            if row["status"] != "ok":
-                summary.failed += 1
-                summary.failures.append(f"{task.folder.name}/{task.entry['key']} {task.step}: {row['error']}")
-        results.add(rows)
-        bar.update(len(rows))
-
-    fn = functions or {}
-    from tqdm import tqdm
-
-    bar = tqdm(total=len(todo), unit="run", desc="analyse", disable=not progress or not todo, dynamic_ncols=True)
+        start_fork_server()  # its imports (2 s) overlap the planning
+    out = Path(out).absolute()  # a remote worker resolves a relative path against its own directory
     try:
-        if serial:
-            warm_up()
-            summary.startup_time = time.perf_counter() - t0
-            # execute_chunk runs under the execution policy (one BLAS thread; 200 short runs with OpenBLAS's two:
-            # 29.9 s of CPU in 15.3 s, against 14.8 s of CPU in 13.9 s with one thread)
-            for part in chunk(todo, 1):
-                record(part, execute_chunk(_items(part), settings, fn))
-        elif todo:
-            _on_cluster(todo, settings, fn, record, summary, workers, scheduler, scheduler_file, say, verbose,
-                        dashboard, t0)
-    finally:
-        bar.close()
-    summary.table = results.compact(current={t.key for t in tasks} | {row_key(r) for r in not_run})
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise AnalyseError(f"{out}: cannot create the results folder ({exc.strerror})") from None
+    def busy(pid):
+        return (f"{out}: another analysis is writing into this results folder (pid {pid}); wait for it "
+                "or use another -o")
+    with folder_lock(out, LOCK_NAME, AnalyseError, busy, say):
+        summary = _analyse_locked(folders, out, steps, settings, serial, workers, scheduler, scheduler_file,
+                                  resume, progress, functions or {}, say, verbose, dashboard, t0, cpu0)
     summary.wall_time = time.perf_counter() - t0
+    summary.client_cpu = time.process_time() - cpu0
     return summary
 
 
-def _items(part: list[Task]) -> list[tuple[str, str]]:
-    return [(str(t.path.resolve()), t.step) for t in part]
+def _analyse_locked(folders, out, steps, settings, serial, workers, scheduler, scheduler_file, resume, progress,
+                    fn, say, verbose, dashboard, t0, cpu0) -> Summary:
+    results = ResultsFolder(out, say)
+    results.clean_leftovers()  # of a killed analysis: this one holds the lock, so none is work in progress
+    existing = results.read_rows()
+    tasks, own_rows, reused, unplanned = plan(folders, steps, settings, existing if resume else None)
+    summary = Summary(total=len(tasks) + len(own_rows) + len(reused), skipped=len(reused))
+    current: dict[tuple, dict[str, Any]] = dict(reused)
+    if own_rows:
+        results.add(own_rows)
+        current.update({row_key(r): {} for r in own_rows})
+    if reused:
+        say(f"{len(reused)} of {len(reused) + len(tasks)} analyses already in {out} (resume); {len(tasks)} to run")
+    by_slot = {t.slot: t for t in tasks}
+
+    def record(done_chunk: list[Task], outcomes: list[Outcome]) -> None:
+        for task, (key, status, error, fstat) in zip(done_chunk, outcomes, strict=True):
+            base = _refresh(by_slot[task.slot].base)
+            current[key] = {**base, "file_stat": fstat} if fstat else base
+            if status == "reused":
+                summary.skipped += 1
+                continue
+            summary.analysed += 1
+            if status != "ok":
+                summary.failed += 1
+                summary.failures.append(f"{task.folder.name}/{task.entry['key']} {task.step}: {error}")
+        bar.update(len(outcomes))
+
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(tasks), unit="run", desc="analyse", disable=not progress or not tasks, dynamic_ncols=True)
+    try:
+        if serial:
+            warm_up()
+            summary.startup_time, summary.startup_cpu = time.perf_counter() - t0, time.process_time() - cpu0
+            # execute_chunk runs under the execution policy (one BLAS thread; 200 short runs with OpenBLAS's two:
+            # 29.9 s of CPU in 15.3 s, against 14.8 s of CPU in 13.9 s with one thread)
+            cpu = time.process_time()
+            for part in chunk(tasks, 1):
+                record(part, execute_chunk(_items(part), settings, fn, str(out)))
+            summary.work_cpu += time.process_time() - cpu  # (serial: the analyses themselves)
+        elif tasks:
+            _on_cluster(tasks, settings, fn, record, summary, workers, scheduler, say, verbose, dashboard, t0, cpu0,
+                        out)
+    finally:
+        bar.close()
+    cpu = time.process_time()
+    summary.table = results.compact(results.read_rows(), current, unplanned)
+    summary.work_cpu += time.process_time() - cpu
+    return summary
+
+
+def _items(part: list[Task]) -> list[dict[str, Any]]:
+    return [{"path": str(t.path), "step": t.step, "base": t.base, "uid": t.entry.get("uid"), "known": t.known}
+            for t in part]
+
+
+def _died(task: Task, exc: BaseException, out: Path) -> Outcome:
+    """The failed row of a run that killed its worker twice (written by the client: no worker can)."""
+    from hilbench.bench.campaign_analysis.table import write_part
+
+    try:
+        content, fstat = _hash_regular(str(task.path))
+    except OSError:
+        content, fstat = "", None
+    row = {**task.base, "content_hash": content, "file_stat": fstat, "status": "failed",
+           "error": f"the worker died twice while analysing this run ({one_line(exc)})"}
+    write_part(out, [row])
+    return row_key(row), row["status"], row["error"], None
+
+
+def _check_writable(results: str, dask_worker: Any = None) -> str | None:
+    """In a worker (``Client.run`` passes ``dask_worker``): None if it can write the results folder, else why
+    not (one line)."""
+    import uuid
+
+    probe = Path(results) / f".probe-{uuid.uuid4().hex[:8]}.tmp"
+    try:
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        where = f"worker {dask_worker.address}" if dask_worker is not None else _where()
+        return f"{where} cannot write the results folder {results} ({exc.strerror})"
+    return None
+
+
+def _connect(scheduler: str | None, scheduler_file: str | None) -> str:
+    """The scheduler's address, after checking within :data:`CONNECT_TIMEOUT` that a Dask scheduler answers there
+    (a Dask peer speaks first: an 8-byte frame length; anything else, or silence, is one line, not a hang or a
+    client that reads some other service's bytes as a length)."""
+    import socket
+    import struct
+    from urllib.parse import urlsplit
+
+    address = scheduler
+    if scheduler_file:
+        try:
+            with open(scheduler_file, "rb") as fh:
+                if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):
+                    raise ValueError("not a regular file")
+                doc = json.loads(fh.read(1 << 20))
+            address = doc["address"]
+            if not isinstance(address, str):
+                raise TypeError("its address is not a string")
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise AnalyseError(f"--scheduler-file {scheduler_file}: no Dask scheduler file ({one_line(exc)})") from None
+    assert address is not None
+    if "://" not in address:
+        address = f"tcp://{address}"
+    parts = urlsplit(address)
+    if parts.scheme != "tcp":
+        return address  # tls, ucx, ...: Dask's own connect timeout applies
+    try:
+        host, port = parts.hostname, parts.port
+    except ValueError:
+        host = port = None
+    if not host or not port:
+        raise AnalyseError(f"--scheduler {address}: not an address like tcp://HOST:8786")
+    try:
+        with socket.create_connection((host, port), timeout=CONNECT_TIMEOUT) as sock:
+            header = b""
+            while len(header) < 16:
+                got = sock.recv(16 - len(header))
+                if not got:
+                    break
+                header += got
+    except TimeoutError:
+        raise AnalyseError(f"--scheduler {address}: no answer within {CONNECT_TIMEOUT:g} s; is a Dask scheduler "
+                           "listening there?") from None
+    except OSError as exc:
+        raise AnalyseError(f"--scheduler {address}: cannot connect ({exc.strerror or exc})") from None
+    total, frames = struct.unpack("<QQ", header) if len(header) == 16 else (0, 0)
+    if not (0 < total < 1 << 24 and 0 < frames < 64):
+        raise AnalyseError(f"--scheduler {address}: the service there does not speak Dask's protocol")
+    return address
 
 
 def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunction], record,
-                summary: Summary, workers: int | None, scheduler: str | None, scheduler_file: str | None,
-                say: Callable[[str], None], verbose: bool, want_dashboard: bool, t0: float) -> None:
+                summary: Summary, workers: int | None, scheduler: str | None, say: Callable[[str], None],
+                verbose: bool, want_dashboard: bool, t0: float, cpu0: float, out: Path) -> None:
     import dask
     from distributed import Client, LocalCluster, as_completed
     from distributed.scheduler import KilledWorker
@@ -269,6 +580,7 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
         except ImportError:
             if verbose:
                 say("dask dashboard: not available (it needs the bokeh package); going on without it")
+    address = scheduler  # checked by _connect
     cluster = None
     # allowed-failures 1: a task whose worker dies is given to a fresh worker once. worker-saturation 1.0: a
     # worker holds only the task it runs (at the default 1.1 a one-thread worker also holds a queued task, and
@@ -289,9 +601,13 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
                           "distributed.admin.tick.interval": "200ms", "distributed.admin.system-monitor.interval": "2s",
                           "distributed.worker.memory.monitor-interval": "1s",
                           "distributed.scheduler.work-stealing": False,
+                          "distributed.comm.timeouts.connect": f"{CONNECT_TIMEOUT:g}s",
                           "distributed.worker.multiprocessing-method": "forkserver"}):
-        if scheduler or scheduler_file:
-            client = Client(scheduler, scheduler_file=scheduler_file, timeout="20s")
+        if address is not None:
+            try:
+                client = Client(address, timeout=f"{CONNECT_TIMEOUT:g}s")
+            except (OSError, TimeoutError) as exc:
+                raise AnalyseError(f"--scheduler {address}: cannot connect ({one_line(exc)})") from None
         else:
             cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
                                    dashboard_address=dashboard, silence_logs=logging.CRITICAL)
@@ -300,33 +616,38 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
             if dashboard is not None and client.dashboard_link:
                 summary.dashboard = client.dashboard_link
                 say(f"dask dashboard: {client.dashboard_link}")
+            if address is not None:  # a remote worker must reach the results folder at the same path
+                refused = [why for why in client.run(_check_writable, str(out)).values() if why]
+                if refused:
+                    raise AnalyseError(refused[0])
             client.run(warm_up)  # a remote worker imports before the tasks (a forked one has); startup_time: how long
-            summary.startup_time = time.perf_counter() - t0
+            summary.startup_time, summary.startup_cpu = time.perf_counter() - t0, time.process_time() - cpu0
             n_workers = len(client.scheduler_info()["workers"]) or 1
             futures = as_completed()
             submitted: dict[Any, list[Task]] = {}
 
             def submit(part: list[Task]) -> None:
-                future = client.submit(execute_chunk, _items(part), settings, fn, pure=False)
+                future = client.submit(execute_chunk, _items(part), settings, fn, str(out), pure=False)
                 submitted[future] = part
                 futures.add(future)
 
+            loop_cpu = time.process_time()
             for part in chunk(todo, n_workers):
                 submit(part)
             for future in futures:
                 part = submitted.pop(future)
                 try:
-                    rows = future.result()
+                    outcomes = future.result()
                 except KilledWorker as exc:
                     if len(part) > 1:  # one of its runs kills workers: find which, run by run
                         for task in part:
                             submit([task])
                         continue
-                    rows = [{"status": "failed", "error": f"the worker died twice while analysing this run "
-                                                          f"({one_line(exc)})"}]
-                except Exception as exc:  # e.g. a result that cannot be unpickled
-                    rows = [{"status": "failed", "error": one_line(exc)}] * len(part)
-                record(part, rows)
+                    outcomes = [_died(part[0], exc, out)]
+                except Exception as exc:  # e.g. a result that cannot be unpickled: the chunk's runs fail here
+                    outcomes = [_died(task, exc, out) for task in part]
+                record(part, outcomes)
+            summary.work_cpu += time.process_time() - loop_cpu
         finally:
             client.close()
             if cluster is not None:

@@ -17,6 +17,8 @@ WORKER_MODULES = ("numpy", "scipy.signal", "scipy.optimize", "scipy.interpolate"
                   "hilbench.analysis.identification.identify", "hilbench.analysis.identification.maxwell_fit",
                   "hilbench.analysis.identification.output_error", "hilbench.analysis.record",
                   "hilbench.bench.campaign_analysis.engine")
+#: most local workers (each a process with its own imports; more than the host's cores only slow it down)
+MAX_WORKERS = 256
 
 
 def start_fork_server() -> None:

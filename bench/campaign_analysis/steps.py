@@ -62,6 +62,7 @@ class StepSettings:
     residual_start: tuple[str, ...] = ("inertia", "maxwell_slip")
     presliding_replicates: int = 20
     skeleton_mass: float | None = None  # J (kg*m^2) or m (kg); None: the run's declared calibration inertia
+    allow_incomplete: bool = False  # analyse aborted or short runs too (--allow-incomplete), as the commands do
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -131,7 +132,9 @@ def _temperature(path: str) -> dict[str, Any]:
     rec = load_record(path, need_torque=False, need_position=False, channels=("temperature",),
                       allow_incomplete=True)
     t = rec.channels.get("temperature")
-    return {"temperature_mean": float(np.mean(t))} if t is not None and t.size else {}
+    if t is None or not np.isfinite(t).any():  # NaN: the protocol's "no reading"
+        return {}
+    return {"temperature_mean": float(np.nanmean(t))}
 
 
 def _identify_row(result: protocol.Result, inputs: protocol.Inputs, path: str) -> dict[str, Any]:
@@ -162,7 +165,8 @@ def run_step(name: str, path: str, settings: StepSettings) -> dict[str, Any]:
     from hilbench.analysis.errors import AnalysisError
 
     entry = protocol.entry(name)
-    inputs = entry.read([path], protocol.ReadOptions(memory=STEP_MEMORY))
+    # the one loader: an aborted or short run is a failed row (unless --allow-incomplete)
+    inputs = entry.read([path], protocol.ReadOptions(memory=STEP_MEMORY, allow_incomplete=settings.allow_incomplete))
     head, tail = inputs, None
     if entry.matches is not None and settings.validation_fraction > 0:
         head, tail = protocol.held_out(inputs, settings.validation_fraction)

@@ -2,14 +2,21 @@
 
 Layout of a results folder::
 
+    .analyse.lock            held by the one analysis writing here (bench.storage.folder_lock)
     results.parquet          the compacted table (sorted by campaign, run key, step)
-    parts/<campaign>-<run>-<step>-<settings>-<n>.parquet   the rows of one task (a chunk of runs) each, written
-                                                           as results arrive (atomic rename)
+    parts/<keys>-<n>.parquet the rows of one task (a chunk of runs), written by the worker that computed them
+    set-aside/               tables or parts that could not be read, renamed out of the way (their rows are redone)
 
-Only the client writes. Every part is complete or absent (written beside, then renamed), so a client killed
-at any moment leaves a folder whose rows are all good: a rerun reads ``results.parquet`` and the parts,
-skips the rows it has, analyses the rest, and compacts. A row's key is (campaign, run key, content hash of the
-run file, step, settings hash, hilbench version): a changed file, setting or version is analysed again.
+Every part and table is complete or absent: written beside as ``.<name>.<random>.tmp``, fsynced, renamed, and the
+folder fsynced. A client or worker killed at any moment leaves good files and, at worst, a temp file that the next
+analysis removes (it holds the lock, so no temp file there is anyone's work in progress). A file that cannot be
+read (zero bytes, truncated, foreign, of an older layout) is moved to ``set-aside/`` with one line, never a folder
+that blocks every later analysis.
+
+A row's identity (:data:`KEY_COLUMNS`) is the campaign's uid (its index's, not its folder's name: a copied or
+renamed campaign keeps its rows, two campaigns of one name never share them), the run key and the run's uid, the
+run file's content hash, the step, the settings hash and the hilbench version. The table holds one current row per
+campaign uid, run key and step (:data:`SLOT`).
 """
 
 from __future__ import annotations
@@ -17,7 +24,7 @@ from __future__ import annotations
 import hashlib
 import os
 import uuid
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -29,18 +36,25 @@ from hilbench.common.units import AXIS_UNITS, axis_unit
 
 TABLE_NAME = "results.parquet"
 PARTS = "parts"
-#: a row's identity: the run (campaign folder name and run key: two runs may hold the same bytes) and its content,
-#: the step, the settings and the version that computed it
-KEY_COLUMNS = ("campaign", "key", "content_hash", "step", "settings_hash", "hilbench_version")
+SET_ASIDE = "set-aside"
+LOCK_NAME = ".analyse.lock"
+#: a row's identity: the run (campaign uid, run key and run uid: two runs may hold the same bytes) and its
+#: content, the step, the settings and the version that computed it
+KEY_COLUMNS = ("campaign_uid", "key", "run_id", "content_hash", "step", "settings_hash", "hilbench_version")
+#: one current row per slot: a newer row of a slot (new file, settings or version) replaces the older one
+SLOT = ("campaign_uid", "key", "step")
 #: columns every row has, with their Arrow types and units
 BASE_COLUMNS: dict[str, tuple[str, str]] = {
-    "campaign": ("string", ""), "folder": ("string", ""), "run_id": ("string", ""), "key": ("string", ""),
-    "axis": ("string", ""),
+    "campaign": ("string", ""), "campaign_uid": ("string", ""),
+    "folder": ("string", ""), "run_id": ("string", ""), "key": ("string", ""), "axis": ("string", ""),
     "name": ("string", ""), "repeat": ("int64", "1"), "protocol": ("string", ""), "file": ("string", ""),
     "start_time": ("string", "ISO 8601 UTC"), "operator": ("string", ""), "environment": ("string", "JSON"),
     "ambient": ("float64", "degC"), "load": ("float64", "kg"),
     "step": ("string", ""), "status": ("string", ""), "error": ("string", ""),
     "content_hash": ("string", "sha256"), "settings_hash": ("string", "sha256"), "hilbench_version": ("string", ""),
+    # the run file's size, mtime, ctime (ns) and inode when it was hashed: a file whose stat is unchanged is not
+    # read again on resume (a copy, a rename or a swap changes the ctime, so it is hashed again)
+    "file_stat": ("string", "size:mtime_ns:ctime_ns:inode"),
 }
 ALL_COLUMNS = {**BASE_COLUMNS, **COLUMNS}
 _TYPES = {"string": pa.string(), "float64": pa.float64(), "int64": pa.int64()}
@@ -68,6 +82,10 @@ def row_key(row: dict[str, Any]) -> tuple:
     return tuple(row.get(k) for k in KEY_COLUMNS)
 
 
+def slot_of(row: dict[str, Any]) -> tuple:
+    return tuple(row.get(k) for k in SLOT)
+
+
 def to_table(rows: Iterable[dict[str, Any]]) -> pa.Table:
     """Rows (dicts; missing columns null, unknown ones refused) as a table of :data:`SCHEMA`."""
     rows = list(rows)
@@ -86,57 +104,123 @@ def to_table(rows: Iterable[dict[str, Any]]) -> pa.Table:
     return pa.Table.from_pydict(columns, schema=SCHEMA)
 
 
+def fsync_folder(folder: Path) -> None:
+    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
 def _write_atomic(table: pa.Table, target: Path) -> None:
+    """``target`` complete or absent after any crash: written beside, fsynced, renamed, the folder fsynced."""
     tmp = target.with_name(f".{target.name}.{uuid.uuid4().hex[:8]}.tmp")
     try:
-        pq.write_table(table, tmp)
+        with open(tmp, "wb") as fh:
+            pq.write_table(table, fh)
+            fh.flush()
+            os.fsync(fh.fileno())
         os.replace(tmp, target)
+        fsync_folder(target.parent)
     finally:
         if tmp.exists():
             tmp.unlink()
 
 
-class ResultsFolder:
-    """The results folder: rows already there, parts as they arrive, compaction."""
+def part_name(rows: list[dict[str, Any]]) -> str:
+    """A part's file name from its rows' keys alone: no campaign or run name in it (those may be any length)."""
+    keys = hashlib.sha256(repr(sorted(repr(row_key(r)) for r in rows)).encode()).hexdigest()[:24]
+    return f"{keys}-{len(rows)}.parquet"
 
-    def __init__(self, path: str | os.PathLike):
+
+def write_part(results: str | os.PathLike, rows: list[dict[str, Any]]) -> Path:
+    """Write the rows of one task as one part of the results folder (atomic, durable); a worker calls this."""
+    parts = Path(results) / PARTS
+    parts.mkdir(parents=True, exist_ok=True)
+    target = parts / part_name(rows)
+    _write_atomic(to_table(rows), target)
+    return target
+
+
+class ResultsFolder:
+    """The results folder: rows already there, leftovers, set-aside files, compaction. Used by the one client
+    that holds the folder's lock."""
+
+    def __init__(self, path: str | os.PathLike, say: Callable[[str], None] = print):
         self.path = Path(path)
         self.parts = self.path / PARTS
+        self.say = say
 
-    def read_rows(self) -> list[dict[str, Any]]:
-        """Every row in the compacted table and the parts (a part wins over the table for the same key)."""
+    def clean_leftovers(self) -> int:
+        """Remove the temp files of killed writes (only under the lock: none is anyone's write in progress)."""
+        n = 0
+        for folder in (self.path, self.parts):
+            for f in folder.glob(".*.tmp") if folder.is_dir() else ():
+                f.unlink(missing_ok=True)
+                n += 1
+        return n
+
+    def files(self) -> list[Path]:
+        table = self.path / TABLE_NAME
+        return ([table] if table.exists() else []) + sorted(self.parts.glob("*.parquet") if self.parts.is_dir()
+                                                             else [])
+
+    def _read(self, f: Path) -> list[dict[str, Any]] | None:
+        """The rows of one file, or None after setting an unreadable one aside (one line)."""
+        try:
+            table = pq.ParquetFile(f).read()  # not read_table: its dataset layer costs twice the CPU per file
+            missing = [k for k in KEY_COLUMNS if k not in table.column_names]
+            if missing:
+                raise ValueError(f"no {', '.join(missing)} column (written by an older hilbench)")
+            return table.to_pylist()
+        except (OSError, ValueError, pa.ArrowException) as exc:
+            aside = self.path / SET_ASIDE
+            aside.mkdir(exist_ok=True)
+            n = 1
+            while (target := aside / f"{f.name}.{n}").exists():
+                n += 1
+            os.replace(f, target)
+            why = " ".join(str(exc).split())[:200]
+            self.say(f"{f}: unreadable ({why}); set aside as {target}, its rows are analysed again")
+            return None
+
+    def read_rows(self, files: list[Path] | None = None) -> dict[tuple, dict[str, Any]]:
+        """Rows by key of ``files`` (default: the table and every part; a part wins over the table)."""
         rows: dict[tuple, dict[str, Any]] = {}
-        files = ([self.path / TABLE_NAME] if (self.path / TABLE_NAME).exists() else []) + sorted(
-            self.parts.glob("*.parquet") if self.parts.is_dir() else [])
-        for f in files:
-            for row in pq.read_table(f).to_pylist():
+        for f in self.files() if files is None else files:
+            for row in self._read(f) or ():
                 rows[row_key(row)] = row
-        return list(rows.values())
+        return rows
 
     def add(self, rows: list[dict[str, Any]]) -> Path:
-        """Write rows (the results of one task) as one part (atomic). One part per row cost 17 ms of the
-        client's time per run, as much as a tenth of a short run's analysis."""
-        self.parts.mkdir(parents=True, exist_ok=True)
-        first = rows[0]
-        keys = hashlib.sha256(repr(sorted(repr(row_key(r)) for r in rows)).encode()).hexdigest()[:8]
-        target = self.parts / f"{first['campaign']}-{first['key']}-{first['step']}-{keys}-{len(rows)}.parquet"
-        _write_atomic(to_table(rows), target)
-        return target
+        """Write rows the client made itself (runs that were not analysed, a run that killed its worker)."""
+        return write_part(self.path, rows)
 
-    def compact(self, current: set[tuple] | None = None) -> Path:
-        """Merge the parts into ``results.parquet`` (sorted; atomic), then remove the parts. With ``current``
-        (row keys of this analysis), an older row of the same run and step (other settings or version, or an
-        older file) is dropped: the table holds one row per run and step."""
-        rows = self.read_rows()
-        if current is not None:
-            fresh = {(r["campaign"], r["key"], r["step"]) for r in rows if row_key(r) in current}
-            rows = [r for r in rows if row_key(r) in current or (r["campaign"], r["key"], r["step"]) not in fresh]
-        rows.sort(key=lambda r: tuple(str(r.get(k) or "") for k in ORDER) + row_key(r))
+    def compact(self, rows: dict[tuple, dict[str, Any]], current: dict[tuple, dict[str, Any]],
+                drop: set[tuple] = frozenset()) -> Path:
+        """Write ``rows`` as ``results.parquet`` (sorted; atomic), then remove the parts.
+
+        ``current``: row key -> fields to refresh (the campaign's folder and name as of now: a renamed campaign's
+        reused rows say where it is). A row of a slot that has a current row, but is not current itself (other
+        settings, version or file), is dropped: one row per campaign uid, run key and step. ``drop``: slots
+        (campaign uid, run key) of runs that their campaign no longer plans; their rows go."""
+        fresh = {slot_of(rows[k]) for k in current if k in rows}
+        out = []
+        for k, r in rows.items():
+            if k in current:
+                out.append({**r, **current[k]})
+            elif slot_of(r) not in fresh and (r.get("campaign_uid"), r.get("key")) not in drop:
+                out.append(r)
+        out.sort(key=lambda r: tuple(str(r.get(k) or "") for k in ORDER) + tuple(str(v) for v in row_key(r)))
         self.path.mkdir(parents=True, exist_ok=True)
         target = self.path / TABLE_NAME
-        _write_atomic(to_table(rows), target)
+        _write_atomic(to_table(out), target)
         if self.parts.is_dir():
             for f in self.parts.glob("*.parquet"):
                 f.unlink()
-            self.parts.rmdir()
+            self.clean_leftovers()
+            try:
+                self.parts.rmdir()
+            except OSError:  # something else in there: harmless, later analyses ignore what is not a part
+                pass
         return target

@@ -86,8 +86,14 @@ def _sha256(path: str) -> str:
 def _loadmat(path: str, **kwargs: Any) -> dict[str, Any]:
     from scipy.io import loadmat
 
+    from hilbench.bench.storage.mat5_bound import MatBoundError, check_inflation
+
     if not os.path.isfile(path):
         raise ImportDataError(f"{path}: no such file")
+    try:
+        check_inflation(path, set(kwargs.get("variable_names") or ()))  # before scipy inflates any of them
+    except (OSError, MatBoundError) as exc:
+        raise ImportDataError(f"{path}: {' '.join(str(exc).split())}") from None
     try:
         return loadmat(path, **kwargs)
     except Exception as exc:  # scipy raises ValueError, TypeError, OSError, MatReadError... for bad files
@@ -699,8 +705,12 @@ def _mat_listing(path: str) -> tuple[bool, dict[str, tuple[tuple[int, ...], str]
         raise ImportDataError(f"{path}: not a MAT file ({' '.join(str(exc).split())})") from None
     if major == 2:
         return True, _mat73_listing(path)
+    from hilbench.bench.storage.mat5_bound import MatBoundError, list_variables
+
     try:
-        listing = matlab.whosmat(path)
+        listing = list_variables(path)  # headers only: whosmat inflated every compressed variable whole
+    except MatBoundError as exc:
+        raise ImportDataError(f"{path}: not a readable MAT file ({' '.join(str(exc).split())})") from None
     except Exception as exc:
         raise ImportDataError(f"{path}: not a readable MAT file ({' '.join(str(exc).split())})") from None
     if len(listing) > MAX_MAT_VARIABLES:

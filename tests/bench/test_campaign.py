@@ -225,3 +225,22 @@ def test_a_hostile_campaign_file_is_one_line(tmp_path, text, reason):
     cp = subprocess.run([sys.executable, "-m", "hilbench.bench.cli", "campaign", str(path), "--check"],
                         capture_output=True, text=True, timeout=60)
     assert cp.returncode == 2 and len(cp.stderr.strip().splitlines()) == 1 and reason in cp.stderr, cp.stderr
+
+
+def test_a_resume_with_fewer_repeats_marks_the_unplanned_runs_and_the_index_has_a_uid(tmp_path):
+    # lowering repeats 3 -> 1 kept runs 2 and 3 in the index as planned ("3/1 runs completed") and analyse used them
+    from hilbench.bench.acquisition.campaign import run_campaign
+
+    text = GOOD.format(duration=0.2).split("[[run]]\nname = \"ss\"")[0].replace("repeats = 2", "repeats = 3")
+    out = tmp_path / "out"
+    run_campaign(load_campaign(_write(tmp_path, text)), out)
+    first = json.loads((out / "index.json").read_text())
+    assert len(first["runs"]) == 3 and len(first["uid"]) == 32  # a uid from the campaign's creation
+    smaller = load_campaign(_write(tmp_path, text.replace("repeats = 3", "repeats = 1"), "d.toml"))
+    entries = run_campaign(smaller, out, resume=True)
+    doc = json.loads((out / "index.json").read_text())
+    assert doc["uid"] == first["uid"]
+    assert {e["key"]: e.get("planned", True) for e in doc["runs"]} == {"id-1": True, "id-2": False, "id-3": False}
+    assert len(entries) == 3
+    run_campaign(load_campaign(_write(tmp_path, text, "e.toml")), out, resume=True)  # planned again: unmarked
+    assert all("planned" not in e for e in json.loads((out / "index.json").read_text())["runs"])

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     from hilbench.analysis.protocol import ANALYSES
-    from hilbench.bench.analysis_input import whole_number
+    from hilbench.bench.analysis_input import MAX_THRESHOLDS, whole_number
+    from hilbench.bench.campaign_analysis.fork_server import MAX_WORKERS
 
     p = sub.add_parser(
         "analyse", help="analyse every run of campaign folders (identify, compare, residual, ...) into one Parquet "
@@ -24,16 +26,19 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="comma-separated steps, each run gets those its protocol supports (default identify; "
                    f"available: the analysis registry's {', '.join(ANALYSES)})")
     engine = p.add_mutually_exclusive_group()
-    engine.add_argument("--serial", action="store_true", help="run in this process (no cluster)")
-    engine.add_argument("--scheduler", metavar="tcp://HOST:8786", help="use a running Dask scheduler")
+    engine.add_argument("--serial", action="store_true", help="run in this process (no cluster; no --workers)")
+    engine.add_argument("--scheduler", metavar="tcp://HOST:8786",
+                        help="use a running Dask scheduler (it must answer within 10 s; its workers must see the "
+                        "run files and the results folder at the same paths)")
     engine.add_argument("--scheduler-file", metavar="FILE", help="use the Dask scheduler this file names")
     p.add_argument("--workers", type=whole_number, default=None,
-                   help="worker processes of the local cluster (default: one per core)")
+                   help=f"worker processes of the local cluster, 1..{MAX_WORKERS} (default: one per core)")
     resume = p.add_mutually_exclusive_group()
     resume.add_argument("--resume", dest="resume", action="store_true", default=True,
                         help="skip rows already in the table (default)")
     resume.add_argument("--no-resume", dest="resume", action="store_false", help="analyse every run again")
-    p.add_argument("--thresholds", type=whole_number, default=32, help="identify: candidate thresholds (default 32)")
+    p.add_argument("--thresholds", type=whole_number, default=32,
+                   help=f"identify: candidate thresholds, 0..{MAX_THRESHOLDS} (default 32)")
     p.add_argument("--method", choices=("lip", "oe"), default="lip", help="identify: method (default lip)")
     p.add_argument("--coulomb", action="store_true", help="identify: add a Coulomb term")
     p.add_argument("--offset", action="store_true", help="identify: add a torque offset")
@@ -41,6 +46,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="identify: tail of each run held out for validation (default 0.3; 0: none)")
     p.add_argument("--skeleton-mass", type=float, default=None, metavar="J",
                    help="skeleton: inertia J (kg*m^2) or mass (kg); default: each run's declared calibration inertia")
+    p.add_argument("--allow-incomplete", action="store_true",
+                   help="also analyse runs that did not complete (aborted, short), as the single-run commands do")
     p.add_argument("--no-dashboard", action="store_true", help="do not start the Dask dashboard (it costs seconds)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -65,8 +72,10 @@ def start_early(argv: list[str]) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from hilbench.bench.acquisition.campaign import INDEX_NAME
+    from hilbench.bench.analysis_input import MAX_THRESHOLDS, check_count
+    from hilbench.bench.campaign_analysis.fork_server import MAX_WORKERS
     from hilbench.bench.campaign_analysis.steps import STEPS, StepSettings
-    from hilbench.bench.errors import AnalyseError
+    from hilbench.bench.errors import AnalyseError, BenchError
     from hilbench.bench.storage import outputs
 
     steps = tuple(s.strip() for s in args.steps.split(",") if s.strip())
@@ -75,8 +84,16 @@ def run(args: argparse.Namespace) -> int:
         raise AnalyseError(f"--steps: unknown step {bad[0] if bad else '(none)'!r} (available: {', '.join(STEPS)})")
     if not 0 <= args.validation_fraction < 0.9:
         raise AnalyseError(f"--validation-fraction must be in [0, 0.9), got {args.validation_fraction}")
-    if args.workers == 0:
-        raise AnalyseError("--workers must be at least 1")
+    if args.workers is not None and not 1 <= args.workers <= MAX_WORKERS:
+        raise AnalyseError(f"--workers must be in 1..{MAX_WORKERS}, got {args.workers}")
+    if args.serial and args.workers is not None:
+        raise AnalyseError("--serial runs in this process: it takes no --workers")
+    try:
+        check_count(args.thresholds, "--thresholds", 0, MAX_THRESHOLDS, "candidate thresholds, as identify takes")
+    except BenchError as exc:
+        raise AnalyseError(str(exc)) from None
+    if args.skeleton_mass is not None and not (math.isfinite(args.skeleton_mass) and args.skeleton_mass > 0):
+        raise AnalyseError(f"--skeleton-mass must be finite and > 0 (kg*m^2 or kg), got {args.skeleton_mass}")
     for folder in args.campaigns:
         if not (folder / INDEX_NAME).is_file():
             raise AnalyseError(f"{folder}: no {INDEX_NAME}; not a campaign folder (hilbench campaign writes one)")
@@ -91,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
 
     settings = StepSettings(thresholds=args.thresholds, method=args.method, coulomb=args.coulomb,
                             offset=args.offset, validation_fraction=args.validation_fraction,
-                            skeleton_mass=args.skeleton_mass)
+                            skeleton_mass=args.skeleton_mass, allow_incomplete=args.allow_incomplete)
     summary = analyse(list(args.campaigns), args.output, steps, settings, serial=args.serial, workers=args.workers,
                       scheduler=args.scheduler, scheduler_file=args.scheduler_file, resume=args.resume,
                       progress=not args.quiet and outputs.verbosity > 0, say=outputs.say,
@@ -99,6 +116,7 @@ def run(args: argparse.Namespace) -> int:
     for line in summary.failures:
         outputs.say(f"failed: {line}")
     outputs.say(f"{summary.analysed} analysed ({summary.failed} failed), {summary.skipped} already there, "
-                f"{summary.total} rows in all ({summary.wall_time:.1f} s, {summary.startup_time:.1f} s of it start-up) "
+                f"{summary.total} rows in all ({summary.wall_time:.1f} s, {summary.startup_time:.1f} s of it start-up; "
+                f"client CPU {1e3 * summary.client_cpu_per_run:.2f} ms per run) "
                 f"-> {summary.table}")
     return 0

@@ -49,12 +49,12 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         with signals_as_interrupt():
-            entries = run_campaign(campaign, out, resume=args.resume, progress=show)
+            entries = run_campaign(campaign, out, resume=args.resume, progress=show, say=outputs.say)
     except KeyboardInterrupt as exc:
         for bar in bars.values():
             bar.close()
         print(f"hilbench campaign: interrupted ({exc or 'Ctrl-C'}); device disarmed. Continue with --resume.")
         return 130
-    done = sum(e["status"] == "completed" for e in entries.values())
+    done = sum(entries[r.key]["status"] == "completed" for r in campaign.runs if r.key in entries)  # planned only
     outputs.say(f"{done}/{len(campaign.runs)} runs completed; index: {out / 'index.json'}")
     return 0 if done == len(campaign.runs) else 1

@@ -65,11 +65,13 @@ def test_resume_skips_what_is_there_and_a_changed_setting_or_file_reanalyses(cam
     again = analyse([copy], out, serial=True, **quiet)
     assert (again.analysed, again.skipped) == (0, 8)
     assert pq.read_table(again.table).equals(first)
-    shutil.copyfile(copy / "id1-1.h5", copy / "id4-2.h5")  # another file under the same name
+    shutil.copyfile(copy / "id1-1.h5", copy / "id4-2.h5")  # another run's file under this run's name
     one = analyse([copy], out, serial=True, **quiet)
     assert (one.analysed, one.skipped) == (1, 7)
     rows = {r["key"]: r for r in _rows(one.table)}
-    assert rows["id4-2"]["breakaway"] == rows["id1-1"]["breakaway"] and len(rows) == 8
+    # its uid is not the index entry's: a failed row that says so, never id1-1's numbers as id4-2's
+    assert rows["id4-2"]["status"] == "failed" and "run uid" in rows["id4-2"]["error"] and len(rows) == 8
+    assert rows["id4-2"]["breakaway"] is None
     changed = analyse([copy], out, settings=StepSettings(thresholds=16), serial=True, **quiet)
     assert (changed.analysed, changed.skipped) == (8, 0)
     assert len(_rows(changed.table)) == 8  # one row per run and step: the older settings' rows are replaced

@@ -73,3 +73,22 @@ def test_remote_scheduler_by_address_and_by_file_gives_the_serial_table(campaign
         out = tmp_path / name
         assert main(["-q", "analyse", str(campaign), "-o", str(out), "--no-dashboard", *option]) == 0
         assert pq.read_table(out / "results.parquet").equals(serial), name
+
+
+def test_a_run_the_worker_cannot_open_is_a_failed_row_naming_the_worker(campaign, remote, tmp_path):
+    from distributed import Client
+
+    from hilbench.bench.campaign_analysis.engine import _check_writable, execute_chunk
+    from hilbench.bench.campaign_analysis.steps import StepSettings
+
+    address, _ = remote
+    item = {"path": str(campaign / "only-on-the-client.h5"), "step": "identify", "uid": "u", "known": (),
+            "base": {"campaign_uid": "c", "key": "k", "run_id": "u", "step": "identify"}}
+    with Client(address, timeout="30s") as client:
+        (worker,) = client.scheduler_info()["workers"]
+        (outcome,) = client.submit(execute_chunk, [item], StepSettings(), {}, str(tmp_path / "r"), pure=False).result()
+        assert outcome[1] == "failed" and f"cannot open on worker {worker}" in outcome[2]
+        # a worker that cannot write the results folder: the analysis asks each before any task (one line)
+        said = client.run(_check_writable, "/proc/hilbench-results")
+        assert said[worker].startswith(f"worker {worker} cannot write the results folder /proc/hilbench-results")
+        assert client.run(_check_writable, str(tmp_path)) == {worker: None}
