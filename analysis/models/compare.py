@@ -85,7 +85,9 @@ def compare(train: RunData, validation: RunData, *, timing: str, train_position:
                 fit.fit_time_s = ms_time
             rows.append(_row(family, fit.n_parameters, fit.fit_time_s, fit.plant, validation, runs, segment, fit))
         except (AnalysisError, PlantParameterError, FloatingPointError, np.linalg.LinAlgError) as exc:
-            rows.append(failed_row(family, f"{type(exc).__name__}: {exc}", time.perf_counter() - t1))
+            # our own one-line refusals say what and why; another error is named by its type
+            reason = str(exc) if isinstance(exc, AnalysisError) else f"{type(exc).__name__}: {exc}"
+            rows.append(failed_row(family, reason, time.perf_counter() - t1))
         if progress is not None:
             progress(family)
     for name, plant in (published or {}).items():

@@ -10,13 +10,13 @@ import warnings
 
 import pytest
 
-from hilbench.analysis.runfile import open_run
 from hilbench.bench.acquisition.breakaway_probe import ProbeResult
 from hilbench.bench.acquisition.campaign import CampaignError, load_campaign, run_campaign
 from hilbench.bench.acquisition.planning import Plan, size_protocols
 from hilbench.bench.acquisition.protocols import Presliding, make_protocol
 from hilbench.bench.acquisition.runner import DeviceSettings
 from hilbench.bench.cli import main
+from hilbench.common.runfile import open_run
 
 KT = 0.2  # N*m/A, the default calibration
 PROBE = ProbeResult("probe.h5", 6.0, (3.7, -3.5, 3.5), 1.1e-3, 0.05,

@@ -36,7 +36,7 @@ if mode == "cli":
 else:  # the GUI's analysis worker, in its own thread
     from hilbench.bench.gui.run_browser import AnalysisWorker
     failed = []
-    worker = AnalysisWorker("identification", path, {})
+    worker = AnalysisWorker("identify", path, {})
     worker.failed.connect(failed.append)
     worker.start()
     worker.wait()

@@ -22,6 +22,7 @@ import pytest
 
 from hilbench.bench.acquisition.protocols import Identification
 from hilbench.bench.acquisition.runner import Bench, DeviceSettings
+from hilbench.common.runfile.schema import DeviceIdentity
 from hilbench.drivers import cia402 as c
 from hilbench.drivers import protocol as p
 from hilbench.drivers.canopen_drive import CanopenDrive
@@ -72,8 +73,8 @@ class ShortDevice(Device):
     clock = "host"
     capabilities = Capabilities({"current": (1000,)})
 
-    def info(self) -> dict:
-        return {"model": "short"}
+    def info(self) -> DeviceIdentity:
+        return DeviceIdentity(model="short")
 
     def configure(self, config) -> None:
         self.config = config

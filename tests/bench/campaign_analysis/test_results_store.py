@@ -282,12 +282,12 @@ def test_a_scheduler_address_of_another_service_is_one_line_within_the_timeout(c
 
 
 def test_nan_temperature_is_a_missing_reading_not_a_failure(tmp_path):
-    from hilbench.analysis.runfile import RunWriter
     from hilbench.bench.campaign_analysis.steps import identify_step
+    from hilbench.common.runfile import RunWriter
 
     src = tmp_path / "made"
     write_campaign(src, SyntheticCampaign(runs=1, duration=1.5, seed=3))
-    from hilbench.analysis.runfile import open_run
+    from hilbench.common.runfile import open_run
 
     with open_run(src / "id1-1.h5") as run:
         channels = {c: np.asarray(run.channel(c)) for c in run.channels}
