@@ -137,6 +137,8 @@ def _inflated(fh: BinaryIO, nbytes: int, order: str, names: set[str]) -> Header:
     while True:
         if not pending:
             pending = fh.read(min(_STEP, left)) if left else b""
+            if left and not pending:  # the file ends inside the variable: nothing more will come
+                raise MatBoundError(f"the file ends {left} bytes short of a compressed variable's end (truncated)")
             left -= len(pending)
         try:
             out = inflate.decompress(pending, max(1, min(limit + 1 - total, _STEP)))

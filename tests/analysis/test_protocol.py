@@ -108,7 +108,8 @@ def _host_clocked(folder: Path) -> Path:
                    device={"protocol": "CiA 402 over CANopen", "sample_times": "host_time"}) as w:
         w.append({"t": src.t, "sample_index": np.arange(n), "position": src.position, "torque": src.torque,
                   "host_time": 50.0 + src.t + jitter})
-    index = {"runs": [{**entry, "file": "drive.h5", "key": "drive"}]}
+        uid = w.uid
+    index = {"runs": [{**entry, "file": "drive.h5", "key": "drive", "uid": uid}]}  # the index names its run
     (folder / "index.json").write_text(json.dumps(index))
     (folder / entry["file"]).unlink()
     return path
