@@ -47,6 +47,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.runs_dir = Path(runs_dir)
         self.timeout = timeout
         self.run_worker: RunWorker | None = None
+        self._estop_worker: RunWorker | None = None  # the run an e-stop request is for (estop)
         self.run_kind = ""
         self.messages: list[tuple[float, str, bool]] = []
         self.device_info: dict | None = None
@@ -192,13 +193,16 @@ class MainWindow(QtWidgets.QMainWindow):
     # ------------------------------------------------------------------ e-stop
     def estop(self) -> None:
         """E-STOP: hand the request to the dedicated e-stop thread at once, then tell the operator."""
+        # the run this e-stop is for: the one running now (the e-stop thread acts after the command went out, and a
+        # run started by then, e.g. after an idle e-stop and a fault clear, is not this request's to abort)
+        self._estop_worker = self.run_worker
         self.estop_line.trigger()
         self.show_message("E-STOP requested", error=True)
 
     def _abort_from_estop(self) -> None:  # e-stop thread, after the command went out
         """A streaming run ends by itself on the latched fault (and records it); a paused run, or one
         whose device did not answer, is aborted after a grace period so it never waits forever."""
-        worker = self.run_worker
+        worker = self._estop_worker
         if worker is None:
             return
         if worker.control.paused:
