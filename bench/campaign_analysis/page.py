@@ -146,10 +146,11 @@ def repeat_summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
-def step_sections(rows: list[dict[str, Any]], units: dict[str, str]) -> list[str]:
+def step_sections(rows: list[dict[str, Any]], units: dict[str, str], axis: str = "rotary") -> list[str]:
     """One section per analysis of the registry (hilbench.analysis.protocol.ANALYSES) that has rows in the table,
     in the registry's order: its title, then a sortable table of its rows (run, repeat, status, the entry's
-    columns with their units, the reason of a failure)."""
+    columns with their units, the reason of a failure). An NRMSE reads in percent; its cell's ``data-v`` keeps the
+    table's exact value (the fraction), which the sorting reads."""
     from hilbench.analysis.protocol import ANALYSES, entry
 
     e = html.escape
@@ -166,16 +167,16 @@ def step_sections(rows: list[dict[str, Any]], units: dict[str, str]) -> list[str
                      "<th data-sort='1' class='t'>run</th><th data-sort='1'>repeat</th>"
                      "<th data-sort='1' class='t'>status</th>")
         for c in columns:
-            unit = units.get(c, "")
-            label = f"{c} ({unit})" if unit and unit != "1" else c
-            parts.append(f"<th data-sort='1'>{e(label)}</th>")
+            head = c.replace("_", " ").replace("nrmse", "NRMSE")
+            parts.append(f"<th data-sort='1'>{e(_header(c, head, units, axis))}</th>")
         parts.append("<th data-sort='1' class='t'>reason</th></tr></thead><tbody>")
         for r in mine:
             cls = "step-row" + (" failed" if r.get("status") != "ok" else "")
             cells = [f"<td class='t' data-v='{e(str(r.get('key')))}'>{e(str(r.get('key')))}</td>",
                      f"<td data-v='{e(str(r.get('repeat')))}'>{_fmt(r.get('repeat'))}</td>",
                      f"<td class='t' data-v='{e(str(r.get('status')))}'>{_fmt(r.get('status'))}</td>"]
-            cells += [f"<td data-v='{e(str(r.get(c)))}'>{_fmt(r.get(c), r.get(f'{c}_se'))}</td>" for c in columns]
+            cells += [f"<td data-v='{e(repr(r.get(c)))}'>{_fmt(r.get(c), r.get(f'{c}_se'), c)}</td>"
+                      for c in columns]
             cells.append(f"<td class='t'>{_fmt(r.get('error'))}</td>")
             parts.append(f"<tr class='{cls}'>{''.join(cells)}</tr>")
         parts.append("</tbody></table>")
@@ -233,7 +234,7 @@ def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, st
         parts.append(f"<tr id='fig-{rid}' class='fig' style='display:none'><td colspan='{len(RUN_COLUMNS)}'>"
                      f"{body}</td></tr>")
     parts.append("</tbody></table>")
-    sections = step_sections(rows, units)
+    sections = step_sections(rows, units, axis)
     if sections:
         parts.append("<h2>Analyses</h2><p>One section per analysis step in the table (the analysis registry's "
                      "order); click a column to sort.</p>")

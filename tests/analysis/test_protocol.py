@@ -124,6 +124,21 @@ def _campaign_row(folder: Path, out: Path, step: str, fraction: float) -> dict:
     return row
 
 
+def _page_cell(row: dict, column: str) -> tuple[float, str]:
+    """(the exact value a campaign page's step section keeps for ``column`` of ``row``, the text it shows)."""
+    import re
+
+    from hilbench.bench.campaign_analysis.page import step_sections
+
+    page = "".join(step_sections([row], {}))
+    section = page[page.index(f"id='step-{row['step']}'"):]
+    heads = re.findall(r"<th data-sort='1'[^>]*>([^<]*)</th>", section.split("</thead>")[0])
+    cells = re.findall(r"<td[^>]*data-v='([^']*)'>([^<]*)</td>", section.split("<tbody>")[1].split("</tr>")[0])
+    head = column.replace("_", " ").replace("nrmse", "NRMSE") + " (%)"
+    value, text = cells[heads.index(head)]
+    return float(value), text
+
+
 CASES = [(2000.0, False), (10000.0, False), (20000.0, False), (2000.0, True)]
 
 
@@ -167,8 +182,10 @@ def test_every_consumer_reports_the_same_figure(rate, host_clocked, tmp_path, ca
                  "--json", str(tmp_path / "h.json")]) == 0
     assert json.loads((tmp_path / "h.json").read_text())["figures"]["validation_torque_nrmse"] == pytest.approx(
         split, rel=RTOL)
-    assert _campaign_row(folder, tmp_path / "split", "identify", FRACTION)["validation_torque_nrmse"] == \
-        pytest.approx(split, rel=RTOL)
+    split_row = _campaign_row(folder, tmp_path / "split", "identify", FRACTION)
+    assert split_row["validation_torque_nrmse"] == pytest.approx(split, rel=RTOL)
+    value, text = _page_cell(split_row, "validation_torque_nrmse")  # the campaign page's cell: % shown, exact kept
+    assert value == pytest.approx(split, rel=RTOL) and float(text) == pytest.approx(100 * split, rel=5e-4)
     files = ident.analyse(ident.read([parts[0]], protocol.ReadOptions()), settings,
                           ident.read([parts[1]], protocol.ReadOptions())).value.figures["validation_torque_nrmse"]
     assert main(["-q", "identify", str(parts[0]), "--validate", str(parts[1]), "--thresholds", str(THRESHOLDS),
