@@ -128,14 +128,13 @@ def _page_cell(row: dict, column: str) -> tuple[float, str]:
     """(the exact value a campaign page's step section keeps for ``column`` of ``row``, the text it shows)."""
     import re
 
-    from hilbench.bench.campaign_analysis.page import step_sections
+    from hilbench.bench.campaign_analysis.page import _header, step_sections
 
     page = "".join(step_sections([row], {}))
     section = page[page.index(f"id='step-{row['step']}'"):]
     heads = re.findall(r"<th data-sort='1'[^>]*>([^<]*)</th>", section.split("</thead>")[0])
     cells = re.findall(r"<td[^>]*data-v='([^']*)'>([^<]*)</td>", section.split("<tbody>")[1].split("</tr>")[0])
-    head = column.replace("_", " ").replace("nrmse", "NRMSE") + " (%)"
-    value, text = cells[heads.index(head)]
+    value, text = cells[heads.index(_header(column, column.replace("_", " ").replace("nrmse", "NRMSE"), {}))]
     return float(value), text
 
 
@@ -278,6 +277,67 @@ def test_the_afrf_reports_one_figure_everywhere(tmp_path, capsys):
     assert streamed.streamed
     assert afrf.report(afrf.analyse(streamed))[1]["afrf_compliance_low_amplitude"] == pytest.approx(compliance,
                                                                                                    rel=RTOL)
+    capsys.readouterr()
+
+
+def test_the_skeleton_reports_one_figure_everywhere(tmp_path, capsys):
+    """A chirp run of the paper's system: the composed amplitude range of the skeleton (the campaign row's columns)
+    from the Python API, the CLI's JSON, the GUI's result, the Parquet row and the page's cell, to 1e-6; the
+    mass is the run's declared inertia everywhere (no option)."""
+    from hilbench.firmware_sim.engine.friction_models import paper_system
+    from tests.analysis.skeleton.test_skeleton_stream import _write_chirp
+
+    folder = tmp_path / "c"
+    folder.mkdir()
+    run = folder / "chirp.h5"
+    _write_chirp(run, paper_system(), 5.0, duration=20.0)
+    (folder / "index.json").write_text(json.dumps({"runs": [{"key": "a", "file": "chirp.h5", "status": "completed",
+                                                             "protocol": "chirp"}]}))
+    sk = protocol.entry("skeleton")
+    summary = sk.report(sk.analyse(sk.read([run], protocol.ReadOptions())))[1]
+    low, high = summary["skeleton_amplitude_min"], summary["skeleton_amplitude_max"]
+    assert main(["-q", "skeleton", str(run), "--json", str(tmp_path / "s.json")]) == 0
+    doc = json.loads((tmp_path / "s.json").read_text())
+    assert (min(doc["amplitude"]), max(doc["amplitude"])) == (pytest.approx(low, rel=RTOL), pytest.approx(high,
+                                                                                                        rel=RTOL))
+    shown = run_analysis("skeleton", run)
+    assert shown.summary["skeleton_amplitude_max"] == pytest.approx(high, rel=RTOL)
+    row = _campaign_row(folder, tmp_path / "row", "skeleton", 0.0)
+    for column, value in (("skeleton_amplitude_min", low), ("skeleton_amplitude_max", high)):
+        assert row[column] == pytest.approx(value, rel=RTOL), column
+        assert _page_cell(row, column)[0] == pytest.approx(value, rel=RTOL), column
+    assert row["skeleton_stiffness_low_amplitude"] == pytest.approx(summary["skeleton_stiffness_low_amplitude"],
+                                                                    rel=RTOL)
+    capsys.readouterr()
+
+
+def test_presliding_reports_one_figure_everywhere(tmp_path, capsys):
+    """A displacement-driven record of the DC motor's Maxwell-slip elements on a nested path: the break-away force
+    and initial stiffness from the Python API, the CLI's presliding.json, the GUI's result, the Parquet row and the
+    page's cell, to 1e-6."""
+    from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_D
+    from tests.analysis.presliding.records import dc_elements, maxwell_force, smooth_path
+    from tests.analysis.presliding.test_presliding_stream import _write
+
+    folder = tmp_path / "c"
+    folder.mkdir()
+    run = folder / "p.h5"
+    x = smooth_path(DC_MOTOR_D, 200)
+    _write(run, x, maxwell_force(x, *dc_elements()) + 2e-3 * np.random.default_rng(5).standard_normal(x.size))
+    (folder / "index.json").write_text(json.dumps({"runs": [{"key": "p", "file": "p.h5", "status": "completed",
+                                                             "protocol": "presliding"}]}))
+    ps = protocol.entry("presliding")
+    summary = ps.report(ps.analyse(ps.read([run], protocol.ReadOptions())))[1]
+    assert main(["-q", "presliding", str(run), "-o", str(tmp_path / "out")]) == 0
+    doc = json.loads((tmp_path / "out" / "presliding.json").read_text())
+    shown = run_analysis("presliding", run)
+    row = _campaign_row(folder, tmp_path / "row", "presliding", 0.0)
+    for column, quantity in (("presliding_breakaway", "breakaway"), ("initial_stiffness", "initial_stiffness")):
+        value = summary[column]
+        assert doc["quantities"][quantity]["value"] == pytest.approx(value, rel=RTOL), column
+        assert shown.summary[column] == pytest.approx(value, rel=RTOL), column
+        assert row[column] == pytest.approx(value, rel=RTOL), column
+        assert _page_cell(row, column)[0] == pytest.approx(value, rel=RTOL), column
     capsys.readouterr()
 
 
