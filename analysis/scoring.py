@@ -67,6 +67,7 @@ from hilbench.analysis.identification.regressors import (
     triangle_average,
     zero_phase_lowpass,
 )
+from hilbench.common.metrics import RunningNrmse
 
 #: more RK4 sub-steps per sample than this means a model too stiff to simulate at the rate (compare refused it there)
 MAX_SUBSTEPS = 2000
@@ -186,35 +187,8 @@ def score(params, position: np.ndarray, torque: np.ndarray, fs: float, *, timing
                         keep=keep, n=x.size)
 
 
-class _Sums:
-    """Running sums of an error and its reference over a record read in blocks (the reference shifted by its first
-    value, so a large constant does not cost precision)."""
-
-    def __init__(self) -> None:
-        self.n = 0
-        self.e2 = self.y2 = self.s1 = self.s2 = 0.0
-        self.ref: float | None = None
-
-    def add(self, y: np.ndarray, e: np.ndarray) -> None:
-        if y.size == 0:
-            return
-        if self.ref is None:
-            self.ref = float(y[0])
-        d = y - self.ref
-        self.n += y.size
-        self.e2 += float(e @ e)
-        self.y2 += float(y @ y)
-        self.s1 += float(np.sum(d))
-        self.s2 += float(d @ d)
-
-    def nrmse(self) -> float:
-        var = self.s2 / self.n - (self.s1 / self.n) ** 2 if self.n else 0.0
-        if not var > 0:
-            raise AnalysisError("cannot normalise the error: the reference signal is constant over the scored span")
-        return float(math.sqrt(self.e2 / self.n / var))
-
-    def relative(self) -> float:
-        return float(math.sqrt(self.e2 / self.y2)) if self.y2 > 0 else math.nan
+#: what a constant reference's one-line refusal adds: the figure is over the scored span only
+SPAN = " over the scored span"
 
 
 def _mechanics(params):
@@ -350,7 +324,7 @@ def score_chunks(params, source: ChunkSource, fs: float, *, timing: str = "hold_
         raise AnalysisError(f"model cannot be scored: {exc}") from None
     offset = float(params.torque_offset)
     margin = max(default_margin(fs, cutoff), 2 * lag, 2)
-    torque_sums, whole, segmented = _Sums(), _Sums(), _Sums()
+    torque_sums, whole, segmented = RunningNrmse(), RunningNrmse(), RunningNrmse()
     kept: dict[str, list[np.ndarray]] = {"rows": [], "measured": [], "predicted": [], "sim": [], "seg": []}
     sims: dict[str, object] = {"whole": None, "seg": None}
     try:
@@ -414,14 +388,14 @@ def score_chunks(params, source: ChunkSource, fs: float, *, timing: str = "hold_
         raise AnalysisError(f"model cannot be simulated: {exc}") from None
     figures: dict = {}
     if s.force:
-        figures["force_nrmse"] = torque_sums.nrmse()
+        figures["force_nrmse"] = torque_sums.nrmse(SPAN)
         figures["force_rel_pct"] = 100.0 * torque_sums.relative()
     else:
-        figures["torque_nrmse"] = torque_sums.nrmse()
+        figures["torque_nrmse"] = torque_sums.nrmse(SPAN)
         figures["torque_rel_pct"] = 100.0 * torque_sums.relative()
         if simulate:
-            figures["position_nrmse"] = whole.nrmse()
-            figures["position_nrmse_segmented"] = segmented.nrmse()
+            figures["position_nrmse"] = whole.nrmse(SPAN)
+            figures["position_nrmse_segmented"] = segmented.nrmse(SPAN)
             figures["position_rms_segmented"] = float(math.sqrt(segmented.e2 / segmented.n))
     figures["samples"] = int(stop - start)
     out = Score(figures)

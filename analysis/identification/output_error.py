@@ -18,7 +18,7 @@ import numpy as np
 from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.identification.regressors import held_torque, zero_phase_lowpass
 from hilbench.analysis.models.friction_model import FrictionModel
-from hilbench.common.metrics import nrmse
+from hilbench.common.metrics import RunningNrmse, nrmse
 
 #: Stop-operator values held at once by segmented_simulation_error (16 MiB of float64).
 CHUNK_VALUES = 1 << 21
@@ -278,34 +278,6 @@ def refine_output_error(
     return refined, {"position_nrmse_before": before, "position_nrmse_after": after, "nfev": int(sol.nfev)}
 
 
-class _Spread:
-    """Running sums for rms(x - sim) and std(x) over a record read in blocks (x shifted by its first value, so
-    a large constant offset does not cost precision)."""
-
-    def __init__(self) -> None:
-        self.n = 0
-        self.err2 = 0.0
-        self.s1 = 0.0
-        self.s2 = 0.0
-        self.ref: float | None = None
-
-    def add(self, x: np.ndarray, sim: np.ndarray) -> None:
-        if self.ref is None and x.size:
-            self.ref = float(x[0])
-        d = x - (self.ref or 0.0)
-        e = x - sim
-        self.n += x.size
-        self.err2 += float(e @ e)
-        self.s1 += float(np.sum(d))
-        self.s2 += float(d @ d)
-
-    def nrmse(self) -> float:
-        var = self.s2 / self.n - (self.s1 / self.n) ** 2 if self.n else 0.0
-        if not var > 0:
-            raise AnalysisError("cannot normalise the error: the reference signal is constant")
-        return float(np.sqrt(self.err2 / self.n / var))
-
-
 def simulation_error_chunks(model: FrictionModel, source, fs: float, *, timing: str = "hold_next") -> float:
     """:func:`simulation_error` (the NRMSE) on a record read chunk by chunk (``chunked``): the plant runs block by
     block from its own state, so the simulation is the one-call simulation bit for bit; nothing of the record's
@@ -314,7 +286,7 @@ def simulation_error_chunks(model: FrictionModel, source, fs: float, *, timing: 
     from hilbench.firmware_sim.engine.plant import Plant, PlantParameterError
 
     dt = 1.0 / fs
-    spread = _Spread()
+    spread = RunningNrmse()
     plant = None
     try:
         sub = stable_substeps(model, dt)
@@ -323,7 +295,8 @@ def simulation_error_chunks(model: FrictionModel, source, fs: float, *, timing: 
                 plant = Plant(model.plant_params(), dt, sub, theta0=float(w.x[0]),
                               omega0=initial_velocity(w.x, fs))
             u = held_torque(w.tau, timing)[w.a - w.wa : w.b - w.wa]
-            spread.add(w.x[w.a - w.wa : w.b - w.wa], plant.run(u).theta)
+            x = w.x[w.a - w.wa : w.b - w.wa]
+            spread.add(x, x - plant.run(u).theta)
     except (PlantParameterError, FloatingPointError) as exc:
         raise AnalysisError(f"model cannot be simulated: {exc}") from None
     return spread.nrmse()
@@ -346,7 +319,7 @@ def segmented_simulation_error_chunks(model: FrictionModel, source, fs: float, *
     block = max(1, -(-max(BLOCK, 2 * margin) // n_seg)) * n_seg  # whole segments, at least 2 margins
     params = model.plant_params()
     carry = StopCarry(params.ms_delta, margin) if params.n_elements else None
-    spread = _Spread()
+    spread = RunningNrmse()
     try:
         sub = stable_substeps(model, dt)
         for w in windows(source, block, margin):
@@ -361,7 +334,7 @@ def segmented_simulation_error_chunks(model: FrictionModel, source, fs: float, *
                 if s is not None:
                     plant.set_deflections(s[k0])
                 sim[k0 - lo : k0 - lo + n_seg] = plant.run(u[k0 : min(k0 + n_seg, hi)]).theta
-            spread.add(w.x[lo:hi], sim)
+            spread.add(w.x[lo:hi], w.x[lo:hi] - sim)
     except (PlantParameterError, FloatingPointError) as exc:
         raise AnalysisError(f"model cannot be simulated: {exc}") from None
     return spread.nrmse()
@@ -430,7 +403,7 @@ def refine_output_error_chunks(model: FrictionModel, source, fs: float, *, timin
     if first is None:
         raise AnalysisError("the record is empty")
     theta0, omega0 = float(first.x[0]), initial_velocity(first.x, fs)
-    spread = _Spread()
+    spread = RunningNrmse()
     for w in windows(source, BLOCK, 2):
         xs = w.x[w.a - w.wa : w.b - w.wa]
         spread.add(xs, xs)

@@ -32,8 +32,8 @@ from hilbench.common.errors import InputError
 
 __all__ = [
     "DRIFT_POSITION_PCT", "FAIR_TORQUE_PCT", "FORCE_NRMSE", "GOOD_TORQUE_PCT", "POSITION_NRMSE", "RELATIVE_ERROR",
-    "SEGMENTED_POSITION_NRMSE", "SEGMENT_S", "TORQUE_NRMSE", "UNIT", "grade", "label", "nrmse", "percent",
-    "relative_error",
+    "RunningNrmse", "SEGMENTED_POSITION_NRMSE", "SEGMENT_S", "TORQUE_NRMSE", "UNIT", "grade", "label", "nrmse",
+    "percent", "relative_error",
 ]
 
 #: the names used in every text a person reads (docs/metrics.md, the glossary)
@@ -64,6 +64,41 @@ def nrmse(y: np.ndarray, y_hat: np.ndarray) -> float:
     if s == 0:
         raise InputError("cannot normalise the error: the reference signal is constant")
     return float(np.sqrt(np.mean((y - np.asarray(y_hat, float)) ** 2)) / s)
+
+
+class RunningNrmse:
+    """:func:`nrmse` (and the relative error ``||e|| / ||y||``) over a signal read in blocks: running sums of the
+    squared error, of y and of y shifted by its first value (so a large constant offset costs no precision)."""
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.e2 = self.y2 = self.s1 = self.s2 = 0.0
+        self.ref: float | None = None
+
+    def add(self, y: np.ndarray, e: np.ndarray) -> None:
+        """One block: the reference ``y`` and the error ``e = y - y_hat`` (same shape)."""
+        if y.size == 0:
+            return
+        if self.ref is None:
+            self.ref = float(y[0])
+        d = y - self.ref
+        self.n += y.size
+        self.e2 += float(e @ e)
+        self.y2 += float(y @ y)
+        self.s1 += float(np.sum(d))
+        self.s2 += float(d @ d)
+
+    def nrmse(self, where: str = "") -> float:
+        """rms(e) / std(y) over every block; a constant reference is :class:`InputError` in one line (``where``
+        ends it, e.g. " over the scored span")."""
+        var = self.s2 / self.n - (self.s1 / self.n) ** 2 if self.n else 0.0
+        if not var > 0:
+            raise InputError(f"cannot normalise the error: the reference signal is constant{where}")
+        return float(np.sqrt(self.e2 / self.n / var))
+
+    def relative(self) -> float:
+        """||e|| / ||y|| over every block (NaN when y is all zero)."""
+        return float(np.sqrt(self.e2 / self.y2)) if self.y2 > 0 else math.nan
 
 
 def relative_error(y: np.ndarray, e: np.ndarray) -> float | None:
