@@ -62,19 +62,17 @@ class Inputs:
     """Runs as an analysis reads them, one entry per run in the order given: ``records`` (arrays loaded, or the
     header alone, ``position`` None, when the run is streamed), ``sources`` (the chunk source of a streamed run,
     else None), ``reads`` (how each was read: :data:`WHOLE`, :data:`STREAMED`, or the decimation's note),
-    ``budget`` (bytes the read kept to; None: none) and ``extra`` (what the analysis read beside, per run)."""
+    and ``budget`` (bytes the read kept to; None: none)."""
 
     records: list[Record]
     sources: list[ChunkSource | None] = field(default_factory=list)
     reads: list[str] = field(default_factory=list)
     budget: int | None = None
-    extra: list[dict[str, Any]] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         n = len(self.records)
         self.sources = list(self.sources) or [None] * n
         self.reads = list(self.reads) or [WHOLE] * n
-        self.extra = list(self.extra) or [{} for _ in range(n)]
 
     @property
     def record(self) -> Record:
@@ -95,16 +93,21 @@ class Inputs:
     def part(self, start: int, stop: int | None = None) -> Inputs:
         """Runs ``start:stop`` as their own Inputs (the budget is the whole read's)."""
         s = slice(start, stop)
-        return Inputs(self.records[s], self.sources[s], self.reads[s], self.budget, self.extra[s])
+        return Inputs(self.records[s], self.sources[s], self.reads[s], self.budget)
 
 
-def whole(paths: Sequence[str | Path], options: ReadOptions, **loader: Any) -> Inputs:
+def whole(paths: Sequence[str | Path], options: ReadOptions, heads: Sequence | None = None,
+          **loader: Any) -> Inputs:
     """Every run read whole by the one loader (:func:`hilbench.analysis.record.load_record`) with ``options`` and
-    the analysis's own ``loader`` keywords (channels, protocol arrays, ...)."""
+    the analysis's own ``loader`` keywords (channels, protocol arrays, ...). ``heads``: the runs'
+    :func:`~hilbench.analysis.record.stream_record` answers, read with ``options`` alone; a host-clocked run
+    came back whole there (resampled onto the uniform grid) and is not read again."""
     from hilbench.analysis.record import load_record
 
     kw = {**options.loader(), **loader}
-    return Inputs([load_record(p, **kw) for p in paths], budget=options.memory)
+    done = [h if src is None and not loader else None for h, src in heads] if heads else [None] * len(paths)
+    return Inputs([d if d is not None else load_record(p, **kw) for p, d in zip(paths, done, strict=True)],
+                  budget=options.memory)
 
 
 def one_run_whole(paths: Sequence[str | Path], options: ReadOptions, what: str, fixed: int, per_sample: int,
@@ -154,7 +157,7 @@ def held_out(inputs: Inputs, fraction: float) -> tuple[Inputs, Inputs | None]:
         raise AnalysisError(f"{inputs.record.path}: a held-out tail needs the run in memory, and it is read chunk by "
                             "chunk (over the memory budget): raise the budget, or validate on a run of its own")
     head, tail = split(inputs.record, fraction)
-    wrap = lambda r: Inputs([r], reads=inputs.reads, budget=inputs.budget, extra=inputs.extra)  # noqa: E731
+    wrap = lambda r: Inputs([r], reads=inputs.reads, budget=inputs.budget)  # noqa: E731
     return wrap(head), (wrap(tail) if tail is not None else None)
 
 

@@ -28,13 +28,15 @@ def read(paths: Sequence[str | Path], options: ReadOptions) -> Inputs:
     path = paths[0]
     record, windows = afrf.stream_header(path, options.allow_incomplete)
     budget = options.memory
-    if budget is None or afrf.array_cost(record.n_samples) <= budget or record.position is not None:
+    if record.position is not None:  # host-clocked: stream_header read it whole (afrf.load), resampled
+        return Inputs([record], budget=budget)
+    if budget is None or afrf.array_cost(record.n_samples) <= budget:
         return Inputs([afrf.load(path, allow_incomplete=options.allow_incomplete)], budget=budget)
     window = largest_window(windows)
     if afrf.stream_cost(window) > budget:
         raise AnalysisError(f"{path}: its longest step window ({window} samples) needs about "
                             f"{mib(afrf.stream_cost(window))}, over --memory {mib(budget)}: raise --memory")
-    return Inputs([record], reads=[STREAMED], budget=budget, extra=[{"windows": windows}])
+    return Inputs([record], reads=[STREAMED], budget=budget)
 
 
 def compute(inputs: Inputs, settings: AfrfSettings, validation: Inputs | None, progress=None):

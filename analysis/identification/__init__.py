@@ -73,7 +73,8 @@ def analyse_stream(record: Record, source, settings: LipSettings | None = None, 
         val, val_source = validation
         check_validation(Inputs([record]), Inputs([val]), ("axis", "kind", "timing", "sample_rate"))
     return identify_chunks(source, record.sample_rate, axis=record.axis, validate=val_source, settings=settings,
-                           record=record.kind, method=method)
+                           record=record.kind, method=method,
+                           validate_samples=val.n_samples if validation is not None else None)
 
 
 def report(result: Identification, out_dir: str | Path, runs: dict[str, str | Path] | None = None) -> list[Path]:

@@ -12,7 +12,7 @@ from typing import Any
 
 from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.identification.maxwell_fit import LipSettings
-from hilbench.analysis.protocol import STREAMED, Analysis, Inputs, ReadOptions, Result, check_validation, whole
+from hilbench.analysis.protocol import STREAMED, Analysis, Inputs, ReadOptions, Result, whole, write_json
 from hilbench.common.units import mib
 
 
@@ -35,11 +35,7 @@ def read(paths: Sequence[str | Path], options: ReadOptions) -> Inputs:
     samples = sum(h.n_samples for h, _ in heads)
     budget = options.memory
     if budget is None or array_cost(samples) <= budget:
-        # a host-clocked run came back whole from stream_record already: not read twice
-        done = [h if src is None else None for h, src in heads]
-        loaded = whole([p for p, d in zip(paths, done, strict=True) if d is None], options).records
-        it = iter(loaded)
-        return Inputs([d if d is not None else next(it) for d in done], budget=budget)
+        return whole(paths, options, heads)  # a host-clocked run came back whole from stream_record: not read twice
     if any(src is None for _, src in heads):
         raise AnalysisError(f"{samples} samples need about {mib(array_cost(samples))} read whole, over --memory "
                             f"{mib(budget)}; a host-clocked run is resampled whole: raise --memory")
@@ -63,8 +59,7 @@ def compute(inputs: Inputs, settings: IdentifySettings, validation: Inputs | Non
         raise AnalysisError(f"--method {settings.method} reads the record whole ({mib(array_cost(samples))} for "
                             f"{samples} samples, over --memory {mib(inputs.budget or 0)}): use --method lip or oe, "
                             "or raise --memory")
-    if validation is not None:  # chunk sources of both runs are read at the training run's rate
-        check_validation(inputs, validation, ("sample_rate",))
+    # analyse_stream checks the validation run, its sample rate included (both are read at one rate)
     return analyse_stream(inputs.record, inputs.sources[0], settings.lip, method=settings.method,
                           validation=(validation.record, validation.sources[0]) if validation is not None else None)
 
@@ -114,12 +109,8 @@ def document(result: Result) -> dict:
 def write(result: Result, out: Path) -> list[Path]:
     """``model.json`` and, when the curves were kept (a run read whole), the plots."""
     from hilbench.analysis.identification import report
-    from hilbench.analysis.output_files import atomic_path, dumps
 
-    path = out / "model.json"
-    with atomic_path(path) as tmp:
-        tmp.write_text(dumps(document(result), indent=2))
-    files = [path]
+    files = [write_json(out / "model.json", document(result))]
     if result.value.curves and "train_force_nrmse" not in result.value.figures:
         runs = {"train": result.inputs.record.path}
         if result.validation is not None:

@@ -221,9 +221,11 @@ def identify_chunks(
     record: str = "torque-driven",
     method: str = "lip",
     oe_max_iterations: int = 20,
+    validate_samples: int | None = None,
 ) -> Identification:
     """:func:`identify` with the ``lip`` or ``oe`` method on records read chunk by chunk, in memory bounded by
-    the block size (docs/long-runs.md; ``oe``: output_error.refine_output_error_chunks). ``source`` and
+    the block size (docs/long-runs.md; ``oe``: output_error.refine_output_error_chunks). ``validate_samples``:
+    the validation run's sample count when known (else one more pass counts it). ``source`` and
     ``validate`` are chunk sources (``chunked``: callables returning a fresh iterator of ``(position, torque)``
     pairs, in order) sampled uniformly at ``fs`` Hz; the caller checks the time stamps. The figures are
     :func:`identify`'s; no curves are kept (``curves`` is empty)."""
@@ -260,7 +262,7 @@ def identify_chunks(
     train = score_chunks(params, source, fs, timing=s.timing, settings=scoring, n=sc.n)
     figures.update(train.prefixed("train", _NOT_REPORTED))
     if validate is not None:
-        val = score_chunks(params, validate, fs, timing=s.timing, settings=scoring)
+        val = score_chunks(params, validate, fs, timing=s.timing, settings=scoring, n=validate_samples)
         figures.update(val.prefixed("validation", _NOT_REPORTED))
     settings_dict = {"method": method, **s.to_dict(), "segment_s": float(segment), "record": record,
                      "candidate_deltas": lip.candidate_deltas.tolist()}

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from hilbench.analysis.models.compare import CompareSettings
-from hilbench.analysis.protocol import WHOLE, Analysis, Inputs, ReadOptions, Result, whole
+from hilbench.analysis.protocol import WHOLE, Analysis, Inputs, ReadOptions, Result, whole, write_json
 
 
 def read(paths: Sequence[str | Path], options: ReadOptions) -> Inputs:
@@ -20,10 +20,11 @@ def read(paths: Sequence[str | Path], options: ReadOptions) -> Inputs:
     from hilbench.analysis.models.compare import reading_plan
     from hilbench.analysis.record import decimated_record, span_note, stream_record
 
-    heads = [stream_record(p, **options.loader())[0] for p in paths]
+    read_heads = [stream_record(p, **options.loader()) for p in paths]
+    heads = [h for h, _ in read_heads]
     plan = reading_plan(heads, options.memory) if options.memory is not None else None
     if plan is None:
-        return whole(paths, options)
+        return whole(paths, options, read_heads)
     qs, span = plan
     records, done = [], 0
     total = sum(h.n_samples for h in heads)
@@ -92,21 +93,18 @@ def write(result: Result, out: Path) -> list[Path]:
     whole comparison."""
     from hilbench.analysis.models.compare import document, markdown_table
     from hilbench.analysis.models.compare_plots import report
-    from hilbench.analysis.output_files import atomic_path, dumps
+    from hilbench.analysis.output_files import atomic_path
     from hilbench.analysis.protocol import provenance
 
-    def put(path: Path, text: str) -> Path:
-        with atomic_path(path) as tmp:
-            tmp.write_text(text)
-        return path
-
-    files = [put(out / "compare.md", markdown_table(result.value))]
+    md = out / "compare.md"
+    with atomic_path(md) as tmp:
+        tmp.write_text(markdown_table(result.value))
+    files = [md]
     (out / "models").mkdir(exist_ok=True)
-    files += [put(out / "models" / f"{name}.json", dumps(doc, indent=2))
-              for name, doc in family_documents(result).items()]
+    files += [write_json(out / "models" / f"{name}.json", doc) for name, doc in family_documents(result).items()]
     files += list(report(result.value, out))
-    files.append(put(out / "compare.json",
-                     dumps(document(result.value, provenance(result.inputs, result.validation)), indent=2)))
+    files.append(write_json(out / "compare.json", document(result.value, provenance(result.inputs,
+                                                                                         result.validation))))
     return files
 
 

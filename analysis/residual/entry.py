@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from hilbench.analysis.protocol import WHOLE, Analysis, Inputs, ReadOptions, Result, whole
+from hilbench.analysis.protocol import WHOLE, Analysis, Inputs, ReadOptions, Result, whole, write_json
 from hilbench.analysis.residual.record_analysis import ResidualSettings
 
 #: bytes per sample of a run held whole at its recorded rate (t, position, torque and the loader's copies)
@@ -23,14 +23,15 @@ def read(paths: Sequence[str | Path], options: ReadOptions) -> Inputs:
     from hilbench.analysis.record import span_note, stream_record
     from hilbench.analysis.residual import record_analysis
 
-    heads = [stream_record(p, **options.loader())[0] for p in paths]
+    read_heads = [stream_record(p, **options.loader()) for p in paths]
+    heads = [h for h, _ in read_heads]
     span = record_analysis.span_for(heads, options.memory) if options.memory is not None else None
     loaded = sum(record_analysis.analysed_samples(h.n_samples, h.sample_rate) for h in heads)
     if options.memory is None or (span is None and record_analysis.cost(loaded) + WHOLE_BYTES_PER_SAMPLE * sum(
             h.n_samples for h in heads) <= options.memory):
         # whole at the recorded rate (analyse reduces it, the same bit for bit): a held-out tail is then cut at
         # the recorded rate, as the same run written as two files reads
-        return whole(paths, options)
+        return whole(paths, options, read_heads)
     records, done = [], 0
     total = sum(h.n_samples for h in heads)
     for p, h in zip(paths, heads, strict=True):
@@ -64,15 +65,12 @@ def summarise(result: Result) -> dict[str, Any]:
 
 
 def write(result: Result, out: Path) -> list[Path]:
-    from hilbench.analysis.output_files import atomic_path, dumps
     from hilbench.analysis.protocol import provenance
     from hilbench.analysis.residual.record_analysis import report
     from hilbench.analysis.residual.report import report_dict
 
-    path = out / "residual.json"
-    with atomic_path(path) as tmp:
-        tmp.write_text(dumps(report_dict(result.value.loop, provenance(result.inputs, result.validation)),
-                             indent=2))
+    path = write_json(out / "residual.json", report_dict(result.value.loop, provenance(result.inputs,
+                                                                                       result.validation)))
     return [path, *report(result.value, out)]
 
 

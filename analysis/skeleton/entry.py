@@ -26,7 +26,7 @@ def read(paths: Sequence[str | Path], options: ReadOptions) -> Inputs:
     samples = sum(h.n_samples for h, _ in heads)
     if options.memory is None or skeleton.array_cost(samples) <= options.memory or any(
             src is None for _, src in heads):
-        return whole(paths, options)
+        return whole(paths, options, heads)
     return Inputs([h for h, _ in heads], [s for _, s in heads], [STREAMED] * len(heads), options.memory)
 
 
