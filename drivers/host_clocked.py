@@ -83,6 +83,7 @@ class HostClockedDevice(Device):
     _cycle: CanCycle | None = None
     _progress = 0          # cycles sent in the current (or last) stream
     _malformed_cycle = 0   # malformed frames the cycles' buses dropped
+    malformed = None       # the drive's own bus's counter of dropped frames (hilbench/common/can.py), once opened
     #: whether the drive's watchdog is fed by its commands (ODrive, moteus): then a zero-torque feed
     #: (:meth:`_feed_message`, sent on ``self.bus``) runs while armed and not streaming
     feeds_watchdog = False
@@ -166,8 +167,7 @@ class HostClockedDevice(Device):
         if fault:
             out.append(("fault", fault))
         out += self._drive_events()
-        malformed = getattr(self, "malformed", None)  # the drive's own bus (hilbench/common/can.py), once opened
-        dropped = (malformed.count if malformed is not None else 0) + self._malformed_cycle
+        dropped = (self.malformed.count if self.malformed is not None else 0) + self._malformed_cycle
         if dropped:
             out.append(("info", f"{dropped} malformed frame(s) on the bus were counted and dropped"))
         return out

@@ -162,7 +162,7 @@ class CanLink(_Decoding):
             bus.set_filters([{"can_id": p.DEVICE_TO_HOST << 4 | node, "can_mask": 0x1F, "extended": False}])
         except (can.CanError, NotImplementedError):
             pass  # the reassembler filters anyway
-        self._decoder = self._reassembler = p.CanReassembler(p.DEVICE_TO_HOST, node)
+        self._decoder = p.CanReassembler(p.DEVICE_TO_HOST, node)
         self.frames_tx = 0
 
     def send(self, msg: p.Message) -> None:
@@ -187,7 +187,7 @@ class CanLink(_Decoding):
                 return None
             if frame.is_error_frame or frame.is_remote_frame:
                 continue
-            msg = self._reassembler.feed(frame.arbitration_id, bytes(frame.data))
+            msg = self._decoder.feed(frame.arbitration_id, bytes(frame.data))
             if msg is not None:
                 return msg
             if deadline is not None and time.monotonic() >= deadline:
@@ -201,6 +201,6 @@ class CanLink(_Decoding):
 
     @property
     def counters(self) -> dict[str, int]:
-        r = self._reassembler
+        r = self._decoder
         return {"frames_rx": r.frames, "frames_tx": self.frames_tx, "crc_errors": r.errors,
                 "dropped_frames": r.dropped_frames}

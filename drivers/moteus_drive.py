@@ -316,7 +316,6 @@ class MoteusDrive(HostClockedDevice):
         command_id = 0x8000 | (HOST_ID << 8) | self.id
         tx = np.zeros((len(values), 1, WIDTH), np.uint8)
         tx[:, 0, :len(base)] = frames
-        self._setpoints = frames
         end = self._message(self._zero_torque()).data
         stop = self._message(self.controller.make_stop(query=True)).data  # answered: the stream sees mode 0
         spec = CanCycleSpec(self.interface, self.channel, self.bus_kwargs, float(self.config.sample_rate),

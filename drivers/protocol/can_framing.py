@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import struct
 
+from hilbench.common.can import pad_fd
 from hilbench.drivers.errors import ProtocolError
 from hilbench.drivers.protocol.messages import PROTOCOL_VERSION, Message, MsgType, decode_message
 
 HOST_TO_DEVICE = 0
 DEVICE_TO_HOST = 1
-_FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
 _LEN = struct.Struct("<H")
 
 
@@ -51,8 +51,7 @@ def encode_can(msg: Message, direction: int, node: int, fd: bool = False) -> lis
     for i, chunk in enumerate(chunks):
         data = bytes(((0x80 if i == len(chunks) - 1 else 0) | i,)) + chunk
         if fd:
-            size = next(n for n in _FD_LENGTHS if n >= len(data))
-            data = data.ljust(size, b"\x00")
+            data = pad_fd(data, 0)
         frames.append((arb, data))
     return frames
 

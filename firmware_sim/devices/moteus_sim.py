@@ -260,7 +260,8 @@ class SimMoteus:
         return self.plant.run_position(target, loop.kp, loop.kd, loop.velocity, loop.feedforward, loop.torque_limit,
                                        self.pll_hz, loop.ki, loop.ilimit)
 
-    def _value(self, register: int):
+    def _values(self) -> dict:
+        """Every register a query may read, as the controller holds them now (one dict per reply)."""
         position, velocity, torque = self.sample
         values = {Register.MODE: self.mode, Register.POSITION: position, Register.VELOCITY: velocity,
                   Register.TORQUE: torque, Register.Q_CURRENT: torque / self.kt, Register.D_CURRENT: 0.0,
@@ -270,15 +271,16 @@ class SimMoteus:
                   Register.FIRMWARE_VERSION: FIRMWARE, Register.REGISTER_MAP_VERSION: REGISTER_MAP,
                   Register.SERIAL_NUMBER1: SERIAL[0], Register.SERIAL_NUMBER2: SERIAL[1],
                   Register.SERIAL_NUMBER3: SERIAL[2]}
-        return values.get(register)
+        return values
 
     def _reply(self, query: list[tuple[int, int]]) -> bytes:
         """The reply subframes for ``query`` ((register, resolution) pairs), grouped as moteus groups them."""
         buf = io.BytesIO()
         writer = Writer(buf)
-        known = [(r, res) for r, res in sorted(query) if self._value(r) is not None]
+        values = self._values()
+        known = [(r, res) for r, res in sorted(query) if values.get(r) is not None]
         for register, _ in sorted(query):
-            if self._value(register) is None:
+            if values.get(register) is None:
                 writer.write_int8(mp.READ_ERROR)
                 writer.write_varuint(register)
                 writer.write_varuint(1)
@@ -292,7 +294,7 @@ class SimMoteus:
             combiner = mp.WriteCombiner(writer, mp.REPLY_BASE, run[0][0], [res for _, res in run])
             for register, resolution in run:
                 if combiner.maybe_write():
-                    value = self._value(register)
+                    value = values[register]
                     method = _WRITE.get(register)
                     if method is None:
                         writer.write_int(value, resolution)

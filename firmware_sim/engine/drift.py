@@ -31,7 +31,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from hilbench.common.physical_bounds import ABSOLUTE_ZERO_DEGC, WINDING_TEMPERATURE_MAX_DEGC
+from hilbench.common.physical_bounds import ABSOLUTE_ZERO_DEGC, WINDING_TEMPERATURE_MAX_DEGC, temperature_possible
 from hilbench.firmware_sim.engine.plant import Plant, PlantOutput, PlantParameterError, PlantParams
 
 #: unit of the temperatures here (and of the run files' ``temperature`` channel)
@@ -111,7 +111,7 @@ def reachable_extremes(drift: Drift, ambient: float, max_temperature: float = MA
     below absolute zero or not below ``max_temperature``, a ``max_temperature`` at which copper has melted, a
     friction level that reaches zero or a factor that is not finite."""
     for key, value in (("ambient", ambient), ("reference_temperature", drift.reference_temperature)):
-        if not (math.isfinite(value) and ABSOLUTE_ZERO_DEGC < value < WINDING_TEMPERATURE_MAX_DEGC):
+        if not temperature_possible(value):
             raise PlantParameterError(f"{key} = {value!r} degC is not a temperature a winding has (it must lie "
                                       f"above absolute zero, {ABSOLUTE_ZERO_DEGC} degC, and below "
                                       f"{WINDING_TEMPERATURE_MAX_DEGC:g} degC, where copper melts)")
