@@ -19,7 +19,7 @@ from hilbench.analysis.record import load_record  # noqa: E402
 from hilbench.analysis.record_split import split  # noqa: E402
 from hilbench.analysis.residual import ResidualSettings  # noqa: E402
 from hilbench.analysis.residual import analyse as residual  # noqa: E402
-from hilbench.bench.campaign_analysis.steps import StepSettings, compare_step, identify_step, residual_step  # noqa: E402
+from hilbench.bench.campaign_analysis.steps import StepSettings, step  # noqa: E402
 from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign  # noqa: E402
 from hilbench.common.runfile import RunWriter  # noqa: E402
 from hilbench.firmware_sim.engine.friction_models import dc_motor  # noqa: E402
@@ -65,7 +65,7 @@ def steps(folder: Path) -> None:
         write_campaign(d, SyntheticCampaign(runs=1, duration=8.0, seed=5, sample_rate=fs))
         path = str(sorted(d.rglob("*.h5"))[0])
         s = StepSettings(compare_families=("maxwell_slip",))
-        i, c, r = identify_step(path, s), compare_step(path, s), residual_step(path, s)
+        i, c, r = step("identify")(path, s), step("compare")(path, s), step("residual")(path, s)
         print(f"campaign steps at {fs:.0f} Hz | validation torque NRMSE: identify {pct(i['validation_torque_nrmse'])}, "
               f"compare maxwell_slip {pct(c['validation_torque_nrmse'])}, residual start "
               f"{pct(r['validation_torque_nrmse_start'])} ({r['model']})", flush=True)
