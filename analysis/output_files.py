@@ -72,20 +72,6 @@ def _written_in_place(target: Path) -> bool:
     raise OutputError(f"{target} is {kind}; an output is a regular file, a character device or a FIFO")
 
 
-def require_regular(target: str | os.PathLike, what: str = "this output") -> None:
-    """Refuse (:class:`OutputError`, one line) a ``target`` that exists and is not a regular file, for outputs
-    that cannot be streamed into a device or a FIFO (an HDF5 run file seeks): they would be renamed over it."""
-    try:
-        mode = os.stat(target).st_mode
-    except FileNotFoundError:
-        return
-    except OSError as exc:
-        raise OutputError(f"{target}: cannot use as {what} ({exc.strerror})") from None
-    if not stat.S_ISREG(mode):
-        raise OutputError(f"{target} is not a regular file; {what} is written as a file and would replace it: "
-                         "choose a file name")
-
-
 @contextlib.contextmanager
 def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``target`` (same folder, same suffix); when the block ends without an

@@ -67,7 +67,7 @@ from hilbench.analysis.identification.regressors import (
     triangle_average,
     zero_phase_lowpass,
 )
-from hilbench.common.metrics import RunningNrmse
+from hilbench.common.metrics import SEGMENT_S, RunningNrmse
 
 #: more RK4 sub-steps per sample than this means a model too stiff to simulate at the rate (compare refused it there)
 MAX_SUBSTEPS = 2000
@@ -86,7 +86,7 @@ class ScoreSettings:
     cutoff: float | None = None
     order: int = 4
     decimation: int | None = None
-    segment: float = 1.0
+    segment: float = SEGMENT_S
     force: bool = False
     simulate: bool = True
     path_factor: float | None = PATH_FACTOR

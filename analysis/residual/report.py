@@ -12,7 +12,15 @@ import numpy as np
 
 from hilbench.analysis.residual.diagnostics import Diagnostic, Signals, _jsonable
 from hilbench.analysis.residual.selection import LoopResult
-from hilbench.common.metrics import RELATIVE_ERROR, UNIT, percent
+from hilbench.common.metrics import (
+    FORCE_NRMSE,
+    POSITION_NRMSE,
+    RELATIVE_ERROR,
+    SEGMENTED_POSITION_NRMSE,
+    TORQUE_NRMSE,
+    UNIT,
+    percent,
+)
 
 
 def report_dict(result: LoopResult, inputs: dict | None = None) -> dict:
@@ -156,11 +164,16 @@ def _fmt(v) -> str:
     return str(v)
 
 
+#: the glossary's names of the error keys (docs/metrics.md)
+_NAMES = {"torque_nrmse": TORQUE_NRMSE, "force_nrmse": FORCE_NRMSE, "position_nrmse": POSITION_NRMSE,
+          "position_nrmse_segmented": SEGMENTED_POSITION_NRMSE}
+
+
 def _metric_name(key: str) -> str:
     """The glossary's name of an error key (docs/metrics.md): ``torque_nrmse`` -> ``torque NRMSE``."""
     if key.endswith("_rel_pct"):
         return f"{key.removesuffix('_rel_pct')} {RELATIVE_ERROR}"
-    return f"{key.removesuffix('_nrmse')} NRMSE"
+    return _NAMES.get(key, f"{key.removesuffix('_nrmse')} NRMSE")
 
 
 def _pct(key: str, value) -> str:

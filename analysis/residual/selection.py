@@ -40,6 +40,7 @@ from hilbench.analysis.residual.diagnostics import (
 from hilbench.analysis.residual.rundata import RunData
 from hilbench.analysis.residual.simulation_error import simulation_error
 from hilbench.common.metrics import nrmse, percent, relative_error
+from hilbench.common.units import axis_unit
 
 DEFAULT_START = ("inertia", "maxwell_slip")
 EMPS_START = ("inertia", "coulomb", "viscous", "offset")
@@ -510,7 +511,7 @@ def extrapolation(train: list[RunData], validation: list[RunData], axis: str) ->
     report says (``extrapolation`` in the JSON, and the verdict)."""
     if not validation:
         return None
-    unit = "rad" if axis == "rotary" else "m"
+    unit, speed_unit = axis_unit("position", axis), axis_unit("velocity", axis)
     lo = min(float(r.position.min()) for r in train)
     hi = max(float(r.position.max()) for r in train)
     v_lo = min(float(r.position.min()) for r in validation)
@@ -523,8 +524,8 @@ def extrapolation(train: list[RunData], validation: list[RunData], axis: str) ->
         parts.append(f"positions {v_lo:.4g} to {v_hi:.4g} {unit} against the training runs' {lo:.4g} to {hi:.4g} "
                      f"{unit}")
     if v_speed > (1 + EXTRAPOLATION_MARGIN) * speed:
-        parts.append(f"speeds up to {v_speed:.4g} {unit}/s against the training runs' {speed:.4g} {unit}/s (99th "
-                     "percentiles)")
+        parts.append(f"speeds up to {v_speed:.4g} {speed_unit} against the training runs' {speed:.4g} "
+                     f"{speed_unit} (99th percentiles)")
     if not parts:
         return None
     return {"position_train": [lo, hi], "position_validation": [v_lo, v_hi], "speed_train": speed,

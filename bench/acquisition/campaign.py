@@ -235,7 +235,8 @@ def _write_index(out_dir: Path, campaign: Campaign, entries: dict[str, dict], ui
     ``"planned": false`` (kept: their files are still there; ``hilbench analyse`` skips them)."""
     planned = [r.key for r in campaign.runs]
     runs = [{k: v for k, v in entries[k].items() if k != "planned"} for k in planned if k in entries]
-    runs += [{**e, "planned": False} for k, e in entries.items() if k not in set(planned)]
+    kept = set(planned)
+    runs += [{**e, "planned": False} for k, e in entries.items() if k not in kept]
     doc = {"campaign": str(campaign.path), "schema": "hilbench-campaign-index", "version": 1, "uid": uid,
            "runs": runs}
     write_index_document(out_dir, doc)

@@ -63,10 +63,6 @@ class Task:
     def path(self) -> Path:
         return self.folder / self.entry["file"]
 
-    @property
-    def slot(self) -> tuple:
-        return (self.campaign_uid, self.entry["key"], self.step)
-
 
 @dataclass
 class Summary:
@@ -141,10 +137,6 @@ def _check_entry(index: Path, i: int, e: Any) -> None:
                            "in the campaign folder")
 
 
-def read_campaign(folder: Path) -> list[dict[str, Any]]:
-    return read_campaign_document(folder)[1]
-
-
 def read_campaign_document(folder: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """(the index document, its run entries, each type-checked); one line for anything else."""
     index = folder / INDEX_NAME
@@ -201,17 +193,17 @@ def campaign_uid(folder: Path, doc: dict[str, Any], wait: float = 5.0) -> str:
             time.sleep(0.1)
 
 
-def _regular(path: Path) -> str | None:
-    """Why ``path`` cannot be a run file (without opening it: a FIFO's open blocks), or None."""
+def _regular(path: Path) -> tuple[str | None, os.stat_result | None]:
+    """(why ``path`` cannot be a run file, or None; its stat) without opening it (a FIFO's open blocks)."""
     try:
         st = os.stat(path)
     except FileNotFoundError:
-        return "run file missing"
+        return "run file missing", None
     except OSError as exc:
-        return f"cannot stat: {exc.strerror}"
+        return f"cannot stat: {exc.strerror}", None
     if not stat.S_ISREG(st.st_mode):
-        return f"not a regular file ({_KIND.get(stat.S_IFMT(st.st_mode), 'special file')})"
-    return None
+        return f"not a regular file ({_KIND.get(stat.S_IFMT(st.st_mode), 'special file')})", st
+    return None, st
 
 
 _KIND = {stat.S_IFDIR: "a directory", stat.S_IFIFO: "a FIFO", stat.S_IFCHR: "a character device",
@@ -229,6 +221,7 @@ def plan(folders: list[Path], steps: tuple[str, ...], settings: StepSettings,
         by_run.setdefault((r.get("campaign_uid"), r.get("key"), r.get("run_id"), r.get("step"),
                            r.get("settings_hash"), r.get("hilbench_version")), []).append(r)
     tasks, own_rows, reused, unplanned, seen = [], [], {}, set(), set()
+    shashes = {step: settings_hash(step, settings) for step in steps}
     for folder in [f.resolve() for f in folders]:  # "." has no name
         doc, entries = read_campaign_document(folder)
         cuid = campaign_uid(folder, doc)
@@ -239,13 +232,13 @@ def plan(folders: list[Path], steps: tuple[str, ...], settings: StepSettings,
                 unplanned.add((cuid, entry["key"]))
                 continue
             path = folder / entry["file"]
+            why, st = _regular(path)  # one stat per run, whatever its steps
             for step in steps_for(str(entry.get("protocol", "")), steps):
-                shash = settings_hash(step, settings)
+                shash = shashes[step]
                 if (cuid, entry["key"], step) in seen:  # the same campaign twice (a copy beside its original)
                     continue
                 seen.add((cuid, entry["key"], step))
                 base = _base(folder, cuid, entry, step, shash)
-                why = _regular(path)
                 if why == "run file missing" or (why is None and entry.get("status") != "completed"
                                                  and not settings.allow_incomplete):
                     own_rows.append({**base, "content_hash": "", "status": "not run",
@@ -255,7 +248,7 @@ def plan(folders: list[Path], steps: tuple[str, ...], settings: StepSettings,
                     own_rows.append({**base, "content_hash": "", "status": "failed", "error": f"{path}: {why}"})
                     continue
                 rows = by_run.get((cuid, entry["key"], entry.get("uid"), step, shash, __version__), [])
-                fingerprint = file_stat(os.stat(path))
+                fingerprint = file_stat(st)
                 same = [r for r in rows if r.get("file_stat") == fingerprint]
                 if same:
                     reused[row_key(same[0])] = _refresh(base)
@@ -420,14 +413,14 @@ def analyse(folders: list[Path], out: Path, steps: tuple[str, ...] = ("identify"
         return (f"{out}: another analysis is writing into this results folder (pid {pid}); wait for it "
                 "or use another -o")
     with folder_lock(out, LOCK_NAME, AnalyseError, busy, say):
-        summary = _analyse_locked(folders, out, steps, settings, serial, workers, scheduler, scheduler_file,
+        summary = _analyse_locked(folders, out, steps, settings, serial, workers, scheduler,
                                   resume, progress, functions or {}, say, verbose, dashboard, t0, cpu0)
     summary.wall_time = time.perf_counter() - t0
     summary.client_cpu = time.process_time() - cpu0
     return summary
 
 
-def _analyse_locked(folders, out, steps, settings, serial, workers, scheduler, scheduler_file, resume, progress,
+def _analyse_locked(folders, out, steps, settings, serial, workers, scheduler, resume, progress,
                     fn, say, verbose, dashboard, t0, cpu0) -> Summary:
     results = ResultsFolder(out, say)
     results.clean_leftovers()  # of a killed analysis: this one holds the lock, so none is work in progress
@@ -440,11 +433,10 @@ def _analyse_locked(folders, out, steps, settings, serial, workers, scheduler, s
         current.update({row_key(r): {} for r in own_rows})
     if reused:
         say(f"{len(reused)} of {len(reused) + len(tasks)} analyses already in {out} (resume); {len(tasks)} to run")
-    by_slot = {t.slot: t for t in tasks}
 
     def record(done_chunk: list[Task], outcomes: list[Outcome]) -> None:
         for task, (key, status, error, fstat) in zip(done_chunk, outcomes, strict=True):
-            base = _refresh(by_slot[task.slot].base)
+            base = _refresh(task.base)
             current[key] = {**base, "file_stat": fstat} if fstat else base
             if status == "reused":
                 summary.skipped += 1

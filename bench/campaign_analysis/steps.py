@@ -140,16 +140,15 @@ def _temperature(path: str) -> dict[str, Any]:
 def _identify_row(result: protocol.Result, inputs: protocol.Inputs, path: str) -> dict[str, Any]:
     """identify's own columns: the grade of the verdict, the distance slid over the whole run (``inputs``, before
     the split) and the temperature."""
-    from hilbench.bench.verdict import judge
+    from hilbench.common.metrics import DRIFT_POSITION_PCT, grade, percent
 
     f = result.value.figures
     where = "validation" if result.validation is not None else "train"
     row: dict[str, Any] = {}
-    if f"{where}_torque_nrmse" in f:
-        verdict = judge(100 * f[f"{where}_torque_nrmse"], 100 * f[f"{where}_position_nrmse"],
-                        100 * f[f"{where}_position_nrmse_segmented"], where, residual_hint=False)
-        grade = verdict.split(":", 1)[1].split()[0] if verdict.startswith("verdict:") else "none"
-        row["verdict"] = grade + ("; the open-loop position drifts" if "position drifts" in verdict else "")
+    if f"{where}_torque_nrmse" in f:  # the grade of bench.verdict.judge's line, from the same bands
+        torque, position = percent(f[f"{where}_torque_nrmse"]), percent(f[f"{where}_position_nrmse"])
+        drifts = "; the open-loop position drifts" if position > DRIFT_POSITION_PCT else ""
+        row["verdict"] = "no" if torque != torque else grade(torque) + drifts
     if not inputs.streamed:
         row["sliding_distance"] = sliding_distance(inputs.record.position, inputs.record.sample_rate)
     return {**row, **_temperature(path)}

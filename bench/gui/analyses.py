@@ -55,8 +55,6 @@ def _gui_names() -> list[str]:
     return [n for n, e in entries().items() if not e.needs_validation]
 
 
-#: analyses that read the file themselves (by path): no other handle of it may be open in this process
-BY_PATH: tuple[str, ...] = ()
 
 
 def availability(name: str) -> str:
@@ -75,7 +73,7 @@ def availability(name: str) -> str:
     return ""
 
 
-def settings_for(name: str, options: dict, inputs) -> object:
+def settings_for(name: str, options: dict) -> object:
     """The analysis settings the browser's ``options`` give (None: the entry's defaults): the skeleton's mass
     (``inertia``, empty: the run's declared inertia, as ``hilbench skeleton`` without --mass) and method, the
     residual loop's start model file, the presliding bootstrap's replicates (default 8)."""
@@ -110,7 +108,7 @@ def run_analysis(name: str, path: str | Path, options: dict | None = None) -> An
     analysis = entry(name)
     inputs = analysis.read([path], ReadOptions(memory=memory_budget("auto"),
                                                allow_incomplete=bool(options.get("allow_incomplete", False))))
-    result = analysis.analyse(inputs, settings_for(name, options, inputs))
+    result = analysis.analyse(inputs, settings_for(name, options))
     shown = ANALYSES.get(name, summary_table)(result, options)
     shown.summary = analysis.report(result)[1]
     line = inputs.record.incomplete_line()

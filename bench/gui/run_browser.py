@@ -381,23 +381,11 @@ class RunBrowser(QtWidgets.QWidget):
                 return
         self.analysis_status.setText(f"running {analyses.titles().get(name, name)} ...")
         self.tabs.setCurrentIndex(1)
-        path = self.run.path
-        if name in analyses.BY_PATH:  # HDF5 refuses a second, differently-flagged handle in one process
-            self.close_run()
-            self._reopen = path
-        worker = AnalysisWorker(name, path, options)
+        worker = AnalysisWorker(name, self.run.path, options)
         worker.done.connect(self.show_result, QtCore.Qt.ConnectionType.QueuedConnection)
         worker.failed.connect(self._analysis_failed, QtCore.Qt.ConnectionType.QueuedConnection)
         self.worker = worker
         worker.start()
-
-    def _after_analysis(self) -> None:
-        path, self._reopen = self._reopen, None
-        if path is not None and self.run is None:
-            self.open(path)
-            self.tabs.setCurrentIndex(1)
-
-    _reopen: str | None = None
 
     def save_model(self, target: str) -> bool:
         """Write the last identification's model file to ``target``; a message either way."""
@@ -427,12 +415,10 @@ class RunBrowser(QtWidgets.QWidget):
             self.start_edit.setText(path)
 
     def _analysis_failed(self, text: str) -> None:
-        self._after_analysis()
         self.analysis_status.setText(f"<span style='color:#c00000'>{text}</span>")
         self.message.emit(text, True)
 
     def show_result(self, result: analyses.AnalysisResult) -> None:
-        self._after_analysis()
         self.last_result = result
         self.save_model_button.setEnabled(result.model_document is not None)
         warn = "".join(f"<br><span style='color:#d08000'>warning: {w}</span>" for w in result.warnings)

@@ -32,7 +32,6 @@ from hilbench.analysis.output_files import (  # noqa: F401  (the one implementat
     declared_inputs,
     dumps,
     json_safe,
-    require_regular,
     same_file,
     save_figure,
 )

@@ -260,6 +260,8 @@ class RunWriter:
             mode = os.stat(self.path).st_mode
         except FileNotFoundError:
             mode = stat.S_IFREG
+        except OSError as exc:
+            raise RunFileError(f"{self.path}: cannot use as a run file ({exc.strerror})") from None
         if not stat.S_ISREG(mode):
             raise RunFileError(f"{self.path} is not a regular file; a run file is written as a file and would "
                                "replace it: choose a file name")
@@ -278,7 +280,7 @@ class RunWriter:
             # that write and nothing dirty is left that a later flush (marking the run failed) would need
             self._file = h5py.File(self._tmp_path, "x", libver="latest", rdcc_nbytes=0)
             later = self._create_layout(
-                device, config, calibration, protocol_name, protocol_params, protocol_arrays, operator, notes,
+                config, calibration, protocol_name, protocol_params, protocol_arrays, operator, notes,
                 source, compression, start_time,
             )
             self._file.flush()
@@ -357,7 +359,7 @@ class RunWriter:
         self._lock_fd = None
 
     def _create_layout(
-        self, device, config, calibration, protocol_name, protocol_params, protocol_arrays, operator, notes,
+        self, config, calibration, protocol_name, protocol_params, protocol_arrays, operator, notes,
         source, compression, start_time,
     ) -> None:
         f = self._file
