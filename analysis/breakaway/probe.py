@@ -12,7 +12,7 @@ twice the presliding distance for a Maxwell-slip (Masing) contact.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -42,8 +42,17 @@ class ProbeResult:
     presliding_distance: float | None    # rad, x_p(0.9) from the full reversals (mean of the two)
     velocity_threshold: float            # rad/s, the speed taken as sliding
     #: the least-squares fit of the slides (see _sliding_fit): positive/negative sliding current (A, signed),
-    #: inertia_per_kt (J/Kt, A*s^2/rad), viscous_per_kt (b/Kt, A*s/rad); None when the slides were too short
+    #: inertia_per_kt (J/Kt, A*s^2/rad), viscous_per_kt (b/Kt, A*s/rad), spring_per_kt (k/Kt, A/rad); None
+    #: when the slides were too short
     sliding: dict[str, float] | None = None
+    #: a spring load (analysis._spring_probe): ``breakaway`` holds the friction current at each slide's end
+    spring: bool = False
+    #: rad, half the shortest full reversal between turning points (a spring load's slides; None otherwise)
+    half_travel: float | None = None
+    #: rad, the range of position over the probe (what a spring's force k*x is weighed over)
+    travel: float = 0.0
+    ramp_time: float = 1.5    # s, as played
+    return_time: float = 0.02  # s, as played (a quick return unless a spring load was probed slowly)
 
     @property
     def positive(self) -> float | None:
@@ -62,7 +71,8 @@ class ProbeResult:
     def as_dict(self) -> dict[str, Any]:
         return {"run": self.path, "peak_A": self.peak, "breakaway_positive_A": self.positive,
                 "breakaway_negative_A": self.negative, "presliding_distance_rad": self.presliding_distance,
-                "velocity_threshold_rad_s": self.velocity_threshold, "sliding_fit": self.sliding}
+                "velocity_threshold_rad_s": self.velocity_threshold, "sliding_fit": self.sliding,
+                "spring_load": self.spring, "half_travel_rad": self.half_travel, "travel_rad": self.travel}
 
 
 def _last(values: tuple[float | None, ...], sign: int) -> float | None:
@@ -107,6 +117,8 @@ def probe_of_record(record, window: float = 0.01, velocity_threshold: float | No
     position = np.asarray(record.position, dtype=float)
     ramps = record.protocol_arrays["ramps"]
     peak = float(record.protocol_params["peak"])
+    ramp_time = float(record.protocol_params.get("ramp_time", 1.5))
+    return_time = float(record.protocol_params.get("return_time", 0.02))
     hold = record.protocol_params.get("hold")  # s at 0 A after each ramp, as the run file records it
     hold_text = f"{float(hold):g} s hold" if hold is not None else "hold"
     counts = float(record.calibration.get("counts_per_rev", 1 << 20))
@@ -115,6 +127,10 @@ def probe_of_record(record, window: float = 0.01, velocity_threshold: float | No
     threshold = velocity_threshold or max(0.05, 5 * count / window)
     velocity = smoothed_velocity(position, fs, window)
     acceleration = smoothed_velocity(velocity, fs, window)
+    spring = _restoring_fit(current, position, velocity, acceleration, threshold, peak / ramp_time, fs, window)
+    if spring is not None and _is_spring(spring, position, peak):
+        found = _spring_probe(path, peak, ramps, spring, current, position, velocity, acceleration, threshold)
+        return replace(found, ramp_time=ramp_time, return_time=return_time)
     breakaway: list[int | None] = []  # sample of each ramp's break-away
     for j, (start, stop, sign) in enumerate(ramps):
         start, stop = int(start), min(int(stop), position.size)
@@ -123,7 +139,18 @@ def probe_of_record(record, window: float = 0.01, velocity_threshold: float | No
                              f"starts: the slide before did not stop in the {hold_text} at 0 A")
         moving = np.flatnonzero(sign * velocity[start:stop] > threshold)
         breakaway.append(start + int(moving[0]) if moving.size else None)
-    sliding = _sliding_fit(ramps, breakaway, current, velocity, acceleration, threshold)
+    sliding = _sliding_fit(ramps, breakaway, current, position, velocity, acceleration, threshold)
+    distances = _presliding_distances(ramps, breakaway, current, position, sliding)
+    d = float(np.mean(distances)) if distances else None
+    return ProbeResult(str(path), peak, tuple(None if k is None else float(current[k]) for k in breakaway), d,
+                       threshold, sliding, travel=float(np.ptp(position)), ramp_time=ramp_time,
+                       return_time=return_time)
+
+
+def _presliding_distances(ramps: np.ndarray, breakaway: list[int | None], friction: np.ndarray,
+                          position: np.ndarray, sliding: dict[str, float] | None) -> list[float]:
+    """x_p(f) of every full reversal: from the previous slide's turning point to the sample ``breakaway`` of the
+    ramp (or the end of its window), where ``friction`` (A) has changed by 2*f*level."""
     distances = []
     previous: int | None = None  # turning point (extreme position) of the previous ramp's slide
     for (_start, stop, sign), k in zip(ramps, breakaway, strict=True):
@@ -132,28 +159,48 @@ def probe_of_record(record, window: float = 0.01, velocity_threshold: float | No
             continue
         if previous is not None and sliding is not None:
             # Masing: from the turning point (every element slipping the other way) the force changes by
-            # 2*V(dx/2); it has changed by 2*f*level where sign*current reaches (2*f - 1)*level, and there dx/2
+            # 2*V(dx/2); it has changed by 2*f*level where sign*friction reaches (2*f - 1)*level, and there dx/2
             # is x_p(f). The level is the fitted sliding current, the mean of both directions.
             level = (sliding["positive"] - sliding["negative"]) / 2
-            reached = np.flatnonzero(sign * current[previous:k + 1] >= (2 * PRESLIDING_FRACTION - 1) * level)
+            reached = np.flatnonzero(sign * friction[previous:k + 1] >= (2 * PRESLIDING_FRACTION - 1) * level)
             if reached.size:
                 distances.append(abs(position[previous + int(reached[0])] - position[previous]) / 2)
         stop = min(int(stop), position.size)
         previous = k + int(np.argmax(sign * position[k:stop]))
-    d = float(np.mean(distances)) if distances else None
-    return ProbeResult(str(path), peak, tuple(None if k is None else float(current[k]) for k in breakaway), d,
-                       threshold, sliding)
+    return distances
 
 
 #: Fewest sliding samples per direction the fit of the sliding level, inertia and viscous term needs.
 MIN_FIT_SAMPLES = 200
+#: A restoring force is a spring when the fitted spring carries at least this share of the probe's peak current
+#: over the probe's travel: friction never does (a free load's presliding stiffness acts over micro-radians, and
+#: its fitted k is noise, about 1e-3 of the peak over the travel on the simulated DC motor), a spring load's
+#: travel is set by it (k * travel is about twice the peak: the load swings from +peak/k to -peak/k).
+SPRING_SHARE = 0.5
+#: Half the full-reversal travel, in presliding distances x_p(0.9), that a spring load's slides must exceed for
+#: the friction at their end to be the sliding level: on the rolling-friction virgin curve the friction at 3 x_p
+#: is 98 % of the level (h * (1 - (d / (d + 3 * 2.16 d))^2)).
+SATURATION_TRAVEL = 3.0
 
 
-def _sliding_fit(ramps: np.ndarray, breakaway: list[int | None], current: np.ndarray, velocity: np.ndarray,
-                 acceleration: np.ndarray, threshold: float) -> dict[str, float] | None:
-    """Least squares of ``current = (J/Kt)*a + (b/Kt)*v + I_c(direction)`` over the slides while the current
-    still ramps (before the quick return): the sliding current of each direction (A), J/Kt (A*s^2/rad) and
-    b/Kt (A*s/rad). None when a direction has fewer than :data:`MIN_FIT_SAMPLES` sliding samples."""
+def _design(acceleration: np.ndarray, velocity: np.ndarray, position: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """Columns a, v, x, [direction > 0], -[direction < 0] of the fits (direction: +1 or -1 per row)."""
+    return np.column_stack([acceleration, velocity, position, (direction > 0).astype(float),
+                            -(direction < 0).astype(float)])
+
+
+def _solution(design: np.ndarray, target: np.ndarray) -> dict[str, float]:
+    coef = np.linalg.lstsq(design, target, rcond=None)[0]
+    return {"inertia_per_kt": float(coef[0]), "viscous_per_kt": float(coef[1]), "spring_per_kt": float(coef[2]),
+            "positive": float(coef[3]), "negative": float(-coef[4])}
+
+
+def _sliding_fit(ramps: np.ndarray, breakaway: list[int | None], current: np.ndarray, position: np.ndarray,
+                 velocity: np.ndarray, acceleration: np.ndarray, threshold: float) -> dict[str, float] | None:
+    """Least squares of ``current = (J/Kt)*a + (b/Kt)*v + (k/Kt)*x + I_c(direction)`` over the slides while the
+    current still ramps (before the quick return): the sliding current of each direction (A), J/Kt (A*s^2/rad),
+    b/Kt (A*s/rad) and k/Kt (A/rad; about 0 on a load without a spring). None when a direction has fewer than
+    :data:`MIN_FIT_SAMPLES` sliding samples."""
     rows: list[np.ndarray] = []
     for (_start, stop, sign), k in zip(ramps, breakaway, strict=True):
         if k is None:
@@ -169,7 +216,65 @@ def _sliding_fit(ramps: np.ndarray, breakaway: list[int | None], current: np.nda
     idx, signs = table[:, 0], table[:, 1]
     if min(np.sum(signs > 0), np.sum(signs < 0)) < MIN_FIT_SAMPLES:
         return None
-    design = np.column_stack([acceleration[idx], velocity[idx], (signs > 0).astype(float), -(signs < 0).astype(float)])
-    coef = np.linalg.lstsq(design, current[idx], rcond=None)[0]
-    return {"inertia_per_kt": float(coef[0]), "viscous_per_kt": float(coef[1]), "positive": float(coef[2]),
-            "negative": float(-coef[3])}
+    return _solution(_design(acceleration[idx], velocity[idx], position[idx], signs), current[idx])
+
+
+def _restoring_fit(current: np.ndarray, position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray,
+                   threshold: float, ramp_rate: float, fs: float, window: float) -> dict[str, float] | None:
+    """The fit of :func:`_sliding_fit` over every moving sample of the run (speed above twice ``threshold``),
+    both ways and whatever the ramp, except where the current changes faster than 1.5 x the slow ramps'
+    ``ramp_rate`` (A/s) and two smoothing windows either side (a quick return: the smoothed acceleration lags
+    it). A spring load moves through the whole probe, returns and holds included; its return is what separates
+    the spring from the friction (same position, the other direction). None below :data:`MIN_FIT_SAMPLES` each
+    way."""
+    slope = smoothed_velocity(current, fs, window)  # A/s
+    fast = (np.abs(slope) > 1.5 * ramp_rate).astype(float)
+    half = max(1, int(round(2 * window * fs)))
+    fast = np.convolve(fast, np.ones(2 * half + 1), "same") > 0
+    idx = np.flatnonzero((np.abs(velocity) > 2 * threshold) & ~fast)
+    direction = np.sign(velocity[idx])
+    if min(np.sum(direction > 0), np.sum(direction < 0)) < MIN_FIT_SAMPLES:
+        return None
+    return _solution(_design(acceleration[idx], velocity[idx], position[idx], direction), current[idx])
+
+
+def _is_spring(fit: dict[str, float], position: np.ndarray, peak: float) -> bool:
+    """Whether the restoring fit's spring matters (:data:`SPRING_SHARE`)."""
+    return fit["spring_per_kt"] * float(np.ptp(position)) >= SPRING_SHARE * peak
+
+
+def _spring_probe(path, peak: float, ramps: np.ndarray, fit: dict[str, float], current: np.ndarray,
+                  position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray,
+                  threshold: float) -> ProbeResult:
+    """A probe of a load on a spring. The friction current is what the current leaves after the spring and the
+    inertia, ``I - (k/Kt)*x - (J/Kt)*a`` (A), with k and J of :func:`_restoring_fit`. A spring load moves from the
+    first ramp on (its travel is set by the spring, there is no break-away in the free load's sense), so each
+    ramp's slide is the travel in its direction; its "break-away" entry is the friction current at the slide's
+    turning point (the extreme of its position in the ramp's window, where the current turns back): the largest
+    friction the slide carried, the sliding level once half the full reversal before it exceeds
+    :data:`SATURATION_TRAVEL` x_p. The sliding level of each direction is that of the last ramp each way (the
+    sign term of the least squares is no level here: a spring load's slides are mostly presliding, whose friction
+    depends on the travel, not on the sign of the speed). The presliding distance follows Masing's rule on the
+    friction current, from turning point to turning point."""
+    friction = current - fit["spring_per_kt"] * position - fit["inertia_per_kt"] * acceleration
+    turning: list[int | None] = []
+    for start, stop, sign in ramps:
+        start, stop = int(start), min(int(stop), position.size)
+        moved = np.any(sign * velocity[start:stop] > threshold)
+        turning.append(start + int(np.argmax(sign * position[start:stop])) if moved else None)
+    ends = tuple(None if k is None else float(friction[k]) for k in turning)
+    positive = next((e for e, s in zip(ends[::-1], RAMP_SIGNS[::-1], strict=True) if s > 0 and e is not None), None)
+    negative = next((e for e, s in zip(ends[::-1], RAMP_SIGNS[::-1], strict=True) if s < 0 and e is not None), None)
+    # the fit's k, J and b always; the levels of the slides' ends (NaN for a direction that did not move)
+    sliding = {**fit, "positive": math.nan if positive is None else positive,
+               "negative": math.nan if negative is None else negative}
+    usable = positive is not None and negative is not None and positive > 0 > negative
+    distances = _presliding_distances(ramps, turning, friction, position, sliding if usable else None)
+    d = float(np.mean(distances)) if distances else None
+    travel = None  # half the shortest full reversal, rad
+    reversals = [abs(position[b] - position[a]) / 2 for a, b in zip(turning[:-1], turning[1:], strict=True)
+                 if a is not None and b is not None]
+    if reversals:
+        travel = min(reversals)
+    return ProbeResult(str(path), peak, ends, d, threshold, sliding, spring=True, half_travel=travel,
+                       travel=float(np.ptp(position)))

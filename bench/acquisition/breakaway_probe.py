@@ -30,14 +30,17 @@ from hilbench.analysis.breakaway.probe import (  # noqa: F401 (re-exported: the 
 from hilbench.bench.acquisition import excitations
 from hilbench.bench.acquisition.protocols import ParameterSpec, Protocol, ProtocolError
 
-#: Time of the quick return from the peak to 0 A, s: short enough that a slide stops soon after it.
+#: Time of the quick return from the peak to 0 A, s: short enough that a slide stops soon after it. A load on a
+#: spring is probed with a slow return instead (``return_time = ramp_time``, bench.acquisition.planning): the spring
+#: bounds its travel, and a quick release would set it swinging at sqrt(k/J) with little friction damping.
 RETURN_TIME = 0.02
 RAMP_DTYPE = np.dtype([("start", "i8"), ("stop", "i8"), ("sign", "i8")])  # sample indices, stop exclusive
 
 
 @dataclass(frozen=True)
 class BreakawayProbe(Protocol):
-    """Break-away probe: slow current ramps to +peak, -peak and +peak, each back to 0 A quickly and held."""
+    """Break-away probe: slow current ramps to +peak, -peak and +peak, each back to 0 A (quickly by default) and
+    held."""
 
     name: ClassVar[str] = PROBE_PROTOCOL
     MODES: ClassVar[tuple[str, ...]] = ("current",)
@@ -45,10 +48,12 @@ class BreakawayProbe(Protocol):
         "peak": ParameterSpec("A", 1e-3, 1e3, "peak current of every ramp"),
         "ramp_time": ParameterSpec("s", 0.1, 60.0, "time of one slow ramp from 0 A to the peak"),
         "hold": ParameterSpec("s", 0.05, 10.0, "rest at 0 A before the first ramp and after every ramp"),
+        "return_time": ParameterSpec("s", 0.001, 60.0, "time of the return from the peak to 0 A"),
     }
     peak: float = 5.0
     ramp_time: float = 1.5
     hold: float = 0.3
+    return_time: float = RETURN_TIME
     mode: str = "current"
     sample_rate: int = 10000
 
@@ -56,7 +61,7 @@ class BreakawayProbe(Protocol):
         """Times (s) and currents (A) of the piecewise-linear profile."""
         t, i = [0.0, self.hold], [0.0, 0.0]
         for sign in RAMP_SIGNS:
-            for dt, level in ((self.ramp_time, sign * self.peak), (RETURN_TIME, 0.0), (self.hold, 0.0)):
+            for dt, level in ((self.ramp_time, sign * self.peak), (self.return_time, 0.0), (self.hold, 0.0)):
                 t.append(t[-1] + dt)
                 i.append(level)
         return np.array(t), np.array(i)
