@@ -53,10 +53,12 @@ STEP_FREQUENCIES = (2.0, 5.0, 10.0)  # Hz
 CHIRP_GAIN = 1.5
 CHIRP_SPAN = 25.0
 PRESLIDING_MULTIPLES = (4.0, 3.0, 2.0, 1.0)
-#: A load on a spring is probed once more with slow returns and ramps of this many natural periods, so that it
-#: follows the current quasi-statically instead of swinging at sqrt(k/J) (its k and J are then within 0.3 % and
-#: 3 % on the paper's system, against 7 % and 6 % from the quick-return probe).
-SPRING_RAMP_PERIODS = 5.0
+#: A load on a spring is probed once more, at the cap, with slow returns and ramps of this many natural periods, so
+#: that it follows the current quasi-statically instead of swinging at sqrt(k/J) (the swing a ramp's corner
+#: starts has an amplitude of (ramp rate)/(k*omega_n), about 0.05 rad on the paper's system at 270 N*m).
+SPRING_RAMP_PERIODS = 15.0
+#: Stepped-sine frequencies of a load on a spring, as fractions of its natural frequency (below resonance).
+SPRING_STEP_RATIOS = (0.2, 0.5)
 
 
 class PlanError(BenchError):
@@ -92,13 +94,17 @@ class Plan:
         fit, p = self.probe.sliding or {}, self.probe
         kt = self.settings.torque_constant
         out = [f"probe: {len(self.probe_runs)} run(s), last {p.path} (peak {p.peak:.3g} A)",
-               f"  break-away (speed above {p.velocity_threshold:.3g} rad/s): +{p.positive:.4g} A, "
-               f"{p.negative:.4g} A",
+               (f"  friction at the slides' ends (current less k*x and J*a): +{p.positive:.4g} A, {p.negative:.4g} A"
+                if p.spring else f"  break-away (speed above {p.velocity_threshold:.3g} rad/s): +{p.positive:.4g} A, "
+                                 f"{p.negative:.4g} A"),
                f"  sliding current (fit of the slides): +{fit['positive']:.4g} A, {fit['negative']:.4g} A "
                f"({fit['positive'] * kt:.4g} N*m, {fit['negative'] * kt:.4g} N*m at {kt:g} N*m/A)",
                f"  inertia J = {fit['inertia_per_kt'] * kt:.4g} kg*m^2, viscous b = "
-               f"{fit['viscous_per_kt'] * kt:.4g} N*m*s/rad, spring k = {fit['spring_per_kt'] * kt:.3g} N*m/rad "
-               f"(no restoring force: {100 * self.spring_share:.2g} % of the sliding current over the probe's travel)",
+               f"{fit['viscous_per_kt'] * kt:.4g} N*m*s/rad, spring k = {fit['spring_per_kt'] * kt:.4g} N*m/rad "
+               + (f"(natural frequency {natural_frequency(p):.4g} Hz; the friction is what the current leaves "
+                  f"after k*x and J*a)" if p.spring else
+                  f"(no restoring force: {100 * self.spring_share:.2g} % of the sliding current over the probe's "
+                  f"travel)"),
                f"  presliding distance x_p(0.9) = {1e3 * (p.presliding_distance or math.nan):.4g} mrad"]
         for name, proto in self.runs.items():
             out.append(f"{name}: {describe(proto)}")
@@ -208,23 +214,8 @@ def probe_breakaway(bench: Bench, probe_dir: str | Path, *, sample_rate: int = 1
         if on_probe is not None:
             on_probe(found)
         if found.spring:
-            if found.return_time < found.ramp_time:  # measure k and J once more without the quick release's swing
-                inertia, k = (found.sliding["inertia_per_kt"], found.sliding["spring_per_kt"])  # type: ignore
-                period = 2 * math.pi * math.sqrt(inertia / k) if inertia > 0 and k > 0 else 1.0
-                ramp = min(60.0, max(1.5, SPRING_RAMP_PERIODS * period))
-                slow = BreakawayProbe(peak=peak, ramp_time=ramp, return_time=ramp, hold=min(10.0, max(0.3, period)),
-                                      sample_rate=sample_rate)
-                path = Path(probe_dir) / f"probe-{len(played) + 1}.h5"
-                result = bench.run(slow, path, overwrite=overwrite, progress=progress, operator="hilbench plan")
-                played.append(str(result.path))
-                if result.status != "completed":
-                    raise PlanError(f"the probe {result.path} ended {result.status}: {result.message}")
-                again = analyse_probe(str(result.path))
-                if on_probe is not None:
-                    on_probe(again)
-                if again.spring:  # (too slow to pass the speed threshold on a small peak: the first stands)
-                    found = again
-            raise PlanError(spring_refusal(found, bench.settings.torque_constant))
+            return _probe_spring(bench, found, probe_dir, played, sample_rate=sample_rate, overwrite=overwrite,
+                                 progress=progress, on_probe=on_probe)
         slid = found.positive is not None and found.negative is not None
         breakaway = max(abs(found.positive), abs(found.negative)) if slid else 0.0  # type: ignore[arg-type]
         long_enough = found.peak >= PEAK_OVER_BREAKAWAY * breakaway or found.peak >= cap
@@ -237,25 +228,38 @@ def probe_breakaway(bench: Bench, probe_dir: str | Path, *, sample_rate: int = 1
         peak = min(cap, max(peak * PEAK_GROWTH, PEAK_OVER_BREAKAWAY * breakaway * 1.05))
 
 
-def spring_refusal(found: ProbeResult, torque_constant: float) -> str:
-    """One line: the spring and inertia the probe measured on a load on a spring, and why plan stops there.
-
-    The friction of a spring load is what the current leaves after the spring force k*x over the probe's travel.
-    With the paper's system (k = 50 N*m/rad, friction level 1.64 N*m) the spring carries about 270 N*m at the end
-    of a slide long enough to saturate the friction, so a 0.2 % error of the fitted k (the presliding stiffness
-    the least squares of the slides cannot separate from the spring) is 40 % of the friction: too small a
-    difference to size a campaign from."""
-    fit = found.sliding or {}
-    k = fit.get("spring_per_kt", math.nan) * torque_constant
-    inertia = fit.get("inertia_per_kt", math.nan) * torque_constant
-    f_n = math.sqrt(k / inertia) / (2 * math.pi) if k > 0 and inertia > 0 else math.nan
-    ends = [abs(e) for e in found.breakaway if e is not None]
-    share = max(ends) * torque_constant / (k * (found.half_travel or math.nan)) if ends else math.nan
-    return (f"{found.path}: a load on a spring: k = {k:.4g} N*m/rad, J = {inertia:.4g} kg*m^2 (natural frequency "
-            f"{f_n:.3g} Hz) by the least squares of the probe; its friction at the slides' ends is about "
-            f"{100 * share:.2g} % of the spring force there, too small a difference for the break-away probe to "
-            f"size friction experiments from. plan sizes loads without a spring; write this campaign by hand "
-            f"(docs/cli.md, 'hilbench plan': loads on a spring)")
+def _probe_spring(bench: Bench, found: ProbeResult, probe_dir: str | Path, played: list[str], *, sample_rate: int,
+                  overwrite: bool, progress: Callable[[Progress], None] | None,
+                  on_probe: Callable[[ProbeResult], None] | None) -> tuple[ProbeResult, list[str]]:
+    """A load on a spring (``found`` from a quick-return probe): one slow probe at the cap. Its returns are as slow
+    as its ramps, each :data:`SPRING_RAMP_PERIODS` natural periods long, so the load follows the current instead
+    of swinging; the spring bounds its travel (about peak*Kt/k), so the probe goes to the cap at once: the
+    farther the slides, the more of them lies where the friction has saturated (analysis.breakaway.probe)."""
+    cap = LIMIT_SHARE * bench.settings.current_limit
+    fit = found.restoring or {}
+    inertia, k = fit.get("inertia_per_kt", math.nan), fit.get("spring_per_kt", math.nan)
+    period = 2 * math.pi * math.sqrt(inertia / k) if inertia > 0 and k > 0 else 1.0  # s
+    ramp = min(60.0, max(1.5, SPRING_RAMP_PERIODS * period))
+    slow = BreakawayProbe(peak=cap, ramp_time=ramp, return_time=ramp, hold=min(10.0, max(0.3, 2 * period)),
+                          sample_rate=sample_rate)
+    path = Path(probe_dir) / f"probe-{len(played) + 1}.h5"
+    result = bench.run(slow, path, overwrite=overwrite, progress=progress, operator="hilbench plan")
+    played.append(str(result.path))
+    if result.status != "completed":
+        raise PlanError(f"the probe {result.path} ended {result.status}: {result.message}")
+    again = analyse_probe(str(result.path))
+    if on_probe is not None:
+        on_probe(again)
+    if again.spring and again.sliding is not None and again.presliding_distance is not None:
+        return again, played
+    kt = bench.settings.torque_constant
+    measured = again if again.spring else found
+    fit = measured.restoring or {}
+    raise PlanError(f"{measured.path}: a load on a spring (k = {fit.get('spring_per_kt', math.nan) * kt:.4g} "
+                    f"N*m/rad, J = {fit.get('inertia_per_kt', math.nan) * kt:.4g} kg*m^2) did not slide far "
+                    f"enough for its friction to saturate up to {cap:.3g} A ({LIMIT_SHARE:g} of --current-limit "
+                    f"{bench.settings.current_limit:g} A; travel {measured.travel:.3g} rad): raise "
+                    f"--current-limit if the motor and the spring allow it")
 
 
 def size_protocols(probe: ProbeResult, settings: DeviceSettings, *, sample_rate: int = 10000,
@@ -275,6 +279,8 @@ def size_protocols(probe: ProbeResult, settings: DeviceSettings, *, sample_rate:
             return cap
         return value
 
+    if probe.spring:
+        return _spring_protocols(probe, settings, level, clipped, notes, sample_rate, duration, seed)
     runs: dict[str, Protocol] = {}
     runs["identification"] = _identification(level, cap, sample_rate, duration, seed, notes)
     steps = tuple(sorted({round(clipped(f * level, f"stepped-sine amplitude {f:g} x sliding current"), 6)
@@ -290,13 +296,14 @@ def size_protocols(probe: ProbeResult, settings: DeviceSettings, *, sample_rate:
 
 
 def _identification(level: float, cap: float, sample_rate: int, duration: float, seed: int,
-                    notes: list[str]) -> Identification:
+                    notes: list[str], **shape: float) -> Identification:
     """Quiet half-periods at QUIET_SHARE of the sliding current; loud ones grown on the played input until
-    SLIDE_SHARE of the samples drive past 1.1 x the sliding current each way (bisection, 40 halvings)."""
+    SLIDE_SHARE of the samples drive past 1.1 x the sliding current each way (bisection, 40 halvings). ``shape``:
+    the noise's cutoff and the envelope's period (Hz, s) when not the protocol's defaults."""
     from hilbench.bench.acquisition.excitations import lowpass_uniform_noise, rectangular_envelope
 
     quiet = QUIET_SHARE * level
-    base = Identification(duration=duration, amplitude=1.0, offset=0.0, seed=seed, sample_rate=sample_rate)
+    base = Identification(duration=duration, amplitude=1.0, offset=0.0, seed=seed, sample_rate=sample_rate, **shape)
     # The played input is noise * (offset + amplitude * square), i.e. loud * a + quiet * b with a and b below:
     # linear in the loud level, so the search scales two arrays instead of regenerating the input.
     n = base.n_samples
@@ -355,6 +362,67 @@ def _chirp(probe: ProbeResult, settings: DeviceSettings, level: float, clipped: 
         raise PlanError(f"cannot size a chirp from {probe.path}: start {f_start:.3g} Hz, stop {f_stop:.3g} Hz")
     return Chirp(duration=duration, gain=gain, sweep="log", f_start=round(f_start, 3), f_stop=round(f_stop, 3),
                  sample_rate=sample_rate)
+
+
+def natural_frequency(probe: ProbeResult) -> float:
+    """sqrt(k/J)/(2 pi) of the probe's fit, Hz (NaN without a positive spring and inertia)."""
+    fit = probe.sliding or {}
+    k, inertia = fit.get("spring_per_kt", math.nan), fit.get("inertia_per_kt", math.nan)
+    return math.sqrt(k / inertia) / (2 * math.pi) if k > 0 and inertia > 0 else math.nan
+
+
+def _spring_protocols(probe: ProbeResult, settings: DeviceSettings, level: float,
+                      clipped: Callable[[float, str], float], notes: list[str], sample_rate: int, duration: float,
+                      seed: int) -> tuple[dict[str, Protocol], list[str]]:
+    """The campaign of a load on a spring k (a mass J on a spring, with friction): every amplitude overcomes the
+    friction plus the spring's force over the displacement it is planned for, at most LIMIT_SHARE of the limit.
+
+    A sine force F0 at omega on a mass-spring with Coulomb friction Fc moves it, in continuous sliding and away from
+    resonance, by X = S / |k - J omega^2| with S = sqrt(F0^2 - (4 Fc / pi)^2) (Den Hartog 1931, "Forced vibrations
+    with combined Coulomb and viscous friction", Trans. ASME APM-53-9; S. S. Rao, Mechanical Vibrations, section
+    "Response of a system with Coulomb damping": the equivalent-viscous solution); with k = 0 it is the free-mass
+    formula of _chirp. Below resonance (omega^2 < k/J) it is the quasi-static X = (F0 - Fc)/k in the limit. So:
+
+    - identification: the noise low-passed at the natural frequency f_n = sqrt(k/J)/(2 pi) (the load follows it
+      quasi-statically; above f_n the mass takes the force and the load hardly moves), envelope periods of
+      eight natural periods (at least 4 s); loud half-periods sized as for a free load against
+      ``I_s + k*x_p/Kt``, the current that holds the load x_p out against the spring and the friction, quiet ones at
+      half of it (presliding);
+    - stepped sine at 0.2 and 0.5 f_n (below resonance; at resonance the friction alone limits the amplitude),
+      amplitudes STEP_FACTORS x ``I_s + (k/Kt) (1 - r^2) x_p`` with r = 0.2 (the stiffer of the two frequencies):
+      0.5 and 0.8 stay within x_p, 1.25 and 2 slide beyond it;
+    - chirp: a log sweep from f_n/2 to where X = x_p above resonance, J omega^2 = k + S/x_p; its force such that
+      X = 2 x_p at the start, S = 2 x_p k (1 - 1/4), at least CHIRP_GAIN x I_s (continuous sliding needs
+      F0 > 4 Fc/pi); it passes the resonance, where the amplitude is what the sweep's speed and the friction let
+      it grow to;
+    - presliding: as for a free load (nested reversals of x_p multiples, J)."""
+    fit = probe.sliding or {}
+    kt = settings.torque_constant
+    k, inertia = fit["spring_per_kt"], fit["inertia_per_kt"]  # A/rad, A*s^2/rad
+    x_p = probe.presliding_distance or math.nan
+    f_n = natural_frequency(probe)
+    holding = level + k * x_p  # A: holds the load x_p out against the spring and the friction
+    runs: dict[str, Protocol] = {}
+    cap = LIMIT_SHARE * settings.current_limit
+    runs["identification"] = _identification(holding, cap, sample_rate, duration, seed, notes,
+                                             cutoff=round(max(0.5, f_n), 3), period=round(max(4.0, 8 / f_n), 3))
+    frequencies = tuple(round(r * f_n, 4) for r in SPRING_STEP_RATIOS)
+    unit = level + k * (1 - min(SPRING_STEP_RATIOS) ** 2) * x_p
+    steps = tuple(sorted({round(clipped(f * unit, f"stepped-sine amplitude {f:g} x (I_s + k*x_p)"), 6)
+                          for f in STEP_FACTORS}))
+    runs["stepped_sine"] = SteppedSine(frequencies=frequencies, amplitudes=steps, settle_periods=3,
+                                       measure_periods=5, sample_rate=sample_rate)
+    w_start = 2 * math.pi * f_n / 2
+    wanted = 2 * x_p * (k - inertia * w_start ** 2)  # A: S for X = 2 x_p at the start
+    gain = clipped(max(math.hypot(wanted, 4 * level / math.pi), CHIRP_GAIN * level), "chirp gain")
+    s_force = math.sqrt(max(0.0, gain ** 2 - (4 * level / math.pi) ** 2))
+    f_stop = min(math.sqrt((k + s_force / x_p) / inertia) / (2 * math.pi), sample_rate / 20)
+    runs["chirp"] = Chirp(duration=duration, gain=gain, sweep="log", f_start=round(f_n / 2, 4),
+                          f_stop=round(f_stop, 4), sample_rate=sample_rate)
+    runs["presliding"] = Presliding(amplitudes=PRESLIDING_MULTIPLES, unit="d", presliding_distance=x_p,
+                                    sample_rate=sample_rate,
+                                    inertia=round(inertia * kt, 9) if 0 < inertia * kt <= 100 else 0.0)
+    return runs, notes
 
 
 def plan_experiments(device: str | Bench, settings: DeviceSettings | None = None, *,
