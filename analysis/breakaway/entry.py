@@ -45,7 +45,10 @@ def summarise(result: Result) -> dict[str, Any]:
     out = res.as_dict()
     for key, value in (res.sliding or {}).items():
         out[f"sliding_{key}"] = value
+    for key, value in (res.restoring or {}).items():  # a spring load's fit over every moving sample
+        out[f"restoring_{key}"] = value
     out.pop("sliding_fit", None)
+    out.pop("restoring_fit", None)
     return out
 
 

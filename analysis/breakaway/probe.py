@@ -74,7 +74,8 @@ class ProbeResult:
         return {"run": self.path, "peak_A": self.peak, "breakaway_positive_A": self.positive,
                 "breakaway_negative_A": self.negative, "presliding_distance_rad": self.presliding_distance,
                 "velocity_threshold_rad_s": self.velocity_threshold, "sliding_fit": self.sliding,
-                "spring_load": self.spring, "half_travel_rad": self.half_travel, "travel_rad": self.travel}
+                "spring_load": self.spring, "half_travel_rad": self.half_travel, "travel_rad": self.travel,
+                "restoring_fit": self.restoring}
 
 
 def _last(values: tuple[float | None, ...], sign: int) -> float | None:
@@ -272,7 +273,7 @@ def _spring_probe(path, peak: float, ramps: np.ndarray, fit: dict[str, float], c
         turning.append(start + int(np.argmax(sign * position[start:stop])) if moved else None)
     reversals = [abs(position[b] - position[a]) / 2 for a, b in zip(turning[:-1], turning[1:], strict=True)
                  if a is not None and b is not None]
-    half_travel = min(reversals) if reversals else None  # rad, half the shortest full reversal
+    half_travel = float(min(reversals)) if reversals else None  # rad, half the shortest full reversal
 
     def ends_of(friction: np.ndarray) -> dict[str, float]:
         last = {s: float(friction[k]) for k, s in zip(turning, RAMP_SIGNS, strict=True) if k is not None}

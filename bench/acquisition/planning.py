@@ -23,6 +23,11 @@ the two directions, ``x_p`` the presliding distance x_p(0.9)):
   continuous-sliding solution for an inertia under a sine force and Coulomb friction) from
   ``CHIRP_SPAN * x_p`` at the start frequency to ``x_p`` at the stop frequency;
 - presliding: nested reversals of 4, 3, 2 and 1 times ``x_p``.
+
+A load on a spring (the probe's least squares has a spring term; :mod:`hilbench.analysis.breakaway.probe` says
+when a spring is recognised) is probed once more, slowly and at the cap (:func:`_probe_spring`), and sized against
+the spring's force as well as the friction (:func:`_spring_protocols`: the mass-spring response to a sine force
+with Coulomb friction, Den Hartog).
 """
 
 from __future__ import annotations
@@ -76,6 +81,18 @@ class Plan:
     runs: dict[str, Protocol]
     notes: list[str] = field(default_factory=list)  # what was clipped to the limits, said in words
 
+    def _spring_text(self) -> str:
+        """The spring of the probe's fit, in words (nothing for a fit without a spring term)."""
+        fit, p = self.probe.sliding or {}, self.probe
+        if "spring_per_kt" not in fit:
+            return ""
+        k = fit["spring_per_kt"] * self.settings.torque_constant
+        if p.spring:
+            return (f", spring k = {k:.4g} N*m/rad (natural frequency {natural_frequency(p):.4g} Hz; the friction "
+                    f"is what the current leaves after k*x and J*a)")
+        return (f", spring k = {k:.3g} N*m/rad (no restoring force: {100 * self.spring_share:.2g} % of the sliding "
+                f"current over the probe's travel)")
+
     @property
     def spring_share(self) -> float:
         """The fitted spring's force over the probe's travel, |k/Kt| * travel, as a share of the sliding
@@ -100,11 +117,7 @@ class Plan:
                f"  sliding current (fit of the slides): +{fit['positive']:.4g} A, {fit['negative']:.4g} A "
                f"({fit['positive'] * kt:.4g} N*m, {fit['negative'] * kt:.4g} N*m at {kt:g} N*m/A)",
                f"  inertia J = {fit['inertia_per_kt'] * kt:.4g} kg*m^2, viscous b = "
-               f"{fit['viscous_per_kt'] * kt:.4g} N*m*s/rad, spring k = {fit['spring_per_kt'] * kt:.4g} N*m/rad "
-               + (f"(natural frequency {natural_frequency(p):.4g} Hz; the friction is what the current leaves "
-                  f"after k*x and J*a)" if p.spring else
-                  f"(no restoring force: {100 * self.spring_share:.2g} % of the sliding current over the probe's "
-                  f"travel)"),
+               f"{fit['viscous_per_kt'] * kt:.4g} N*m*s/rad" + self._spring_text(),
                f"  presliding distance x_p(0.9) = {1e3 * (p.presliding_distance or math.nan):.4g} mrad"]
         for name, proto in self.runs.items():
             out.append(f"{name}: {describe(proto)}")
@@ -192,8 +205,9 @@ def _quantity(value: object, unit: str) -> str:
 def probe_breakaway(bench: Bench, probe_dir: str | Path, *, sample_rate: int = 10000, overwrite: bool = False,
                     progress: Callable[[Progress], None] | None = None,
                     on_probe: Callable[[ProbeResult], None] | None = None) -> tuple[ProbeResult, list[str]]:
-    """Play probes of growing peak current until the motor slid both ways with slides long enough to fit;
-    returns the last probe's result and the run files played (``probe_dir/probe-N.h5``)."""
+    """Play probes of growing peak current until the motor slid both ways with slides long enough to fit (a load
+    on a spring: one slow probe at the cap, :func:`_probe_spring`); returns the last probe's result and the run
+    files played (``probe_dir/probe-N.h5``)."""
     cap = LIMIT_SHARE * bench.settings.current_limit
     peak = FIRST_PEAK_SHARE * bench.settings.current_limit
     played: list[str] = []

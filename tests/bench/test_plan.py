@@ -91,6 +91,40 @@ def test_sizing_stays_within_the_current_limit_and_says_what_it_clipped():
     assert np.max(np.abs(u)) <= LIMIT_SHARE * 20.0 and not [n for n in notes if n.startswith("identification")]
 
 
+@pytest.mark.device_free
+def test_sizing_against_a_spring_follows_the_mass_spring_response():
+    """A probe of a mass on a spring (J = 1 kg*m^2, k = 50 N*m/rad, I_s = 1.6 A, x_p = 1 rad at 1 N*m/A): every
+    current within 0.9 of the limit; the chirp runs from f_n/2 to where the mass-spring with Coulomb friction moves
+    x_p, X = S/|k - J w^2| with S = sqrt(F0^2 - (4 Fc/pi)^2) (Den Hartog), and moves 2 x_p at its start; the stepped
+    sine stays below resonance, its lowest amplitude short of holding x_p against the spring and the friction, its
+    highest beyond it; the identification's noise is low-passed at f_n."""
+    from hilbench.bench.acquisition.planning import natural_frequency
+
+    fit = {"positive": 1.6, "negative": -1.6, "inertia_per_kt": 1.0, "viscous_per_kt": 0.0, "spring_per_kt": 50.0}
+    probe = ProbeResult("probe.h5", 270.0, (1.6, -1.6, 1.6), 1.0, 0.05, fit, spring=True, half_travel=5.4)
+    settings = DeviceSettings(current_limit=300.0, torque_constant=1.0)
+    runs, notes = size_protocols(probe, settings, duration=5.0, sample_rate=1000)
+    f_n = math.sqrt(50.0) / (2 * math.pi)
+    assert natural_frequency(probe) == pytest.approx(f_n, rel=1e-12)
+    for name, proto in runs.items():
+        if proto.mode == "current":
+            assert np.max(np.abs(proto.setpoints(300.0))) <= LIMIT_SHARE * 300.0 + 1e-9, name
+    chirp = runs["chirp"]
+
+    def amplitude(f: float) -> float:  # rad
+        s = math.sqrt(chirp.gain ** 2 - (4 * 1.6 / math.pi) ** 2)
+        return s / abs(50.0 - (2 * math.pi * f) ** 2)
+
+    assert chirp.f_start == pytest.approx(f_n / 2, abs=1e-4)
+    assert amplitude(chirp.f_start) == pytest.approx(2.0, rel=1e-3)
+    assert amplitude(chirp.f_stop) == pytest.approx(1.0, rel=1e-3) and chirp.f_stop > f_n
+    steps = runs["stepped_sine"]
+    assert max(steps.frequencies) < f_n
+    holding = 1.6 + 50.0 * (1 - 0.2 ** 2) * 1.0  # A: holds x_p out at the stiffer frequency
+    assert min(steps.amplitudes) < holding < max(steps.amplitudes)
+    assert runs["identification"].cutoff == pytest.approx(f_n, abs=1e-3) and not notes
+
+
 def test_probe_finds_the_simulated_motors_friction(tmp_path):
     plan = plan_experiments(LOCKSTEP, DeviceSettings(), probe_dir=tmp_path, duration=5.0)
     fit, kt = plan.probe.sliding, DC_MOTOR_TORQUE_CONSTANT
