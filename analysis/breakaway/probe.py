@@ -220,7 +220,10 @@ def _sliding_fit(ramps: np.ndarray, breakaway: list[int | None], current: np.nda
     idx, signs = table[:, 0], table[:, 1]
     if min(np.sum(signs > 0), np.sum(signs < 0)) < MIN_FIT_SAMPLES:
         return None
-    return _solution(_design(acceleration[idx], velocity[idx], position[idx], signs), current[idx])
+    # position about its mean over the slides: the sliding currents are those at the slides' mean position, not
+    # shifted by k times wherever the probe started (k is noise on a free load: 1e-3 of I_s over the travel)
+    centred = position[idx] - float(np.mean(position[idx]))
+    return _solution(_design(acceleration[idx], velocity[idx], centred, signs), current[idx])
 
 
 def _restoring_fit(current: np.ndarray, position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray,
