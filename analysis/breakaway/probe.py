@@ -185,6 +185,11 @@ SPRING_SHARE = 0.5
 #: 5 x_p is 99.3 % of the level (h * (1 - (d / (d + 5 * 2.16 d))^2)). With 3 x_p the paper's system read a level
 #: 13 % low (1.42 against 1.64 N*m) and k 0.08 % high; with 5, 3.7 % low and 0.01 %.
 SATURATION_TRAVEL = 5.0
+#: ... at least this (the friction at 3 x_p of the rolling curve: 98 % of its level), else the slides are too
+#: short; shorter than 5 x_p when the saturated part would be shorter than SEGMENT_TRAVEL x_p (at the cap of the
+#: paper's system at 1 kHz a 0.3 rad part read k 0.17 % high and the level 30 % low; 4.65 x_p now)
+MIN_SATURATION_TRAVEL = 3.0
+SEGMENT_TRAVEL = 1.0
 
 
 def _design(acceleration: np.ndarray, velocity: np.ndarray, position: np.ndarray, direction: np.ndarray) -> np.ndarray:
@@ -293,12 +298,18 @@ def _spring_probe(path, peak: float, ramps: np.ndarray, fit: dict[str, float], c
         if not distances:
             break
         d = float(np.mean(distances))
+        # the saturated part starts at 2*saturation*x_p from the turning point and must stay SEGMENT_TRAVEL x_p
+        # long: k is fitted from the slope within these parts (across them it is one with the levels)
+        saturation = min(SATURATION_TRAVEL, (2 * (half_travel or 0.0) - SEGMENT_TRAVEL * d) / (2 * d))
+        if saturation < MIN_SATURATION_TRAVEL:
+            sliding = None
+            break
         rows = []
         for (_start, _stop, sign), previous, k in zip(ramps[1:], turning[:-1], turning[1:], strict=True):
             if previous is None or k is None:
                 continue
             seg = np.arange(previous, k + 1)
-            far = np.abs(position[seg] - position[previous]) >= 2 * SATURATION_TRAVEL * d
+            far = np.abs(position[seg] - position[previous]) >= 2 * saturation * d
             seg = seg[far & (sign * velocity[seg] > 2 * threshold)]
             rows.append(np.column_stack([seg, np.full(seg.size, sign)]))
         table = np.concatenate(rows) if rows else np.empty((0, 2), dtype=int)

@@ -166,7 +166,8 @@ def unused_parameters(proto: Protocol) -> set[str]:
     if isinstance(proto, Chirp):
         return {"rate"} if proto.sweep != "quadratic" else {"f_start", "f_stop"}
     if isinstance(proto, Presliding):
-        return ({"m_per_rad"} if proto.unit != "m" else set()) | ({"inertia"} if proto.inertia == 0 else set())
+        return (({"m_per_rad"} if proto.unit != "m" else set()) | ({"inertia"} if proto.inertia == 0 else set())
+                | ({"presliding_distance"} if proto.unit != "d" else set()))
     return set()
 
 
@@ -182,6 +183,9 @@ def describe(proto: Protocol) -> str:
     if isinstance(proto, Chirp):
         return (f"chirp ({proto.sweep}) {proto.gain:.4g} A from {proto.f_start:.3g} to {proto.f_stop:.3g} Hz in "
                 f"{proto.duration:g} s")
+    if isinstance(proto, Presliding) and proto.unit != "d":
+        return (f"presliding reversals at {', '.join(f'{a:.4g}' for a in proto.amplitudes)} {proto.unit}, "
+                f"{proto.rate:.4g} {proto.unit}/s")
     if isinstance(proto, Presliding):
         return (f"presliding reversals at {', '.join(f'{a:g}' for a in proto.amplitudes)} x "
                 f"{1e3 * proto.presliding_distance:.4g} mrad, {proto.rate:g} x_p/s")
@@ -409,7 +413,7 @@ def _spring_protocols(probe: ProbeResult, settings: DeviceSettings, level: float
       X = 2 x_p at the start, S = 2 x_p k (1 - 1/4), at least CHIRP_GAIN x I_s (continuous sliding needs
       F0 > 4 Fc/pi); it passes the resonance, where the amplitude is what the sweep's speed and the friction let
       it grow to;
-    - presliding: as for a free load (nested reversals of x_p multiples, J)."""
+    - presliding: as for a free load (nested reversals at 4, 3, 2 and 1 x_p, 2 x_p/s, J), written in rad."""
     fit = probe.sliding or {}
     kt = settings.torque_constant
     k, inertia = fit["spring_per_kt"], fit["inertia_per_kt"]  # A/rad, A*s^2/rad
@@ -433,8 +437,9 @@ def _spring_protocols(probe: ProbeResult, settings: DeviceSettings, level: float
     f_stop = min(math.sqrt((k + s_force / x_p) / inertia) / (2 * math.pi), sample_rate / 20)
     runs["chirp"] = Chirp(duration=duration, gain=gain, sweep="log", f_start=round(f_n / 2, 4),
                           f_stop=round(f_stop, 4), sample_rate=sample_rate)
-    runs["presliding"] = Presliding(amplitudes=PRESLIDING_MULTIPLES, unit="d", presliding_distance=x_p,
-                                    sample_rate=sample_rate,
+    # in rad at the load: a spring load's x_p may exceed what `presliding_distance` (unit d) takes (1 rad)
+    runs["presliding"] = Presliding(amplitudes=tuple(round(m * x_p, 6) for m in PRESLIDING_MULTIPLES), unit="rad",
+                                    rate=round(2 * x_p, 6), sample_rate=sample_rate,
                                     inertia=round(inertia * kt, 9) if 0 < inertia * kt <= 100 else 0.0)
     return runs, notes
 
