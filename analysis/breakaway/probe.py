@@ -298,6 +298,9 @@ def _spring_probe(path, peak: float, ramps: np.ndarray, fit: dict[str, float], c
         if not distances:
             break
         d = float(np.mean(distances))
+        if not d > 0:  # the friction changed by 1.8 x its level at once: no presliding seen, no saturation to fit
+            sliding = None
+            break
         # the saturated part starts at 2*saturation*x_p from the turning point and must stay SEGMENT_TRAVEL x_p
         # long: k is fitted from the slope within these parts (across them it is one with the levels)
         saturation = min(SATURATION_TRAVEL, (2 * (half_travel or 0.0) - SEGMENT_TRAVEL * d) / (2 * d))
