@@ -75,7 +75,7 @@ SIZES = {
 }
 
 
-@pytest.mark.parametrize("size", list(SIZES))
+@pytest.mark.parametrize("size", [pytest.param(n, marks=pytest.mark.slow) if n >= 200 else n for n in SIZES])
 def test_plan_campaign_analyse_drift_with_every_default(size, tmp_path, monkeypatch, capsys):
     repeats, duration, n_id, baseline = SIZES[size]
     started = time.perf_counter()

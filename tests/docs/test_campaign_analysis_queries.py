@@ -16,7 +16,7 @@ from hilbench.bench.campaign_analysis.engine import analyse
 from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
 from hilbench.common.units import schema_units
 
-DOC = Path(__file__).resolve().parents[3] / "docs" / "campaign-analysis.md"
+DOC = Path(__file__).resolve().parents[2] / "docs" / "campaign-analysis.md"
 
 
 def snippets() -> dict[str, str]:
