@@ -145,3 +145,16 @@ def test_a_linear_axis_campaign_charts_in_linear_units(view, tmp_path):
     assert "break-away (N) " in axis.labelString() and "N*m" not in axis.labelString()
     view.parameter.setCurrentText("viscous")  # about 1e-3: engineering prefix, linear unit
     assert "b (mN*s/m) " in axis.labelString()
+
+
+def test_a_campaign_too_short_to_chart_says_so_in_the_status(view, tmp_path):
+    """Two runs: the report's own line (all baseline, not charted), the table filled, no chart drawn."""
+    import pyarrow.parquet as pq
+
+    pq.write_table(to_table(_rows()[:2]), tmp_path / TABLE_NAME)
+    view.path_edit.setText(str(tmp_path))
+    assert not view.load()
+    assert view.table.rowCount() == 2 and view.drift is None
+    assert "no drift charts: baseline: the first 2 of 2 runs" in view.status.text()
+    assert "not charted: 2 runs: too few to chart (a baseline needs 3" in view.status.text()
+    assert not view.plots["value"].listDataItems()
