@@ -23,7 +23,8 @@ SLOWEST_FIRST = ("benchmarks/test_quick.py", "test_packaging.py", "analysis/drif
                  "analysis/identification/test_identification.py", "analysis/reproductions/test_paper.py",
                  "analysis/residual/test_residual_loop.py", "bench/test_demo.py",
                  "analysis/identification/test_uncertainty.py", "bench/test_default_chirp_warning.py",
-                 "bench/test_identify_command.py", "analysis/drift/test_drift_temperature.py")
+                 "bench/test_identify_command.py", "analysis/drift/test_drift_temperature.py",
+                 "bench/test_documented_path.py")
 
 
 def _slowest_first(item: pytest.Item) -> int:

@@ -114,6 +114,8 @@ class DriftResult:
     baseline: np.ndarray             # bool per run
     coefficients: int                # fitted per parameter (intercept and covariates)
     series: dict[str, Series]        # label -> series
+    axis: str = "rotary"             # the runs' axis (hilbench.common.units): the parameters' units follow it
+    unmonitored: dict[str, str] = field(default_factory=dict)  # label -> why it has no charts (too few runs...)
 
     @property
     def monitoring_from(self) -> int | None:
@@ -121,7 +123,10 @@ class DriftResult:
         return int(after[0]) if after.size else None
 
     def baseline_line(self) -> str:
-        return baseline_rule(len(self.runs), int(self.baseline.sum()), self.coefficients)
+        line = baseline_rule(len(self.runs), int(self.baseline.sum()), self.coefficients)
+        if not self.series and self.unmonitored:  # one reason for the whole series (too few runs)
+            return f"{line}; not charted: {next(iter(self.unmonitored.values()))}"
+        return line + "".join(f"; {label} not charted: {why}" for label, why in self.unmonitored.items())
 
 
 @dataclass
@@ -147,9 +152,10 @@ class DriftReport:
         alarms, params, groups = [], {}, []
         for g in self.groups:
             first = g.monitoring_from
-            groups.append({"group": g.group, "runs": len(g.runs), "baseline": int(g.baseline.sum()),
+            groups.append({"group": g.group, "axis": g.axis, "runs": len(g.runs), "baseline": int(g.baseline.sum()),
                            "baseline_rule": g.baseline_line(),
-                           "monitoring_from": None if first is None else g.runs[first]})
+                           "monitoring_from": None if first is None or not g.series else g.runs[first],
+                           "unmonitored": dict(g.unmonitored)})
             for label, s in g.series.items():
                 cps = [{"index": i, "run": g.runs[i], "hours": float(g.hours[i]),
                         "distance_rad": float(g.distance[i - 1]) if i else 0.0,
@@ -171,7 +177,8 @@ class DriftReport:
                                "change_point_penalty": _finite(lim.penalty), "outlier_z": _finite(lim.outlier),
                                "false_alarm_per_chart": lim.alpha, "draws": lim.draws}}
         baseline = [r for g in self.groups for r, b in zip(g.runs, g.baseline, strict=True) if b]
-        first = next((g.runs[g.monitoring_from] for g in self.groups if g.monitoring_from is not None), None)
+        first = next((g.runs[g.monitoring_from] for g in self.groups if g.monitoring_from is not None and g.series),
+                     None)
         return {"schema": "hilbench-drift", "version": 2, "runs": sum(len(g.runs) for g in self.groups),
                 "groups": groups, "baseline": baseline, "monitoring_from": first,
                 "settings": self.settings.to_dict(), "parameters": params, "alarms": alarms}
@@ -193,19 +200,21 @@ def _column(rows: list[dict], name: str) -> np.ndarray:
     return np.array([np.nan if r.get(name) is None else float(r[name]) for r in rows])
 
 
-def _group_key(row: dict) -> tuple[str, str]:
-    return str(row.get("protocol") or ""), str(row.get("settings_hash") or "")
+def _group_key(row: dict) -> tuple[str, str, str]:
+    return str(row.get("protocol") or ""), str(row.get("axis") or "rotary"), str(row.get("settings_hash") or "")
 
 
 def group_rows(rows: list[dict[str, Any]]) -> dict[str, list[dict[str, Any]]]:
-    """Rows by series: one series per protocol and analysis settings (label: the protocol, with the settings'
-    hash where one protocol was analysed with several settings)."""
+    """Rows by series: one series per protocol, axis and analysis settings (label: the protocol, with the axis
+    where one protocol ran on both, and the settings' hash where one protocol was analysed with several
+    settings)."""
     keys = sorted({_group_key(r) for r in rows})
-    protocols = [p for p, _ in keys]
     out: dict[str, list[dict[str, Any]]] = {}
     for key in keys:
-        p, h = key
-        label = p if protocols.count(p) == 1 else f"{p} {h[:8]}".strip()
+        p, a, h = key
+        same = [k for k in keys if k[0] == p]
+        label = " ".join([p] + ([a] if len({k[1] for k in same}) > 1 else [])
+                         + ([h[:8]] if len({k[2] for k in same}) > 1 else [])).strip()
         out[label] = [r for r in rows if _group_key(r) == key]
     return out
 
@@ -235,6 +244,8 @@ def _baseline(runs: list[str], s: DriftSettings, coefficients: int) -> np.ndarra
         return np.array([run in named or run.split("/", 1)[1] in named for run in runs])
     n = len(runs)
     size = default_baseline(n, coefficients) if s.baseline is None else s.baseline
+    if s.baseline is None and size < coefficients + 2:  # too few runs for a spread: all baseline, none charted
+        return np.ones(n, bool)
     if not coefficients + 2 <= size <= n:
         raise AnalysisError(f"baseline of {size} runs: need {coefficients + 2} to {n} (the runs analysed; "
                             f"{coefficients} coefficient{'s' if coefficients != 1 else ''} and a spread)")
@@ -251,6 +262,16 @@ def _series_result(label: str, rows: list[dict[str, Any]], s: DriftSettings, alp
     base = _baseline(runs, s, 1 + usable)
     design, kept, report = _covariate_design(cov, base)
     p = design.shape[1]
+    hours = _hours([str(r.get("start_time")) for r in rows])
+    distance = np.cumsum(np.nan_to_num(_column(rows, "sliding_distance")))
+    axis = _axis(rows, label)
+    if s.baseline is None and not s.baseline_runs and n < p + 2:
+        # the default baseline of a series this short is all of it: reported, nothing charted yet (issue #38: a
+        # 4-run planned campaign has one identification and one chirp run)
+        why = (f"{n} run{'s' if n != 1 else ''}: too few to chart (a baseline needs {p + 2}: {p} "
+               f"coefficient{'s' if p != 1 else ''} and a spread)")
+        return DriftResult(label, s, runs, hours, distance, cov, base, p, {}, axis,
+                           {_label(name, label): why for name in s.parameters})
     if int(base.sum()) < p + 2:
         raise AnalysisError(f"{label or 'the runs'}: a baseline of {int(base.sum())} runs is too short for {p} "
                             "coefficients and a spread (use a longer baseline)")
@@ -263,15 +284,19 @@ def _series_result(label: str, rows: list[dict[str, Any]], s: DriftSettings, alp
         lo, hi = design[base, j].min(), design[base, j].max()
         outside |= (design[:, j] < lo) | (design[:, j] > hi)
     extrapolated = [int(i) for i in np.flatnonzero(outside & mon)]
-    series = {}
+    series, unmonitored = {}, {}
     for name in s.parameters:
         y, se = _column(rows, name), _column(rows, f"{name}_se")
         if not np.all(np.isfinite(y)):
             raise AnalysisError(f"parameter {name!r} is missing in {int(np.sum(~np.isfinite(y)))} of the runs")
         z2, fitted2, sig = standardise(y[None, :], design, base)
         z, fitted, sigma = z2[0], fitted2[0], float(sig[0])
-        if not sigma > 0:
-            raise AnalysisError(f"{name}: no spread over the baseline; the charts need one")
+        if not sigma > 1e-12 * max(1.0, float(np.max(np.abs(y[base])))):
+            # a noise-free simulator repeats a run bit for bit (a chirp has no seed): no scale to score against
+            differ = int(np.sum(np.abs(y[~base] - fitted[~base]) > 1e-12 * max(1.0, float(np.max(np.abs(y))))))
+            unmonitored[_label(name, label)] = (f"no spread over the {int(base.sum())} baseline runs (identical "
+                                                f"values); {differ} later run(s) differ from them")
+            continue
         # the limits, calibrated on simulated in-control campaigns of this design whose noise has the law of this
         # parameter's own baseline scores (analysis.drift.calibration)
         lim = calibrate(design, base, alpha=alpha, alpha_outlier=s.outlier_rate, lam=s.ewma_lambda, k=s.cusum_k,
@@ -295,14 +320,24 @@ def _series_result(label: str, rows: list[dict[str, Any]], s: DriftSettings, alp
             ewma_alarms = [start + i for i in signals(np.abs(w[mon]) > lim_e[mon])]
             cusum_alarms = [start + i for i in signals(np.maximum(hi[mon], lo[mon]) > lim.cusum)]
         pen = s.penalty if s.penalty is not None else lim.penalty
-        label_name = name if not label else f"{name} [{label}]"
+        label_name = _label(name, label)
         series[label_name] = Series(
             label_name, name, y, se, fitted, z, w, lim_e, hi, lo, sigma, lim, cov_report,
             ewma_alarms=ewma_alarms, cusum_alarms=cusum_alarms, change_points=change_points(zc, pen, min_size),
             outliers=[int(i) for i in np.flatnonzero(np.abs(z) > lim.outlier)], extrapolated=extrapolated)
-    distance = np.cumsum(np.nan_to_num(_column(rows, "sliding_distance")))
-    return DriftResult(label, s, runs, _hours([str(r.get("start_time")) for r in rows]), distance, cov, base, p,
-                       series)
+    return DriftResult(label, s, runs, hours, distance, cov, base, p, series, axis, unmonitored)
+
+
+def _label(name: str, group: str) -> str:
+    return name if not group else f"{name} [{group}]"
+
+
+def _axis(rows: list[dict[str, Any]], label: str) -> str:
+    """The one axis of a series' runs (``rotary`` when the rows do not say)."""
+    axes = {str(r.get("axis") or "rotary") for r in rows}
+    if len(axes) > 1:
+        raise AnalysisError(f"{label or 'the runs'}: runs of a rotary and a linear axis in one series")
+    return axes.pop()
 
 
 def monitor(rows: list[dict[str, Any]], settings: DriftSettings | None = None) -> DriftReport:

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from hilbench.analysis.drift.monitor import DriftReport, DriftResult
+from hilbench.common.units import axis_unit
 
 #: axis labels of the covariates the monitor knows (name -> label with unit)
 COVARIATE_LABELS = {"temperature_mean": "winding temperature (degC)", "load": "load (kg)"}
@@ -33,7 +34,8 @@ def drift_figure(result: DriftResult, name: str, unit: str):
 
     s = result.series[name]
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), constrained_layout=True)
-    xs = [time_axis(result.hours), (result.distance, "cumulative sliding distance (rad)")]
+    xs = [time_axis(result.hours),
+          (result.distance, f"cumulative sliding distance ({axis_unit('position', result.axis)})")]
     temp = result.covariate_values.get("temperature_mean")
     if temp is not None and np.all(np.isfinite(temp)):
         xs.append((temp, COVARIATE_LABELS["temperature_mean"]))
@@ -111,14 +113,17 @@ def _file_part(label: str) -> str:
     return "".join(c if c.isalnum() or c in "-_" else "-" for c in label).strip("-")
 
 
-def write_figures(report: DriftReport, units: dict[str, str], out: Path, save) -> list[Path]:
-    """Both figures of every series as PNG into ``out`` via ``save(fig, path)``; returns the paths."""
+def write_figures(report: DriftReport, units: dict[str, dict[str, str]], out: Path, save) -> list[Path]:
+    """Both figures of every series as PNG into ``out`` via ``save(fig, path)``; returns the paths. ``units``: axis
+    (``rotary``, ``linear``) -> column -> unit (the results table's metadata on that axis,
+    hilbench.common.units.schema_units); each series reads the units of its runs' axis."""
     import matplotlib.pyplot as plt
 
     paths = []
     for result in report.groups:
         for name, s in result.series.items():
-            for kind, fig in (("drift", drift_figure(result, name, units.get(s.parameter, ""))),
+            unit = units[result.axis].get(s.parameter, "")
+            for kind, fig in (("drift", drift_figure(result, name, unit)),
                               ("charts", charts_figure(result, name))):
                 path = out / f"{kind}-{_file_part(name)}.png"
                 save(fig, path)

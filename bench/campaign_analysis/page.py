@@ -146,6 +146,28 @@ def repeat_summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
+def runs_of(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One row per run of the campaign from its rows of every step: the run's identify row (its parameters) when it
+    has one, else its first row; ``failed`` when any of its steps failed, with each failed step's reason
+    (``step: reason``), so a run whose protocol no identify step reads (stepped sine, presliding) is in the
+    table too."""
+    from hilbench.analysis.protocol import ANALYSES
+
+    order = {name: i for i, name in enumerate(ANALYSES)}
+    by_run: dict[str, list[dict[str, Any]]] = defaultdict(list)
+    for r in rows:
+        by_run[str(r.get("key"))].append(r)
+    out = []
+    for rs in by_run.values():
+        own = next((r for r in rs if r.get("step") in ("identify", None)), rs[0])
+        bad = sorted((r for r in rs if r.get("status") != "ok"), key=lambda r: order.get(str(r.get("step")), 99))
+        if bad and all(r.get("step") for r in bad):
+            own = {**own, "status": bad[0].get("status"),
+                   "error": "; ".join(f"{r.get('step')}: {r.get('error')}" for r in bad)}
+        out.append(own)
+    return out
+
+
 def step_sections(rows: list[dict[str, Any]], units: dict[str, str], axis: str = "rotary") -> list[str]:
     """One section per analysis of the registry (hilbench.analysis.protocol.ANALYSES) that has rows in the table,
     in the registry's order: its title, then a sortable table of its rows (run, repeat, status, the entry's
@@ -185,8 +207,10 @@ def step_sections(rows: list[dict[str, Any]], units: dict[str, str], axis: str =
 
 def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, str], drift_pngs: list[Path],
                   summary: dict[str, Any] | None, axis: str = "rotary") -> str:
-    """The HTML text of one campaign's page (``axis``: the runs' axis, which names the break-away torque/force)."""
-    rows = sorted(rows, key=lambda r: (str(r.get("start_time")), str(r.get("key"))))
+    """The HTML text of one campaign's page (``rows``: its rows of every step; ``axis``: the runs' axis, which names
+    the break-away torque/force)."""
+    every = sorted(rows, key=lambda r: (str(r.get("start_time")), str(r.get("key"))))
+    rows = runs_of(every)
     folder = Path(rows[0]["folder"]) if rows and rows[0].get("folder") else None
     plan = []
     if folder is not None and (folder / "index.json").is_file():
@@ -198,7 +222,8 @@ def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, st
     parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>campaign {e(campaign)}</title>",
              f"<style>{CSS}</style><script>{JS}</script></head><body>",
              f"<h1>Campaign {e(campaign)}</h1><pre id='js-errors'></pre>",
-             f"<p>{len(rows)} analysed runs, {sum(r.get('status') == 'ok' for r in rows)} ok; "
+             f"<p>{len(rows)} analysed runs, {sum(r.get('status') == 'ok' for r in rows)} ok "
+             f"({len(every)} analyses, {sum(r.get('status') == 'ok' for r in every)} ok); "
              f"folder {e(folder.name) if folder else '?'}</p>"]
     parts.append(f"<h2>Plan</h2><details><summary>{len(plan)} planned runs</summary><table><thead><tr>"
                  "<th class='t'>run</th><th class='t'>protocol</th>"
@@ -234,7 +259,7 @@ def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, st
         parts.append(f"<tr id='fig-{rid}' class='fig' style='display:none'><td colspan='{len(RUN_COLUMNS)}'>"
                      f"{body}</td></tr>")
     parts.append("</tbody></table>")
-    sections = step_sections(rows, units, axis)
+    sections = step_sections(every, units, axis)
     if sections:
         parts.append("<h2>Analyses</h2><p>One section per analysis step in the table (the analysis registry's "
                      "order); click a column to sort.</p>")
@@ -243,16 +268,19 @@ def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, st
                  "</summary><table><thead><tr><th class='t'>run</th>"
                  "<th>repeats</th>" + "".join(f"<th>{e(_header(p, HEADERS[p], units, axis))}</th>"
                                               for p in SUMMARY_PARAMETERS) + "</tr></thead><tbody>")
-    for s in repeat_summary(rows):
+    for s in repeat_summary([r for r in every if r.get("step") in ("identify", None)]):
         parts.append(f"<tr><td class='t'>{e(s['name'])}</td><td>{s['n']}</td>" + "".join(
             f"<td>{_fmt(s[p][0], s[p][1], p)}</td>" for p in SUMMARY_PARAMETERS) + "</tr>")
     parts.append("</tbody></table></details>")
-    if drift_pngs:
+    if drift_pngs or summary is not None:
         parts.append("<h2>Drift</h2>")
         if summary is not None:
             parts.append(f"<p>{len(summary.get('alarms', []))} alarm(s) over {summary.get('runs')} runs "
                          f"(all campaigns of the results table); baseline: {len(summary.get('baseline', []))} "
-                         "runs.</p>")
+                         "runs.</p><ul class='series'>")
+            parts += [f"<li>{e(g.get('group', ''))}: {e(g.get('baseline_rule', ''))}</li>"
+                      for g in summary.get("groups", [])]
+            parts.append("</ul>")
         for p in drift_pngs:
             parts.append(f"<h3>{e(p.stem)}</h3><img alt='{e(p.stem)}' src='{_file_png(p)}'>")
     parts.append("</body></html>")

@@ -406,13 +406,15 @@ class CampaignResults(QtWidgets.QWidget):
         import pyarrow.parquet as pq
 
         from hilbench.bench.campaign_analysis.table import TABLE_NAME
+        from hilbench.common.units import schema_units
 
         path = Path(self.path_edit.text().strip())
         table = path if path.suffix == ".parquet" else path / TABLE_NAME
         try:
             read = pq.read_table(table)
             rows = [r for r in read.to_pylist() if r.get("step") == "identify"]
-            units = {f.name: (f.metadata or {}).get(b"unit", b"").decode() for f in read.schema}
+            axis = next((str(r["axis"]) for r in rows if r.get("axis")), "rotary")
+            units = schema_units(read.schema, axis)  # a linear axis reads N, kg, N*s/m (unit_linear)
         except Exception as exc:
             self.status.setText(f"<span style='color:#c00000'>{table}: {one_line(exc)}</span>")
             return False
@@ -470,6 +472,11 @@ class CampaignResults(QtWidgets.QWidget):
         except Exception as exc:
             self.drift = None
             self.status.setText(f"{len(self.rows)} runs; no drift charts: {one_line(exc)}")
+            return False
+        if not report.series:  # every series too short or without spread: said, nothing to chart
+            self.drift = None
+            why = "; ".join(g.baseline_line() for g in report.groups)
+            self.status.setText(f"{len(self.rows)} runs ({ok} ok); no drift charts: {why}")
             return False
         label, s = next(iter(report.series.items()))
         self._label_charts(s.value)

@@ -37,3 +37,18 @@ def axis_unit(quantity: str, axis: str) -> str:
 
 #: what drives an axis, by name: a torque on a rotary axis, a force on a linear one ("break-away torque/force")
 EFFORT = {"rotary": "torque", "linear": "force"}
+
+
+def field_unit(metadata: dict[bytes, bytes] | None, axis: str = "rotary") -> str:
+    """The unit of a results-table column (its Parquet field ``metadata``) for a row on ``axis``: ``unit_linear`` on
+    a linear axis when the column follows the axis (``unit_follows: axis``), else ``unit`` ("" when none)."""
+    meta = metadata or {}
+    if axis == "linear" and meta.get(b"unit_follows") == b"axis" and b"unit_linear" in meta:
+        return meta[b"unit_linear"].decode()
+    return meta.get(b"unit", b"").decode()
+
+
+def schema_units(fields, axis: str = "rotary") -> dict[str, str]:
+    """Column name -> unit on ``axis`` for every field of a results table's schema (:func:`field_unit`)."""
+    axis_unit("position", axis)  # refuses an unknown axis
+    return {f.name: field_unit(f.metadata, axis) for f in fields}

@@ -40,6 +40,7 @@ def run(args: argparse.Namespace) -> int:
     from hilbench.bench.campaign_analysis.table import TABLE_NAME
     from hilbench.bench.errors import BenchError
     from hilbench.bench.storage import outputs
+    from hilbench.common.units import AXES, schema_units
 
     table = args.results / TABLE_NAME if args.results.is_dir() else args.results
     if not table.is_file():
@@ -51,9 +52,9 @@ def run(args: argparse.Namespace) -> int:
         t = pq.read_table(table)
     except (OSError, ValueError) as exc:  # pyarrow: ArrowIOError, ArrowInvalid
         raise BenchError(f"{table}: not a readable Parquet table ({' '.join(str(exc).split())})") from None
-    units = {f.name: (f.metadata or {}).get(b"unit", b"").decode() for f in t.schema}
+    units = {axis: schema_units(t.schema, axis) for axis in AXES}  # a column's unit follows the row's axis
     params = tuple(p.strip() for p in args.parameters.split(",") if p.strip())
-    unknown = [p for p in params if p not in units or f"{p}_se" not in units]
+    unknown = [p for p in params if p not in units["rotary"] or f"{p}_se" not in units["rotary"]]
     if unknown or not params:
         raise BenchError(f"--parameters: {unknown[0] if unknown else '(none)'!r} is not an identified parameter "
                          f"with a standard error in {table}")
@@ -61,7 +62,8 @@ def run(args: argparse.Namespace) -> int:
         raise BenchError(f"--false-alarm {args.false_alarm:g}: must lie in (0, 100) %")
     if args.penalty is not None and not (math.isfinite(args.penalty) and args.penalty > 0):
         raise BenchError(f"--penalty {args.penalty:g}: must be finite and > 0")
-    rows = [r for r in t.to_pylist() if r.get("step") == "identify"]
+    every_row = t.to_pylist()  # the page shows every step's rows; drift follows identify's
+    rows = [r for r in every_row if r.get("step") == "identify"]
     settings = DriftSettings(parameters=params, baseline=args.baseline, penalty=args.penalty,
                              false_alarm=args.false_alarm / 100.0,
                              baseline_runs=tuple(k.strip() for k in args.baseline_runs.split(","))
@@ -74,8 +76,9 @@ def run(args: argparse.Namespace) -> int:
     summary = result.summary()
     summary["figures"] = [p.name for p in figures]
     outputs.write_json(out / "drift.json", summary, indent=1, allow_nan=False)
+    axes = {g["group"]: g["axis"] for g in summary["groups"]}
     for name, p in summary["parameters"].items():
-        unit = units[p["parameter"]]
+        unit = units[axes[p["group"]]][p["parameter"]]
         c = p["covariates"].get("temperature_mean", {})
         dep = (f"temperature {c['coefficient']:.3g} +- {c['se']:.2g} {unit}/K"
                f"{' (found)' if c['found'] else ' (not significant)'}" if "coefficient" in c else
@@ -88,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_page:
         from hilbench.bench.campaign_analysis.page import write_pages
 
-        for page in write_pages(rows, units, figures, summary, out):
+        for page in write_pages(every_row, units["rotary"], figures, summary, out):
             outputs.say(f"page: {page}")
     outputs.say(f"{len(summary['alarms'])} alarm(s) over {summary['runs']} runs -> {out / 'drift.json'}")
     return 0

@@ -28,3 +28,33 @@ def test_a_linear_run_row_keeps_its_axis_and_its_page_shows_linear_units():
     text = campaign_page("c", [row], column_units("linear"), [], None, "linear")
     assert "inertia J (kg)" in text and "viscous coefficient b (N*s/m)" in text and "kg*m^2" not in text
     assert "break-away force (N)" in text and "break-away torque" not in text
+
+
+def test_drift_of_a_linear_axis_campaign_speaks_in_linear_units(tmp_path, monkeypatch, capsys):
+    """`hilbench drift` on rows of a linear axis: its lines and figures read N, N*s/m and m (the columns'
+    `unit_linear`), not the rotary units of the field's `unit` (issue #38)."""
+    import numpy as np
+    import pyarrow.parquet as pq
+
+    from hilbench.bench.cli import main
+    from hilbench.bench.storage import outputs
+    from tests.analysis.drift.pools import campaign
+
+    rows = [{**r, "axis": "linear", "step": "identify"} for r in campaign("warm", 12, np.random.default_rng(6))]
+    pq.write_table(to_table(rows), tmp_path / "results.parquet")
+    labels: dict[str, list[str]] = {}
+    save = outputs.save_figure
+
+    def keep_labels(fig, path):
+        labels[path.name] = [t for ax in fig.axes if ax.get_visible() for t in (ax.get_xlabel(), ax.get_ylabel())]
+        return save(fig, path)
+
+    monkeypatch.setattr(outputs, "save_figure", keep_labels)
+    assert main(["drift", str(tmp_path)]) == 0
+    said = capsys.readouterr().out
+    assert "breakaway: temperature " in said and " N/K (" in said and "N*m" not in said
+    assert "viscous: temperature " in said and " N*s/m/K (" in said
+    assert "breakaway (N)" in labels["drift-breakaway.png"] and "cumulative sliding distance (m)" in labels[
+        "drift-breakaway.png"]
+    assert "viscous (N*s/m)" in labels["drift-viscous.png"]
+    assert not any("rad" in t or "N*m" in t for ts in labels.values() for t in ts)

@@ -83,20 +83,22 @@ def test_a_failing_analysis_is_one_red_line(view, qtbot, tmp_path):
 
 
 def test_a_failing_drift_is_one_red_line_and_writes_nothing(view, qtbot, tmp_path):
-    """Two analysed runs are too few for a baseline: the command's own reason, in red, and no report."""
+    """Two runs whose analysis failed leave nothing to follow: the command's own reason, in red, and no report.
+    (Two analysed runs are a report with nothing charted yet: tests/bench/test_documented_path.py.)"""
     import pyarrow.parquet as pq
 
     from tests.bench.gui.test_campaign_results import _rows
 
     results = tmp_path / "results"
     results.mkdir()
-    pq.write_table(to_table(_rows()[:2]), results / TABLE_NAME)
+    failed = [{**r, "status": "failed", "error": "AnalysisError: no position channel"} for r in _rows()[:2]]
+    pq.write_table(to_table(failed), results / TABLE_NAME)
     view.results_edit.setText(str(results))
     assert view.drift_button.isEnabled() and not view.analyse_button.isEnabled()  # no campaign folder given
     assert view.drift()
     qtbot.waitUntil(lambda: view.command is None, timeout=60000)
     status = _plain(view.status)
-    assert "#c00000" in view.status.text() and status.startswith("drift failed: baseline of 2 runs: need 3")
+    assert "#c00000" in view.status.text() and status.startswith("drift failed: no analysed run (status ok)")
     assert not (results / "drift" / "drift.json").exists()
 
 

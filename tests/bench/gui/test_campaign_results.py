@@ -131,3 +131,30 @@ def test_the_operator_keeps_the_height_they_gave_the_table(view, results, qtbot)
     qtbot.wait(50)
     assert view.split.sizes()[0] == moved[0]  # a resize gives its pixels to the charts, not back to the rule
     assert view.load() and view.split.sizes()[0] < moved[0]  # a new table: the rule again
+
+
+def test_a_linear_axis_campaign_charts_in_linear_units(view, tmp_path):
+    """Rows of a linear axis (their `axis` column): the value chart reads the column's `unit_linear` (N, kg), not
+    the rotary unit the Parquet field's `unit` holds (issue #38)."""
+    import pyarrow.parquet as pq
+
+    pq.write_table(to_table([{**r, "axis": "linear"} for r in _rows()]), tmp_path / TABLE_NAME)
+    view.path_edit.setText(str(tmp_path))
+    assert view.load()
+    axis = view.plots["value"].getAxis("left")
+    assert "break-away (N) " in axis.labelString() and "N*m" not in axis.labelString()
+    view.parameter.setCurrentText("viscous")  # about 1e-3: engineering prefix, linear unit
+    assert "b (mN*s/m) " in axis.labelString()
+
+
+def test_a_campaign_too_short_to_chart_says_so_in_the_status(view, tmp_path):
+    """Two runs: the report's own line (all baseline, not charted), the table filled, no chart drawn."""
+    import pyarrow.parquet as pq
+
+    pq.write_table(to_table(_rows()[:2]), tmp_path / TABLE_NAME)
+    view.path_edit.setText(str(tmp_path))
+    assert not view.load()
+    assert view.table.rowCount() == 2 and view.drift is None
+    assert "no drift charts: baseline: the first 2 of 2 runs" in view.status.text()
+    assert "not charted: 2 runs: too few to chart (a baseline needs 3" in view.status.text()
+    assert not view.plots["value"].listDataItems()
