@@ -12,6 +12,7 @@ from typing import Any
 
 from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.protocol import Analysis, Inputs, ReadOptions, Result, one_run_whole, write_json
+from hilbench.common.runfile import CURRENT_CMD
 
 #: bytes per sample read whole (t, position, current, and the reference's position, velocity and acceleration)
 BYTES_PER_SAMPLE = 64
@@ -45,7 +46,7 @@ def reference_of(record):
 def read(paths: Sequence[str | Path], options: ReadOptions) -> Inputs:
     """One compensated run, whole; refused in one line when it does not fit ``options.memory``."""
     return one_run_whole(paths, options, "tracking metrics", BYTES_FIXED, BYTES_PER_SAMPLE,
-                         need_torque=False, channels=("current_cmd",), torque_channel=None)
+                         need_torque=False, channels=(CURRENT_CMD,), torque_channel=None)
 
 
 def compute(inputs: Inputs, settings: TrackingSettings, validation: Inputs | None, progress=None):
@@ -56,7 +57,7 @@ def compute(inputs: Inputs, settings: TrackingSettings, validation: Inputs | Non
     if rec.position.size != ref.n:
         raise AnalysisError(f"{rec.path}: {rec.position.size} samples recorded, the reference has {ref.n}; the run "
                             "did not complete")
-    return tracking_metrics(ref, rec.position, rec.channel("current_cmd"), window=settings.window,
+    return tracking_metrics(ref, rec.position, rec.channel(CURRENT_CMD), window=settings.window,
                             tolerance=settings.tolerance)
 
 

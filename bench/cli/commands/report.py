@@ -35,11 +35,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def summary_lines(title: str, summary: dict) -> list[str]:
     """The summary as text, one figure a line; an NRMSE (a fraction in the JSON) in percent (docs/metrics.md)."""
-    from hilbench.common.metrics import UNIT, percent
+    from hilbench.common.metrics import UNIT, is_fraction, percent
 
     lines = [title]
     for key, value in summary.items():
-        if isinstance(value, float) and key.endswith("_nrmse"):
+        if isinstance(value, float) and is_fraction(key):
             lines.append(f"  {key.replace('nrmse', 'NRMSE').replace('_', ' ')}: {percent(value):.4g} {UNIT}")
         elif isinstance(value, int | float | str) and not isinstance(value, bool):
             lines.append(f"  {key}: {value:.6g}" if isinstance(value, float) else f"  {key}: {value}")
