@@ -178,10 +178,26 @@ def step_sections(rows: list[dict[str, Any]], units: dict[str, str], axis: str =
     return parts
 
 
+def run_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One row per run for the runs table and the repeat summary: its identify row (the parameters they show),
+    else its first row (a probe or a compensated run has no identify row: its status and reason still show). A row
+    without a ``step`` is an identify row."""
+    chosen: dict[tuple[str, str], dict[str, Any]] = {}
+    for r in rows:
+        run = (str(r.get("folder")), str(r.get("key")))
+        if run not in chosen or (r.get("step", "identify") == "identify"
+                                 and chosen[run].get("step", "identify") != "identify"):
+            chosen[run] = r
+    return list(chosen.values())
+
+
 def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, str], drift_pngs: list[Path],
                   summary: dict[str, Any] | None, axis: str = "rotary") -> str:
-    """The HTML text of one campaign's page (``axis``: the runs' axis, which names the break-away torque/force)."""
-    rows = sorted(rows, key=lambda r: (str(r.get("start_time")), str(r.get("key"))))
+    """The HTML text of one campaign's page (``axis``: the runs' axis, which names the break-away torque/force).
+    ``rows``: every step's rows of the campaign; the runs table has one row per run (:func:`run_rows`), the
+    analyses a section per step (:func:`step_sections`)."""
+    sections = step_sections(rows, units, axis)
+    rows = sorted(run_rows(rows), key=lambda r: (str(r.get("start_time")), str(r.get("key"))))
     folder = Path(rows[0]["folder"]) if rows and rows[0].get("folder") else None
     plan = []
     if folder is not None and (folder / "index.json").is_file():
@@ -229,7 +245,6 @@ def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, st
         parts.append(f"<tr id='fig-{rid}' class='fig' style='display:none'><td colspan='{len(RUN_COLUMNS)}'>"
                      f"{body}</td></tr>")
     parts.append("</tbody></table>")
-    sections = step_sections(rows, units, axis)
     if sections:
         parts.append("<h2>Analyses</h2><p>One section per analysis step in the table (the analysis registry's "
                      "order); click a column to sort.</p>")

@@ -61,7 +61,8 @@ def run(args: argparse.Namespace) -> int:
         raise BenchError(f"--false-alarm {args.false_alarm:g}: must lie in (0, 100) %")
     if args.penalty is not None and not (math.isfinite(args.penalty) and args.penalty > 0):
         raise BenchError(f"--penalty {args.penalty:g}: must be finite and > 0")
-    rows = [r for r in t.to_pylist() if r.get("step") == "identify"]
+    every = t.to_pylist()
+    rows = [r for r in every if r.get("step") == "identify"]
     settings = DriftSettings(parameters=params, baseline=args.baseline, penalty=args.penalty,
                              false_alarm=args.false_alarm / 100.0,
                              baseline_runs=tuple(k.strip() for k in args.baseline_runs.split(","))
@@ -88,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_page:
         from hilbench.bench.campaign_analysis.page import write_pages
 
-        for page in write_pages(rows, units, figures, summary, out):
+        for page in write_pages(every, units, figures, summary, out):  # a section per step the table holds
             outputs.say(f"page: {page}")
     outputs.say(f"{len(summary['alarms'])} alarm(s) over {summary['runs']} runs -> {out / 'drift.json'}")
     return 0
