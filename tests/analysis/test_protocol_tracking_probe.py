@@ -1,9 +1,10 @@
 """The analysis protocol's consistency for the two analyses of runs of their own: the compensation metrics of a
 compensated run and the break-away probe. Each reaches every consumer it has through the registry: the Python API,
 the CLI's JSON (``hilbench report``; for the compensation also the matrix report ``hilbench compensate`` and a
-``[[compensate]]`` campaign write), the GUI's result, the campaign's Parquet row (the run's protocol picks the step,
-``steps_for``) and the campaign page's cell; each gives the same figure to 1e-6, and the figure is its closed form
-(the rms and peak of reference - position) or the simulated motor's break-away current.
+``[[compensate]]`` campaign write; for the probe ``analyse_probe``, which ``hilbench plan`` sizes from), the GUI's
+result (its summary, and the table it shows to six digits), the campaign's Parquet row (the run's protocol picks
+the step, ``steps_for``) and the campaign page's cell; each gives the same figure to 1e-6, and the figure is its
+closed form (the rms and peak of reference - position) or near the simulated motor's sliding current.
 """
 
 from __future__ import annotations
@@ -32,6 +33,16 @@ from hilbench.firmware_sim.engine.plant import simulate
 from tests.analysis.consistency import RTOL, campaign_row, page_cell
 
 pytestmark = pytest.mark.device_free
+
+
+#: the GUI's table shows six significant digits: within half a unit of the sixth
+SHOWN = 5e-6
+
+
+def _shown(result, column: str) -> float:
+    """The number the GUI's result table shows for ``column`` (its text, as the operator reads it)."""
+    (text,) = [value for quantity, value, _unit in result.numbers if quantity == column]
+    return float(text)
 
 
 def _campaign(folder: Path, file: str, protocol_name: str) -> None:
@@ -93,6 +104,7 @@ def test_the_compensation_metrics_read_one_figure_everywhere(tmp_path, capsys):
         for where, got in (("report", cli[column]), ("matrix", matrix[column]), ("gui", shown.summary[column]),
                            ("row", row[column]), ("page", page_cell(row, column)[0])):
             assert got == pytest.approx(value, rel=RTOL), (column, where)
+        assert _shown(shown, column) == pytest.approx(value, rel=SHOWN), column
     capsys.readouterr()
 
 
@@ -138,6 +150,7 @@ def test_the_breakaway_probe_reads_one_figure_everywhere(tmp_path, capsys):
         for where, got in (("plan", planned[column]), ("report", cli[column]), ("gui", shown.summary[column]),
                            ("row", row[column]), ("page", page_cell(row, column)[0])):
             assert got == pytest.approx(value, rel=RTOL), (column, where)
+        assert _shown(shown, column) == pytest.approx(value, rel=SHOWN), column
     capsys.readouterr()
 
 
