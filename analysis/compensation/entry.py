@@ -19,12 +19,18 @@ BYTES_PER_SAMPLE = 64
 BYTES_FIXED = 100 << 20
 
 
+#: the metrics' glitch window (s) and settling band (rad) of a run that records none
+WINDOW, TOLERANCE = 0.05, 1e-4
+
+
 @dataclass(frozen=True)
 class TrackingSettings:
-    """``window`` (s) after each reversal for the glitch; settling ``tolerance`` (rad) of point-to-point moves."""
+    """``window`` (s) after each reversal for the glitch; settling ``tolerance`` (rad) of point-to-point moves.
+    None: the run's own (its protocol parameters ``window`` and ``tolerance``, which ``hilbench compensate`` and a
+    ``[[compensate]]`` step record), else :data:`WINDOW` and :data:`TOLERANCE`."""
 
-    window: float = 0.05
-    tolerance: float = 1e-4
+    window: float | None = None
+    tolerance: float | None = None
 
 
 def reference_of(record):
@@ -57,8 +63,10 @@ def compute(inputs: Inputs, settings: TrackingSettings, validation: Inputs | Non
     if rec.position.size != ref.n:
         raise AnalysisError(f"{rec.path}: {rec.position.size} samples recorded, the reference has {ref.n}; the run "
                             "did not complete")
-    return tracking_metrics(ref, rec.position, rec.channel(CURRENT_CMD), window=settings.window,
-                            tolerance=settings.tolerance)
+    params = rec.protocol_params
+    window = settings.window if settings.window is not None else float(params.get("window", WINDOW))
+    tolerance = settings.tolerance if settings.tolerance is not None else float(params.get("tolerance", TOLERANCE))
+    return tracking_metrics(ref, rec.position, rec.channel(CURRENT_CMD), window=window, tolerance=tolerance)
 
 
 def summarise(result: Result) -> dict[str, Any]:

@@ -60,10 +60,11 @@ def _report_json(name: str, run: Path, out: Path) -> dict:
 
 
 def _compensated_run(path: Path) -> tuple[CompensatedReference, np.ndarray]:
-    """A compensated run (sine reference, 1 kHz) whose position lags the reference by 3 samples plus a 7 Hz
-    ripple of 10 µrad: the tracking error is known sample by sample. Returns the protocol and that error."""
+    """A compensated run (sine reference, 1 kHz, scored with a 0.02 s glitch window) whose position lags the
+    reference by 3 samples plus a 7 Hz ripple of 10 µrad: the tracking error is known sample by sample. Returns
+    the protocol and that error."""
     proto = CompensatedReference(reference="sine", amplitudes=(1e-3, 1e-2), frequency=1.0, cycles=1, rest=0.1,
-                                 sample_rate=1000)
+                                 window=0.02, sample_rate=1000)
     ref, fs = proto.reference_path, float(proto.sample_rate)
     k = np.arange(ref.n)
     position = np.concatenate([np.zeros(3), ref.position[:-3]]) + 1e-5 * np.sin(2 * np.pi * 7 * k / fs)
@@ -90,10 +91,14 @@ def test_the_compensation_metrics_read_one_figure_everywhere(tmp_path, capsys):
     closed = {"rms_error_rad": float(np.sqrt(np.mean(error**2))), "max_error_rad": float(np.max(np.abs(error)))}
     for column, value in closed.items():  # the closed form: reference - position, sample by sample
         assert summary[column] == pytest.approx(value, rel=1e-12), column
+    # the glitch: the peak |error| within the run's own 0.02 s after each reversal of the reference
+    assert summary["glitch_window_s"] == 0.02
+    peaks = [np.max(np.abs(error[k:k + 20])) for k in summary["reversal_sample"]]
+    assert summary["glitch_rad"] == pytest.approx(peaks, rel=1e-12)
     cli = _report_json("compensation", run, tmp_path / "r.json")
     # the matrix report `hilbench compensate --matrix` and a [[compensate]] campaign write from the played run
-    write_report([measured_case(proto.case, run, MatrixSettings())], tmp_path / "matrix",
-                 {"source": "test", "window_s": 0.05, "tolerance_rad": 1e-4})
+    write_report([measured_case(proto.case, run, MatrixSettings(window=0.02))], tmp_path / "matrix",
+                 {"source": "test", "window_s": 0.02, "tolerance_rad": 1e-4})
     (matrix,) = json.loads((tmp_path / "matrix" / "compensation.json").read_text())["runs"]
     shown = run_analysis("compensation", run)
     row = campaign_row(folder, tmp_path / "row", "compensation", 0.3)

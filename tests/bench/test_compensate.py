@@ -218,7 +218,7 @@ tolerance = "2e-4 rad"
     assert glitch["none"] > 3 * glitch["maxwell_slip"]
     assert (tmp_path / "out" / "m" / "compensation_sine.png").exists()
     # `hilbench analyse` gives each compensated run its compensation row (the run's protocol picks the step), with
-    # the report's figures; the glitch ones are not compared: the step's window (0.02 s) is the report's own
+    # the report's figures: the glitch ones too, scored with the step's window (0.02 s) that the run records
     import pyarrow.parquet as pq
 
     assert cli.main(["-q", "analyse", str(tmp_path / "out"), "--steps", "identify,compensation", "--serial",
@@ -228,7 +228,7 @@ tolerance = "2e-4 rad"
     for r in doc["runs"]:
         row = rows[f"m.sine.{r['feedforward']}-1"]
         assert row["status"] == "ok", row["error"]
-        for column in ("rms_error_rad", "max_error_rad", "effort_rms_a"):
+        for column in ("rms_error_rad", "max_error_rad", "effort_rms_a", "glitch_mean_rad", "glitch_max_rad"):
             assert row[column] == pytest.approx(r[column], rel=1e-9), (r["feedforward"], column)
 
 
