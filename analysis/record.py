@@ -28,6 +28,7 @@ from hilbench.common.runfile import (
     HOST_TIME,
     LINEAR_ALIASES,
     SAMPLE_KINDS,
+    TORQUE_CMD,
     Run,
     RunFileError,
     host_sampled,
@@ -37,7 +38,7 @@ from hilbench.common.runfile import (
 )
 
 #: the default torque channels, in order of preference
-TORQUE_CHANNELS = ("torque", "torque_cmd")
+TORQUE_CHANNELS = ("torque", TORQUE_CMD)
 #: Largest magnitude accepted in a channel. The analyses square and sum samples: 1e100 squared is 1e200, far from
 #: float64's 1.8e308 even summed over 1e9 samples; real torques, forces and positions are many decades below.
 MAX_ABS_VALUE = 1e100

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hilbench.common.physical_bounds import ABSOLUTE_ZERO_DEGC, WINDING_TEMPERATURE_MAX_DEGC, temperature_possible
-from hilbench.common.runfile.schema import DeviceIdentity
+from hilbench.common.runfile.schema import CURRENT_CMD, DeviceIdentity
 from hilbench.drivers import protocol as p
 from hilbench.drivers.calibration import Calibration, CountUnwrapper
 from hilbench.drivers.device import Capabilities, Device, SampleBlock
@@ -106,7 +106,7 @@ def flag_impossible(current_cmd: np.ndarray, current_meas: np.ndarray, temperatu
     if math.isfinite(cmd.dot(cmd) + meas.dot(meas)) and (temperature is None or temperature_possible(temperature)):
         return cmd, meas, temperature, 0, ""
     bad, note = 0, ""
-    for values, name in ((cmd, "current_cmd"), (meas, "current")):
+    for values, name in ((cmd, CURRENT_CMD), (meas, "current")):
         wrong = ~np.isfinite(values)
         if wrong.any():
             bad += int(wrong.sum())

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hilbench.common.runfile.schema import CYCLE, DRIVE_STATUS, HOST_TIME, DeviceIdentity
+from hilbench.common.runfile.schema import CYCLE, DRIVE_STATUS, HOST_TIME, TORQUE_CMD, DeviceIdentity
 
 CLOCKS = ("device", "host")
 #: Control modes a device may offer and their setpoint units: ``MODE_UNITS`` (hilbench.common.units).
@@ -110,7 +110,7 @@ class CycleSamples(SampleBlock):
         """Channels beyond the device-clocked set, for the run file."""
         status = self.status if self.status is not None else np.zeros(len(self))
         out = {HOST_TIME: self.host_time, CYCLE: self.cycle.astype(np.float64), "velocity": self.velocity,
-               "torque_cmd": self.torque_cmd, DRIVE_STATUS: status.astype(np.float64)}
+               TORQUE_CMD: self.torque_cmd, DRIVE_STATUS: status.astype(np.float64)}
         return out
 
 

@@ -12,18 +12,25 @@ from typing import Any
 
 from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.protocol import Analysis, Inputs, ReadOptions, Result, one_run_whole, write_json
+from hilbench.common.runfile import CURRENT_CMD
 
 #: bytes per sample read whole (t, position, current, and the reference's position, velocity and acceleration)
 BYTES_PER_SAMPLE = 64
 BYTES_FIXED = 100 << 20
 
 
+#: the metrics' glitch window (s) and settling band (rad) of a run that records none
+WINDOW, TOLERANCE = 0.05, 1e-4
+
+
 @dataclass(frozen=True)
 class TrackingSettings:
-    """``window`` (s) after each reversal for the glitch; settling ``tolerance`` (rad) of point-to-point moves."""
+    """``window`` (s) after each reversal for the glitch; settling ``tolerance`` (rad) of point-to-point moves.
+    None: the run's own (its protocol parameters ``window`` and ``tolerance``, which ``hilbench compensate`` and a
+    ``[[compensate]]`` step record), else :data:`WINDOW` and :data:`TOLERANCE`."""
 
-    window: float = 0.05
-    tolerance: float = 1e-4
+    window: float | None = None
+    tolerance: float | None = None
 
 
 def reference_of(record):
@@ -45,7 +52,7 @@ def reference_of(record):
 def read(paths: Sequence[str | Path], options: ReadOptions) -> Inputs:
     """One compensated run, whole; refused in one line when it does not fit ``options.memory``."""
     return one_run_whole(paths, options, "tracking metrics", BYTES_FIXED, BYTES_PER_SAMPLE,
-                         need_torque=False, channels=("current_cmd",), torque_channel=None)
+                         need_torque=False, channels=(CURRENT_CMD,), torque_channel=None)
 
 
 def compute(inputs: Inputs, settings: TrackingSettings, validation: Inputs | None, progress=None):
@@ -56,8 +63,10 @@ def compute(inputs: Inputs, settings: TrackingSettings, validation: Inputs | Non
     if rec.position.size != ref.n:
         raise AnalysisError(f"{rec.path}: {rec.position.size} samples recorded, the reference has {ref.n}; the run "
                             "did not complete")
-    return tracking_metrics(ref, rec.position, rec.channel("current_cmd"), window=settings.window,
-                            tolerance=settings.tolerance)
+    params = rec.protocol_params
+    window = settings.window if settings.window is not None else float(params.get("window", WINDOW))
+    tolerance = settings.tolerance if settings.tolerance is not None else float(params.get("tolerance", TOLERANCE))
+    return tracking_metrics(ref, rec.position, rec.channel(CURRENT_CMD), window=window, tolerance=tolerance)
 
 
 def summarise(result: Result) -> dict[str, Any]:

@@ -36,6 +36,7 @@ from hilbench.analysis.models.families import (
     predicted_torque,
 )
 from hilbench.analysis.scoring import ScoredRun, ScoreSettings, score_run
+from hilbench.common.metrics import percent
 from hilbench.firmware_sim.engine.plant import PlantParameterError, PlantParams
 
 SCHEMA = "hilbench.compare/1"
@@ -145,17 +146,14 @@ def markdown_table(result: Comparison) -> str:
     def f(v: float) -> str:
         return "–" if v is None or not math.isfinite(v) else f"{v:.4g}"
 
-    def pct(v: float) -> str:
-        return f(None if v is None else 100.0 * v)
-
     for r in result.rows:
         if r.error is not None:
             lines.append(f"| {r.name} | – | {f(r.fit_time_s)} | FAILED: {r.error.replace('|', '/')} | | | | |")
             continue
-        lines.append(f"| {r.name} | {r.n_parameters} | {f(r.fit_time_s)} | {pct(r.validation['torque_nrmse'])} | "
-                     f"{pct(r.validation['position_nrmse_segmented'])} | {f(r.validation['position_rms_segmented'])} "
-                     f"| {pct(r.train['torque_nrmse'])} | "
-                     f"{pct(r.train['position_nrmse_segmented'])} |")
+        v, t = r.validation, r.train  # NRMSE fractions; the table shows percent (common.metrics.percent)
+        lines.append(f"| {r.name} | {r.n_parameters} | {f(r.fit_time_s)} | {f(percent(v['torque_nrmse']))} | "
+                     f"{f(percent(v['position_nrmse_segmented']))} | {f(v['position_rms_segmented'])} "
+                     f"| {f(percent(t['torque_nrmse']))} | {f(percent(t['position_nrmse_segmented']))} |")
     return "\n".join(lines) + "\n"
 
 

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 # gives the array function.
 from hilbench.analysis.presliding import analyse as _arrays  # noqa: F401
 from hilbench.analysis.presliding import report as _document  # noqa: F401
+from hilbench.common.runfile.schema import POSITION_CMD, SAMPLE_INDEX, VELOCITY_CMD
 
 if TYPE_CHECKING:
     from hilbench.analysis.channel_windows import Progress
@@ -29,7 +30,7 @@ if TYPE_CHECKING:
     from hilbench.analysis.record import Record
 
 #: run-file channels that hold no force: refused as the force channel
-NOT_FORCE = ("t", "sample_index", "position", "position_cmd", "velocity", "velocity_cmd", "counts")
+NOT_FORCE = ("t", SAMPLE_INDEX, "position", POSITION_CMD, "velocity", VELOCITY_CMD, "counts")
 #: fewer turning points than this leave the memory-rule checks and the bootstrap's blocks without a nested loop
 MIN_REVERSALS = 4
 #: output files of :func:`report`

@@ -28,7 +28,7 @@ from hilbench.analysis.breakaway.probe import (  # noqa: F401 (re-exported: the 
     smoothed_velocity,
 )
 from hilbench.bench.acquisition import excitations
-from hilbench.bench.acquisition.protocols import ParameterSpec, Protocol, ProtocolError
+from hilbench.bench.acquisition.protocols import PROTOCOLS, ParameterSpec, Protocol, ProtocolError
 
 #: Time of the quick return from the peak to 0 A, s: short enough that a slide stops soon after it. A load on a
 #: spring is probed with a slow return instead (``return_time = ramp_time``, bench.acquisition.planning): the spring
@@ -88,3 +88,8 @@ class BreakawayProbe(Protocol):
             rows.append((int(round(t_knots[start] * self.sample_rate)),
                          min(self.n_samples, int(round(t_knots[start + 3] * self.sample_rate))), sign))
         return {"ramps": np.array(rows, dtype=RAMP_DTYPE)}
+
+
+# a campaign may play probes ([[run]] protocol = "breakaway_probe": the break-away followed over a campaign, each
+# probe a row of the registry's ``breakaway`` step); bench/__init__.py imports this module, as compensation.py
+PROTOCOLS[BreakawayProbe.name] = BreakawayProbe

@@ -103,6 +103,10 @@ class CompensatedReference(Protocol):
         "targets": ParameterSpec("rad", -1e3, 1e3, "point_to_point: targets in turn", kind="floats"),
         "move_time": ParameterSpec("s", 1e-3, 100.0, "point_to_point: time of each move (minimum jerk)"),
         "rest": ParameterSpec("s", 0.0, 600.0, "rest at 0 (sine, triangle) or after each move"),
+        # how the run's tracking is scored (analysis.compensation.metrics): kept with the run, so the matrix report,
+        # the campaign's compensation row, the GUI and `hilbench report` score it alike
+        "window": ParameterSpec("s", 1e-4, 10.0, "metrics: glitch window after each reversal of the reference"),
+        "tolerance": ParameterSpec("rad", 1e-9, 1.0, "metrics: settling band of point-to-point moves"),
     }
     reference: str = "sine"
     model: str = ""
@@ -115,6 +119,8 @@ class CompensatedReference(Protocol):
     targets: tuple[float, ...] = field(default=(0.05, -0.05, 0.0))
     move_time: float = 0.3
     rest: float = 0.5
+    window: float = 0.05
+    tolerance: float = 1e-4
     mode: str = "position"
     sample_rate: int = 10000
 
@@ -157,11 +163,12 @@ class CompensatedReference(Protocol):
                     self.sample_rate, kt, ratio)
 
     @classmethod
-    def of(cls, case: Case) -> CompensatedReference:
-        """The protocol that plays ``case`` (bound to the case's calibration)."""
+    def of(cls, case: Case, window: float = 0.05, tolerance: float = 1e-4) -> CompensatedReference:
+        """The protocol that plays ``case`` (bound to the case's calibration), scored with the glitch ``window``
+        (s) and settling ``tolerance`` (rad)."""
         return cls(reference=case.reference, model=case.model, compensation=case.compensation,
-                   sample_rate=case.sample_rate, **dict(case.parameters)).calibrated(case.torque_constant,
-                                                                                     case.ratio)
+                   sample_rate=case.sample_rate, window=window, tolerance=tolerance,
+                   **dict(case.parameters)).calibrated(case.torque_constant, case.ratio)
 
     def _bound(self) -> Case:
         if self.calibration is None:

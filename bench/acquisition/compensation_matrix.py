@@ -273,7 +273,7 @@ def campaign_step(table: dict, defaults: dict, index: int, path: Path, text: str
         _, doc = load_compensators(model)
         check_calibration(doc, settings.torque_constant, settings.ratio)
         found = cases(str(model), references, names, matrix, int(merged.get("sample_rate", 10000)))
-        protocols = [CompensatedReference.of(c) for c in found]
+        protocols = [CompensatedReference.of(c, matrix.window, matrix.tolerance) for c in found]
     except (BenchError, AnalysisError) as exc:
         raise fail("model", str(exc)) from None
     try:  # a relative simulator config or EDS is read from the campaign file's folder, as the model is

@@ -24,7 +24,17 @@ import numpy as np
 
 from hilbench.bench.acquisition.protocols import Protocol
 from hilbench.bench.errors import BenchError
-from hilbench.common.runfile import DEVICE_CHANNELS, HOST_CLOCKED_CHANNELS, DeviceIdentity, RunFileError, RunWriter
+from hilbench.common.runfile import (
+    CURRENT_CMD,
+    CURRENT_FF,
+    DEVICE_CHANNELS,
+    HOST_CLOCKED_CHANNELS,
+    POSITION_CMD,
+    SAMPLE_INDEX,
+    DeviceIdentity,
+    RunFileError,
+    RunWriter,
+)
 from hilbench.drivers import protocol as wire
 from hilbench.drivers.amplifier import Amplifier
 from hilbench.drivers.device import Device, refusal
@@ -278,7 +288,7 @@ class Bench:
         # -- startup
         amp.configure(config)
         host_clocked = amp.clock == "host"
-        reference = (("position_cmd",) + (("current_ff",) if ff is not None else ())) if position else ()
+        reference = ((POSITION_CMD,) + ((CURRENT_FF,) if ff is not None else ())) if position else ()
         writer = RunWriter(
             path, sample_rate=float(protocol.sample_rate),  # type: ignore
             channels=(DEVICE_CHANNELS + reference + (HOST_CLOCKED_CHANNELS if host_clocked else ())
@@ -363,12 +373,12 @@ class Bench:
                 reference = {}
                 if position:  # the reference at the load, like `position` (setpoints are at the motor)
                     ref = u[k: k + n].reshape(n, -1)
-                    reference["position_cmd"] = ref[:, 0] / ratio
+                    reference[POSITION_CMD] = ref[:, 0] / ratio
                     if ref.shape[1] > 1:
-                        reference["current_ff"] = ref[:, 1]
+                        reference[CURRENT_FF] = ref[:, 1]
                 k += n
                 extra = blk.extra()
-                writer.append({"sample_index": blk.index, "t": t, "current_cmd": blk.current_cmd,
+                writer.append({SAMPLE_INDEX: blk.index, "t": t, CURRENT_CMD: blk.current_cmd,
                                "current": blk.current_meas, "torque": torque, "position": measured,
                                "counts": blk.counts, **reference, **extra})
                 if n and "temperature" in extra and math.isfinite(extra["temperature"][-1]):  # NaN: flagged
@@ -382,7 +392,7 @@ class Bench:
                     elapsed = time.monotonic() - t_start
                     eta = elapsed / done * (total - done) if done else math.inf
                     progress(Progress(done, total, eta, seg, len(segments), t, blk.current_cmd,
-                                      blk.current_meas, torque, measured, velocity, reference.get("position_cmd")))
+                                      blk.current_meas, torque, measured, velocity, reference.get(POSITION_CMD)))
                 if n:
                     last_pos = float(measured[-1])
                 if control.aborted:

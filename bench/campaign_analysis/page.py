@@ -18,7 +18,7 @@ import numpy as np
 
 from hilbench.bench.campaign_analysis.table import column_units
 from hilbench.bench.storage import outputs
-from hilbench.common.metrics import UNIT, label, percent
+from hilbench.common.metrics import UNIT, is_fraction, label, percent
 from hilbench.common.units import EFFORT
 
 #: (column, header) of the runs table; a parameter is shown with its standard error
@@ -83,21 +83,16 @@ def _file_png(path: Path) -> str:
 def _fmt(v: Any, se: Any = None, col: str = "") -> str:
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
         return ""
-    if _is_fraction(col) and isinstance(v, int | float):  # an error figure: text shows percent (docs/metrics.md)
+    if is_fraction(col) and isinstance(v, int | float):  # an error figure: text shows percent (docs/metrics.md)
         v, se = percent(v), percent(se) if isinstance(se, int | float) else se
     if isinstance(v, float):
         return f"{v:.4g}" + (f" &plusmn; {se:.2g}" if isinstance(se, float) and math.isfinite(se) else "")
     return html.escape(str(v))
 
 
-def _is_fraction(col: str) -> bool:
-    """An NRMSE column: the table keeps the fraction, every text shows it in percent."""
-    return col.endswith("_nrmse")
-
-
 def _header(col: str, head: str, units: dict[str, str], axis: str = "rotary") -> str:
     head = head.replace("torque", EFFORT[axis]) if col == "breakaway" else head
-    unit = UNIT if _is_fraction(col) else units.get(col, "")
+    unit = UNIT if is_fraction(col) else units.get(col, "")
     return f"{head} ({unit})" if unit and unit != "1" and col != "start_time" else head
 
 

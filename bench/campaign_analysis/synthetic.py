@@ -16,7 +16,7 @@ import numpy as np
 
 from hilbench.bench.acquisition import excitations
 from hilbench.bench.acquisition.campaign import INDEX_NAME
-from hilbench.common.runfile import RunWriter
+from hilbench.common.runfile import CURRENT_CMD, SAMPLE_INDEX, RunWriter
 from hilbench.firmware_sim.engine.drift import Drift, DriftState, rest, simulate_drifting
 from hilbench.firmware_sim.engine.friction_models import dc_motor
 from hilbench.firmware_sim.engine.plant import PlantParams
@@ -83,7 +83,7 @@ def simulate_runs(spec: SyntheticCampaign) -> Iterator[SimulatedRun]:
                                           seed=spec.seed + i, mode="current", limit=None)
         out_i, temperature = simulate_drifting(base.replace(seed=spec.seed + i), ex.u, 1 / fs, drift, state)
         n = ex.u.size
-        channels = {"sample_index": np.arange(n), "t": np.arange(n) / fs, "current_cmd": ex.u,
+        channels = {SAMPLE_INDEX: np.arange(n), "t": np.arange(n) / fs, CURRENT_CMD: ex.u,
                     "current": out_i.current_meas, "torque": base.torque_constant * out_i.current_meas,
                     "position": out_i.position_meas, "temperature": temperature}
         params = {"duration": spec.duration, "amplitude": spec.amplitude, "period": spec.period,
@@ -104,7 +104,7 @@ def write_campaign(out_dir: str | os.PathLike, spec: SyntheticCampaign,
         raise FileExistsError(f"{out / INDEX_NAME}: exists; a synthetic campaign goes into a new folder")
     entries = []
     for run in simulate_runs(spec):
-        names = ["sample_index", "t", "current_cmd", "current", "torque"]
+        names = [SAMPLE_INDEX, "t", CURRENT_CMD, "current", "torque"]
         names += [] if run.index in fail_runs else ["position"]
         with RunWriter(out / f"{run.key}.h5", sample_rate=float(spec.sample_rate),
                        channels=(*names, "temperature"), protocol_name="identification",

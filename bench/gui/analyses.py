@@ -120,10 +120,12 @@ def run_analysis(name: str, path: str | Path, options: dict | None = None) -> An
 def summary_table(result, options: dict | None = None) -> AnalysisResult:
     """Any registered analysis: its report summary's figures as the table, no figures."""
     from hilbench.analysis.protocol import entry
+    from hilbench.common.metrics import UNIT, is_fraction, percent
 
     analysis = entry(result.name)
     summary = analysis.report(result)[1]
-    numbers = [(k, f"{v:.6g}" if isinstance(v, float) else str(v), analysis.columns.get(k, ("", ""))[1])
+    numbers = [(k, f"{percent(v):.4g}", UNIT) if isinstance(v, float) and is_fraction(k) else
+               (k, f"{v:.6g}" if isinstance(v, float) else str(v), analysis.columns.get(k, ("", ""))[1])
                for k, v in summary.items() if isinstance(v, int | float | str) and not isinstance(v, bool)]
     return AnalysisResult(analysis.title, numbers, [])
 

@@ -16,7 +16,7 @@ from PySide6 import QtCore, QtWidgets
 from hilbench.bench.gui.command_process import CommandProcess
 from hilbench.bench.gui.plot_style import style_plot, style_view
 from hilbench.bench.gui.worker import one_line
-from hilbench.common.metrics import UNIT
+from hilbench.common.metrics import UNIT, is_fraction
 from hilbench.common.units import EFFORT
 
 COLUMNS = ("run", "protocol", "duration (s)", "state", "progress")
@@ -37,7 +37,7 @@ def result_headers(axis: str = "rotary") -> list[str]:
     units = column_units(axis)
     out = []
     for head, column, scale in RESULT_COLUMNS:
-        unit = UNIT if column.endswith("_nrmse") else units.get(column, "")
+        unit = UNIT if is_fraction(column) else units.get(column, "")
         head = head.replace("torque", EFFORT[axis]) if column == "breakaway" else head
         out.append(f"{head}\n({unit})" if scale is not None and unit not in ("", "1") else head)
     return out

@@ -14,6 +14,7 @@ from hilbench.analysis.execution import limited
 from hilbench.bench.gui import analyses
 from hilbench.bench.gui.elided_label import ElidedLabel
 from hilbench.bench.gui.worker import one_line
+from hilbench.common.runfile.schema import SAMPLE_INDEX
 
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
 #: analysis curves: the measurement dark and solid, a model orange and dashed, anything else from COLOURS with a
@@ -278,7 +279,7 @@ class RunBrowser(QtWidgets.QWidget):
         self.channels.blockSignals(True)
         self.channels.clear()
         for name in run.channels:
-            if name in ("sample_index",):
+            if name == SAMPLE_INDEX:
                 continue
             self.channels.addItem(f"{name}")
         self.channels.blockSignals(False)
@@ -518,5 +519,5 @@ def describe_run(r) -> list[str]:
         f"events: {len(r.events)}",
     ]
     for e in r.events:
-        lines.append(f"  t = {e['t']:<10.6g} s  #{e['sample_index']:<9} {e['kind']:<7} {e['message']}")
+        lines.append(f"  t = {e['t']:<10.6g} s  #{e[SAMPLE_INDEX]:<9} {e['kind']:<7} {e['message']}")
     return lines

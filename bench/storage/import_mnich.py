@@ -31,6 +31,7 @@ from hilbench.bench.storage.importers import (
     _sample_rate,
     _sha256,
 )
+from hilbench.common.runfile import SAMPLE_INDEX
 
 MNICH_MASS = 24.7  # kg, reduced mass (data set README)
 MNICH_SHIFT = -0.004  # s, NI clock relative to the servo clock (data set README)
@@ -89,7 +90,7 @@ def load_mnich(
     fs = _sample_rate(t, ni_csv)
     velocity = np.interp(t_ni[keep], t_servo, speed)
     samples = {
-        "sample_index": np.arange(t.size, dtype=np.int64),
+        SAMPLE_INDEX: np.arange(t.size, dtype=np.int64),
         "t": t,
         "position": cumulative_trapezoid(velocity, t, initial=0.0),
         "velocity": velocity,

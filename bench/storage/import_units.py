@@ -15,6 +15,7 @@ import math
 import re
 
 from hilbench.bench.errors import BenchError
+from hilbench.common.runfile.schema import CURRENT_CMD, POSITION_CMD, TORQUE_CMD, VELOCITY_CMD
 
 COUNTS = "counts"
 
@@ -36,13 +37,13 @@ UNITS: dict[str, dict[str, float]] = {
 QUANTITY: dict[str, tuple[str, str]] = {
     "t": ("time", "time"),
     "position": ("angle", "length"),
-    "position_cmd": ("angle", "length"),
+    POSITION_CMD: ("angle", "length"),
     "velocity": ("angular_velocity", "linear_velocity"),
-    "velocity_cmd": ("angular_velocity", "linear_velocity"),
+    VELOCITY_CMD: ("angular_velocity", "linear_velocity"),
     "torque": ("torque", "force"),
-    "torque_cmd": ("torque", "force"),
+    TORQUE_CMD: ("torque", "force"),
     "current": ("current", "current"),
-    "current_cmd": ("current", "current"),
+    CURRENT_CMD: ("current", "current"),
     "counts": ("counts", "counts"),
 }
 
@@ -50,13 +51,13 @@ QUANTITY: dict[str, tuple[str, str]] = {
 ALIASES: dict[str, tuple[str, ...]] = {
     "t": ("t", "time", "timestamp", "time_stamp"),
     "position": ("position", "pos", "theta", "angle", "displacement", "x", "q"),
-    "position_cmd": ("position_cmd", "position_ref", "pos_ref", "pos_cmd", "theta_ref", "reference"),
+    POSITION_CMD: ("position_cmd", "position_ref", "pos_ref", "pos_cmd", "theta_ref", "reference"),
     "velocity": ("velocity", "vel", "speed", "omega", "v"),
-    "velocity_cmd": ("velocity_cmd", "velocity_ref", "vel_ref", "speed_ref", "speed_cmd"),
+    VELOCITY_CMD: ("velocity_cmd", "velocity_ref", "vel_ref", "speed_ref", "speed_cmd"),
     "torque": ("torque", "tau", "force", "f", "torque_meas"),
-    "torque_cmd": ("torque_cmd", "torque_ref", "tau_ref", "force_cmd", "force_ref"),
+    TORQUE_CMD: ("torque_cmd", "torque_ref", "tau_ref", "force_cmd", "force_ref"),
     "current": ("current", "i", "iq", "i_q", "current_meas"),
-    "current_cmd": ("current_cmd", "current_ref", "i_ref", "iq_ref", "i_cmd"),
+    CURRENT_CMD: ("current_cmd", "current_ref", "i_ref", "iq_ref", "i_cmd"),
     "counts": ("counts", "encoder", "encoder_counts", "enc"),
 }
 _CHANNEL_OF = {alias: channel for channel, names in ALIASES.items() for alias in names}
@@ -94,7 +95,7 @@ def factor_to_si(channel: str, unit: str, axis: str) -> float | str:
         raise UnitError(f"--unit {channel}=...: units apply to {', '.join(QUANTITY)}, not {channel!r}")
     quantity = quantity_of(channel, axis)
     table = dict(UNITS[quantity])
-    if channel in ("position", "position_cmd") and axis == "rotary":
+    if channel in ("position", POSITION_CMD) and axis == "rotary":
         table[COUNTS] = 1.0
     u = normalise_unit(unit)
     if u not in table:

@@ -31,7 +31,7 @@ from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.reproductions.emps import EMPS_VARIABLES, parse_emps
 from hilbench.bench.errors import BenchError
 from hilbench.bench.storage.import_units import COUNTS, factor_to_si
-from hilbench.common.runfile import CHANNELS, TORQUE_TIMINGS, RunWriter
+from hilbench.common.runfile import CHANNELS, POSITION_CMD, SAMPLE_INDEX, TORQUE_CMD, TORQUE_TIMINGS, RunWriter
 from hilbench.common.units import AXIS_UNITS
 
 EMPS_CITATION = (
@@ -179,10 +179,10 @@ def load_emps(path: str | os.PathLike) -> ImportedRun:
         raise ImportDataError(str(exc)) from None
     t, gtau, kp, kv = rec.t, rec.gtau, rec.kp, rec.kv
     samples = {
-        "sample_index": np.arange(t.size, dtype=np.int64),
+        SAMPLE_INDEX: np.arange(t.size, dtype=np.int64),
         "t": t,
         "position": rec.qm,
-        "position_cmd": rec.qg,
+        POSITION_CMD: rec.qg,
         "torque": rec.force,
         "drive_voltage": rec.vir,
     }
@@ -190,7 +190,7 @@ def load_emps(path: str | os.PathLike) -> ImportedRun:
     variables = {
         "t": "t",
         "position": "qm",
-        "position_cmd": "qg",
+        POSITION_CMD: "qg",
         "torque": "gtau*vir",
         "drive_voltage": "vir",
     }
@@ -248,14 +248,14 @@ def load_hsm150(path: str | os.PathLike) -> ImportedRun:
     n = data.shape[0]
     cols = {
         "t": 0,
-        "position_cmd": 1,
+        POSITION_CMD: 1,
         "position": 2,
         "velocity": 3,
-        "torque_cmd": 4,
+        TORQUE_CMD: 4,
         "torque": 5,
         "current": 6,
     }
-    samples: dict[str, np.ndarray] = {"sample_index": np.arange(n, dtype=np.int64)}
+    samples: dict[str, np.ndarray] = {SAMPLE_INDEX: np.arange(n, dtype=np.int64)}
     samples.update({name: np.ascontiguousarray(data[:, c]) for name, c in cols.items()})
     _check_finite(samples, path, {k: f"data[:, {c}]" for k, c in cols.items()})
     quantum = 2 * math.pi / HSM150_COUNTS_PER_REV
@@ -367,7 +367,7 @@ def _assign_channels(names: list[str], mapping: Mapping[str, str], path: str) ->
         if channel is not None:
             found.setdefault(channel, []).append(name)
     for channel, column in mapping.items():
-        if channel not in CHANNELS or channel == "sample_index":
+        if channel not in CHANNELS or channel == SAMPLE_INDEX:
             raise ImportDataError(f"--map {channel}={column}: {channel!r} is not a run-file channel")
         if column not in names:
             raise ImportDataError(f"{path}: --map {channel}={column}: no column {column!r} (has: {', '.join(names)})")
@@ -576,7 +576,7 @@ def table_run(columns: Mapping[str, np.ndarray], path: str, fmt: str, options: T
         calibration["counts_per_rev"] = o.counts_per_rev
     if "counts" in samples:
         samples["counts"] = samples["counts"].astype(np.int64)
-    samples["sample_index"] = np.arange(samples["t"].size, dtype=np.int64)
+    samples[SAMPLE_INDEX] = np.arange(samples["t"].size, dtype=np.int64)
     variables = dict(labels)
     if "torque" not in column_of:
         variables["torque"] = f"{o.torque_constant}*{column_of['current']}"

@@ -112,6 +112,12 @@ def percent(fraction: float | None) -> float:
     return math.nan if fraction is None else 100.0 * float(fraction)
 
 
+def is_fraction(key: str) -> bool:
+    """Whether a figure's key (a summary's, a table column's) names an NRMSE, kept as a fraction in data files and
+    shown in percent in every text: ``validation_torque_nrmse``, ``train_position_nrmse_segmented``..."""
+    return "_nrmse" in key or key == "nrmse"
+
+
 def label(where: str, quantity: str = TORQUE_NRMSE) -> str:
     """``validation torque NRMSE`` and the like: where the figure is computed, then what it is."""
     return f"{where} {quantity}"

@@ -23,19 +23,15 @@ from hilbench.analysis.errors import AnalysisError
 from hilbench.analysis.identification.entry import IdentifySettings
 from hilbench.analysis.identification.maxwell_fit import LipSettings
 from hilbench.analysis.record import load_record
-from hilbench.bench.campaign_analysis.engine import analyse as analyse_campaign
 from hilbench.bench.campaign_analysis.steps import STEPS, StepSettings
 from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
 from hilbench.bench.cli import main
 from hilbench.bench.gui.analyses import run_analysis
 from hilbench.common.runfile import RunWriter
+from tests.analysis.consistency import FRACTION, RTOL, THRESHOLDS, campaign_row, page_cell
 
 pytestmark = pytest.mark.device_free
 
-RTOL = 1e-6
-THRESHOLDS = 16
-FRACTION = 0.3
-quiet = {"progress": False, "say": lambda _line: None}
 
 
 @pytest.fixture
@@ -115,29 +111,6 @@ def _host_clocked(folder: Path) -> Path:
     return path
 
 
-def _campaign_row(folder: Path, out: Path, step: str, fraction: float) -> dict:
-    settings = StepSettings(thresholds=THRESHOLDS, validation_fraction=fraction,
-                            compare_families=("coulomb_viscous", "maxwell_slip"))
-    s = analyse_campaign([folder], out, (step,), settings, serial=True, resume=False, **quiet)
-    (row,) = pq.read_table(s.table).to_pylist()
-    assert row["status"] == "ok", row["error"]
-    return row
-
-
-def _page_cell(row: dict, column: str) -> tuple[float, str]:
-    """(the exact value a campaign page's step section keeps for ``column`` of ``row``, the text it shows)."""
-    import re
-
-    from hilbench.bench.campaign_analysis.page import _header, step_sections
-
-    page = "".join(step_sections([row], {}))
-    section = page[page.index(f"id='step-{row['step']}'"):]
-    heads = re.findall(r"<th data-sort='1'[^>]*>([^<]*)</th>", section.split("</thead>")[0])
-    cells = re.findall(r"<td[^>]*data-v='([^']*)'>([^<]*)</td>", section.split("<tbody>")[1].split("</tr>")[0])
-    value, text = cells[heads.index(_header(column, column.replace("_", " ").replace("nrmse", "NRMSE"), {}))]
-    return float(value), text
-
-
 CASES = [(2000.0, False), (10000.0, False), (20000.0, False), (2000.0, True)]
 
 
@@ -158,7 +131,7 @@ def test_every_consumer_reports_the_same_figure(rate, host_clocked, tmp_path, ca
     assert main(["-q", "identify", str(run), "--thresholds", str(THRESHOLDS), "--json", str(tmp_path / "m.json")]) == 0
     cli = json.loads((tmp_path / "m.json").read_text())
     gui = run_analysis("identify", run)
-    row = _campaign_row(folder, tmp_path / "whole", "identify", 0.0)
+    row = campaign_row(folder, tmp_path / "whole", "identify", 0.0)
     gui_thresholds = gui.model_document["settings"]["n_thresholds"]
     for where, value in (("cli", cli["figures"]["train_torque_nrmse"]), ("campaign", row["train_torque_nrmse"])):
         assert value == pytest.approx(figure, rel=RTOL), where
@@ -181,9 +154,9 @@ def test_every_consumer_reports_the_same_figure(rate, host_clocked, tmp_path, ca
                  "--json", str(tmp_path / "h.json")]) == 0
     assert json.loads((tmp_path / "h.json").read_text())["figures"]["validation_torque_nrmse"] == pytest.approx(
         split, rel=RTOL)
-    split_row = _campaign_row(folder, tmp_path / "split", "identify", FRACTION)
+    split_row = campaign_row(folder, tmp_path / "split", "identify", FRACTION)
     assert split_row["validation_torque_nrmse"] == pytest.approx(split, rel=RTOL)
-    value, text = _page_cell(split_row, "validation_torque_nrmse")  # the campaign page's cell: % shown, exact kept
+    value, text = page_cell(split_row, "validation_torque_nrmse")  # the campaign page's cell: % shown, exact kept
     assert value == pytest.approx(split, rel=RTOL) and float(text) == pytest.approx(100 * split, rel=5e-4)
     files = ident.analyse(ident.read([parts[0]], protocol.ReadOptions()), settings,
                           ident.read([parts[1]], protocol.ReadOptions())).value.figures["validation_torque_nrmse"]
@@ -210,38 +183,53 @@ def test_every_consumer_reports_the_same_figure(rate, host_clocked, tmp_path, ca
 
     stepped = cmp.report(cmp.analyse(head, step_settings("compare", StepSettings(
         thresholds=THRESHOLDS, compare_families=families)), tail))[1]
-    row = _campaign_row(folder, tmp_path / "cmp-row", "compare", FRACTION)
+    row = campaign_row(folder, tmp_path / "cmp-row", "compare", FRACTION)
     assert row["model"] == stepped["model"]
     assert row["validation_torque_nrmse"] == pytest.approx(stepped["validation_torque_nrmse"], rel=RTOL)
     assert stepped["maxwell_slip.validation_torque_nrmse"] == pytest.approx(split, rel=RTOL)  # identify's figure
     capsys.readouterr()
 
 
-def test_the_residual_loop_reports_one_figure_everywhere(tmp_path, capsys):
-    """The residual loop (2 kHz, 70/30): the Python API, the CLI's --hold-out, the campaign row;
-    and on the whole run (blocked cross-validation) the API, the CLI's JSON and the GUI's result."""
-    folder = tmp_path / "c"
-    write_campaign(folder, SyntheticCampaign(runs=1, duration=1.5, sample_rate=2000.0, seed=12))
-    run = folder / json.loads((folder / "index.json").read_text())["runs"][0]["file"]
+@pytest.fixture(scope="module", params=CASES, ids=["2kHz", "10kHz", "20kHz", "host-clocked"])
+def residual_run(request, tmp_path_factory):
+    """One short run per rate (1.5 s: the loop's blocked cross-validation needs a few blocks), and the host-clocked
+    drive's rewrite of the 2 kHz one, shared by the residual tests of that case."""
+    rate, host_clocked = request.param
+    folder = tmp_path_factory.mktemp("residual") / "c"
+    write_campaign(folder, SyntheticCampaign(runs=1, duration=1.5, sample_rate=rate, seed=12))
+    run = _host_clocked(folder) if host_clocked else \
+        folder / json.loads((folder / "index.json").read_text())["runs"][0]["file"]
+    assert any(n.startswith("resampled on host_time") for n in load_record(run).notes) == host_clocked
+    return folder, run
+
+
+def test_the_residual_loop_reports_one_figure_everywhere(residual_run, tmp_path, capsys):
+    """The residual loop at 2, 10 and 20 kHz and on a host-clocked drive's run: on the whole run (blocked
+    cross-validation) the Python API, the CLI's JSON, the GUI's result and the campaign row (no held-out tail); cut
+    70/30, the API, the CLI's --hold-out, the campaign row and the page's cell, start and final model alike."""
+    folder, run = residual_run
     res = protocol.entry("residual")
     inputs = res.read([run], protocol.ReadOptions())
     whole = res.report(res.analyse(inputs))[1]
     assert main(["-q", "residual", str(run), "--json", str(tmp_path / "r.json")]) == 0
     cli = json.loads((tmp_path / "r.json").read_text())
-    assert cli["error_after"]["validation"]["torque_nrmse"] == pytest.approx(whole["validation_torque_nrmse"],
-                                                                             rel=RTOL)
+    row = campaign_row(folder, tmp_path / "whole", "residual", 0.0)
+    for key, part in (("validation_torque_nrmse_start", "error_before"), ("validation_torque_nrmse", "error_after")):
+        value = whole[key]
+        assert cli[part]["validation"]["torque_nrmse"] == pytest.approx(value, rel=RTOL), key
+        assert row[key] == pytest.approx(value, rel=RTOL), key
     assert run_analysis("residual", run).summary["validation_torque_nrmse"] == pytest.approx(
         whole["validation_torque_nrmse"], rel=RTOL)
     head, tail = protocol.held_out(inputs, FRACTION)
     split = res.report(res.analyse(head, None, tail))[1]
     assert main(["-q", "residual", str(run), "--hold-out", str(FRACTION), "--json", str(tmp_path / "s.json")]) == 0
     cli = json.loads((tmp_path / "s.json").read_text())
-    for key, value in (("validation_torque_nrmse_start", cli["error_before"]["validation"]["torque_nrmse"]),
-                       ("validation_torque_nrmse", cli["error_after"]["validation"]["torque_nrmse"])):
-        assert value == pytest.approx(split[key], rel=RTOL), key
-    row = _campaign_row(folder, tmp_path / "row", "residual", FRACTION)
-    assert row["validation_torque_nrmse"] == pytest.approx(split["validation_torque_nrmse"], rel=RTOL)
-    assert row["validation_torque_nrmse_start"] == pytest.approx(split["validation_torque_nrmse_start"], rel=RTOL)
+    row = campaign_row(folder, tmp_path / "row", "residual", FRACTION)
+    for key, part in (("validation_torque_nrmse_start", "error_before"), ("validation_torque_nrmse", "error_after")):
+        value = split[key]
+        assert cli[part]["validation"]["torque_nrmse"] == pytest.approx(value, rel=RTOL), key
+        assert row[key] == pytest.approx(value, rel=RTOL), key
+        assert page_cell(row, key)[0] == pytest.approx(value, rel=RTOL), key
     capsys.readouterr()
 
 
@@ -269,7 +257,7 @@ def test_the_afrf_reports_one_figure_everywhere(tmp_path, capsys):
     i, j = int(np.argmin(doc["amplitudes"])), int(np.argmin(doc["frequencies"]))
     assert doc["magnitude"][i][j][0] / doc["drive_magnitude"][i][j] == pytest.approx(compliance, rel=RTOL)
     assert run_analysis("afrf", run).summary["afrf_compliance_low_amplitude"] == pytest.approx(compliance, rel=RTOL)
-    row = _campaign_row(folder, tmp_path / "row", "afrf", 0.0)
+    row = campaign_row(folder, tmp_path / "row", "afrf", 0.0)
     assert row["afrf_compliance_low_amplitude"] == pytest.approx(compliance, rel=RTOL)
     from hilbench.analysis.afrf import array_cost
 
@@ -302,10 +290,10 @@ def test_the_skeleton_reports_one_figure_everywhere(tmp_path, capsys):
                                                                                                         rel=RTOL))
     shown = run_analysis("skeleton", run)
     assert shown.summary["skeleton_amplitude_max"] == pytest.approx(high, rel=RTOL)
-    row = _campaign_row(folder, tmp_path / "row", "skeleton", 0.0)
+    row = campaign_row(folder, tmp_path / "row", "skeleton", 0.0)
     for column, value in (("skeleton_amplitude_min", low), ("skeleton_amplitude_max", high)):
         assert row[column] == pytest.approx(value, rel=RTOL), column
-        assert _page_cell(row, column)[0] == pytest.approx(value, rel=RTOL), column
+        assert page_cell(row, column)[0] == pytest.approx(value, rel=RTOL), column
     assert row["skeleton_stiffness_low_amplitude"] == pytest.approx(summary["skeleton_stiffness_low_amplitude"],
                                                                     rel=RTOL)
     capsys.readouterr()
@@ -331,13 +319,13 @@ def test_presliding_reports_one_figure_everywhere(tmp_path, capsys):
     assert main(["-q", "presliding", str(run), "-o", str(tmp_path / "out")]) == 0
     doc = json.loads((tmp_path / "out" / "presliding.json").read_text())
     shown = run_analysis("presliding", run)
-    row = _campaign_row(folder, tmp_path / "row", "presliding", 0.0)
+    row = campaign_row(folder, tmp_path / "row", "presliding", 0.0)
     for column, quantity in (("presliding_breakaway", "breakaway"), ("initial_stiffness", "initial_stiffness")):
         value = summary[column]
         assert doc["quantities"][quantity]["value"] == pytest.approx(value, rel=RTOL), column
         assert shown.summary[column] == pytest.approx(value, rel=RTOL), column
         assert row[column] == pytest.approx(value, rel=RTOL), column
-        assert _page_cell(row, column)[0] == pytest.approx(value, rel=RTOL), column
+        assert page_cell(row, column)[0] == pytest.approx(value, rel=RTOL), column
     capsys.readouterr()
 
 

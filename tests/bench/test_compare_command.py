@@ -34,6 +34,10 @@ def test_compare_writes_table_json_and_plots(tmp_path, capsys):
     # the data come from the continuous model: it must beat Coulomb+viscous on the validation run, and recover h
     assert (rows["continuous"]["validation"]["position_nrmse_segmented"]
             < rows["coulomb_viscous"]["validation"]["position_nrmse_segmented"])
+    for name, r in rows.items():  # the table shows the JSON's fractions in percent (common.metrics.percent)
+        cells = next(line for line in table.splitlines() if line.startswith(f"| {name} |")).split("|")
+        assert float(cells[4]) == pytest.approx(100 * r["validation"]["torque_nrmse"], rel=5e-4), name
+        assert float(cells[7]) == pytest.approx(100 * r["train"]["torque_nrmse"], rel=5e-4), name
     fit = rows["continuous"]["fit"]
     assert fit["parameters"]["h"] == pytest.approx(0.3, rel=0.05)
     assert fit["units"]["h"] == "N*m" and fit["units"]["d"] == "rad"

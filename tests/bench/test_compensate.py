@@ -217,6 +217,19 @@ tolerance = "2e-4 rad"
     # measured on sim:// (16-element truth, this 8-element model of the same virgin curve): about 30x
     assert glitch["none"] > 3 * glitch["maxwell_slip"]
     assert (tmp_path / "out" / "m" / "compensation_sine.png").exists()
+    # `hilbench analyse` gives each compensated run its compensation row (the run's protocol picks the step), with
+    # the report's figures: the glitch ones too, scored with the step's window (0.02 s) that the run records
+    import pyarrow.parquet as pq
+
+    assert cli.main(["-q", "analyse", str(tmp_path / "out"), "--steps", "identify,compensation", "--serial",
+                     "-o", str(tmp_path / "rows"), "--quiet"]) == 0
+    rows = {r["key"]: r for r in pq.read_table(tmp_path / "rows" / "results.parquet").to_pylist()}
+    assert {r["step"] for r in rows.values()} == {"compensation"}
+    for r in doc["runs"]:
+        row = rows[f"m.sine.{r['feedforward']}-1"]
+        assert row["status"] == "ok", row["error"]
+        for column in ("rms_error_rad", "max_error_rad", "effort_rms_a", "glitch_mean_rad", "glitch_max_rad"):
+            assert row[column] == pytest.approx(r[column], rel=1e-9), (r["feedforward"], column)
 
 
 def test_a_compensate_step_with_a_bad_key_names_its_line(tmp_path):

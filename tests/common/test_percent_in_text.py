@@ -44,3 +44,14 @@ def test_the_residual_summary_names_every_error_once_and_shows_percent():
     assert "| validation | torque relative error (%) | 1.283 | 1.283 |" in text
     assert "| validation | position NRMSE (%) | 25 | 25 |" in text
     assert "0.01283" not in text and "torque_nrmse" not in text and "torque_rel_pct" not in text
+
+
+def test_a_segmented_position_nrmse_is_shown_in_percent_on_the_campaign_page():
+    """The page took only ``*_nrmse`` for a fraction, so ``validation_position_nrmse_segmented`` read 0.0314; every
+    text now asks common.metrics.is_fraction."""
+    from hilbench.bench.campaign_analysis.page import step_sections
+
+    row = {"step": "identify", "status": "ok", "key": "a", "repeat": 1, "validation_position_nrmse_segmented": 0.0314}
+    page = "".join(step_sections([row], {}))
+    assert "validation position NRMSE segmented (%)" in page
+    assert re.search(r"<td data-v='0\.0314'>3\.14</td>", page), page

@@ -188,7 +188,7 @@ def _on_device(args, protocols, settings, matrix, files: list[Path]) -> list:
     from hilbench.bench.errors import BenchError
 
     try:  # every protocol is built (and checked) before the device is opened
-        played = [CompensatedReference.of(case) for case in protocols]
+        played = [CompensatedReference.of(case, matrix.window, matrix.tolerance) for case in protocols]
     except ProtocolError as exc:
         raise BenchError(str(exc)) from None
     from hilbench.bench.acquisition.runner import Bench, signals_as_interrupt

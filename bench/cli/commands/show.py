@@ -33,7 +33,7 @@ def _fmt(value: float | None) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from hilbench.bench.storage import outputs
-    from hilbench.common.runfile import channel_summary, open_run, repair
+    from hilbench.common.runfile import SAMPLE_INDEX, channel_summary, open_run, repair
 
     outputs.refuse_inputs({"--json": args.json}, [args.run])
     outputs.refuse_existing("--json", args.json, args.overwrite)
@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
             "channels": channels,
             "protocol_arrays": {name: list(r.protocol_array(name).shape) for name in r.protocol_array_names},
             "events": [
-                {"sample_index": int(e["sample_index"]), "t": float(e["t"]), "kind": str(e["kind"]),
+                {SAMPLE_INDEX: int(e[SAMPLE_INDEX]), "t": float(e["t"]), "kind": str(e["kind"]),
                  "message": str(e["message"])}
                 for e in events
             ],
@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
             )
         lines.append(f"events: {len(events)}")
         for e in events[: max(args.events, 0)]:
-            lines.append(f"  t={e['t']:<12.6g} #{e['sample_index']:<10} {e['kind']:<8} {e['message']}")
+            lines.append(f"  t={e['t']:<12.6g} #{e[SAMPLE_INDEX]:<10} {e['kind']:<8} {e['message']}")
         if len(events) > args.events:
             lines.append(f"  ... {len(events) - args.events} more")
     outputs.say("\n".join(lines), args.json, level=0)

@@ -56,43 +56,48 @@ def _axis(quantity: str) -> tuple[str, str]:
     return AXIS_UNITS["rotary"][quantity], AXIS_UNITS["linear"][quantity]
 
 
+#: the channel names of a sample block (channel -> array) a device yields and a run file keeps, named once: no
+#: module outside this package spells them (tests/common/test_runfile_keys.py)
+SAMPLE_INDEX, TIME, CYCLE, DRIVE_STATUS = "sample_index", "t", "cycle", "drive_status"
+#: the commanded channels: current, torque (force), velocity, the position reference and its feed-forward current
+CURRENT_CMD, TORQUE_CMD, VELOCITY_CMD = "current_cmd", "torque_cmd", "velocity_cmd"
+POSITION_CMD, CURRENT_FF = "position_cmd", "current_ff"
+#: the host-clocked drive's time channel: the one spelling of its key
+HOST_TIME = "host_time"
+
 CHANNELS: dict[str, ChannelSpec] = {
-    "sample_index": ChannelSpec("1", "1", "i8", "device sample counter"),
-    "t": ChannelSpec("s", "s", "f8", "device time of the sample"),
-    "current_cmd": ChannelSpec("A", "A", "f8", "commanded motor current"),
+    SAMPLE_INDEX: ChannelSpec("1", "1", "i8", "device sample counter"),
+    TIME: ChannelSpec("s", "s", "f8", "device time of the sample"),
+    CURRENT_CMD: ChannelSpec("A", "A", "f8", "commanded motor current"),
     "current": ChannelSpec("A", "A", "f8", "measured motor current"),
     "torque": ChannelSpec(*_axis("torque"), "f8", "motor torque (force on a linear axis)"),
-    "torque_cmd": ChannelSpec(*_axis("torque"), "f8", "commanded torque (force on a linear axis)"),
+    TORQUE_CMD: ChannelSpec(*_axis("torque"), "f8", "commanded torque (force on a linear axis)"),
     "position": ChannelSpec(*_axis("position"), "f8", "measured position"),
-    "position_cmd": ChannelSpec(*_axis("position"), "f8", "position reference"),
+    POSITION_CMD: ChannelSpec(*_axis("position"), "f8", "position reference"),
     "counts": ChannelSpec("counts", "counts", "i8", "raw encoder counts"),
     "velocity": ChannelSpec(*_axis("velocity"), "f8", "measured velocity"),
-    "velocity_cmd": ChannelSpec(*_axis("velocity"), "f8", "commanded velocity (velocity mode)"),
-    "current_ff": ChannelSpec("A", "A", "f8", "feed-forward current streamed with the position reference"),
+    VELOCITY_CMD: ChannelSpec(*_axis("velocity"), "f8", "commanded velocity (velocity mode)"),
+    CURRENT_FF: ChannelSpec("A", "A", "f8", "feed-forward current streamed with the position reference"),
     "temperature": ChannelSpec("degC", "degC", "f8", "winding temperature the device reports (one reading per "
                                                         "sample block, held over its samples)"),
     # what a host-clocked drive adds (docs/drives.md): when each cycle's trigger left the host, the cycle count
     # and the drive's status word
-    "host_time": ChannelSpec("s", "s", "f8", "host monotonic time at which the cycle's trigger (SYNC) was sent"),
-    "cycle": ChannelSpec("1", "1", "f8", "cycle counter of a host-clocked drive (SYNC or cyclic message count)"),
-    "drive_status": ChannelSpec("1", "1", "f8", "the drive's status word per sample (CiA 402 0x6041, ODrive "
+    HOST_TIME: ChannelSpec("s", "s", "f8", "host monotonic time at which the cycle's trigger (SYNC) was sent"),
+    CYCLE: ChannelSpec("1", "1", "f8", "cycle counter of a host-clocked drive (SYNC or cyclic message count)"),
+    DRIVE_STATUS: ChannelSpec("1", "1", "f8", "the drive's status word per sample (CiA 402 0x6041, ODrive "
                                                 "axis state); 0 when it reports none"),
 }
-#: the host-clocked drive's time channel: the one spelling of its key
-HOST_TIME = "host_time"
-#: the channel names of a sample block (channel -> array) a device yields, named once
-SAMPLE_INDEX, TIME, CYCLE, DRIVE_STATUS = "sample_index", "t", "cycle", "drive_status"
-DEVICE_CHANNELS = ("sample_index", "t", "current_cmd", "current", "torque", "position", "counts")
+DEVICE_CHANNELS = (SAMPLE_INDEX, TIME, CURRENT_CMD, "current", "torque", "position", "counts")
 #: the channels a host-clocked drive adds to :data:`DEVICE_CHANNELS`
-HOST_CLOCKED_CHANNELS = ("velocity", "torque_cmd", HOST_TIME, CYCLE, DRIVE_STATUS)
-REQUIRED_CHANNELS = ("sample_index", "t")
+HOST_CLOCKED_CHANNELS = ("velocity", TORQUE_CMD, HOST_TIME, CYCLE, DRIVE_STATUS)
+REQUIRED_CHANNELS = (SAMPLE_INDEX, TIME)
 # On a linear axis analysis may ask for the honest names; they are the same datasets.
-LINEAR_ALIASES = {"force": "torque", "force_cmd": "torque_cmd"}
+LINEAR_ALIASES = {"force": "torque", "force_cmd": TORQUE_CMD}
 
 EVENT_DTYPE = np.dtype(
     [
-        ("sample_index", "i8"),
-        ("t", "f8"),  # device time, s
+        (SAMPLE_INDEX, "i8"),
+        (TIME, "f8"),  # device time, s
         ("wall_time", "f8"),  # host UNIX time, s
         ("kind", "S16"),
         ("message", f"S{EVENT_MESSAGE_BYTES}"),

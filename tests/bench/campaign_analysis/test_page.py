@@ -19,10 +19,20 @@ CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic
 
 @pytest.fixture(scope="module")
 def page(tmp_path_factory) -> Path:
+    """The page of a campaign analysed with two steps: identify and the toy analysis registered with one line
+    (tests/analysis/toy_analysis.py), so that every run has two rows in the table."""
+    from hilbench.analysis import protocol
+
     root = tmp_path_factory.mktemp("page")
     write_campaign(root / "bench1", SyntheticCampaign(runs=6, repeats=3, duration=2.0, seed=5), fail_runs=(4,))
-    analyse([root / "bench1"], root / "results", serial=True, progress=False, say=lambda _l: None)
-    assert main(["-q", "drift", str(root / "results")]) == 0  # every default: 5 runs analysed (issue #38)
+    protocol.register("toy", "tests.analysis.toy_analysis")
+    try:  # the page, like the steps, iterates the registry: the toy stays registered until it is written
+        analyse([root / "bench1"], root / "results", ("identify", "toy"), serial=True, progress=False,
+                say=lambda _l: None)
+        assert main(["-q", "drift", str(root / "results")]) == 0  # every default: 5 runs analysed (issue #38)
+    finally:
+        protocol.ANALYSES.pop("toy")
+        protocol._LOADED.pop("toy", None)
     return root / "results" / "drift" / "campaign-bench1.html"
 
 
@@ -35,6 +45,25 @@ def test_page_is_self_contained_and_holds_every_run(page):
     assert "class='run failed'" in text and "no position channel" in text  # the record loader's one line
     for fig in ("drift-breakaway", "charts-breakaway", "drift-viscous", "charts-viscous"):
         assert f"<img alt='{fig}' src='data:image/png;base64," in text
+
+
+def test_the_page_has_a_section_per_step_in_the_table_with_its_exact_figures(page):
+    """hilbench drift once gave the page the identify rows alone, so no other step's section ever reached it:
+    each step analysed has its section, its cells keep the table's exact figure, and the runs table one row per
+    run (above: 6, not 12)."""
+    import pyarrow.parquet as pq
+
+    text = page.read_text()
+    assert "id='step-identify'" in text and "id='step-toy'" in text
+    rows = {r["key"]: r for r in pq.read_table(page.parent.parent / "results.parquet").to_pylist()
+            if r["step"] == "toy" and r["status"] == "ok"}
+    section = text[text.index("id='step-toy'"):].split("</table>")[0]
+    heads = re.findall(r"<th data-sort='1'[^>]*>([^<]*)</th>", section)
+    column = next(i for i, h in enumerate(heads) if h.startswith("sliding distance"))
+    shown = [re.findall(r"data-v='([^']*)'", tr) for tr in re.findall(r"<tr class='step-row'>(.*?)</tr>", section)]
+    assert len(shown) == len(rows) == 5
+    for cells in shown:
+        assert float(cells[column]) == pytest.approx(rows[cells[0]]["sliding_distance"], rel=1e-12), cells[0]
 
 
 def test_repeat_summary_is_mean_and_sample_std():

@@ -1,0 +1,172 @@
+"""The analysis protocol's consistency for the two analyses of runs of their own: the compensation metrics of a
+compensated run and the break-away probe. Each reaches every consumer it has through the registry: the Python API,
+the CLI's JSON (``hilbench report``; for the compensation also the matrix report ``hilbench compensate`` and a
+``[[compensate]]`` campaign write; for the probe ``analyse_probe``, which ``hilbench plan`` sizes from), the GUI's
+result (its summary, and the table it shows to six digits), the campaign's Parquet row (the run's protocol picks
+the step, ``steps_for``) and the campaign page's cell; each gives the same figure to 1e-6, and the figure is its
+closed form (the rms and peak of reference - position) or near the simulated motor's sliding current.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hilbench.analysis import protocol
+from hilbench.bench.acquisition.breakaway_probe import BreakawayProbe
+from hilbench.bench.acquisition.compensation import CompensatedReference
+from hilbench.bench.campaign_analysis.steps import steps_for
+from hilbench.bench.cli import main
+from hilbench.bench.gui.analyses import run_analysis
+from hilbench.common.runfile import (
+    CURRENT_CMD,
+    POSITION_CMD,
+    SAMPLE_INDEX,
+    TIME,
+    RunWriter,
+)
+from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_BREAKAWAY, DC_MOTOR_TORQUE_CONSTANT, dc_motor
+from hilbench.firmware_sim.engine.plant import simulate
+from tests.analysis.consistency import RTOL, campaign_row, page_cell
+
+pytestmark = pytest.mark.device_free
+
+
+#: the GUI's table shows six significant digits: within half a unit of the sixth
+SHOWN = 5e-6
+
+
+def _shown(result, column: str) -> float:
+    """The number the GUI's result table shows for ``column`` (its text, as the operator reads it)."""
+    (text,) = [value for quantity, value, _unit in result.numbers if quantity == column]
+    return float(text)
+
+
+def _campaign(folder: Path, file: str, protocol_name: str) -> None:
+    """``folder`` as a campaign of one completed run ``file`` of protocol ``protocol_name``."""
+    (folder / "index.json").write_text(json.dumps({"runs": [{"key": "a", "file": file, "status": "completed",
+                                                             "protocol": protocol_name}]}))
+
+
+def _report_json(name: str, run: Path, out: Path) -> dict:
+    """The summary ``hilbench report NAME RUN --json`` writes."""
+    assert main(["-q", "report", name, str(run), "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["analysis"] == name
+    return doc["summary"]
+
+
+def _compensated_run(path: Path) -> tuple[CompensatedReference, np.ndarray]:
+    """A compensated run (sine reference, 1 kHz, scored with a 0.02 s glitch window) whose position lags the
+    reference by 3 samples plus a 7 Hz ripple of 10 µrad: the tracking error is known sample by sample. Returns
+    the protocol and that error."""
+    proto = CompensatedReference(reference="sine", amplitudes=(1e-3, 1e-2), frequency=1.0, cycles=1, rest=0.1,
+                                 window=0.02, sample_rate=1000)
+    ref, fs = proto.reference_path, float(proto.sample_rate)
+    k = np.arange(ref.n)
+    position = np.concatenate([np.zeros(3), ref.position[:-3]]) + 1e-5 * np.sin(2 * np.pi * 7 * k / fs)
+    zeros = np.zeros(ref.n)
+    with RunWriter(path, sample_rate=fs, protocol_name=proto.name, protocol_params=proto.parameters(),
+                   channels=(SAMPLE_INDEX, TIME, CURRENT_CMD, "current", "torque", "position", "counts",
+                             POSITION_CMD)) as w:
+        w.append({SAMPLE_INDEX: k, TIME: k / fs, CURRENT_CMD: 0.3 * np.sin(k / 50), "current": zeros,
+                  "torque": zeros, "position": position, "counts": k * 0, POSITION_CMD: ref.position})
+    return proto, ref.position - position
+
+
+def test_the_compensation_metrics_read_one_figure_everywhere(tmp_path, capsys):
+    from hilbench.bench.acquisition.compensation_matrix import MatrixSettings, measured_case, write_report
+
+    folder = tmp_path / "c"
+    folder.mkdir()
+    run = folder / "m.sine.none-1.h5"
+    proto, error = _compensated_run(run)
+    _campaign(folder, run.name, proto.name)
+    assert steps_for(proto.name, tuple(protocol.ANALYSES)) == ["compensation"]
+    comp = protocol.entry("compensation")
+    summary = comp.report(comp.analyse(comp.read([run], protocol.ReadOptions())))[1]
+    closed = {"rms_error_rad": float(np.sqrt(np.mean(error**2))), "max_error_rad": float(np.max(np.abs(error)))}
+    for column, value in closed.items():  # the closed form: reference - position, sample by sample
+        assert summary[column] == pytest.approx(value, rel=1e-12), column
+    # the glitch: the peak |error| within the run's own 0.02 s after each reversal of the reference
+    assert summary["glitch_window_s"] == 0.02
+    peaks = [np.max(np.abs(error[k:k + 20])) for k in summary["reversal_sample"]]
+    assert summary["glitch_rad"] == pytest.approx(peaks, rel=1e-12)
+    cli = _report_json("compensation", run, tmp_path / "r.json")
+    # the matrix report `hilbench compensate --matrix` and a [[compensate]] campaign write from the played run
+    write_report([measured_case(proto.case, run, MatrixSettings(window=0.02))], tmp_path / "matrix",
+                 {"source": "test", "window_s": 0.02, "tolerance_rad": 1e-4})
+    (matrix,) = json.loads((tmp_path / "matrix" / "compensation.json").read_text())["runs"]
+    shown = run_analysis("compensation", run)
+    row = campaign_row(folder, tmp_path / "row", "compensation", 0.3)
+    checked = [c for c in comp.columns if isinstance(summary.get(c), float) and np.isfinite(summary[c])]
+    assert {"rms_error_rad", "max_error_rad", "glitch_mean_rad", "glitch_max_rad", "effort_rms_a"} <= set(checked)
+    for column in checked:
+        value = summary[column]
+        for where, got in (("report", cli[column]), ("matrix", matrix[column]), ("gui", shown.summary[column]),
+                           ("row", row[column]), ("page", page_cell(row, column)[0])):
+            assert got == pytest.approx(value, rel=RTOL), (column, where)
+        assert _shown(shown, column) == pytest.approx(value, rel=SHOWN), column
+    capsys.readouterr()
+
+
+def _probe_run(path: Path) -> float:
+    """A break-away probe (5 kHz, 0.5 s ramps to twice the break-away current) played on the simulated DC
+    motor's plant (8 Maxwell-slip elements) and written as the runner writes it. Returns the motor's sliding
+    current (sum W_i / K_t, A)."""
+    kt = DC_MOTOR_TORQUE_CONSTANT
+    probe = BreakawayProbe(peak=2 * DC_MOTOR_BREAKAWAY / kt, ramp_time=0.5, hold=0.2, sample_rate=5000)
+    u, fs = probe.setpoints(), float(probe.sample_rate)
+    out = simulate(dc_motor(8), u, 1 / fs)
+    k = np.arange(u.size)
+    with RunWriter(path, sample_rate=fs, protocol_name=probe.name, protocol_params=probe.parameters(),
+                   protocol_arrays=probe.protocol_arrays()) as w:
+        w.append({SAMPLE_INDEX: k, TIME: k / fs, CURRENT_CMD: u, "current": out.current_meas, "torque": out.torque,
+                  "position": out.theta, "counts": out.counts})
+    return DC_MOTOR_BREAKAWAY / kt
+
+
+def test_the_breakaway_probe_reads_one_figure_everywhere(tmp_path, capsys):
+    from hilbench.bench.acquisition.breakaway_probe import analyse_probe
+
+    folder = tmp_path / "c"
+    folder.mkdir()
+    run = folder / "probe-1.h5"
+    level = _probe_run(run)
+    _campaign(folder, run.name, BreakawayProbe.name)
+    assert steps_for(BreakawayProbe.name, tuple(protocol.ANALYSES)) == ["breakaway"]
+    probe = protocol.entry("breakaway")
+    summary = probe.report(probe.analyse(probe.read([run], protocol.ReadOptions())))[1]
+    # the motor: every element slips at sum W_i / K_t, the fitted sliding current within 3 % (as test_plan.py);
+    # the slide shows (the velocity threshold) once most elements slip, at 80-100 % of it
+    assert summary["sliding_positive"] == pytest.approx(level, rel=0.03)
+    assert summary["sliding_negative"] == pytest.approx(-level, rel=0.03)
+    assert 0.8 * level < summary["breakaway_positive_A"] <= level
+    assert -level <= summary["breakaway_negative_A"] < -0.8 * level
+    planned = analyse_probe(run).as_dict()  # what `hilbench plan` sizes its campaign from
+    cli = _report_json("breakaway", run, tmp_path / "r.json")
+    shown = run_analysis("breakaway", run)
+    row = campaign_row(folder, tmp_path / "row", "breakaway", 0.3)
+    for column in probe.columns:
+        value = summary[column]
+        for where, got in (("plan", planned[column]), ("report", cli[column]), ("gui", shown.summary[column]),
+                           ("row", row[column]), ("page", page_cell(row, column)[0])):
+            assert got == pytest.approx(value, rel=RTOL), (column, where)
+        assert _shown(shown, column) == pytest.approx(value, rel=SHOWN), column
+    capsys.readouterr()
+
+
+def test_a_campaign_plays_probes_and_analyses_them_with_the_breakaway_step(tmp_path):
+    """[[run]] protocol = "breakaway_probe" plans a probe (the break-away followed over a campaign), and the
+    campaign's steps give its runs the breakaway step: the run's protocol is one the entry names."""
+    from hilbench.bench.acquisition.campaign import load_campaign
+
+    (tmp_path / "c.toml").write_text('[defaults]\ndevice = "sim://"\n\n[[run]]\nprotocol = "breakaway_probe"\n'
+                                     'peak = "3 A"\nramp_time = "0.5 s"\nrepeats = 2\n')
+    campaign = load_campaign(tmp_path / "c.toml")
+    assert [r.key for r in campaign.runs] == ["breakaway_probe1-1", "breakaway_probe1-2"]
+    assert all(r.protocol == BreakawayProbe(peak=3.0, ramp_time=0.5) for r in campaign.runs)
+    assert steps_for(campaign.runs[0].protocol.name, ("identify", "breakaway")) == ["breakaway"]
