@@ -126,6 +126,8 @@ def _figures(
     rows = sc.rows - scored.start  # rows of the span, indices into this run's arrays
     curves[prefix] = {"t": run.t, "position": run.position, "torque_filtered": sc.measured,
                       "torque_predicted": sc.predicted, "t_rows": run.t[rows]}
+    if lead is not None:  # the span's rows come from filtering the run before it too: the plots filter the same
+        curves[prefix]["lead_position"] = np.asarray(lead[0], float)
     if force_mode:  # the model maps the measured displacement to the force: no integration, nothing drifts
         curves[prefix]["position_rows"] = run.position[rows]
     else:

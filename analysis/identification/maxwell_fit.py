@@ -331,6 +331,11 @@ def fit_lip_chunks(
         )
     _, names = _lin_columns(_EmptyRows(), s)
     nl = len(names)
+    if n_rows <= nl + grid.size:  # least squares needs more rows than unknowns (the factor is square at most)
+        raise AnalysisError(
+            f"run too short: {n_samples} samples leave {n_rows} rows for {nl + grid.size} unknowns ({nl} linear "
+            f"terms and {grid.size} thresholds); record longer, or fewer thresholds (--thresholds)"
+        )
 
     # whole arrays: the passes are kept, and the later threshold sets (all subsets) pick their columns
     held = _HeldPasses(nl) if calibrated else None

@@ -123,14 +123,19 @@ def _identification_hysteresis(result: Identification, c: dict, u: dict, title: 
     m, lip = result.model, result.lip
     t = np.asarray(c["t"], float)
     fs = (t.size - 1) / (t[-1] - t[0])
-    data = filtered_data(np.asarray(c["position"], float), np.zeros(t.size), fs, lip.cutoff,
-                         order=lip.settings.order, decimation=lip.decimation, timing=lip.settings.timing)
-    if data.rows.size != np.asarray(c["t_rows"]).size:  # the same filter on the same record gives the same rows
+    # a held-out span was scored filtered together with the run before it (its lead): filter the same samples
+    lead = np.asarray(c.get("lead_position", np.empty(0)), float)
+    x = np.concatenate([lead, np.asarray(c["position"], float)])
+    data = filtered_data(x, np.zeros(x.size), fs, lip.cutoff, order=lip.settings.order, decimation=lip.decimation,
+                         timing=lip.settings.timing)
+    span = data.rows >= lead.size
+    position, acceleration = data.position[span], data.acceleration[span]
+    if position.size != np.asarray(c["t_rows"]).size:  # the same filter on the same record gives the same rows
         raise ValueError("hysteresis rows do not match the fit rows")
-    not_friction = m.inertia * data.acceleration + m.spring * data.position + m.offset
+    not_friction = m.inertia * acceleration + m.spring * position + m.offset
     measured = np.asarray(c["torque_filtered"]) - not_friction
     model = np.asarray(c["torque_predicted"]) - not_friction
-    return hysteresis_figure(data.position, measured, [(f"model ({result.method})", model)], u, title, path,
+    return hysteresis_figure(position, measured, [(f"model ({result.method})", model)], u, title, path,
                              t=np.asarray(c["t_rows"], float))
 
 

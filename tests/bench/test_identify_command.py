@@ -137,3 +137,64 @@ def test_the_hysteresis_legend_says_how_many_samples_a_dot_stands_for(tmp_path):
     texts = [t.get_text() for leg in figures["h.png"].legends for t in leg.get_texts()]
     assert "model, one sample in 3" in texts, texts
     assert not any(re.search(r"\\d(th|nd|rd|st) sample", t) for t in texts), texts
+
+
+def test_a_held_out_tail_gets_its_hysteresis_figure_on_the_scored_rows(tmp_path, monkeypatch):
+    """``--hold-out`` scores the tail filtered together with the run before it: the validation hysteresis figure
+    (it failed with 'hysteresis rows do not match the fit rows') shows the filtered position of the whole run at
+    the scored rows, to 1e-12."""
+    import h5py
+
+    from hilbench.analysis.identification import plots
+    from hilbench.analysis.identification.regressors import filtered_data
+
+    _write_run(tmp_path / "a.h5", 1)
+    shown: dict = {}
+    original = plots.hysteresis_figure
+
+    def spy(x, measured, models, units, title, path, t=None):
+        shown[path.name] = (np.asarray(x), np.asarray(t))
+        return original(x, measured, models, units, title, path, t=t)
+
+    lips = []
+    real_hysteresis = plots._identification_hysteresis
+
+    def keep_lip(result, c, u, title, path):
+        lips.append((result.lip, c))
+        return real_hysteresis(result, c, u, title, path)
+
+    monkeypatch.setattr(plots, "hysteresis_figure", spy)
+    monkeypatch.setattr(plots, "_identification_hysteresis", keep_lip)
+    assert main(["identify", str(tmp_path / "a.h5"), "--hold-out", "0.3", "--json", str(tmp_path / "m.json"),
+                 "--plots", str(tmp_path / "plots"), "-q"]) == 0
+    assert (tmp_path / "plots" / "validation_hysteresis.png").is_file()
+    x, t = shown["validation_hysteresis.png"]
+    with h5py.File(tmp_path / "a.h5", "r") as f:
+        position = f["samples/position"][()]
+    fs, (lip, c) = 2000.0, lips[-1]
+    whole = filtered_data(position, np.zeros(position.size), fs, lip.cutoff, order=lip.settings.order,
+                          decimation=lip.decimation, timing=lip.settings.timing)
+    lead = c["lead_position"].size  # the samples before the tail
+    assert lead == round(0.7 * position.size)
+    rows = lead + np.round((t - c["t"][0]) * fs).astype(int)  # the scored rows, as indices into the whole run
+    at = np.searchsorted(whole.rows, rows)
+    assert t.size > 100
+    np.testing.assert_array_equal(whole.rows[at], rows)
+    np.testing.assert_allclose(x, whole.position[at], rtol=0, atol=1e-12)
+
+
+def test_a_run_with_fewer_rows_than_unknowns_is_one_line_naming_the_option(tmp_path, capsys):
+    """700 samples at 2 kHz leave 66 regression rows for 66 unknowns (64 thresholds, J, b): it was an IndexError
+    from the triangular solve ("index 66 is out of bounds"); now one line naming --thresholds, exit 2, and fewer
+    thresholds fit the same run."""
+    fs, n = 2000.0, 700
+    p = dc_motor().replace(counts_per_rev=2**20, seed=3)
+    out = simulate(p, random_enveloped(n, fs, 3, 6.0), 1 / fs)
+    with RunWriter(tmp_path / "s.h5", sample_rate=fs, channels=("sample_index", "t", "torque", "position")) as w:
+        w.append({"sample_index": np.arange(n), "t": np.arange(n) / fs,
+                  "torque": p.torque_constant * out.current_meas, "position": out.position_meas})
+    assert main(["identify", str(tmp_path / "s.h5"), "--json", str(tmp_path / "m.json")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "66 rows for 66 unknowns" in err and "--thresholds" in err, err
+    assert not (tmp_path / "m.json").exists()
+    assert main(["identify", str(tmp_path / "s.h5"), "--json", str(tmp_path / "m.json"), "--thresholds", "16"]) == 0
