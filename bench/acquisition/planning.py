@@ -39,7 +39,13 @@ from pathlib import Path
 
 import numpy as np
 
-from hilbench.bench.acquisition.breakaway_probe import BreakawayProbe, ProbeError, ProbeResult, analyse_probe
+from hilbench.bench.acquisition.breakaway_probe import (
+    SPRING_SHARE,
+    BreakawayProbe,
+    ProbeError,
+    ProbeResult,
+    analyse_probe,
+)
 from hilbench.bench.acquisition.protocols import Chirp, Identification, Presliding, Protocol, SteppedSine
 from hilbench.bench.acquisition.runner import Bench, DeviceSettings, Progress
 from hilbench.bench.errors import BenchError
@@ -82,22 +88,27 @@ class Plan:
     notes: list[str] = field(default_factory=list)  # what was clipped to the limits, said in words
 
     def _spring_text(self) -> str:
-        """The spring of the probe's fit, in words (nothing for a fit without a spring term)."""
-        fit, p = self.probe.sliding or {}, self.probe
+        """The spring of the probe, in words: a spring load's from the fit of its slides; a free load's from the
+        restoring fit (the least squares with a spring term over every moving sample, which tells the two apart),
+        as the noise it is there (nothing without that fit)."""
+        p = self.probe
+        fit = (p.sliding if p.spring else p.restoring) or {}
         if "spring_per_kt" not in fit:
             return ""
         k = fit["spring_per_kt"] * self.settings.torque_constant
         if p.spring:
-            return (f", spring k = {k:.4g} N*m/rad (natural frequency {natural_frequency(p):.4g} Hz; the friction "
-                    f"is what the current leaves after k*x and J*a)")
-        return (f", spring k = {k:.3g} N*m/rad (no restoring force: {100 * self.spring_share:.2g} % of the sliding "
-                f"current over the probe's travel)")
+            rest = fit.get("rest_position", math.nan)
+            return (f", spring k = {k:.4g} N*m/rad resting at {rest:.4g} rad (natural frequency "
+                    f"{natural_frequency(p):.4g} Hz; the friction is what the current leaves after k*x, J*a and b*v)")
+        return (f", spring k = {k:.3g} N*m/rad (no restoring force: |k| x travel is {100 * self.spring_share:.2g} % "
+                f"of the sliding current; a spring's is at least {100 * SPRING_SHARE:g} % of the probe's peak)")
 
     @property
     def spring_share(self) -> float:
-        """The fitted spring's force over the probe's travel, |k/Kt| * travel, as a share of the sliding
-        current: about 0 on a load without a spring (a spring load is refused, spring_refusal)."""
-        fit = self.probe.sliding or {}
+        """The restoring fit's spring force over the probe's travel, |k/Kt| * travel, as a share of the sliding
+        current: about 0 on a load without a spring (at least probe.SPRING_SHARE of the peak on a spring load,
+        which is then probed slowly and sized against its spring)."""
+        fit = self.probe.restoring or {}
         return abs(fit.get("spring_per_kt", math.nan)) * self.probe.travel / self.sliding_current
 
     @property
@@ -259,7 +270,7 @@ def _probe_spring(bench: Bench, found: ProbeResult, probe_dir: str | Path, playe
     period = 2 * math.pi * math.sqrt(inertia / k) if inertia > 0 and k > 0 else 1.0  # s
     ramp = min(60.0, max(1.5, SPRING_RAMP_PERIODS * period))
     slow = BreakawayProbe(peak=cap, ramp_time=ramp, return_time=ramp, hold=min(10.0, max(0.3, 2 * period)),
-                          sample_rate=sample_rate)
+                          shape="cosine", sample_rate=sample_rate)
     path = Path(probe_dir) / f"probe-{len(played) + 1}.h5"
     result = bench.run(slow, path, overwrite=overwrite, progress=progress, operator="hilbench plan")
     played.append(str(result.path))

@@ -15,7 +15,7 @@ import re
 import numpy as np
 import pytest
 
-from hilbench.bench.acquisition.breakaway_probe import BreakawayProbe, ProbeResult, smoothed_velocity
+from hilbench.bench.acquisition.breakaway_probe import SPRING_SHARE, BreakawayProbe, ProbeResult, smoothed_velocity
 from hilbench.bench.acquisition.excitations import lowpass_uniform_noise, random_enveloped
 from hilbench.bench.acquisition.planning import LIMIT_SHARE, plan_experiments, size_protocols
 from hilbench.bench.acquisition.runner import DeviceSettings
@@ -293,7 +293,11 @@ def test_plan_on_every_shipped_preset_measures_the_load_against_its_parameters(t
         if name == "dc_motor":
             assert level == pytest.approx(DC_MOTOR_BREAKAWAY / DC_MOTOR_TORQUE_CONSTANT, rel=0.03)
             assert inertia == pytest.approx(DC_MOTOR_INERTIA, rel=0.10)
-            assert abs(k) / DC_MOTOR_TORQUE_CONSTANT * travel < 0.02 * level  # A: no spring invented
+            # no spring invented: the restoring fit's k (what tells a spring load) over the probes' travel stays
+            # under half the share of the peak a spring load shows (SPRING_SHARE; 1.0 A against 3 A when written);
+            # the slides' own fit has no spring term on a free load
+            peak = float(re.search(r"\(peak (\S+) A\)", head).group(1))
+            assert abs(k) / DC_MOTOR_TORQUE_CONSTANT * travel < 0.5 * SPRING_SHARE * peak  # A
             continue
         truth = paper_system()
         assert k == pytest.approx(PAPER_SPRING, rel=0.005) and inertia == pytest.approx(PAPER_MASS, rel=0.03)
