@@ -93,36 +93,46 @@ def test_sizing_stays_within_the_current_limit_and_says_what_it_clipped():
 
 @pytest.mark.device_free
 def test_sizing_against_a_spring_follows_the_mass_spring_response():
-    """A probe of a mass on a spring (J = 1 kg*m^2, k = 50 N*m/rad, I_s = 1.6 A, x_p = 1 rad at 1 N*m/A): every
-    current within 0.9 of the limit; the chirp runs from f_n/2 to where the mass-spring with Coulomb friction moves
-    x_p, X = S/|k - J w^2| with S = sqrt(F0^2 - (4 Fc/pi)^2) (Den Hartog), and moves 2 x_p at its start; the stepped
-    sine stays below resonance, its lowest amplitude short of holding x_p against the spring and the friction, its
-    highest beyond it; the identification's noise is low-passed at f_n."""
+    """A probe of a mass on a spring (J = 1 kg*m^2, k = 50 N*m/rad, I_s = 1.6 A, x_p = 1 rad, half travel 5.4 rad
+    at 1 N*m/A): every current within 0.9 of the limit; the chirp runs from f_n/2 to where the mass-spring with
+    Coulomb friction moves x_p, X = S/|k - J w^2| with S = sqrt(F0^2 - (4Fc/pi)^2) (Den Hartog), and crosses the
+    resonance with 1.5 x the passage's amplitude S/(2 J w_n) sqrt(2 pi T/(w_n ln(f_stop/f_start))) at the probe's
+    half travel (the bound the plan states); the stepped sine stays below resonance, its 0.5 and 0.8 amplitudes
+    within x_p at both frequencies, its highest beyond it; the identification's noise is low-passed at f_n."""
     from hilbench.bench.acquisition.planning import natural_frequency
 
-    fit = {"positive": 1.6, "negative": -1.6, "inertia_per_kt": 1.0, "viscous_per_kt": 0.0, "spring_per_kt": 50.0}
+    fit = {"positive": 1.6, "negative": -1.6, "inertia_per_kt": 1.0, "viscous_per_kt": 0.0, "spring_per_kt": 50.0,
+           "rest_position": 0.0}
     probe = ProbeResult("probe.h5", 270.0, (1.6, -1.6, 1.6), 1.0, 0.05, fit, spring=True, half_travel=5.4)
     settings = DeviceSettings(current_limit=300.0, torque_constant=1.0)
     runs, notes = size_protocols(probe, settings, duration=5.0, sample_rate=1000)
     f_n = math.sqrt(50.0) / (2 * math.pi)
+    w_n = 2 * math.pi * f_n
     assert natural_frequency(probe) == pytest.approx(f_n, rel=1e-12)
     for name, proto in runs.items():
         if proto.mode == "current":
             assert np.max(np.abs(proto.setpoints(300.0))) <= LIMIT_SHARE * 300.0 + 1e-9, name
     chirp = runs["chirp"]
+    s_force = math.sqrt(chirp.gain ** 2 - (4 * 1.6 / math.pi) ** 2)  # A
 
     def amplitude(f: float) -> float:  # rad
-        s = math.sqrt(chirp.gain ** 2 - (4 * 1.6 / math.pi) ** 2)
-        return s / abs(50.0 - (2 * math.pi * f) ** 2)
+        return s_force / abs(50.0 - (2 * math.pi * f) ** 2)
 
     assert chirp.f_start == pytest.approx(f_n / 2, abs=1e-4)
-    assert amplitude(chirp.f_start) == pytest.approx(2.0, rel=1e-3)
     assert amplitude(chirp.f_stop) == pytest.approx(1.0, rel=1e-3) and chirp.f_stop > f_n
+    crossing = s_force / (2 * w_n) * math.sqrt(2 * math.pi * 5.0 / (w_n * math.log(chirp.f_stop / chirp.f_start)))
+    assert 1.5 * crossing == pytest.approx(5.4, rel=1e-3)
+    (note,) = notes  # the plan states the crossing swing and its bound
+    assert f"swing of about {crossing:.3g} rad" in note and "swing bound 5.4 rad" in note, note
     steps = runs["stepped_sine"]
     assert max(steps.frequencies) < f_n
-    holding = 1.6 + 50.0 * (1 - 0.2 ** 2) * 1.0  # A: holds x_p out at the stiffer frequency
-    assert min(steps.amplitudes) < holding < max(steps.amplitudes)
-    assert runs["identification"].cutoff == pytest.approx(f_n, abs=1e-3) and not notes
+    unit = 1.6 + 50.0 * (1 - 0.5 ** 2) * 1.0  # A: holds x_p out at the softer frequency, 0.5 f_n
+    assert sorted(steps.amplitudes) == pytest.approx([f * unit for f in (0.5, 0.8, 1.25, 2.0)], rel=1e-6)
+    for f in steps.frequencies:  # 0.8 x stays within x_p, 2 x slides beyond it, at both frequencies
+        stiffness = 50.0 - (2 * math.pi * f) ** 2
+        swing = [math.sqrt(a ** 2 - (4 * 1.6 / math.pi) ** 2) / stiffness for a in sorted(steps.amplitudes)]
+        assert swing[1] < 1.0 < swing[3], (f, swing)
+    assert runs["identification"].cutoff == pytest.approx(f_n, abs=1e-3)
 
 
 def test_probe_finds_the_simulated_motors_friction(tmp_path):
@@ -316,6 +326,15 @@ def test_plan_on_every_shipped_preset_measures_the_load_against_its_parameters(t
             print(f"{name}: identification friction beyond 0.8 of the level on {100 * shares[0]:.3g} % / "
                   f"{100 * shares[1]:.3g} % of the samples")
         assert min(shares) > 0.05, shares
+        # the chirp crosses resonance within the swing the plan states (the probe's half travel): it grew without
+        # bound before (+-10 rad at 5 s, +-22.8 rad at 20 s against the probe's +-5.4 rad)
+        bound = float(re.search(r"swing bound (\S+) rad", head).group(1))
+        rest = float(re.search(r"resting at (\S+) rad", head).group(1))
+        with open_run(out / "chirp-1.h5") as run:
+            swing = float(np.max(np.abs(np.asarray(run.channel("position")) - rest)))
+        with capsys.disabled():
+            print(f"{name}: chirp peak swing {swing:.3g} rad, bound {bound:.4g} rad")
+        assert 0.3 * bound < swing <= bound, (swing, bound)
 
 
 def test_plan_on_a_spring_it_cannot_slide_says_so_in_one_line(tmp_path, capsys, starts_devices):
