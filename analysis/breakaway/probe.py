@@ -287,22 +287,17 @@ def _branch_fit(rows: np.ndarray, current: np.ndarray, position: np.ndarray, vel
     columns = [acceleration[idx], velocity[idx], position[idx] - float(np.mean(position[idx])), np.ones(idx.size)]
     target = current[idx]
 
-    fixed = np.column_stack(columns)
-    norms = np.linalg.norm(fixed, axis=0)
-    norms[norms == 0] = 1.0
-    fixed = fixed / norms  # unit columns: the normal equations of the search stay well conditioned
-    gram, projected = fixed.T @ fixed, fixed.T @ target
+    # only the g column changes with d: the other columns are projected out once (Frisch-Waugh), so that each d
+    # costs a pass over the samples, and the residual is taken from what they leave (no cancellation against the
+    # spring's large share of the current: the minimum is flat and must be found to 1e-6)
+    basis = np.linalg.qr(np.column_stack(columns))[0]
+    left = target - basis @ (basis.T @ target)
 
     def residual(log_d: float) -> float:
-        """The least squares' residual sum at d = exp(log_d), from the normal equations (only the g column
-        changes with d: a pass over the samples per d instead of a factorisation)."""
+        """The least squares' residual sum at d = exp(log_d)."""
         shape = signs * _branch_shape(distance, amplitude, math.exp(log_d))
-        shape = shape / (np.linalg.norm(shape) or 1.0)
-        cross = fixed.T @ shape
-        normal = np.block([[gram, cross[:, None]], [cross[None, :], np.ones((1, 1))]])
-        right = np.append(projected, shape @ target)
-        coef = np.linalg.lstsq(normal, right, rcond=None)[0]
-        return float(target @ target - right @ coef)
+        shape = shape - basis @ (basis.T @ shape)
+        return float(left @ left - (shape @ left) ** 2 / (shape @ shape))
 
     def solve(log_d: float) -> np.ndarray:
         design = np.column_stack([*columns, signs * _branch_shape(distance, amplitude, math.exp(log_d))])
