@@ -151,13 +151,11 @@ def probe_of_record(record, window: float = 0.01, velocity_threshold: float | No
 
 
 def _presliding_distances(ramps: np.ndarray, breakaway: list[int | None], friction: np.ndarray,
-                          position: np.ndarray, sliding: dict[str, float] | None,
-                          from_turning: bool = False) -> list[float]:
-    """x_p(f) of every full reversal: from the previous slide's turning point to the sample ``breakaway`` of the
-    ramp (or the end of its window), where ``friction`` (A) has changed by 2*f*level: from the friction at the
-    turning point when ``from_turning`` (a spring load: the slide before need not have saturated, its turning
-    friction is then short of the level), else from minus the level (a free load slid, and ``friction`` is the
-    raw current, whose value at the turning point carries the quick return's deceleration)."""
+                          position: np.ndarray, sliding: dict[str, float] | None) -> list[float]:
+    """x_p(f) of every full reversal of a free load: from the previous slide's turning point to the sample
+    ``breakaway`` of the ramp (or the end of its window), where ``friction`` (A) has changed by 2*f*level from
+    minus the level (the slide before saturated; the current at the turning point itself carries the quick
+    return's deceleration)."""
     distances = []
     previous: int | None = None  # turning point (extreme position) of the previous ramp's slide
     for (_start, stop, sign), k in zip(ramps, breakaway, strict=True):
@@ -169,8 +167,7 @@ def _presliding_distances(ramps: np.ndarray, breakaway: list[int | None], fricti
             # 2*V(dx/2); it has changed by 2*f*level where sign*friction reaches (2*f - 1)*level, and there dx/2
             # is x_p(f). The level is the fitted sliding current, the mean of both directions.
             level = (sliding["positive"] - sliding["negative"]) / 2
-            start = sign * friction[previous] if from_turning else -level
-            reached = np.flatnonzero(sign * friction[previous:k + 1] >= start + 2 * PRESLIDING_FRACTION * level)
+            reached = np.flatnonzero(sign * friction[previous:k + 1] >= (2 * PRESLIDING_FRACTION - 1) * level)
             if reached.size:
                 distances.append(abs(position[previous + int(reached[0])] - position[previous]) / 2)
         stop = min(int(stop), position.size)

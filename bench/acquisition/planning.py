@@ -24,10 +24,11 @@ the two directions, ``x_p`` the presliding distance x_p(0.9)):
   ``CHIRP_SPAN * x_p`` at the start frequency to ``x_p`` at the stop frequency;
 - presliding: nested reversals of 4, 3, 2 and 1 times ``x_p``.
 
-A load on a spring (the probe's least squares has a spring term; :mod:`hilbench.analysis.breakaway.probe` says
-when a spring is recognised) is probed once more, slowly and at the cap (:func:`_probe_spring`), and sized against
-the spring's force as well as the friction (:func:`_spring_protocols`: the mass-spring response to a sine force
-with Coulomb friction, Den Hartog).
+A load on a spring (the probe's restoring fit, a least squares with a spring term over every moving sample, shows
+one; :mod:`hilbench.analysis.breakaway.probe` says when a spring is recognised) is probed once more, slowly and at
+the cap (:func:`_probe_spring`), and sized against the spring's force as well as the friction
+(:func:`_spring_protocols`: the mass-spring response to a sine force with Coulomb friction, Den Hartog; its chirp
+crosses resonance with a swing bounded by the probe's travel, :func:`swing_bound`).
 """
 
 from __future__ import annotations
@@ -64,9 +65,10 @@ STEP_FREQUENCIES = (2.0, 5.0, 10.0)  # Hz
 CHIRP_GAIN = 1.5
 CHIRP_SPAN = 25.0
 PRESLIDING_MULTIPLES = (4.0, 3.0, 2.0, 1.0)
-#: A load on a spring is probed once more, at the cap, with slow returns and ramps of this many natural periods, so
-#: that it follows the current quasi-statically instead of swinging at sqrt(k/J) (the swing a ramp's corner
-#: starts has an amplitude of (ramp rate)/(k*omega_n), about 0.05 rad on the paper's system at 270 N*m).
+#: A load on a spring is probed once more, at the cap, with slow cosine ramps and returns of this many natural
+#: periods, so that it follows the current quasi-statically instead of swinging at sqrt(k/J): a linear ramp's
+#: corner would start a swing of (change of the ramp rate)/(k*omega_n), and a swing faster than the ramp's speed
+#: runs the load backwards (inner presliding loops; docs/cli.md gives the paper system's figures).
 SPRING_RAMP_PERIODS = 15.0
 #: Stepped-sine frequencies of a load on a spring, as fractions of its natural frequency (below resonance).
 SPRING_STEP_RATIOS = (0.2, 0.5)
@@ -416,8 +418,8 @@ def _spring_protocols(probe: ProbeResult, settings: DeviceSettings, level: float
     "Response of a system with Coulomb damping": the equivalent-viscous solution; 4 Fc / pi is that
     approximation's, Den Hartog's exact condition for continuous sliding of a free mass is F0 > (pi/2) Fc); with
     k = 0 it is the free-mass formula of _chirp. As omega -> 0 it tends to S/k. At resonance the Coulomb friction
-    does not bound it once F0 > 4 Fc/pi: the amplitude grows by S/(2 J omega_n) per second... without limit; a sweep
-    through resonance bounds it only by its speed. So:
+    does not bound it once F0 > 4 Fc/pi: the amplitude grows by S/(2 J omega_n) rad per second without limit, and
+    a sweep through resonance bounds it only by its speed. So:
 
     - identification: the noise low-passed at the natural frequency f_n = sqrt(k/J)/(2 pi) (the load follows it
       quasi-statically; above f_n the mass takes the force and the load hardly moves), envelope periods of
