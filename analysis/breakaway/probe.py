@@ -41,7 +41,7 @@ class ProbeResult:
     path: str
     peak: float                          # A, the probe's peak current
     breakaway: tuple[float | None, ...]  # A, signed, per ramp (None: that ramp did not slide)
-    presliding_distance: float | None    # rad, x_p(0.9) from the full reversals (mean of the two)
+    presliding_distance: float | None    # rad, x_p(0.9) from the full reversals (a spring load's: of the fitted branch)
     velocity_threshold: float            # rad/s, the speed taken as sliding
     #: the least-squares fit of the slides: positive/negative sliding current (A, signed), inertia_per_kt (J/Kt,
     #: A*s^2/rad), viscous_per_kt (b/Kt, A*s/rad); a spring load's (_spring_probe) also spring_per_kt (k/Kt,
@@ -321,9 +321,10 @@ def _spring_probe(path, peak: float, ramps: np.ndarray, fit: dict[str, float], c
     friction at the end of a slide of the paper's system at 270 A), so k must be right to well under 1 %. The
     least squares over every moving sample (:func:`_restoring_fit`) is not: a Maxwell-slip friction's presliding
     stiffness looks like a spring to it; and a constant sliding level fitted over the slides' far parts trades k
-    against the level there (x has the sign of the direction at the ends of the travel), reading the level a few %
-    low and x_p a quarter low. So the friction of the full reversals (ramps 2 and 3, every moving sample) is
-    modelled as the Masing branch of the rolling-friction virgin curve, ``I_s * dir * g(s)``
+    against the level there (x has the sign of the direction at the ends of the travel), reading the level low
+    and x_p, which Masing's rule takes from the level, lower still. So the friction of the full reversals (ramps
+    2 and 3, every moving sample) is modelled as the Masing branch of the rolling-friction virgin curve,
+    ``I_s * dir * g(s)``
     (:func:`_branch_shape`, s the distance from the previous turning point), and fitted with the spring, the
     inertia, the viscous term and the offset: ``I = (J/Kt) a + (b/Kt) v + (k/Kt) x + c + I_s dir g(s)``, with the
     curve's d the one of least residual (:func:`_branch_fit`). The presliding distance is that curve's x_p(0.9),

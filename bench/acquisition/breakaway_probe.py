@@ -3,7 +3,8 @@
 The probe plays, in current mode, three slow ramps from 0 A to ``+peak``, ``-peak`` and ``+peak`` again, each
 followed by a quick return to 0 A and a hold at rest. A ramp that crosses the break-away current sets the motor
 sliding; the quick return stops it again within a fraction of a second, so the speed reached stays small however
-far the peak lies above the break-away. The second and third ramps each start from the motor's rest after a
+far the peak lies above the break-away (a load on a spring is probed with slow cosine ramps and returns instead,
+``shape = "cosine"``: see RETURN_TIME). The second and third ramps each start from the motor's rest after a
 slide the other way: the displacement from that turning point to the next break-away is a full reversal of the
 presliding loop, twice the presliding distance for a Maxwell-slip (Masing) contact.
 
