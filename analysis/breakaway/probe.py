@@ -12,7 +12,7 @@ twice the presliding distance for a Maxwell-slip (Masing) contact.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +24,8 @@ from hilbench.analysis.errors import AnalysisError
 PROBE_PROTOCOL = "breakaway_probe"
 #: Signs of the slow ramps, in order; the 2nd and 3rd start after a slide the other way (full reversals).
 RAMP_SIGNS = (1, -1, 1)
+#: Shapes of the ramps and returns (protocol parameter ``shape``; runs without it: linear)
+PROBE_SHAPES = ("linear", "cosine")
 #: The presliding distance reported is x_p(f) of docs/presliding.md at this fraction f of the sliding level.
 PRESLIDING_FRACTION = 0.9
 
@@ -39,11 +41,11 @@ class ProbeResult:
     path: str
     peak: float                          # A, the probe's peak current
     breakaway: tuple[float | None, ...]  # A, signed, per ramp (None: that ramp did not slide)
-    presliding_distance: float | None    # rad, x_p(0.9) from the full reversals (mean of the two)
+    presliding_distance: float | None    # rad, x_p(0.9) from the full reversals (a spring load's: of the fitted branch)
     velocity_threshold: float            # rad/s, the speed taken as sliding
-    #: the least-squares fit of the slides (see _sliding_fit): positive/negative sliding current (A, signed),
-    #: inertia_per_kt (J/Kt, A*s^2/rad), viscous_per_kt (b/Kt, A*s/rad), spring_per_kt (k/Kt, A/rad); None
-    #: when the slides were too short
+    #: the least-squares fit of the slides: positive/negative sliding current (A, signed), inertia_per_kt (J/Kt,
+    #: A*s^2/rad), viscous_per_kt (b/Kt, A*s/rad); a spring load's (_spring_probe) also spring_per_kt (k/Kt,
+    #: A/rad) and rest_position (rad, where the spring holds the load at 0 A); None when the slides were too short
     sliding: dict[str, float] | None = None
     #: a spring load (analysis._spring_probe): ``breakaway`` holds the friction current at each slide's end
     spring: bool = False
@@ -51,10 +53,9 @@ class ProbeResult:
     half_travel: float | None = None
     #: rad, the range of position over the probe (what a spring's force k*x is weighed over)
     travel: float = 0.0
-    #: a spring load: the least squares over every moving sample (_restoring_fit; k and J within a few %)
+    #: the least squares over every moving sample with a spring term (_restoring_fit): what tells a spring load
+    #: (_is_spring) from a free one, whose k it shows as noise; None below MIN_FIT_SAMPLES moving samples each way
     restoring: dict[str, float] | None = None
-    ramp_time: float = 1.5    # s, as played
-    return_time: float = 0.02  # s, as played (a quick return unless a spring load was probed slowly)
 
     @property
     def positive(self) -> float | None:
@@ -121,7 +122,8 @@ def probe_of_record(record, window: float = 0.01, velocity_threshold: float | No
     ramps = record.protocol_arrays["ramps"]
     peak = float(record.protocol_params["peak"])
     ramp_time = float(record.protocol_params.get("ramp_time", 1.5))
-    return_time = float(record.protocol_params.get("return_time", 0.02))
+    # the ramps' steepest current slope, A/s (a cosine ramp's is pi/2 times the linear one's)
+    steepest = peak / ramp_time * (math.pi / 2 if record.protocol_params.get("shape") == "cosine" else 1.0)
     hold = record.protocol_params.get("hold")  # s at 0 A after each ramp, as the run file records it
     hold_text = f"{float(hold):g} s hold" if hold is not None else "hold"
     counts = float(record.calibration.get("counts_per_rev", 1 << 20))
@@ -130,10 +132,9 @@ def probe_of_record(record, window: float = 0.01, velocity_threshold: float | No
     threshold = velocity_threshold or max(0.05, 5 * count / window)
     velocity = smoothed_velocity(position, fs, window)
     acceleration = smoothed_velocity(velocity, fs, window)
-    spring = _restoring_fit(current, position, velocity, acceleration, threshold, peak / ramp_time, fs, window)
+    spring = _restoring_fit(current, position, velocity, acceleration, threshold, steepest, fs, window)
     if spring is not None and _is_spring(spring, position, peak):
-        found = _spring_probe(path, peak, ramps, spring, current, position, velocity, acceleration, threshold)
-        return replace(found, ramp_time=ramp_time, return_time=return_time)
+        return _spring_probe(path, peak, ramps, spring, current, position, velocity, acceleration, threshold)
     breakaway: list[int | None] = []  # sample of each ramp's break-away
     for j, (start, stop, sign) in enumerate(ramps):
         start, stop = int(start), min(int(stop), position.size)
@@ -146,14 +147,15 @@ def probe_of_record(record, window: float = 0.01, velocity_threshold: float | No
     distances = _presliding_distances(ramps, breakaway, current, position, sliding)
     d = float(np.mean(distances)) if distances else None
     return ProbeResult(str(path), peak, tuple(None if k is None else float(current[k]) for k in breakaway), d,
-                       threshold, sliding, travel=float(np.ptp(position)), ramp_time=ramp_time,
-                       return_time=return_time)
+                       threshold, sliding, travel=float(np.ptp(position)), restoring=spring)
 
 
 def _presliding_distances(ramps: np.ndarray, breakaway: list[int | None], friction: np.ndarray,
                           position: np.ndarray, sliding: dict[str, float] | None) -> list[float]:
-    """x_p(f) of every full reversal: from the previous slide's turning point to the sample ``breakaway`` of the
-    ramp (or the end of its window), where ``friction`` (A) has changed by 2*f*level."""
+    """x_p(f) of every full reversal of a free load: from the previous slide's turning point to the sample
+    ``breakaway`` of the ramp (or the end of its window), where ``friction`` (A) has changed by 2*f*level from
+    minus the level (the slide before saturated; the current at the turning point itself carries the quick
+    return's deceleration)."""
     distances = []
     previous: int | None = None  # turning point (extreme position) of the previous ramp's slide
     for (_start, stop, sign), k in zip(ramps, breakaway, strict=True):
@@ -177,38 +179,44 @@ def _presliding_distances(ramps: np.ndarray, breakaway: list[int | None], fricti
 MIN_FIT_SAMPLES = 200
 #: A restoring force is a spring when the fitted spring carries at least this share of the probe's peak current
 #: over the probe's travel: friction never does (a free load's presliding stiffness acts over micro-radians, and
-#: its fitted k is noise, about 1e-3 of the peak over the travel on the simulated DC motor), a spring load's
-#: travel is set by it (k * travel is about twice the peak: the load swings from +peak/k to -peak/k).
+#: its fitted k is noise: under 2 % of the sliding current over the travel on the simulated DC motor,
+#: tests/bench/test_plan.py), a spring load's travel is set by it (k * travel is about twice the peak: the load
+#: swings from +peak/k to -peak/k).
 SPRING_SHARE = 0.5
-#: Half the distance from a turning point, in presliding distances x_p(0.9), beyond which a spring load's slide is
-#: taken as saturated (friction at its sliding level): on the rolling-friction virgin curve the friction at
-#: 5 x_p is 99.3 % of the level (h * (1 - (d / (d + 5 * 2.16 d))^2)). With 3 x_p the paper's system read a level
-#: 13 % low (1.42 against 1.64 N*m) and k 0.08 % high; with 5, 3.7 % low and 0.01 %.
-SATURATION_TRAVEL = 5.0
-#: ... at least this (the friction at 3 x_p of the rolling curve: 98 % of its level), else the slides are too
-#: short; shorter than 5 x_p when the saturated part would be shorter than SEGMENT_TRAVEL x_p (at the cap of the
-#: paper's system at 1 kHz a 0.3 rad part read k 0.17 % high and the level 30 % low; 4.65 x_p now)
+#: x_p(f) / d of the rolling-friction virgin curve h * (1 - (d / (d + x))^2): 1/sqrt(1 - f) - 1 (2.162 at 0.9)
+XP_OVER_D = 1 / math.sqrt(1 - PRESLIDING_FRACTION) - 1
+#: A spring load's slides must reach this many x_p from the previous turning point (half the full reversal, where
+#: the rolling curve is at 98 % of its level) for the level to be fitted rather than extrapolated; else the plan
+#: needs a larger peak.
 MIN_SATURATION_TRAVEL = 3.0
-SEGMENT_TRAVEL = 1.0
+#: The search for the branch's d (rad) spans this range of the probe's travel (log scale: a coarse grid of
+#: D_GRID values, then a bounded Brent search around the best)
+D_RANGE = (1e-6, 1.0)
+D_GRID = 49
 
 
-def _design(acceleration: np.ndarray, velocity: np.ndarray, position: np.ndarray, direction: np.ndarray) -> np.ndarray:
-    """Columns a, v, x, [direction > 0], -[direction < 0] of the fits (direction: +1 or -1 per row)."""
-    return np.column_stack([acceleration, velocity, position, (direction > 0).astype(float),
-                            -(direction < 0).astype(float)])
+def _design(acceleration: np.ndarray, velocity: np.ndarray, position: np.ndarray | None,
+            direction: np.ndarray) -> np.ndarray:
+    """Columns a, v, [x], [direction > 0], -[direction < 0] of the fits (direction: +1 or -1 per row; no spring
+    column when ``position`` is None)."""
+    columns = [acceleration, velocity] + ([] if position is None else [position])
+    return np.column_stack([*columns, (direction > 0).astype(float), -(direction < 0).astype(float)])
 
 
 def _solution(design: np.ndarray, target: np.ndarray) -> dict[str, float]:
+    """The coefficients of :func:`_design`'s columns by name (spring_per_kt only when it has the x column)."""
     coef = np.linalg.lstsq(design, target, rcond=None)[0]
-    return {"inertia_per_kt": float(coef[0]), "viscous_per_kt": float(coef[1]), "spring_per_kt": float(coef[2]),
-            "positive": float(coef[3]), "negative": float(-coef[4])}
+    names = ("inertia_per_kt", "viscous_per_kt", "spring_per_kt")[:design.shape[1] - 2]
+    return {**{n: float(c) for n, c in zip(names, coef, strict=False)},
+            "positive": float(coef[-2]), "negative": float(-coef[-1])}
 
 
 def _sliding_fit(ramps: np.ndarray, breakaway: list[int | None], current: np.ndarray, position: np.ndarray,
                  velocity: np.ndarray, acceleration: np.ndarray, threshold: float) -> dict[str, float] | None:
-    """Least squares of ``current = (J/Kt)*a + (b/Kt)*v + (k/Kt)*x + I_c(direction)`` over the slides while the
-    current still ramps (before the quick return): the sliding current of each direction (A), J/Kt (A*s^2/rad),
-    b/Kt (A*s/rad) and k/Kt (A/rad; about 0 on a load without a spring). None when a direction has fewer than
+    """Least squares of ``current = (J/Kt)*a + (b/Kt)*v + I_c(direction)`` over the slides of a free load while
+    the current still ramps (before the quick return): the sliding current of each direction (A), J/Kt
+    (A*s^2/rad) and b/Kt (A*s/rad). No spring term: a free load has none to fit (its k would be noise traded
+    against the two intercepts; :func:`_restoring_fit` shows it). None when a direction has fewer than
     :data:`MIN_FIT_SAMPLES` sliding samples."""
     rows: list[np.ndarray] = []
     for (_start, stop, sign), k in zip(ramps, breakaway, strict=True):
@@ -225,20 +233,17 @@ def _sliding_fit(ramps: np.ndarray, breakaway: list[int | None], current: np.nda
     idx, signs = table[:, 0], table[:, 1]
     if min(np.sum(signs > 0), np.sum(signs < 0)) < MIN_FIT_SAMPLES:
         return None
-    # position about its mean over the slides: the sliding currents are those at the slides' mean position, not
-    # shifted by k times wherever the probe started (k is noise on a free load: 1e-3 of I_s over the travel)
-    centred = position[idx] - float(np.mean(position[idx]))
-    return _solution(_design(acceleration[idx], velocity[idx], centred, signs), current[idx])
+    return _solution(_design(acceleration[idx], velocity[idx], None, signs), current[idx])
 
 
 def _restoring_fit(current: np.ndarray, position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray,
                    threshold: float, ramp_rate: float, fs: float, window: float) -> dict[str, float] | None:
-    """The fit of :func:`_sliding_fit` over every moving sample of the run (speed above twice ``threshold``),
-    both ways and whatever the ramp, except where the current changes faster than 1.5 x the slow ramps'
-    ``ramp_rate`` (A/s) and two smoothing windows either side (a quick return: the smoothed acceleration lags
-    it). A spring load moves through the whole probe, returns and holds included; its return is what separates
-    the spring from the friction (same position, the other direction). None below :data:`MIN_FIT_SAMPLES` each
-    way."""
+    """Least squares of ``current = (J/Kt)*a + (b/Kt)*v + (k/Kt)*x + I_c(direction)`` over every moving sample of
+    the run (speed above twice ``threshold``), both ways and whatever the ramp, except where the current changes
+    faster than 1.5 x the slow ramps' steepest slope ``ramp_rate`` (A/s) and two smoothing windows either side (a
+    quick return: the smoothed acceleration lags it). A spring load moves through the whole probe, returns and
+    holds included; its return is what separates the spring from the friction (same position, the other
+    direction). None below :data:`MIN_FIT_SAMPLES` each way."""
     slope = smoothed_velocity(current, fs, window)  # A/s
     fast = (np.abs(slope) > 1.5 * ramp_rate).astype(float)
     half = max(1, int(round(2 * window * fs)))
@@ -255,6 +260,54 @@ def _is_spring(fit: dict[str, float], position: np.ndarray, peak: float) -> bool
     return fit["spring_per_kt"] * float(np.ptp(position)) >= SPRING_SHARE * peak
 
 
+def _branch_shape(distance: np.ndarray, amplitude: np.ndarray, d: float) -> np.ndarray:
+    """g(s) of a Masing branch of the rolling-friction virgin curve phi(x) = h (1 - (d / (d + x))^2) (d in rad)
+    in a loop of half-travel ``amplitude`` A (rad): the friction ``distance`` s (rad) from the turning point is
+    ``h * g(s)``, the turning point's -phi(A) plus twice the virgin curve at half the distance,
+    g = 1 + (d / (d + A))^2 - 2 (d / (d + s/2))^2. It rises from -phi(A)/h to phi(A)/h at s = 2A (short of 1: a
+    loop of finite travel never saturates every element)."""
+    return 1 + (d / (d + amplitude)) ** 2 - 2 * (d / (d + distance / 2)) ** 2
+
+
+def _branch_fit(rows: np.ndarray, current: np.ndarray, position: np.ndarray, velocity: np.ndarray,
+                acceleration: np.ndarray) -> tuple[float, np.ndarray]:
+    """The least squares ``I = (J/Kt) a + (b/Kt) v + (k/Kt) (x - mean x) + c' + I_s dir g(s)`` over ``rows``
+    (sample, direction, previous turning point, own turning point), with d of :func:`_branch_shape` the one of
+    least residual (a log grid over :data:`D_RANGE` of the travel, then Brent). Returns d (rad) and the
+    coefficients (J/Kt, b/Kt, k/Kt, c', I_s)."""
+    from scipy.optimize import minimize_scalar
+
+    idx, signs, turns, ends = rows.T
+    distance = np.abs(position[idx] - position[turns])
+    amplitude = np.abs(position[ends] - position[turns]) / 2
+    # x about its mean over the fitted samples: a shift of the encoder's zero moves c' only, to rounding
+    columns = [acceleration[idx], velocity[idx], position[idx] - float(np.mean(position[idx])), np.ones(idx.size)]
+    target = current[idx]
+
+    # only the g column changes with d: the other columns are projected out once (Frisch-Waugh), so that each d
+    # costs a pass over the samples, and the residual is taken from what they leave (no cancellation against the
+    # spring's large share of the current: the minimum is flat and must be found to 1e-6)
+    basis = np.linalg.qr(np.column_stack(columns))[0]
+    left = target - basis @ (basis.T @ target)
+
+    def residual(log_d: float) -> float:
+        """The least squares' residual sum at d = exp(log_d)."""
+        shape = signs * _branch_shape(distance, amplitude, math.exp(log_d))
+        shape = shape - basis @ (basis.T @ shape)
+        return float(left @ left - (shape @ left) ** 2 / (shape @ shape))
+
+    def solve(log_d: float) -> np.ndarray:
+        design = np.column_stack([*columns, signs * _branch_shape(distance, amplitude, math.exp(log_d))])
+        return np.linalg.lstsq(design, target, rcond=None)[0]
+
+    scale = float(np.max(amplitude))
+    grid = np.linspace(math.log(D_RANGE[0] * scale), math.log(D_RANGE[1] * scale), D_GRID)
+    best = int(np.argmin([residual(g) for g in grid]))
+    lo, hi = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
+    found = minimize_scalar(residual, bounds=(lo, hi), method="bounded", options={"xatol": 1e-9})
+    return math.exp(float(found.x)), solve(float(found.x))
+
+
 def _spring_probe(path, peak: float, ramps: np.ndarray, fit: dict[str, float], current: np.ndarray,
                   position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray,
                   threshold: float) -> ProbeResult:
@@ -262,18 +315,24 @@ def _spring_probe(path, peak: float, ramps: np.ndarray, fit: dict[str, float], c
     there is no break-away in the free load's sense): each ramp's slide runs from the previous slide's turning point
     (the extreme of position in a ramp's window, where the current turns back) to its own.
 
-    The friction current is what the current leaves after the spring and the inertia, ``I - (k/Kt)*x - (J/Kt)*a``
-    (A). It is a small difference (the spring carries about a hundred times the friction at the end of a slide of
-    the paper's system), so k must be right to well under 1 %, and the least squares over every moving sample
-    (:func:`_restoring_fit`) is not: a Maxwell-slip friction's presliding stiffness looks like a spring to it
-    (about +0.2 % on the paper's system). So the fit is repeated over the saturated part of the full reversals
-    only: the samples of ramps 2 and 3 farther from the previous turning point than 2 x :data:`SATURATION_TRAVEL`
-    presliding distances, where the friction is its sliding level (within 1 % on a rolling-friction curve), so
-    that ``I = (J/Kt) a + (b/Kt) v + (k/Kt) x + I_s(direction)`` holds with a constant ``I_s``. x_p comes from
-    the friction current by Masing's rule (:func:`_presliding_distances`, from turning point to turning point);
-    the selection and the fit are iterated until x_p settles (three rounds). ``sliding`` is that fit, None when
-    the slides were too short to saturate (fewer than :data:`MIN_FIT_SAMPLES` samples each way): the plan then
-    needs a larger peak. Each ramp's "break-away" entry is the friction current at its slide's turning point."""
+    The friction current is what the current leaves after the spring, the inertia and the viscous term,
+    ``I - (k/Kt)*x - (J/Kt)*a - (b/Kt)*v - c`` (A), where ``c = -(k/Kt)*x_r`` is the spring's pull at encoder
+    zero (its rest x_r need not be there). It is a small difference (the spring carries a hundred times the
+    friction at the end of a slide of the paper's system at 270 A), so k must be right to well under 1 %. The
+    least squares over every moving sample (:func:`_restoring_fit`) is not: a Maxwell-slip friction's presliding
+    stiffness looks like a spring to it; and a constant sliding level fitted over the slides' far parts trades k
+    against the level there (x has the sign of the direction at the ends of the travel), reading the level low
+    and x_p, which Masing's rule takes from the level, lower still. So the friction of the full reversals (ramps
+    2 and 3, every moving sample) is modelled as the Masing branch of the rolling-friction virgin curve,
+    ``I_s * dir * g(s)``
+    (:func:`_branch_shape`, s the distance from the previous turning point), and fitted with the spring, the
+    inertia, the viscous term and the offset: ``I = (J/Kt) a + (b/Kt) v + (k/Kt) x + c + I_s dir g(s)``, with the
+    curve's d the one of least residual (:func:`_branch_fit`). The presliding distance is that curve's x_p(0.9),
+    :data:`XP_OVER_D` x d. ``sliding`` is that fit (``positive = I_s``, ``negative = -I_s``: on a spring an
+    asymmetry of the friction is one with the rest offset, which takes it); None when the slides did not reach
+    :data:`MIN_SATURATION_TRAVEL` x_p from their turning points (or fewer than :data:`MIN_FIT_SAMPLES` samples
+    each way): the plan then needs a larger peak. Each ramp's "break-away" entry is the friction current at its
+    slide's turning point."""
     turning: list[int | None] = []
     for start, stop, sign in ramps:
         start, stop = int(start), min(int(stop), position.size)
@@ -282,49 +341,31 @@ def _spring_probe(path, peak: float, ramps: np.ndarray, fit: dict[str, float], c
     reversals = [abs(position[b] - position[a]) / 2 for a, b in zip(turning[:-1], turning[1:], strict=True)
                  if a is not None and b is not None]
     half_travel = float(min(reversals)) if reversals else None  # rad, half the shortest full reversal
-
-    def ends_of(friction: np.ndarray) -> dict[str, float]:
-        last = {s: float(friction[k]) for k, s in zip(turning, RAMP_SIGNS, strict=True) if k is not None}
-        return {"positive": last.get(1, math.nan), "negative": last.get(-1, math.nan)}
-
-    current_fit: dict[str, float] = {**fit, **ends_of(current - fit["spring_per_kt"] * position
-                                                      - fit["inertia_per_kt"] * acceleration)}
+    rows = []
+    for (_start, _stop, sign), previous, k in zip(ramps[1:], turning[:-1], turning[1:], strict=True):
+        if previous is None or k is None:
+            continue
+        seg = np.arange(previous, k + 1)
+        seg = seg[sign * velocity[seg] > 2 * threshold]
+        rows.append(np.column_stack([seg, np.full(seg.size, sign), np.full(seg.size, previous),
+                                     np.full(seg.size, k)]))
+    table = np.concatenate(rows) if rows else np.empty((0, 4), dtype=int)
     sliding: dict[str, float] | None = None
     d: float | None = None
-    for _ in range(3):
-        friction = current - current_fit["spring_per_kt"] * position - current_fit["inertia_per_kt"] * acceleration
-        usable = current_fit["positive"] > 0 > current_fit["negative"]
-        distances = _presliding_distances(ramps, turning, friction, position, current_fit if usable else None)
-        if not distances:
-            break
-        d = float(np.mean(distances))
-        if not d > 0:  # the friction changed by 1.8 x its level at once: no presliding seen, no saturation to fit
-            sliding = None
-            break
-        # the saturated part starts at 2*saturation*x_p from the turning point and must stay SEGMENT_TRAVEL x_p
-        # long: k is fitted from the slope within these parts (across them it is one with the levels)
-        saturation = min(SATURATION_TRAVEL, (2 * (half_travel or 0.0) - SEGMENT_TRAVEL * d) / (2 * d))
-        if saturation < MIN_SATURATION_TRAVEL:
-            sliding = None
-            break
-        rows = []
-        for (_start, _stop, sign), previous, k in zip(ramps[1:], turning[:-1], turning[1:], strict=True):
-            if previous is None or k is None:
-                continue
-            seg = np.arange(previous, k + 1)
-            far = np.abs(position[seg] - position[previous]) >= 2 * saturation * d
-            seg = seg[far & (sign * velocity[seg] > 2 * threshold)]
-            rows.append(np.column_stack([seg, np.full(seg.size, sign)]))
-        table = np.concatenate(rows) if rows else np.empty((0, 2), dtype=int)
-        idx, signs = table[:, 0], table[:, 1]
-        if min(np.sum(signs > 0), np.sum(signs < 0)) < MIN_FIT_SAMPLES:
-            sliding = None
-            break
-        sliding = current_fit = _solution(_design(acceleration[idx], velocity[idx], position[idx], signs),
-                                          current[idx])
-    friction = current - current_fit["spring_per_kt"] * position - current_fit["inertia_per_kt"] * acceleration
+    # until the branch fit stands, the friction is what the restoring fit leaves (its intercepts are c +- I_s)
+    model = (fit["spring_per_kt"], fit["inertia_per_kt"], fit["viscous_per_kt"],
+             (fit["positive"] + fit["negative"]) / 2)
+    if min(np.sum(table[:, 1] > 0), np.sum(table[:, 1] < 0)) >= MIN_FIT_SAMPLES:
+        shape_d, coef = _branch_fit(table, current, position, velocity, acceleration)
+        inertia, viscous, spring, centred, level = map(float, coef)
+        offset = centred - spring * float(np.mean(position[table[:, 0]]))  # c at x = 0
+        x_p = XP_OVER_D * shape_d
+        if level > 0 and spring > 0 and (half_travel or 0.0) >= MIN_SATURATION_TRAVEL * x_p:
+            model, d = (spring, inertia, viscous, offset), x_p
+            sliding = {"inertia_per_kt": inertia, "viscous_per_kt": viscous, "spring_per_kt": spring,
+                       "positive": level, "negative": -level, "rest_position": -offset / spring}
+    spring, inertia, viscous, offset = model
+    friction = current - spring * position - inertia * acceleration - viscous * velocity - offset
     ends = tuple(None if k is None else float(friction[k]) for k in turning)
-    if sliding is None:
-        d = None
     return ProbeResult(str(path), peak, ends, d, threshold, sliding, spring=True, half_travel=half_travel,
                        travel=float(np.ptp(position)), restoring=fit)

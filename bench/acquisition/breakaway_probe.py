@@ -3,7 +3,8 @@
 The probe plays, in current mode, three slow ramps from 0 A to ``+peak``, ``-peak`` and ``+peak`` again, each
 followed by a quick return to 0 A and a hold at rest. A ramp that crosses the break-away current sets the motor
 sliding; the quick return stops it again within a fraction of a second, so the speed reached stays small however
-far the peak lies above the break-away. The second and third ramps each start from the motor's rest after a
+far the peak lies above the break-away (a load on a spring is probed with slow cosine ramps and returns instead,
+``shape = "cosine"``: see RETURN_TIME). The second and third ramps each start from the motor's rest after a
 slide the other way: the displacement from that turning point to the next break-away is a full reversal of the
 presliding loop, twice the presliding distance for a Maxwell-slip (Masing) contact.
 
@@ -21,7 +22,9 @@ import numpy as np
 
 from hilbench.analysis.breakaway.probe import (  # noqa: F401 (re-exported: the probe's analysis)
     PROBE_PROTOCOL,
+    PROBE_SHAPES,
     RAMP_SIGNS,
+    SPRING_SHARE,
     ProbeError,
     ProbeResult,
     analyse_probe,
@@ -31,8 +34,10 @@ from hilbench.bench.acquisition import excitations
 from hilbench.bench.acquisition.protocols import PROTOCOLS, ParameterSpec, Protocol, ProtocolError
 
 #: Time of the quick return from the peak to 0 A, s: short enough that a slide stops soon after it. A load on a
-#: spring is probed with a slow return instead (``return_time = ramp_time``, bench.acquisition.planning): the spring
-#: bounds its travel, and a quick release would set it swinging at sqrt(k/J) with little friction damping.
+#: spring is probed with a slow return instead (``return_time = ramp_time``, bench.acquisition.planning) and cosine
+#: ramps: the spring bounds its travel, and a quick release, or a ramp's corner, would set it swinging at sqrt(k/J)
+#: with little friction damping (a corner's swing, (change of the ramp rate)/(k*omega_n), reverses the load's motion
+#: when it exceeds its speed along the ramp: inner presliding loops the friction fit does not model).
 RETURN_TIME = 0.02
 RAMP_DTYPE = np.dtype([("start", "i8"), ("stop", "i8"), ("sign", "i8")])  # sample indices, stop exclusive
 
@@ -49,11 +54,14 @@ class BreakawayProbe(Protocol):
         "ramp_time": ParameterSpec("s", 0.1, 60.0, "time of one slow ramp from 0 A to the peak"),
         "hold": ParameterSpec("s", 0.05, 10.0, "rest at 0 A before the first ramp and after every ramp"),
         "return_time": ParameterSpec("s", 0.001, 60.0, "time of the return from the peak to 0 A"),
+        "shape": ParameterSpec("", None, None, "ramps and returns: linear, or cosine (half a cosine period each: no "
+                               "corner to set a spring load swinging)", kind="choice", choices=PROBE_SHAPES),
     }
     peak: float = 5.0
     ramp_time: float = 1.5
     hold: float = 0.3
     return_time: float = RETURN_TIME
+    shape: str = "linear"
     mode: str = "current"
     sample_rate: int = 10000
 
@@ -73,7 +81,13 @@ class BreakawayProbe(Protocol):
     def excitation(self, limit: float | None = None) -> excitations.Excitation:
         t_knots, i_knots = self._knots()
         t = np.arange(self.n_samples) / self.sample_rate
-        u = np.interp(t, t_knots, i_knots)
+        if self.shape == "cosine":  # each segment as half a cosine period: the current's slope is 0 at every knot
+            j = np.clip(np.searchsorted(t_knots, t, side="right") - 1, 0, t_knots.size - 2)
+            span = np.diff(t_knots)[j]
+            frac = np.clip(np.divide(t - t_knots[j], span, out=np.ones_like(t), where=span > 0), 0.0, 1.0)
+            u = i_knots[j] + (i_knots[j + 1] - i_knots[j]) * (1 - np.cos(np.pi * frac)) / 2
+        else:
+            u = np.interp(t, t_knots, i_knots)
         if limit is not None and self.peak > limit:
             raise ProtocolError(f"probe peak {self.peak:g} A is above the current limit {limit:g} A")
         return excitations.Excitation(name=self.name, mode="current", fs=float(self.sample_rate), u=u,

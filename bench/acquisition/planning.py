@@ -24,10 +24,11 @@ the two directions, ``x_p`` the presliding distance x_p(0.9)):
   ``CHIRP_SPAN * x_p`` at the start frequency to ``x_p`` at the stop frequency;
 - presliding: nested reversals of 4, 3, 2 and 1 times ``x_p``.
 
-A load on a spring (the probe's least squares has a spring term; :mod:`hilbench.analysis.breakaway.probe` says
-when a spring is recognised) is probed once more, slowly and at the cap (:func:`_probe_spring`), and sized against
-the spring's force as well as the friction (:func:`_spring_protocols`: the mass-spring response to a sine force
-with Coulomb friction, Den Hartog).
+A load on a spring (the probe's restoring fit, a least squares with a spring term over every moving sample, shows
+one; :mod:`hilbench.analysis.breakaway.probe` says when a spring is recognised) is probed once more, slowly and at
+the cap (:func:`_probe_spring`), and sized against the spring's force as well as the friction
+(:func:`_spring_protocols`: the mass-spring response to a sine force with Coulomb friction, Den Hartog; its chirp
+crosses resonance with a swing bounded by the probe's travel, :func:`swing_bound`).
 """
 
 from __future__ import annotations
@@ -39,7 +40,13 @@ from pathlib import Path
 
 import numpy as np
 
-from hilbench.bench.acquisition.breakaway_probe import BreakawayProbe, ProbeError, ProbeResult, analyse_probe
+from hilbench.bench.acquisition.breakaway_probe import (
+    SPRING_SHARE,
+    BreakawayProbe,
+    ProbeError,
+    ProbeResult,
+    analyse_probe,
+)
 from hilbench.bench.acquisition.protocols import Chirp, Identification, Presliding, Protocol, SteppedSine
 from hilbench.bench.acquisition.runner import Bench, DeviceSettings, Progress
 from hilbench.bench.errors import BenchError
@@ -58,12 +65,17 @@ STEP_FREQUENCIES = (2.0, 5.0, 10.0)  # Hz
 CHIRP_GAIN = 1.5
 CHIRP_SPAN = 25.0
 PRESLIDING_MULTIPLES = (4.0, 3.0, 2.0, 1.0)
-#: A load on a spring is probed once more, at the cap, with slow returns and ramps of this many natural periods, so
-#: that it follows the current quasi-statically instead of swinging at sqrt(k/J) (the swing a ramp's corner
-#: starts has an amplitude of (ramp rate)/(k*omega_n), about 0.05 rad on the paper's system at 270 N*m).
+#: A load on a spring is probed once more, at the cap, with slow cosine ramps and returns of this many natural
+#: periods, so that it follows the current quasi-statically instead of swinging at sqrt(k/J): a linear ramp's
+#: corner would start a swing of (change of the ramp rate)/(k*omega_n), and a swing faster than the ramp's speed
+#: runs the load backwards (inner presliding loops; docs/cli.md gives the paper system's figures).
 SPRING_RAMP_PERIODS = 15.0
 #: Stepped-sine frequencies of a load on a spring, as fractions of its natural frequency (below resonance).
 SPRING_STEP_RATIOS = (0.2, 0.5)
+#: A spring load's chirp crosses resonance with CHIRP_MARGIN x its crossing amplitude within the swing bound: the
+#: passage overshoots the amplitude it leaves (the Cornu spiral's first loop, about 1.2 x) and the off-resonance
+#: response adds to it.
+CHIRP_MARGIN = 1.5
 
 
 class PlanError(BenchError):
@@ -82,22 +94,27 @@ class Plan:
     notes: list[str] = field(default_factory=list)  # what was clipped to the limits, said in words
 
     def _spring_text(self) -> str:
-        """The spring of the probe's fit, in words (nothing for a fit without a spring term)."""
-        fit, p = self.probe.sliding or {}, self.probe
+        """The spring of the probe, in words: a spring load's from the fit of its slides; a free load's from the
+        restoring fit (the least squares with a spring term over every moving sample, which tells the two apart),
+        as the noise it is there (nothing without that fit)."""
+        p = self.probe
+        fit = (p.sliding if p.spring else p.restoring) or {}
         if "spring_per_kt" not in fit:
             return ""
         k = fit["spring_per_kt"] * self.settings.torque_constant
         if p.spring:
-            return (f", spring k = {k:.4g} N*m/rad (natural frequency {natural_frequency(p):.4g} Hz; the friction "
-                    f"is what the current leaves after k*x and J*a)")
-        return (f", spring k = {k:.3g} N*m/rad (no restoring force: {100 * self.spring_share:.2g} % of the sliding "
-                f"current over the probe's travel)")
+            rest = fit.get("rest_position", math.nan)
+            return (f", spring k = {k:.4g} N*m/rad resting at {rest:.4g} rad (natural frequency "
+                    f"{natural_frequency(p):.4g} Hz; the friction is what the current leaves after k*x, J*a and b*v)")
+        return (f", spring k = {k:.3g} N*m/rad (no restoring force: |k| x travel is {100 * self.spring_share:.2g} % "
+                f"of the sliding current; a spring's is at least {100 * SPRING_SHARE:g} % of the probe's peak)")
 
     @property
     def spring_share(self) -> float:
-        """The fitted spring's force over the probe's travel, |k/Kt| * travel, as a share of the sliding
-        current: about 0 on a load without a spring (a spring load is refused, spring_refusal)."""
-        fit = self.probe.sliding or {}
+        """The restoring fit's spring force over the probe's travel, |k/Kt| * travel, as a share of the sliding
+        current: about 0 on a load without a spring (at least probe.SPRING_SHARE of the peak on a spring load,
+        which is then probed slowly and sized against its spring)."""
+        fit = self.probe.restoring or {}
         return abs(fit.get("spring_per_kt", math.nan)) * self.probe.travel / self.sliding_current
 
     @property
@@ -259,7 +276,7 @@ def _probe_spring(bench: Bench, found: ProbeResult, probe_dir: str | Path, playe
     period = 2 * math.pi * math.sqrt(inertia / k) if inertia > 0 and k > 0 else 1.0  # s
     ramp = min(60.0, max(1.5, SPRING_RAMP_PERIODS * period))
     slow = BreakawayProbe(peak=cap, ramp_time=ramp, return_time=ramp, hold=min(10.0, max(0.3, 2 * period)),
-                          sample_rate=sample_rate)
+                          shape="cosine", sample_rate=sample_rate)
     path = Path(probe_dir) / f"probe-{len(played) + 1}.h5"
     result = bench.run(slow, path, overwrite=overwrite, progress=progress, operator="hilbench plan")
     played.append(str(result.path))
@@ -398,21 +415,26 @@ def _spring_protocols(probe: ProbeResult, settings: DeviceSettings, level: float
     A sine force F0 at omega on a mass-spring with Coulomb friction Fc moves it, in continuous sliding and away from
     resonance, by X = S / |k - J omega^2| with S = sqrt(F0^2 - (4 Fc / pi)^2) (Den Hartog 1931, "Forced vibrations
     with combined Coulomb and viscous friction", Trans. ASME APM-53-9; S. S. Rao, Mechanical Vibrations, section
-    "Response of a system with Coulomb damping": the equivalent-viscous solution); with k = 0 it is the free-mass
-    formula of _chirp. Below resonance (omega^2 < k/J) it is the quasi-static X = (F0 - Fc)/k in the limit. So:
+    "Response of a system with Coulomb damping": the equivalent-viscous solution; 4 Fc / pi is that
+    approximation's, Den Hartog's exact condition for continuous sliding of a free mass is F0 > (pi/2) Fc); with
+    k = 0 it is the free-mass formula of _chirp. As omega -> 0 it tends to S/k. At resonance the Coulomb friction
+    does not bound it once F0 > 4 Fc/pi: the amplitude grows by S/(2 J omega_n) rad per second without limit, and
+    a sweep through resonance bounds it only by its speed. So:
 
     - identification: the noise low-passed at the natural frequency f_n = sqrt(k/J)/(2 pi) (the load follows it
       quasi-statically; above f_n the mass takes the force and the load hardly moves), envelope periods of
       eight natural periods (at least 4 s); loud half-periods sized as for a free load against
       ``I_s + k*x_p/Kt``, the current that holds the load x_p out against the spring and the friction, quiet ones at
       half of it (presliding);
-    - stepped sine at 0.2 and 0.5 f_n (below resonance; at resonance the friction alone limits the amplitude),
-      amplitudes STEP_FACTORS x ``I_s + (k/Kt) (1 - r^2) x_p`` with r = 0.2 (the stiffer of the two frequencies):
-      0.5 and 0.8 stay within x_p, 1.25 and 2 slide beyond it;
-    - chirp: a log sweep from f_n/2 to where X = x_p above resonance, J omega^2 = k + S/x_p; its force such that
-      X = 2 x_p at the start, S = 2 x_p k (1 - 1/4), at least CHIRP_GAIN x I_s (continuous sliding needs
-      F0 > 4 Fc/pi); it passes the resonance, where the amplitude is what the sweep's speed and the friction let
-      it grow to;
+    - stepped sine at r = 0.2 and 0.5 f_n (below resonance), amplitudes STEP_FACTORS x ``I_s + (k/Kt) (1 - r^2)
+      x_p`` with r = 0.5, the largest ratio (the softer dynamic stiffness, 0.75 k): 0.5 and 0.8 stay within x_p at
+      both frequencies, 2 slides beyond it at both, 1.25 beyond it at 0.5 f_n;
+    - chirp: a log sweep from f_n/2 to where X = x_p above resonance, J omega^2 = k + S/x_p, through the
+      resonance. A sweep crossing it at d(omega)/dt = omega_n ln(f_stop/f_start)/T (a log sweep of T s) leaves the
+      undamped linear oscillator the amplitude X_c = S/(2 J omega_n) sqrt(2 pi T / (omega_n ln(f_stop/f_start)))
+      (the passage through resonance; the friction only lowers it): S is the largest with CHIRP_MARGIN X_c within
+      the swing the probe showed the load takes (its half travel) and within the device's position window about
+      the spring's rest. The plan's notes state X_c and that bound;
     - presliding: as for a free load (nested reversals at 4, 3, 2 and 1 x_p, 2 x_p/s, J), written in rad."""
     fit = probe.sliding or {}
     kt = settings.torque_constant
@@ -425,23 +447,68 @@ def _spring_protocols(probe: ProbeResult, settings: DeviceSettings, level: float
     runs["identification"] = _identification(holding, cap, sample_rate, duration, seed, notes,
                                              cutoff=round(max(0.5, f_n), 3), period=round(max(4.0, 8 / f_n), 3))
     frequencies = tuple(round(r * f_n, 4) for r in SPRING_STEP_RATIOS)
-    unit = level + k * (1 - min(SPRING_STEP_RATIOS) ** 2) * x_p
-    steps = tuple(sorted({round(clipped(f * unit, f"stepped-sine amplitude {f:g} x (I_s + k*x_p)"), 6)
+    unit = level + k * (1 - max(SPRING_STEP_RATIOS) ** 2) * x_p
+    steps = tuple(sorted({round(clipped(f * unit, f"stepped-sine amplitude {f:g} x (I_s + 0.75 k*x_p)"), 6)
                           for f in STEP_FACTORS}))
     runs["stepped_sine"] = SteppedSine(frequencies=frequencies, amplitudes=steps, settle_periods=3,
                                        measure_periods=5, sample_rate=sample_rate)
-    w_start = 2 * math.pi * f_n / 2
-    wanted = 2 * x_p * (k - inertia * w_start ** 2)  # A: S for X = 2 x_p at the start
-    gain = clipped(max(math.hypot(wanted, 4 * level / math.pi), CHIRP_GAIN * level), "chirp gain")
-    s_force = math.sqrt(max(0.0, gain ** 2 - (4 * level / math.pi) ** 2))
-    f_stop = min(math.sqrt((k + s_force / x_p) / inertia) / (2 * math.pi), sample_rate / 20)
-    runs["chirp"] = Chirp(duration=duration, gain=gain, sweep="log", f_start=round(f_n / 2, 4),
-                          f_stop=round(f_stop, 4), sample_rate=sample_rate)
+    runs["chirp"] = _spring_chirp(probe, settings, level, k, inertia, x_p, f_n, clipped, notes, sample_rate,
+                                  duration)
     # in rad at the load: a spring load's x_p may exceed what `presliding_distance` (unit d) takes (1 rad)
     runs["presliding"] = Presliding(amplitudes=tuple(round(m * x_p, 6) for m in PRESLIDING_MULTIPLES), unit="rad",
                                     rate=round(2 * x_p, 6), sample_rate=sample_rate,
                                     inertia=round(inertia * kt, 9) if 0 < inertia * kt <= 100 else 0.0)
     return runs, notes
+
+
+def swing_bound(probe: ProbeResult, settings: DeviceSettings) -> float:
+    """rad: the largest swing about the spring's rest a spring load's chirp is sized for: the probe's half travel
+    (what the load was seen to take) and the device's position window about the rest, whichever is less."""
+    rest = (probe.sliding or {}).get("rest_position", 0.0)
+    return min(probe.half_travel or math.nan, rest - settings.position_min, settings.position_max - rest)
+
+
+def crossing_amplitude(s_force: float, inertia: float, f_n: float, f_start: float, f_stop: float,
+                       duration: float) -> float:
+    """rad: X_c = S/(2 J omega_n) sqrt(2 pi T / (omega_n ln(f_stop/f_start))), the amplitude a log sweep of
+    ``duration`` T s from ``f_start`` to ``f_stop`` (Hz) leaves an undamped oscillator J (A*s^2/rad) of natural
+    frequency ``f_n`` (Hz) under the net force S (A) when it crosses its resonance."""
+    w_n = 2 * math.pi * f_n
+    return s_force / (2 * inertia * w_n) * math.sqrt(2 * math.pi * duration / (w_n * math.log(f_stop / f_start)))
+
+
+def _spring_chirp(probe: ProbeResult, settings: DeviceSettings, level: float, k: float, inertia: float, x_p: float,
+                  f_n: float, clipped: Callable[[float, str], float], notes: list[str], sample_rate: int,
+                  duration: float) -> Chirp:
+    """The chirp of :func:`_spring_protocols`: the largest net force S (A) whose crossing amplitude, times
+    CHIRP_MARGIN, stays within :func:`swing_bound` (bisection: X_c grows with S)."""
+    bound = swing_bound(probe, settings)
+    f_start = f_n / 2
+    coulomb = 4 * level / math.pi  # A: what the friction takes of the force amplitude (equivalent viscous)
+
+    def f_stop_of(s_force: float) -> float:  # Hz: X = x_p above resonance
+        return min(math.sqrt((k + s_force / x_p) / inertia) / (2 * math.pi), sample_rate / 20)
+
+    def crossing(s_force: float) -> float:
+        return crossing_amplitude(s_force, inertia, f_n, f_start, f_stop_of(s_force), duration)
+
+    if not (bound > 0 and f_stop_of(0.0) > f_start):
+        raise PlanError(f"{probe.path}: no chirp: the swing bound is {bound:.3g} rad (the probe's half travel and "
+                        f"the position window about the spring's rest)")
+    lo, hi = 0.0, math.sqrt(max(0.0, (LIMIT_SHARE * settings.current_limit) ** 2 - coulomb ** 2))
+    if CHIRP_MARGIN * crossing(hi) > bound:
+        for _ in range(60):
+            mid = (lo + hi) / 2
+            lo, hi = (mid, hi) if CHIRP_MARGIN * crossing(mid) <= bound else (lo, mid)
+    s_force = lo
+    gain = clipped(math.hypot(s_force, coulomb), "chirp gain")
+    f_stop = f_stop_of(s_force)
+    x_c = crossing(s_force)
+    notes.append(f"chirp: crosses the natural frequency {f_n:.4g} Hz with a swing of about {x_c:.3g} rad "
+                 f"(X_c at net force {s_force:.3g} A); swing bound {bound:.4g} rad about the spring's rest (the "
+                 f"probe's half travel and the position window)")
+    return Chirp(duration=duration, gain=round(gain, 6), sweep="log", f_start=round(f_start, 4),
+                 f_stop=round(f_stop, 4), sample_rate=sample_rate)
 
 
 def plan_experiments(device: str | Bench, settings: DeviceSettings | None = None, *,
