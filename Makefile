@@ -22,7 +22,7 @@ $(BIN)/python:
 	$(BIN)/python -m pip install --quiet --upgrade pip setuptools wheel
 
 $(STAMP): $(BIN)/python pyproject.toml setup.py $(C_SRC) $(PKG)
-	$(BIN)/python -m pip install --quiet -e ".[test]"
+	$(BIN)/python -m pip install --quiet -e ".[test,docs-query]"
 	$(BIN)/python -c "import hilbench.firmware_sim.engine._plant, hilbench.firmware_sim.devices._fwcore"  # C extensions built
 	touch $@
 

@@ -33,6 +33,7 @@ import numpy as np
 from hilbench.analysis.drift.calibration import Limits, calibrate, clipped, cusum_paths, ewma_paths, standardise
 from hilbench.analysis.drift.charts import change_points, signals
 from hilbench.analysis.errors import AnalysisError
+from hilbench.common.units import rows_axis
 
 #: the longest default baseline, runs
 MAX_BASELINE = 50
@@ -201,21 +202,21 @@ def _column(rows: list[dict], name: str) -> np.ndarray:
 
 
 def _group_key(row: dict) -> tuple[str, str, str]:
-    return str(row.get("protocol") or ""), str(row.get("axis") or "rotary"), str(row.get("settings_hash") or "")
+    return str(row.get("protocol") or ""), rows_axis([row]), str(row.get("settings_hash") or "")
 
 
-def group_rows(rows: list[dict[str, Any]]) -> dict[str, list[dict[str, Any]]]:
-    """Rows by series: one series per protocol, axis and analysis settings (label: the protocol, with the axis
-    where one protocol ran on both, and the settings' hash where one protocol was analysed with several
-    settings)."""
+def group_rows(rows: list[dict[str, Any]]) -> dict[str, tuple[str, list[dict[str, Any]]]]:
+    """Rows by series: label -> (the series' axis, its rows); one series per protocol, axis and analysis settings
+    (label: the protocol, with the axis where one protocol ran on both, and the settings' hash where one protocol
+    was analysed with several settings)."""
     keys = sorted({_group_key(r) for r in rows})
-    out: dict[str, list[dict[str, Any]]] = {}
+    out: dict[str, tuple[str, list[dict[str, Any]]]] = {}
     for key in keys:
         p, a, h = key
         same = [k for k in keys if k[0] == p]
         label = " ".join([p] + ([a] if len({k[1] for k in same}) > 1 else [])
                          + ([h[:8]] if len({k[2] for k in same}) > 1 else [])).strip()
-        out[label] = [r for r in rows if _group_key(r) == key]
+        out[label] = (a, [r for r in rows if _group_key(r) == key])
     return out
 
 
@@ -244,34 +245,33 @@ def _baseline(runs: list[str], s: DriftSettings, coefficients: int) -> np.ndarra
         return np.array([run in named or run.split("/", 1)[1] in named for run in runs])
     n = len(runs)
     size = default_baseline(n, coefficients) if s.baseline is None else s.baseline
-    if s.baseline is None and size < coefficients + 2:  # too few runs for a spread: all baseline, none charted
-        return np.ones(n, bool)
     if not coefficients + 2 <= size <= n:
         raise AnalysisError(f"baseline of {size} runs: need {coefficients + 2} to {n} (the runs analysed; "
                             f"{coefficients} coefficient{'s' if coefficients != 1 else ''} and a spread)")
     return np.arange(n) < size
 
 
-def _series_result(label: str, rows: list[dict[str, Any]], s: DriftSettings, alpha: float, seed: int
+def _series_result(label: str, axis: str, rows: list[dict[str, Any]], s: DriftSettings, alpha: float, seed: int
                    ) -> DriftResult:
     rows = sorted(rows, key=lambda r: (str(r.get("start_time")), str(r.get("campaign")), str(r.get("key"))))
     runs = [f"{r.get('campaign')}/{r.get('key')}" for r in rows]
     n = len(runs)
     cov = {c: _column(rows, c) for c in s.covariates}
     usable = sum(bool(np.all(np.isfinite(x)) and np.ptp(x) > 0) for x in cov.values())
+    hours = _hours([str(r.get("start_time")) for r in rows])
+    distance = np.cumsum(np.nan_to_num(_column(rows, "sliding_distance")))
+    if s.baseline is None and not s.baseline_runs and n < usable + 3:
+        # too few runs for a fit and a spread: the default baseline is all of them, reported, nothing charted yet
+        # (issue #38: a 4-run planned campaign has one identification and one chirp run). Over all runs a
+        # covariate varies over the baseline exactly when it varies at all: the coefficients are 1 + usable.
+        p = 1 + usable
+        why = (f"{n} run{'s' if n != 1 else ''}: too few to chart (a baseline needs {p + 2}: {p} "
+               f"coefficient{'s' if p != 1 else ''} and a spread)")
+        return DriftResult(label, s, runs, hours, distance, cov, np.ones(n, bool), p, {}, axis,
+                           {_label(name, label): why for name in s.parameters})
     base = _baseline(runs, s, 1 + usable)
     design, kept, report = _covariate_design(cov, base)
     p = design.shape[1]
-    hours = _hours([str(r.get("start_time")) for r in rows])
-    distance = np.cumsum(np.nan_to_num(_column(rows, "sliding_distance")))
-    axis = _axis(rows, label)
-    if s.baseline is None and not s.baseline_runs and n < p + 2:
-        # the default baseline of a series this short is all of it: reported, nothing charted yet (issue #38: a
-        # 4-run planned campaign has one identification and one chirp run)
-        why = (f"{n} run{'s' if n != 1 else ''}: too few to chart (a baseline needs {p + 2}: {p} "
-               f"coefficient{'s' if p != 1 else ''} and a spread)")
-        return DriftResult(label, s, runs, hours, distance, cov, base, p, {}, axis,
-                           {_label(name, label): why for name in s.parameters})
     if int(base.sum()) < p + 2:
         raise AnalysisError(f"{label or 'the runs'}: a baseline of {int(base.sum())} runs is too short for {p} "
                             "coefficients and a spread (use a longer baseline)")
@@ -332,14 +332,6 @@ def _label(name: str, group: str) -> str:
     return name if not group else f"{name} [{group}]"
 
 
-def _axis(rows: list[dict[str, Any]], label: str) -> str:
-    """The one axis of a series' runs (``rotary`` when the rows do not say)."""
-    axes = {str(r.get("axis") or "rotary") for r in rows}
-    if len(axes) > 1:
-        raise AnalysisError(f"{label or 'the runs'}: runs of a rotary and a linear axis in one series")
-    return axes.pop()
-
-
 def monitor(rows: list[dict[str, Any]], settings: DriftSettings | None = None) -> DriftReport:
     """Drift of ``settings.parameters`` over ``rows`` (one identify row per run, any order; status ``ok`` only),
     one series per protocol and analysis settings."""
@@ -357,7 +349,7 @@ def monitor(rows: list[dict[str, Any]], settings: DriftSettings | None = None) -
     groups = group_rows(rows)
     single = len(groups) == 1
     alpha = s.false_alarm / (CHARTS * len(s.parameters) * len(groups))
-    results = [_series_result("" if single else label, rs, s, alpha, seed=i) for i, (label, rs) in
+    results = [_series_result("" if single else label, axis, rs, s, alpha, seed=i) for i, (label, (axis, rs)) in
                enumerate(groups.items())]
     if single:
         results[0].group = next(iter(groups))

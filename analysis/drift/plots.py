@@ -3,6 +3,7 @@ control charts (matplotlib, Agg; units on every axis)."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -110,7 +111,9 @@ def charts_figure(result: DriftResult, name: str):
 
 
 def _file_part(label: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_" else "-" for c in label).strip("-")
+    """A series label as a file-name part: each run of other characters than letters, digits and ``_`` is one
+    ``-`` (``breakaway [identification]`` -> ``breakaway-identification``)."""
+    return re.sub(r"\W+", "-", label).strip("-")
 
 
 def write_figures(report: DriftReport, units: dict[str, dict[str, str]], out: Path, save) -> list[Path]:

@@ -16,10 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from hilbench.bench.campaign_analysis.table import column_units
 from hilbench.bench.storage import outputs
 from hilbench.common.metrics import UNIT, is_fraction, label, percent
-from hilbench.common.units import EFFORT
+from hilbench.common.units import EFFORT, rows_axis
 
 #: (column, header) of the runs table; a parameter is shown with its standard error
 RUN_COLUMNS = [("key", "run"), ("repeat", "repeat"), ("start_time", "start (UTC)"), ("status", "status"),
@@ -282,17 +281,18 @@ def campaign_page(campaign: str, rows: list[dict[str, Any]], units: dict[str, st
     return "\n".join(parts)
 
 
-def write_pages(rows: list[dict[str, Any]], units: dict[str, str], drift_pngs: list[Path],
+def write_pages(rows: list[dict[str, Any]], units: dict[str, dict[str, str]], drift_pngs: list[Path],
                 summary: dict[str, Any] | None, out: Path) -> list[Path]:
-    """``out/campaign-<name>.html`` for every campaign in ``rows``."""
+    """``out/campaign-<name>.html`` for every campaign in ``rows``. ``units``: axis (``rotary``, ``linear``) ->
+    column -> unit, as the results table's metadata reads on that axis (hilbench.common.units.schema_units); each
+    page shows the units of its runs' axis."""
     by_campaign: dict[str, list[dict]] = defaultdict(list)
     for r in rows:
         by_campaign[str(r.get("campaign"))].append(r)
     paths = []
     for campaign, rs in sorted(by_campaign.items()):
         path = out / f"campaign-{campaign}.html"
-        axis = next((str(r["axis"]) for r in rs if r.get("axis")), "rotary")  # the units follow the runs' axis
-        outputs.write_text(path, campaign_page(campaign, rs, {**units, **column_units(axis)}, drift_pngs, summary,
-                                               axis))
+        axis = rows_axis(rs)
+        outputs.write_text(path, campaign_page(campaign, rs, units[axis], drift_pngs, summary, axis))
         paths.append(path)
     return paths

@@ -338,6 +338,7 @@ class CampaignResults(QtWidgets.QWidget):
         self.table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
         self.table.setSortingEnabled(True)
         self.units: dict[str, str] = {}
+        self.axis = "rotary"  # the loaded rows' axis (hilbench.common.units.rows_axis), which the units follow
         self.graphics = style_view(pg.GraphicsLayoutWidget())
         self.plots: dict[str, pg.PlotItem] = {}
         for row, (key, _label) in enumerate(CHARTS):
@@ -406,28 +407,27 @@ class CampaignResults(QtWidgets.QWidget):
         import pyarrow.parquet as pq
 
         from hilbench.bench.campaign_analysis.table import TABLE_NAME
-        from hilbench.common.units import schema_units
+        from hilbench.common.units import rows_axis, schema_units
 
         path = Path(self.path_edit.text().strip())
         table = path if path.suffix == ".parquet" else path / TABLE_NAME
         try:
             read = pq.read_table(table)
             rows = [r for r in read.to_pylist() if r.get("step") == "identify"]
-            axis = next((str(r["axis"]) for r in rows if r.get("axis")), "rotary")
+            axis = rows_axis(rows)
             units = schema_units(read.schema, axis)  # a linear axis reads N, kg, N*s/m (unit_linear)
         except Exception as exc:
             self.status.setText(f"<span style='color:#c00000'>{table}: {one_line(exc)}</span>")
             return False
         rows.sort(key=lambda r: (str(r.get("start_time")), str(r.get("campaign")), str(r.get("key"))))
         self.rows = rows
-        self.units = units
+        self.units, self.axis = units, axis
         self._fill_table()
         return self.show_drift()
 
     def _fill_table(self) -> None:
         self.table.setSortingEnabled(False)
-        axis = next((str(r["axis"]) for r in self.rows if r.get("axis")), "rotary")  # units follow the runs' axis
-        self.table.setHorizontalHeaderLabels(result_headers(axis))
+        self.table.setHorizontalHeaderLabels(result_headers(self.axis))  # units follow the runs' axis
         self.table.setRowCount(len(self.rows))
         for i, row in enumerate(self.rows):
             for j, (_header, column, scale) in enumerate(RESULT_COLUMNS):

@@ -6,6 +6,9 @@ docs/metrics.md names the quantities).
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
+from typing import Any
+
 
 def mib(nbytes: float) -> str:
     """Bytes as a whole number of MiB (2**20 bytes), for the memory budget's one-line messages."""
@@ -34,6 +37,17 @@ def axis_unit(quantity: str, axis: str) -> str:
     if axis not in AXIS_UNITS:
         raise ValueError(f"axis must be one of {', '.join(AXES)}, got {axis!r}")
     return AXIS_UNITS[axis][quantity]
+
+
+def rows_axis(rows: Iterable[Mapping[str, Any]]) -> str:
+    """The axis of a set of results-table rows (a campaign's, a series'): the first row's that names one in its
+    ``axis`` column, ``rotary`` when none does (a run file without an axis is rotary). Every reader of the rows'
+    axis (the campaign page, the GUI's results, the drift series) takes it from here. An unknown axis is refused
+    (ValueError)."""
+    axis = next((str(r["axis"]) for r in rows if r.get("axis")), "rotary")
+    axis_unit("position", axis)  # refuses an unknown axis
+    return axis
+
 
 #: what drives an axis, by name: a torque on a rotary axis, a force on a linear one ("break-away torque/force")
 EFFORT = {"rotary": "torque", "linear": "force"}

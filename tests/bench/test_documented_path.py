@@ -118,8 +118,8 @@ def test_plan_campaign_analyse_drift_with_every_default(size, tmp_path, monkeypa
         assert all("no spread over the" in why and "(identical values); 0 later run(s) differ" in why
                    for why in chirp["unmonitored"].values())
         assert sorted(p.name for p in out.glob("*.png")) == [
-            "charts-breakaway--identification.png", "charts-viscous--identification.png",
-            "drift-breakaway--identification.png", "drift-viscous--identification.png"]
+            "charts-breakaway-identification.png", "charts-viscous-identification.png",
+            "drift-breakaway-identification.png", "drift-viscous-identification.png"]
 
     page = (out / "campaign-plan.html").read_text()
     for key in keys:  # every run of the campaign is named (the plan), every analysed run has its row

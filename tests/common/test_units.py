@@ -2,7 +2,7 @@
 
 import pytest
 
-from hilbench.common.units import AXES, AXIS_UNITS, MODE_UNITS, axis_unit, mib
+from hilbench.common.units import AXES, AXIS_UNITS, MODE_UNITS, axis_unit, mib, rows_axis
 
 
 @pytest.mark.parametrize("axis", AXES)
@@ -23,3 +23,12 @@ def test_axis_unit_and_mode_units():
     assert MODE_UNITS == {"current": "A", "velocity": AXIS_UNITS["rotary"]["velocity"],
                           "position": AXIS_UNITS["rotary"]["position"]}
     assert mib(3 * (1 << 20)) == "3 MiB"
+
+
+def test_rows_axis_is_the_first_named_axis_else_rotary():
+    """The one reader of a set of rows' axis (the page, the GUI's results, the drift series)."""
+    assert rows_axis([]) == "rotary" and rows_axis([{"axis": None}, {"axis": ""}, {}]) == "rotary"
+    assert rows_axis([{"axis": None}, {"axis": "linear"}, {"axis": "rotary"}]) == "linear"
+    assert rows_axis(iter([{"axis": "rotary"}])) == "rotary"  # any iterable of rows
+    with pytest.raises(ValueError, match="axis must be one of rotary, linear, got 'planar'"):
+        rows_axis([{"axis": "planar"}])

@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_page:
         from hilbench.bench.campaign_analysis.page import write_pages
 
-        for page in write_pages(every_row, units["rotary"], figures, summary, out):
+        for page in write_pages(every_row, units, figures, summary, out):
             outputs.say(f"page: {page}")
     outputs.say(f"{len(summary['alarms'])} alarm(s) over {summary['runs']} runs -> {out / 'drift.json'}")
     return 0

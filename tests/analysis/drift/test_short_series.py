@@ -71,7 +71,7 @@ def test_a_linear_axis_series_keeps_its_axis_and_its_figures_read_linear_units(t
     assert saved[0][0] == "breakaway (N)" and saved[2][0] == "viscous (N*s/m)"  # drift-breakaway, drift-viscous
 
 
-def test_runs_of_both_axes_are_two_series_and_a_field_reads_its_axis_unit():
+def test_runs_of_both_axes_are_two_series_and_a_field_reads_its_axis_unit(tmp_path):
     rng = np.random.default_rng(4)
     rotary, linear = campaign("flat", 6, rng), campaign("flat", 6, rng)
     for r in linear:
@@ -79,6 +79,10 @@ def test_runs_of_both_axes_are_two_series_and_a_field_reads_its_axis_unit():
     report = monitor(rotary + linear, DriftSettings(parameters=("breakaway",), covariates=()))
     assert [(g.group, g.axis) for g in report.groups] == [("identification linear", "linear"),
                                                           ("identification rotary", "rotary")]
+    names = write_figures(report, {axis: schema_units(SCHEMA, axis) for axis in AXES}, tmp_path, lambda f, p: None)
+    # a series' figure is named cleanly (the label "breakaway [identification linear]" once gave "breakaway--...")
+    assert sorted(p.name for p in names) == [f"{kind}-breakaway-identification-{axis}.png" for kind in
+                                             ("charts", "drift") for axis in ("linear", "rotary")]
     meta = SCHEMA.field("viscous").metadata
     assert field_unit(meta, "linear") == "N*s/m" and field_unit(meta, "rotary") == "N*m*s/rad"
     assert field_unit(SCHEMA.field("duration").metadata, "linear") == "s" and field_unit(None) == ""

@@ -30,6 +30,23 @@ def test_a_linear_run_row_keeps_its_axis_and_its_page_shows_linear_units():
     assert "break-away force (N)" in text and "break-away torque" not in text
 
 
+def test_each_campaign_page_shows_the_units_given_for_its_runs_axis(tmp_path):
+    """write_pages takes the units by axis (the table's metadata, schema_units) and shows the page of a campaign
+    the units of its runs' axis, those given and no other (it once overwrote them with the code's own)."""
+    from hilbench.bench.campaign_analysis.page import write_pages
+    from hilbench.common.units import AXES, schema_units
+
+    base = {"key": "r1", "status": "ok", "name": "r1", "inertia": 2.1, "breakaway": 20.0, "viscous": 200.0}
+    rows = [{**base, "campaign": "lin", "axis": "linear"}, {**base, "campaign": "rot", "axis": None}]
+    units = {axis: schema_units(SCHEMA, axis) for axis in AXES}
+    units["linear"] = {**units["linear"], "breakaway": "kN"}  # a unit only the given dictionary has
+    pages = write_pages(rows, units, [], None, tmp_path)
+    assert [p.name for p in pages] == ["campaign-lin.html", "campaign-rot.html"]
+    lin, rot = (p.read_text() for p in pages)
+    assert "break-away force (kN)" in lin and "viscous coefficient b (N*s/m)" in lin and "(N*m)" not in lin
+    assert "break-away torque (N*m)" in rot and "viscous coefficient b (N*m*s/rad)" in rot and "(N)" not in rot
+
+
 def test_drift_of_a_linear_axis_campaign_speaks_in_linear_units(tmp_path, monkeypatch, capsys):
     """`hilbench drift` on rows of a linear axis: its lines and figures read N, N*s/m and m (the columns'
     `unit_linear`), not the rotary units of the field's `unit` (issue #38)."""

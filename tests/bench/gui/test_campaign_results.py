@@ -141,6 +141,9 @@ def test_a_linear_axis_campaign_charts_in_linear_units(view, tmp_path):
     pq.write_table(to_table([{**r, "axis": "linear"} for r in _rows()]), tmp_path / TABLE_NAME)
     view.path_edit.setText(str(tmp_path))
     assert view.load()
+    assert view.axis == "linear"  # read once in load(), which the table's headers reuse
+    heads = [view.table.horizontalHeaderItem(j).text() for j in range(view.table.columnCount())]
+    assert heads == result_headers("linear") and "break-away force\n(N)" in heads
     axis = view.plots["value"].getAxis("left")
     assert "break-away (N) " in axis.labelString() and "N*m" not in axis.labelString()
     view.parameter.setCurrentText("viscous")  # about 1e-3: engineering prefix, linear unit
