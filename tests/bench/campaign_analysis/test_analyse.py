@@ -159,16 +159,17 @@ def test_cli_bad_input_is_one_line_and_exit_2(campaign, tmp_path, capsys):
 
 _EARLY_CHILD = """
 import sys
-from multiprocessing import forkserver
+from hilbench.bench.campaign_analysis import cluster_host
 from hilbench.bench.cli.commands.analyse import start_early
 start_early(sys.argv[1:])
-print(forkserver._forkserver._forkserver_pid is not None)
+print(cluster_host._early is not None)
 """
 
 
-def test_the_fork_server_starts_before_the_parser_only_for_a_local_cluster(campaign, tmp_path):
-    """`hilbench analyse` starts its workers' fork server first thing (its 2 s of imports are the local cluster's
-    critical path), but only for a line that names a campaign folder and asks for no other engine."""
+def test_the_cluster_host_starts_before_the_parser_only_for_a_local_cluster(campaign, tmp_path):
+    """`hilbench analyse` starts its cluster's host process (and with it the workers' fork server, whose 1-2 s of
+    imports are the local cluster's critical path) first thing, but only for a line that names a campaign folder and
+    asks for no other engine."""
     def started(*args: str) -> bool:
         done = subprocess.run([sys.executable, "-c", _EARLY_CHILD, *args], capture_output=True, text=True,
                               timeout=60)

@@ -1,0 +1,157 @@
+"""The local cluster in a process of its own: the Dask scheduler, the nannies and the fork server of the workers run
+in a child process of ``hilbench analyse`` (the *cluster host*), and the command is one more client of it, as with
+``--scheduler``. So the command's process carries only the client's work: with the scheduler and the nannies in it
+(one process, one GIL, one event loop) it spent 1.4-2 ms of CPU per analysed run on 200 runs of 5 s at 5 kHz on a
+quiet 2-core machine, and 5-8 ms under load, most of it the scheduler's ticks, the workers' heartbeats and the
+nannies' monitors, which grow with the wall time, not the work. The host's own CPU per run is reported beside the
+client's (engine.Summary.scheduler_cpu_per_run): with N workers it is what one scheduler process must keep up with.
+
+The host starts the workers' fork server first thing, before it imports anything of hilbench or Dask: the server's
+imports (:data:`fork_server.WORKER_MODULES`, about 1-2 s on one core) are the cluster's critical path. It is started
+from a ``-c`` program (:data:`BOOT`), not ``-m``: multiprocessing would make the fork server and every worker import
+a ``__main__`` module again.
+
+Protocol, one JSON line each way on the host's stdin and on a copy of its stdout (its stdout itself goes to stderr,
+so that nothing a library prints can break the reply): the client sends ``{"workers", "dashboard", "config"}``, the
+host answers ``{"address", "dashboard"}`` once the workers are up, or ``{"error"}``; then it holds the cluster until
+its stdin ends (the client closed it, or died however it died: no cluster outlives its client), closes it, stops
+the fork server (so that its and its workers' CPU reach the client's resource usage) and exits.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import select
+import subprocess
+import sys
+import time
+from typing import Any
+
+from hilbench.analysis.execution import ENVIRONMENT
+from hilbench.bench.campaign_analysis.fork_server import WORKER_MODULES
+from hilbench.bench.errors import AnalyseError
+
+#: the host's program: its reply channel first, then the fork server (before any import of its own), then serve()
+BOOT = """
+import json, os, sys
+reply = os.dup(1)
+os.dup2(2, 1)
+from multiprocessing import forkserver, get_context
+get_context("forkserver").set_forkserver_preload(json.loads(sys.argv[1]))
+forkserver.ensure_running()
+from hilbench.bench.campaign_analysis.cluster_host import serve
+serve(reply)
+"""
+#: how long the cluster may take to come up, s (the fork server's imports take 1-2 s on an idle core, 10 s at a load
+#: of 20)
+START_TIMEOUT = 300.0
+
+
+def serve(reply_fd: int) -> None:
+    """The host's side (in the child process started with :data:`BOOT`)."""
+    import logging
+    from multiprocessing import forkserver
+
+    reply = os.fdopen(reply_fd, "w")
+    request = sys.stdin.readline()
+    cluster = None
+    try:
+        if request:
+            import dask
+            from distributed import LocalCluster
+
+            doc = json.loads(request)
+            dask.config.set(doc["config"])  # this process's scheduler and nannies, and the workers they start
+            try:
+                cluster = LocalCluster(n_workers=doc["workers"], threads_per_worker=1, processes=True,
+                                       dashboard_address=doc["dashboard"], silence_logs=logging.CRITICAL)
+            except Exception as exc:  # noqa: BLE001 -- said to the client in one line
+                reply.write(json.dumps({"error": f"{type(exc).__name__}: {' '.join(str(exc).split())}"}) + "\n")
+            else:
+                link = cluster.dashboard_link if doc["dashboard"] else None
+                reply.write(json.dumps({"address": cluster.scheduler_address, "dashboard": link}) + "\n")
+            reply.flush()
+            sys.stdin.read()  # until the client closes the pipe or dies
+    finally:
+        if cluster is not None:
+            cluster.close()
+        # wait for the fork server, which reaps the workers: their CPU then counts in this process's children's, and
+        # so in the command's (a private method, the one CPython's tests use; without it the server exits by itself
+        # when this process does)
+        getattr(forkserver._forkserver, "_stop", lambda: None)()
+
+
+class Host:
+    """The client's handle on a cluster host process (started at once: its fork server starts importing)."""
+
+    def __init__(self) -> None:
+        self.proc = subprocess.Popen([sys.executable, "-c", BOOT, json.dumps(["distributed", *WORKER_MODULES])],
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, env={**os.environ, **ENVIRONMENT},
+                                     close_fds=True)
+
+    def start(self, workers: int, dashboard: str | None, config: dict[str, Any],
+              timeout: float = START_TIMEOUT) -> tuple[str, str | None]:
+        """(scheduler address, dashboard link) of a cluster of ``workers`` workers, once they are up."""
+        assert self.proc.stdin is not None and self.proc.stdout is not None
+        try:
+            self.proc.stdin.write((json.dumps({"workers": workers, "dashboard": dashboard, "config": config})
+                                   + "\n").encode())
+            self.proc.stdin.flush()
+        except BrokenPipeError:
+            raise AnalyseError(f"the local cluster's process ended before it started (exit code "
+                               f"{self.proc.wait()})") from None
+        line, deadline, fd = b"", time.monotonic() + timeout, self.proc.stdout.fileno()
+        while not line.endswith(b"\n"):
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([fd], [], [], left)[0]:
+                self.close()
+                raise AnalyseError(f"the local cluster did not start within {timeout:g} s")
+            got = os.read(fd, 65536)
+            if not got:
+                raise AnalyseError(f"the local cluster's process ended before it started (exit code "
+                                   f"{self.proc.wait()})")
+            line += got
+        doc = json.loads(line)
+        if "error" in doc:
+            self.close()
+            raise AnalyseError(f"the local cluster did not start: {doc['error'][:300]}")
+        return doc["address"], doc["dashboard"]
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def close(self, timeout: float = 60.0) -> None:
+        """End the host: it closes the cluster, stops its fork server and exits; killed if it does not in time."""
+        for pipe in (self.proc.stdin, self.proc.stdout):
+            if pipe is not None:
+                try:
+                    pipe.close()
+                except BrokenPipeError:
+                    pass
+        try:
+            self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+
+
+_early: Host | None = None
+
+
+def start_early() -> None:
+    """Start a host now (``hilbench analyse`` calls this before it builds its parser); :func:`take` hands it over."""
+    global _early
+    if _early is None:
+        _early = Host()
+
+
+def take() -> Host:
+    """The host started early, if it still runs, else a new one."""
+    global _early
+    host, _early = _early, None
+    if host is not None and host.alive():
+        return host
+    if host is not None:
+        host.close()
+    return Host()
