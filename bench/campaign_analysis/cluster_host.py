@@ -11,11 +11,13 @@ imports (:data:`fork_server.WORKER_MODULES`, about 1-2 s on one core) are the cl
 from a ``-c`` program (:data:`BOOT`), not ``-m``: multiprocessing would make the fork server and every worker import
 a ``__main__`` module again.
 
-Protocol, one JSON line each way on the host's stdin and on a copy of its stdout (its stdout itself goes to stderr,
-so that nothing a library prints can break the reply): the client sends ``{"workers", "dashboard", "config"}``, the
-host answers ``{"address", "dashboard"}`` once the workers are up, or ``{"error"}``; then it holds the cluster until
-its stdin ends (the client closed it, or died however it died: no cluster outlives its client), closes it, stops
-the fork server (so that its and its workers' CPU reach the client's resource usage) and exits.
+The host gets its worker count and dashboard on its command line and starts the cluster at once, so that the whole
+start (the fork server's imports, distributed's, the scheduler, the workers) overlaps the client's own imports and
+planning. It answers with one JSON line on a copy of its stdout (its stdout itself goes to stderr, so that nothing a
+library prints can break the reply): ``{"address", "dashboard"}`` once the workers are up, or ``{"error"}``. Then it
+holds the cluster until its stdin ends (the client closed it, or died however it died: no cluster outlives its
+client), closes it, stops the fork server (so that its and its workers' CPU reach the client's resource usage) and
+exits.
 """
 
 from __future__ import annotations
@@ -41,38 +43,53 @@ from multiprocessing import forkserver, get_context
 get_context("forkserver").set_forkserver_preload(json.loads(sys.argv[1]))
 forkserver.ensure_running()
 from hilbench.bench.campaign_analysis.cluster_host import serve
-serve(reply)
+serve(reply, json.loads(sys.argv[2]))
 """
+#: the local cluster's Dask settings (the host's scheduler and nannies, and the workers they start).
+#: allowed-failures 1: a task whose worker dies is given to a fresh worker once. worker-saturation 1.0: a worker
+#: holds only the task it runs (at the default 1.1 a one-thread worker also holds a queued task, and a death then
+#: counts against that innocent task too: a 200-run benchmark lost a third row that way). profile off: the worker's
+#: statistical profiler samples the task's stack every 10 ms and cost 15-25 % of the CPU of a 0.1 s identification
+#: (0.104-0.108 s against 0.077-0.091 s per task, measured). multiprocessing-method forkserver: the workers are forked
+#: from the server this process starts first (fork_server.WORKER_MODULES imported once; 3.5 s of CPU per worker when
+#: spawned). Housekeeping at a run's pace, not a web dashboard's: the event loops' health tick every 200 ms (20 ms),
+#: the system monitor every 2 s (0.5 s), the worker's memory check every 1 s (0.1 s), no work stealing (the chunks
+#: are sized by the client): the process of the scheduler and nannies spent 3.3-3.6 s of CPU on a 200-run campaign
+#: with Dask's defaults, 2.6 s with these.
+CONFIG = {"distributed.scheduler.allowed-failures": 1, "distributed.scheduler.worker-saturation": 1.0,
+          "distributed.worker.profile.enabled": False, "distributed.admin.tick.limit": "60s",
+          "distributed.admin.tick.interval": "200ms", "distributed.admin.system-monitor.interval": "2s",
+          "distributed.worker.memory.monitor-interval": "1s", "distributed.scheduler.work-stealing": False,
+          "distributed.worker.multiprocessing-method": "forkserver"}
 #: how long the cluster may take to come up, s (the fork server's imports take 1-2 s on an idle core, 10 s at a load
 #: of 20)
 START_TIMEOUT = 300.0
 
 
-def serve(reply_fd: int) -> None:
+def serve(reply_fd: int, request: dict[str, Any]) -> None:
     """The host's side (in the child process started with :data:`BOOT`)."""
     import logging
     from multiprocessing import forkserver
 
+    import dask
+    from distributed import LocalCluster
+
     reply = os.fdopen(reply_fd, "w")
-    request = sys.stdin.readline()
     cluster = None
     try:
-        if request:
-            import dask
-            from distributed import LocalCluster
-
-            doc = json.loads(request)
-            dask.config.set(doc["config"])  # this process's scheduler and nannies, and the workers they start
-            try:
-                cluster = LocalCluster(n_workers=doc["workers"], threads_per_worker=1, processes=True,
-                                       dashboard_address=doc["dashboard"], silence_logs=logging.CRITICAL)
-            except Exception as exc:  # noqa: BLE001 -- said to the client in one line
-                reply.write(json.dumps({"error": f"{type(exc).__name__}: {' '.join(str(exc).split())}"}) + "\n")
-            else:
-                link = cluster.dashboard_link if doc["dashboard"] else None
-                reply.write(json.dumps({"address": cluster.scheduler_address, "dashboard": link}) + "\n")
-            reply.flush()
-            sys.stdin.read()  # until the client closes the pipe or dies
+        dask.config.set(CONFIG)
+        try:
+            cluster = LocalCluster(n_workers=request["workers"], threads_per_worker=1, processes=True,
+                                   dashboard_address=request["dashboard"], silence_logs=logging.CRITICAL)
+        except Exception as exc:  # noqa: BLE001 -- said to the client in one line
+            reply.write(json.dumps({"error": f"{type(exc).__name__}: {' '.join(str(exc).split())}"}) + "\n")
+        else:
+            link = cluster.dashboard_link if request["dashboard"] else None
+            reply.write(json.dumps({"address": cluster.scheduler_address, "dashboard": link}) + "\n")
+        reply.flush()
+        sys.stdin.read()  # until the client closes the pipe or dies
+    except BrokenPipeError:  # the client is gone
+        pass
     finally:
         if cluster is not None:
             cluster.close()
@@ -82,25 +99,33 @@ def serve(reply_fd: int) -> None:
         getattr(forkserver._forkserver, "_stop", lambda: None)()
 
 
-class Host:
-    """The client's handle on a cluster host process (started at once: its fork server starts importing)."""
+def local_workers(workers: int | None) -> int:
+    """Worker processes of a local cluster: ``workers``, by default one per core."""
+    return workers or os.cpu_count() or 1
 
-    def __init__(self) -> None:
-        self.proc = subprocess.Popen([sys.executable, "-c", BOOT, json.dumps(["distributed", *WORKER_MODULES])],
+
+def dashboard_address(wanted: bool) -> str | None:
+    """Where the cluster's dashboard listens: any free port (several analyses may run on one machine) when wanted
+    and the bokeh package is there, else None."""
+    import importlib.util
+
+    return ":0" if wanted and importlib.util.find_spec("bokeh") is not None else None
+
+
+class Host:
+    """The client's handle on a cluster host process of ``workers`` workers (started at once: its fork server starts
+    importing, then the cluster starts)."""
+
+    def __init__(self, workers: int, dashboard: str | None) -> None:
+        self.request = {"workers": workers, "dashboard": dashboard}
+        self.proc = subprocess.Popen([sys.executable, "-c", BOOT, json.dumps(["distributed", *WORKER_MODULES]),
+                                      json.dumps(self.request)],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, env={**os.environ, **ENVIRONMENT},
                                      close_fds=True)
 
-    def start(self, workers: int, dashboard: str | None, config: dict[str, Any],
-              timeout: float = START_TIMEOUT) -> tuple[str, str | None]:
-        """(scheduler address, dashboard link) of a cluster of ``workers`` workers, once they are up."""
-        assert self.proc.stdin is not None and self.proc.stdout is not None
-        try:
-            self.proc.stdin.write((json.dumps({"workers": workers, "dashboard": dashboard, "config": config})
-                                   + "\n").encode())
-            self.proc.stdin.flush()
-        except BrokenPipeError:
-            raise AnalyseError(f"the local cluster's process ended before it started (exit code "
-                               f"{self.proc.wait()})") from None
+    def address(self, timeout: float = START_TIMEOUT) -> tuple[str, str | None]:
+        """(scheduler address, dashboard link), once the workers are up."""
+        assert self.proc.stdout is not None
         line, deadline, fd = b"", time.monotonic() + timeout, self.proc.stdout.fileno()
         while not line.endswith(b"\n"):
             left = deadline - time.monotonic()
@@ -139,19 +164,29 @@ class Host:
 _early: Host | None = None
 
 
-def start_early() -> None:
+def start_early(workers: int, dashboard: str | None) -> None:
     """Start a host now (``hilbench analyse`` calls this before it builds its parser); :func:`take` hands it over."""
     global _early
     if _early is None:
-        _early = Host()
+        _early = Host(workers, dashboard)
 
 
-def take() -> Host:
-    """The host started early, if it still runs, else a new one."""
+def discard() -> None:
+    """End a host started early that no analysis took (nothing to analyse, or a refusal): killed, it never ran a
+    task; its workers exit with it (a nanny's worker watches its parent)."""
     global _early
     host, _early = _early, None
-    if host is not None and host.alive():
+    if host is not None:
+        host.proc.kill()
+        host.close()
+
+
+def take(workers: int, dashboard: str | None) -> Host:
+    """The host started early if it still runs with these settings, else a new one."""
+    global _early
+    host, _early = _early, None
+    if host is not None and host.alive() and host.request == {"workers": workers, "dashboard": dashboard}:
         return host
     if host is not None:
         host.close()
-    return Host()
+    return Host(workers, dashboard)

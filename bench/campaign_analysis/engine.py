@@ -411,8 +411,8 @@ def analyse(folders: list[Path], out: Path, steps: tuple[str, ...] = ("identify"
     t0, cpu0 = time.perf_counter(), time.process_time()
     if not serial and (scheduler or scheduler_file):
         scheduler, scheduler_file = _connect(scheduler, scheduler_file), None  # a Dask scheduler, before any work
-    if not (serial or scheduler or scheduler_file):
-        cluster_host.start_early()  # its fork server's imports (1-2 s) overlap the planning
+    if not (serial or scheduler or scheduler_file):  # the cluster's start (2-3 s of CPU) overlaps the planning
+        cluster_host.start_early(cluster_host.local_workers(workers), cluster_host.dashboard_address(dashboard))
     out = Path(out).absolute()  # a remote worker resolves a relative path against its own directory
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -421,9 +421,12 @@ def analyse(folders: list[Path], out: Path, steps: tuple[str, ...] = ("identify"
     def busy(pid):
         return (f"{out}: another analysis is writing into this results folder (pid {pid}); wait for it "
                 "or use another -o")
-    with folder_lock(out, LOCK_NAME, AnalyseError, busy, say):
-        summary = _analyse_locked(folders, out, steps, settings, serial, workers, scheduler,
-                                  resume, progress, functions or {}, say, verbose, dashboard, t0, cpu0)
+    try:
+        with folder_lock(out, LOCK_NAME, AnalyseError, busy, say):
+            summary = _analyse_locked(folders, out, steps, settings, serial, workers, scheduler,
+                                      resume, progress, functions or {}, say, verbose, dashboard, t0, cpu0)
+    finally:
+        cluster_host.discard()  # started early and not needed (every row there, or a refusal)
     summary.wall_time = time.perf_counter() - t0
     summary.client_cpu = time.process_time() - cpu0
     return summary
@@ -454,11 +457,17 @@ def _analyse_locked(folders, out, steps, settings, serial, workers, scheduler, r
             if status != "ok":
                 summary.failed += 1
                 summary.failures.append(f"{task.folder.name}/{task.entry['key']} {task.step}: {error}")
-        bar.update(len(outcomes))
+        if bar is not None:
+            bar.update(len(outcomes))
 
-    from tqdm import tqdm
+    # no bar at all without progress, not a disabled one: tqdm takes a lock shared across fork (a multiprocessing
+    # RLock) even to register a disabled bar, and a forked analysis killed inside it left the next one waiting
+    # forever (the chaos test's last analysis hung so)
+    bar = None
+    if progress and tasks:
+        from tqdm import tqdm
 
-    bar = tqdm(total=len(tasks), unit="run", desc="analyse", disable=not progress or not tasks, dynamic_ncols=True)
+        bar = tqdm(total=len(tasks), unit="run", desc="analyse", dynamic_ncols=True)
     try:
         if serial:
             warm_up()
@@ -473,7 +482,8 @@ def _analyse_locked(folders, out, steps, settings, serial, workers, scheduler, r
             _on_cluster(tasks, settings, fn, record, summary, workers, scheduler, say, verbose, dashboard, t0, cpu0,
                         out)
     finally:
-        bar.close()
+        if bar is not None:
+            bar.close()
     cpu = time.process_time()
     summary.table = results.compact(results.read_rows(), current, unplanned)
     summary.work_cpu += time.process_time() - cpu
@@ -572,42 +582,17 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
     from distributed import Client, as_completed
     from distributed.scheduler import KilledWorker
 
-    dashboard: str | None = None
-    if want_dashboard:
-        try:
-            import bokeh  # noqa: F401 -- the dashboard needs it
-
-            dashboard = ":0"  # any free port: several analyses may run on one machine
-        except ImportError:
-            if verbose:
-                say("dask dashboard: not available (it needs the bokeh package); going on without it")
+    dashboard = cluster_host.dashboard_address(want_dashboard)
+    if want_dashboard and dashboard is None and verbose:
+        say("dask dashboard: not available (it needs the bokeh package); going on without it")
     address = scheduler  # checked by _connect
-    # allowed-failures 1: a task whose worker dies is given to a fresh worker once. worker-saturation 1.0: a
-    # worker holds only the task it runs (at the default 1.1 a one-thread worker also holds a queued task, and
-    # a death then counts against that innocent task too: a 200-run benchmark lost a third row that way)
-    # profile off: the worker's statistical profiler samples the task's stack every 10 ms and cost 15-25 % of
-    # the CPU of a 0.1 s identification (0.104-0.108 s against 0.077-0.091 s per task, measured)
-    # multiprocessing-method forkserver (local cluster only): the workers are forked from a server process that
-    # imported what the steps need once (WORKER_MODULES), so none imports scipy & co. itself (3.5 s of CPU each
-    # when spawned). A fork server, not a fork of this process: this one runs threads (the cluster's event loop
-    # forks), which can deadlock a forked child, and a fork would inherit its BLAS set-up, made before Dask's
-    # pre-spawn environment (OMP_NUM_THREADS=1 ...); the cluster host starts the server in the execution policy's.
-    # housekeeping at a run's pace, not a web dashboard's: the event loops' health tick every 200 ms (20 ms), the
-    # system monitor every 2 s (0.5 s), the worker's memory check every 1 s (0.1 s), no work stealing (the chunks
-    # are sized here): the process of the scheduler and nannies spent 3.3-3.6 s of CPU on a 200-run campaign with
-    # Dask's defaults, 2.6 s with these, on the two cores the workers need. They are the cluster host's settings
-    # (cluster_host: sent to it) and this client's (the connect timeout)
-    config = {"distributed.scheduler.allowed-failures": 1, "distributed.scheduler.worker-saturation": 1.0,
-              "distributed.worker.profile.enabled": False, "distributed.admin.tick.limit": "60s",
-              "distributed.admin.tick.interval": "200ms", "distributed.admin.system-monitor.interval": "2s",
-              "distributed.worker.memory.monitor-interval": "1s", "distributed.scheduler.work-stealing": False,
-              "distributed.comm.timeouts.connect": f"{CONNECT_TIMEOUT:g}s",
-              "distributed.worker.multiprocessing-method": "forkserver"}
     host = None
-    with dask.config.set(config):
+    # the local cluster's settings are the cluster host's (cluster_host.CONFIG); this client's own: the same where
+    # they apply to it, and the connect timeout
+    with dask.config.set({**cluster_host.CONFIG, "distributed.comm.timeouts.connect": f"{CONNECT_TIMEOUT:g}s"}):
         if address is None:  # the local cluster, in a process of its own (cluster_host)
-            host = cluster_host.take()
-            address, summary.dashboard = host.start(workers or os.cpu_count() or 1, dashboard, config)
+            host = cluster_host.take(cluster_host.local_workers(workers), dashboard)
+            address, summary.dashboard = host.address()
         try:
             client = Client(address, timeout=f"{CONNECT_TIMEOUT:g}s")
         except (OSError, TimeoutError) as exc:

@@ -65,9 +65,17 @@ def start_early(argv: list[str]) -> None:
 
     if not any(not a.startswith("-") and (Path(a) / INDEX_NAME).is_file() for a in argv):
         return
+    workers = None
+    for i, a in enumerate(argv):  # the count the command will check; a bad one: no early start
+        if a == "--workers" or a.startswith("--workers="):
+            value = a.partition("=")[2] if "=" in a else (argv[i + 1] if i + 1 < len(argv) else "")
+            workers = int(value) if value.isdigit() else -1
     from hilbench.bench.campaign_analysis import cluster_host
+    from hilbench.bench.campaign_analysis.fork_server import MAX_WORKERS
 
-    cluster_host.start_early()
+    if workers is None or 1 <= workers <= MAX_WORKERS:
+        dashboard = cluster_host.dashboard_address("--no-dashboard" not in argv)
+        cluster_host.start_early(cluster_host.local_workers(workers), dashboard)
 
 
 def run(args: argparse.Namespace) -> int:
