@@ -28,22 +28,48 @@ import select
 import subprocess
 import sys
 import time
-from typing import Any
 
 from hilbench.analysis.execution import ENVIRONMENT
 from hilbench.bench.campaign_analysis.fork_server import WORKER_MODULES
 from hilbench.bench.errors import AnalyseError
 
-#: the host's program: its reply channel first, then the fork server (before any import of its own), then serve()
+#: the host's program: its reply channel first, then the fork server (before any other import), then the cluster
+#: until its stdin ends. A program of its own, not a function of this module: importing any module of hilbench.bench
+#: imports numpy & co. (the package's __init__), CPU taken from the fork server's imports, the critical path.
+#: argv: the fork server's preload (JSON list), the request (JSON: workers, dashboard, Dask config)
 BOOT = """
 import json, os, sys
-reply = os.dup(1)
-os.dup2(2, 1)
+reply = os.fdopen(os.dup(1), "w")
+os.dup2(2, 1)  # anything printed goes to stderr, not into the reply
 from multiprocessing import forkserver, get_context
 get_context("forkserver").set_forkserver_preload(json.loads(sys.argv[1]))
 forkserver.ensure_running()
-from hilbench.bench.campaign_analysis.cluster_host import serve
-serve(reply, json.loads(sys.argv[2]))
+request = json.loads(sys.argv[2])
+import logging
+import dask
+from distributed import LocalCluster
+cluster = None
+try:
+    dask.config.set(request["config"])
+    try:
+        cluster = LocalCluster(n_workers=request["workers"], threads_per_worker=1, processes=True,
+                               dashboard_address=request["dashboard"], silence_logs=logging.CRITICAL)
+    except Exception as exc:
+        reply.write(json.dumps({"error": f"{type(exc).__name__}: {' '.join(str(exc).split())}"}) + "\\n")
+    else:
+        link = cluster.dashboard_link if request["dashboard"] else None
+        reply.write(json.dumps({"address": cluster.scheduler_address, "dashboard": link}) + "\\n")
+    reply.flush()
+    sys.stdin.read()  # until the client closes the pipe or dies
+except BrokenPipeError:  # the client is gone
+    pass
+finally:
+    if cluster is not None:
+        cluster.close()
+    # wait for the fork server, which reaps the workers: their CPU then counts in this process's children's, and so
+    # in the command's (a private method, the one CPython's tests use; without it the server exits by itself when
+    # this process does)
+    getattr(forkserver._forkserver, "_stop", lambda: None)()
 """
 #: the local cluster's Dask settings (the host's scheduler and nannies, and the workers they start).
 #: allowed-failures 1: a task whose worker dies is given to a fresh worker once. worker-saturation 1.0: a worker
@@ -66,39 +92,6 @@ CONFIG = {"distributed.scheduler.allowed-failures": 1, "distributed.scheduler.wo
 START_TIMEOUT = 300.0
 
 
-def serve(reply_fd: int, request: dict[str, Any]) -> None:
-    """The host's side (in the child process started with :data:`BOOT`)."""
-    import logging
-    from multiprocessing import forkserver
-
-    import dask
-    from distributed import LocalCluster
-
-    reply = os.fdopen(reply_fd, "w")
-    cluster = None
-    try:
-        dask.config.set(CONFIG)
-        try:
-            cluster = LocalCluster(n_workers=request["workers"], threads_per_worker=1, processes=True,
-                                   dashboard_address=request["dashboard"], silence_logs=logging.CRITICAL)
-        except Exception as exc:  # noqa: BLE001 -- said to the client in one line
-            reply.write(json.dumps({"error": f"{type(exc).__name__}: {' '.join(str(exc).split())}"}) + "\n")
-        else:
-            link = cluster.dashboard_link if request["dashboard"] else None
-            reply.write(json.dumps({"address": cluster.scheduler_address, "dashboard": link}) + "\n")
-        reply.flush()
-        sys.stdin.read()  # until the client closes the pipe or dies
-    except BrokenPipeError:  # the client is gone
-        pass
-    finally:
-        if cluster is not None:
-            cluster.close()
-        # wait for the fork server, which reaps the workers: their CPU then counts in this process's children's, and
-        # so in the command's (a private method, the one CPython's tests use; without it the server exits by itself
-        # when this process does)
-        getattr(forkserver._forkserver, "_stop", lambda: None)()
-
-
 def local_workers(workers: int | None) -> int:
     """Worker processes of a local cluster: ``workers``, by default one per core."""
     return workers or os.cpu_count() or 1
@@ -119,7 +112,7 @@ class Host:
     def __init__(self, workers: int, dashboard: str | None) -> None:
         self.request = {"workers": workers, "dashboard": dashboard}
         self.proc = subprocess.Popen([sys.executable, "-c", BOOT, json.dumps(["distributed", *WORKER_MODULES]),
-                                      json.dumps(self.request)],
+                                      json.dumps({**self.request, "config": CONFIG})],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, env={**os.environ, **ENVIRONMENT},
                                      close_fds=True)
 
