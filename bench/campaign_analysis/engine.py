@@ -600,7 +600,8 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
         except (OSError, TimeoutError) as exc:
             if host is not None:
                 host.close()
-            raise AnalyseError(f"--scheduler {address}: cannot connect ({one_line(exc)})") from None
+            where = f"--scheduler {address}" if scheduler else f"the local cluster at {address}"
+            raise AnalyseError(f"{where}: cannot connect ({one_line(exc)})") from None
         try:
             if dashboard is not None and (summary.dashboard or client.dashboard_link):
                 summary.dashboard = summary.dashboard or client.dashboard_link

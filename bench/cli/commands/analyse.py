@@ -79,6 +79,15 @@ def start_early(argv: list[str]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hilbench.bench.campaign_analysis import cluster_host
+
+    try:
+        return _run(args)
+    finally:
+        cluster_host.discard()  # a cluster host start_early started for a command line refused here
+
+
+def _run(args: argparse.Namespace) -> int:
     from hilbench.bench.acquisition.campaign import INDEX_NAME
     from hilbench.bench.analysis_input import MAX_THRESHOLDS, check_count
     from hilbench.bench.campaign_analysis.fork_server import MAX_WORKERS

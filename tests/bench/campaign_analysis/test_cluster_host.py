@@ -86,6 +86,30 @@ def test_a_client_killed_with_sigkill_takes_its_cluster_with_it():
         client.wait()
 
 
+def test_a_refused_command_line_ends_the_host_it_started_early(tmp_path):
+    """`hilbench analyse` starts its cluster host before it parses its options; a line it then refuses (exit 2)
+    ends that host at once, also when the command runs inside a longer-lived process (the GUI, a test)."""
+    from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
+    from hilbench.bench.cli.main import main
+
+    folder = tmp_path / "c"
+    write_campaign(folder, SyntheticCampaign(runs=1, duration=0.5, sample_rate=1000.0, seed=1))
+    started = []
+    real = cluster_host.Host
+
+    class Spy(real):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            started.append(self)
+
+    cluster_host.Host = Spy
+    try:
+        assert main(["analyse", str(folder), "--workers", "1", "--thresholds", "-5"]) == 2
+    finally:
+        cluster_host.Host = real
+    assert len(started) == 1 and started[0].proc.poll() is not None and cluster_host._early is None
+
+
 def test_a_cluster_that_cannot_start_is_one_line():
     host = cluster_host.Host(1, "not an address")
     with pytest.raises(AnalyseError, match="the local cluster did not start: ") as err:
@@ -95,6 +119,7 @@ def test_a_cluster_that_cannot_start_is_one_line():
 
 
 def test_an_early_host_is_taken_once_with_its_settings_and_otherwise_ended():
+    cluster_host.discard()
     cluster_host.start_early(1, None)
     early = cluster_host._early
     assert cluster_host.take(1, None) is early and cluster_host._early is None
