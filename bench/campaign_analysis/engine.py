@@ -5,7 +5,8 @@ once), and holds the results folder's lock (table.LOCK_NAME) throughout. Tasks t
 :data:`MAX_CHUNK`); the worker hashes each file, checks its uid against the index, analyses it unless its row is
 there, writes the chunk's rows as one part of the results folder (table.write_part) and returns only their keys.
 The client compacts the parts into the table at the end. Chunks because a Dask task costs the client and the
-scheduler (which share one process and its GIL on a LocalCluster) 1-4 ms of CPU.
+scheduler 1-4 ms of CPU. The local cluster (scheduler, nannies, the workers' fork server) runs in a process of its
+own (cluster_host), so that this process does the client's work only.
 
 Faults: a step that raises gives a row with status ``failed`` and the one-line reason (caught in the worker).
 A worker that dies (segfault, out of memory, ``os._exit``) loses its task; the scheduler gives it to a fresh
@@ -18,7 +19,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import logging
 import math
 import os
 import re
@@ -31,15 +31,18 @@ from typing import Any
 
 from hilbench import __version__
 from hilbench.bench.acquisition.campaign import INDEX_NAME
-from hilbench.bench.campaign_analysis.fork_server import MAX_WORKERS, start_fork_server, warm_up
+from hilbench.bench.campaign_analysis import cluster_host
+from hilbench.bench.campaign_analysis.fork_server import MAX_WORKERS, warm_up
 from hilbench.bench.campaign_analysis.steps import STEPS, StepSettings, steps_for
 from hilbench.bench.campaign_analysis.table import ResultsFolder, row_key
 from hilbench.bench.errors import AnalyseError
 
 StepFunction = Callable[[str, StepSettings], dict[str, Any]]
-#: most runs per task: large enough that the per-task cost vanishes, small enough that both workers stay busy to
-#: the end and that a killed client loses little
-MAX_CHUNK = 8
+#: most runs per task: large enough that the per-task cost vanishes (a task costs the client about 2.7 ms of CPU:
+#: its round trips and reading its part; the scheduler as much again), small enough that a worker's death or a killed
+#: client loses little. 16 with chunks of half a worker's share: 24 tasks for 200 runs on 2 workers (44 with 8 and a
+#: quarter), the last 7 single runs
+MAX_CHUNK = 16
 _QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(\S*)\s*$")
 #: environment keys read into numeric columns: key -> (column, accepted units)
 #: largest campaign index read, bytes (a thousand runs are ~1 MB)
@@ -75,15 +78,23 @@ class Summary:
     startup_time: float = 0.0  # of wall_time: cluster start and every worker's imports of the steps
     dashboard: str | None = None
     failures: list[str] = field(default_factory=list)
-    client_cpu: float = 0.0    # s of this process's CPU (the client's, and on a local cluster its scheduler's)
+    client_cpu: float = 0.0    # s of this process's CPU (the client's; the local cluster's scheduler runs in its host)
     startup_cpu: float = 0.0   # of client_cpu: before the first task (imports, planning, cluster start)
     work_cpu: float = 0.0      # of client_cpu: from the first task to the table written (not the cluster's close)
+    scheduler_cpu: float | None = None  # s of the scheduler's process's CPU from the first task to the last result
+    # (the local cluster's host: scheduler and nannies; None serially, or if the scheduler runs no functions)
 
     @property
     def client_cpu_per_run(self) -> float:
-        """s of this process's CPU per analysed run from the first task to the table: what limits many workers
-        (the scheduler and the client share this process and its GIL), measurable on 2 cores."""
+        """s of this process's CPU per analysed run from the first task to the table: with N workers the client
+        must handle N runs in the time one run's analysis takes; measurable on 2 cores."""
         return self.work_cpu / max(1, self.analysed + self.skipped)
+
+    @property
+    def scheduler_cpu_per_run(self) -> float | None:
+        """s of the scheduler's process's CPU per analysed run (scheduler and nannies on a local cluster): the
+        other process that must keep up with N workers."""
+        return None if self.scheduler_cpu is None else self.scheduler_cpu / max(1, self.analysed + self.skipped)
 
 
 def one_line(exc: BaseException) -> str:
@@ -366,9 +377,9 @@ def _execute_items(items, settings, functions, results, row_key, write_part) -> 
 
 def chunk(todo: list[Task], workers: int) -> list[list[Task]]:
     """Split the tasks into chunks of at most MAX_CHUNK that shrink as the work left does (guided scheduling):
-    each is a quarter of the remaining tasks' share per worker, so the last ones are single runs and no worker
-    waits for another's last chunk of eight; small campaigns get one run per chunk."""
-    out, i, per = [], 0, 4 * max(1, workers)
+    each is half the remaining tasks' share per worker, so the last ones are single runs and no worker waits for
+    another's last big chunk; small campaigns get small chunks."""
+    out, i, per = [], 0, 2 * max(1, workers)
     while i < len(todo):
         size = max(1, min(MAX_CHUNK, (len(todo) - i) // per))
         out.append(todo[i:i + size])
@@ -402,8 +413,8 @@ def analyse(folders: list[Path], out: Path, steps: tuple[str, ...] = ("identify"
     t0, cpu0 = time.perf_counter(), time.process_time()
     if not serial and (scheduler or scheduler_file):
         scheduler, scheduler_file = _connect(scheduler, scheduler_file), None  # a Dask scheduler, before any work
-    if not (serial or scheduler or scheduler_file):
-        start_fork_server()  # its imports (2 s) overlap the planning
+    if not (serial or scheduler or scheduler_file):  # the cluster's start (2-3 s of CPU) overlaps the planning
+        cluster_host.start_early(cluster_host.local_workers(workers), cluster_host.dashboard_address(dashboard))
     out = Path(out).absolute()  # a remote worker resolves a relative path against its own directory
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -412,9 +423,12 @@ def analyse(folders: list[Path], out: Path, steps: tuple[str, ...] = ("identify"
     def busy(pid):
         return (f"{out}: another analysis is writing into this results folder (pid {pid}); wait for it "
                 "or use another -o")
-    with folder_lock(out, LOCK_NAME, AnalyseError, busy, say):
-        summary = _analyse_locked(folders, out, steps, settings, serial, workers, scheduler,
-                                  resume, progress, functions or {}, say, verbose, dashboard, t0, cpu0)
+    try:
+        with folder_lock(out, LOCK_NAME, AnalyseError, busy, say):
+            summary = _analyse_locked(folders, out, steps, settings, serial, workers, scheduler,
+                                      resume, progress, functions or {}, say, verbose, dashboard, t0, cpu0)
+    finally:
+        cluster_host.discard()  # started early and not needed (every row there, or a refusal)
     summary.wall_time = time.perf_counter() - t0
     summary.client_cpu = time.process_time() - cpu0
     return summary
@@ -445,11 +459,17 @@ def _analyse_locked(folders, out, steps, settings, serial, workers, scheduler, r
             if status != "ok":
                 summary.failed += 1
                 summary.failures.append(f"{task.folder.name}/{task.entry['key']} {task.step}: {error}")
-        bar.update(len(outcomes))
+        if bar is not None:
+            bar.update(len(outcomes))
 
-    from tqdm import tqdm
+    # no bar at all without progress, not a disabled one: tqdm takes a lock shared across fork (a multiprocessing
+    # RLock) even to register a disabled bar, and a forked analysis killed inside it left the next one waiting
+    # forever (the chaos test's last analysis hung so)
+    bar = None
+    if progress and tasks:
+        from tqdm import tqdm
 
-    bar = tqdm(total=len(tasks), unit="run", desc="analyse", disable=not progress or not tasks, dynamic_ncols=True)
+        bar = tqdm(total=len(tasks), unit="run", desc="analyse", dynamic_ncols=True)
     try:
         if serial:
             warm_up()
@@ -464,7 +484,8 @@ def _analyse_locked(folders, out, steps, settings, serial, workers, scheduler, r
             _on_cluster(tasks, settings, fn, record, summary, workers, scheduler, say, verbose, dashboard, t0, cpu0,
                         out)
     finally:
-        bar.close()
+        if bar is not None:
+            bar.close()
     cpu = time.process_time()
     summary.table = results.compact(results.read_rows(), current, unplanned)
     summary.work_cpu += time.process_time() - cpu
@@ -560,55 +581,32 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
                 summary: Summary, workers: int | None, scheduler: str | None, say: Callable[[str], None],
                 verbose: bool, want_dashboard: bool, t0: float, cpu0: float, out: Path) -> None:
     import dask
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import Client, as_completed
     from distributed.scheduler import KilledWorker
 
-    dashboard: str | None = None
-    if want_dashboard:
-        try:
-            import bokeh  # noqa: F401 -- the dashboard needs it
-
-            dashboard = ":0"  # any free port: several analyses may run on one machine
-        except ImportError:
-            if verbose:
-                say("dask dashboard: not available (it needs the bokeh package); going on without it")
+    dashboard = cluster_host.dashboard_address(want_dashboard)
+    if want_dashboard and dashboard is None and verbose:
+        say("dask dashboard: not available (it needs the bokeh package); going on without it")
     address = scheduler  # checked by _connect
-    cluster = None
-    # allowed-failures 1: a task whose worker dies is given to a fresh worker once. worker-saturation 1.0: a
-    # worker holds only the task it runs (at the default 1.1 a one-thread worker also holds a queued task, and
-    # a death then counts against that innocent task too: a 200-run benchmark lost a third row that way)
-    # profile off: the worker's statistical profiler samples the task's stack every 10 ms and cost 15-25 % of
-    # the CPU of a 0.1 s identification (0.104-0.108 s against 0.077-0.091 s per task, measured)
-    # multiprocessing-method forkserver (local cluster only): the workers are forked from a server process that
-    # imported what the steps need once (WORKER_MODULES), so none imports scipy & co. itself (3.5 s of CPU each
-    # when spawned). A fork server, not a fork of this process: this one runs threads (the cluster's event loop
-    # forks), which can deadlock a forked child, and a fork would inherit its BLAS set-up, made before Dask's
-    # pre-spawn environment (OMP_NUM_THREADS=1 ...); start_fork_server starts the server in that environment.
-    # housekeeping at a run's pace, not a web dashboard's: the event loops' health tick every 200 ms (20 ms), the
-    # system monitor every 2 s (0.5 s), the worker's memory check every 1 s (0.1 s), no work stealing (the chunks
-    # are sized here): the client process (scheduler, nannies) spent 3.3-3.6 s of CPU on a 200-run campaign with
-    # Dask's defaults, 2.6 s with these, on the two cores the workers need
-    with dask.config.set({"distributed.scheduler.allowed-failures": 1, "distributed.scheduler.worker-saturation": 1.0,
-                          "distributed.worker.profile.enabled": False, "distributed.admin.tick.limit": "60s",
-                          "distributed.admin.tick.interval": "200ms", "distributed.admin.system-monitor.interval": "2s",
-                          "distributed.worker.memory.monitor-interval": "1s",
-                          "distributed.scheduler.work-stealing": False,
-                          "distributed.comm.timeouts.connect": f"{CONNECT_TIMEOUT:g}s",
-                          "distributed.worker.multiprocessing-method": "forkserver"}):
-        if address is not None:
-            try:
-                client = Client(address, timeout=f"{CONNECT_TIMEOUT:g}s")
-            except (OSError, TimeoutError) as exc:
-                raise AnalyseError(f"--scheduler {address}: cannot connect ({one_line(exc)})") from None
-        else:
-            cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                                   dashboard_address=dashboard, silence_logs=logging.CRITICAL)
-            client = Client(cluster)
+    host = None
+    # the local cluster's settings are the cluster host's (cluster_host.CONFIG); this client's own: the same where
+    # they apply to it, and the connect timeout
+    with dask.config.set({**cluster_host.CONFIG, "distributed.comm.timeouts.connect": f"{CONNECT_TIMEOUT:g}s"}):
+        if address is None:  # the local cluster, in a process of its own (cluster_host)
+            host = cluster_host.take(cluster_host.local_workers(workers), dashboard)
+            address, summary.dashboard = host.address()
         try:
-            if dashboard is not None and client.dashboard_link:
-                summary.dashboard = client.dashboard_link
-                say(f"dask dashboard: {client.dashboard_link}")
-            if address is not None:  # a remote worker must reach the results folder at the same path
+            client = Client(address, timeout=f"{CONNECT_TIMEOUT:g}s")
+        except (OSError, TimeoutError) as exc:
+            if host is not None:
+                host.close()
+            where = f"--scheduler {address}" if scheduler else f"the local cluster at {address}"
+            raise AnalyseError(f"{where}: cannot connect ({one_line(exc)})") from None
+        try:
+            if dashboard is not None and (summary.dashboard or client.dashboard_link):
+                summary.dashboard = summary.dashboard or client.dashboard_link
+                say(f"dask dashboard: {summary.dashboard}")
+            if scheduler is not None:  # a remote worker must reach the results folder at the same path
                 refused = [why for why in client.run(_check_writable, str(out)).values() if why]
                 if refused:
                     raise AnalyseError(refused[0])
@@ -623,7 +621,7 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
                 submitted[future] = part
                 futures.add(future)
 
-            loop_cpu = time.process_time()
+            loop_cpu, scheduler_cpu = time.process_time(), _scheduler_cpu(client)
             for part in chunk(todo, n_workers):
                 submit(part)
             for future in futures:
@@ -640,7 +638,19 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
                     outcomes = [_died(task, exc, out) for task in part]
                 record(part, outcomes)
             summary.work_cpu += time.process_time() - loop_cpu
+            end = _scheduler_cpu(client)
+            if scheduler_cpu is not None and end is not None:
+                summary.scheduler_cpu = end - scheduler_cpu
         finally:
             client.close()
-            if cluster is not None:
-                cluster.close()
+            if host is not None:
+                host.close()
+
+
+def _scheduler_cpu(client: Any) -> float | None:
+    """s of CPU the scheduler's process has spent (the cluster host's: scheduler and nannies), or None if the
+    scheduler does not run functions sent to it (``distributed.scheduler.pickle`` off)."""
+    try:
+        return float(client.run_on_scheduler(time.process_time))
+    except Exception:  # noqa: BLE001 -- a figure of the summary, not a reason to stop
+        return None

@@ -54,23 +54,40 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def start_early(argv: list[str]) -> None:
-    """Start the local cluster's fork server if this command line will use one (hilbench.bench.cli.main calls this
-    before it builds its parser): the server's imports (about 2 s on one core) are the local cluster's critical path,
-    and the command's own imports, parsing and planning then run beside them on the other core (the server starts
-    0.22-0.35 s after the interpreter instead of 0.38-0.60 s). Only for a line that names a campaign folder and no
-    other engine; a line that is bad for another reason costs a server process that exits with the command."""
+    """Start the local cluster's host process if this command line will use one (hilbench.bench.cli.main calls this
+    before it builds its parser): its fork server's imports (1-2 s on one core) are the local cluster's critical
+    path, and the command's own imports, parsing and planning then run beside them. Only for a line that names a
+    campaign folder and no other engine; a line that is bad for another reason costs a process that exits with the
+    command."""
     if any(a in ("-h", "--help") or a.startswith(("--serial", "--scheduler")) for a in argv):
         return
     from hilbench.bench.acquisition.campaign import INDEX_NAME
 
     if not any(not a.startswith("-") and (Path(a) / INDEX_NAME).is_file() for a in argv):
         return
-    from hilbench.bench.campaign_analysis.fork_server import start_fork_server
+    workers = None
+    for i, a in enumerate(argv):  # the count the command will check; a bad one: no early start
+        if a == "--workers" or a.startswith("--workers="):
+            value = a.partition("=")[2] if "=" in a else (argv[i + 1] if i + 1 < len(argv) else "")
+            workers = int(value) if value.isdigit() else -1
+    from hilbench.bench.campaign_analysis import cluster_host
+    from hilbench.bench.campaign_analysis.fork_server import MAX_WORKERS
 
-    start_fork_server()
+    if workers is None or 1 <= workers <= MAX_WORKERS:
+        dashboard = cluster_host.dashboard_address("--no-dashboard" not in argv)
+        cluster_host.start_early(cluster_host.local_workers(workers), dashboard)
 
 
 def run(args: argparse.Namespace) -> int:
+    from hilbench.bench.campaign_analysis import cluster_host
+
+    try:
+        return _run(args)
+    finally:
+        cluster_host.discard()  # a cluster host start_early started for a command line refused here
+
+
+def _run(args: argparse.Namespace) -> int:
     from hilbench.bench.acquisition.campaign import INDEX_NAME
     from hilbench.bench.analysis_input import MAX_THRESHOLDS, check_count
     from hilbench.bench.campaign_analysis.fork_server import MAX_WORKERS
@@ -115,8 +132,10 @@ def run(args: argparse.Namespace) -> int:
                       verbose=outputs.verbosity > 1, dashboard=not args.no_dashboard)
     for line in summary.failures:
         outputs.say(f"failed: {line}")
+    per_run = summary.scheduler_cpu_per_run
+    scheduler = "" if per_run is None else f", scheduler {1e3 * per_run:.2f} ms per run"
     outputs.say(f"{summary.analysed} analysed ({summary.failed} failed), {summary.skipped} already there, "
                 f"{summary.total} rows in all ({summary.wall_time:.1f} s, {summary.startup_time:.1f} s of it start-up; "
-                f"client CPU {1e3 * summary.client_cpu_per_run:.2f} ms per run) "
+                f"client CPU {1e3 * summary.client_cpu_per_run:.2f} ms per run{scheduler}) "
                 f"-> {summary.table}")
     return 0

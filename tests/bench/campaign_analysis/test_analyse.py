@@ -97,8 +97,8 @@ def _dies(path: str, settings: StepSettings) -> dict:
 
 def test_cluster_survives_dying_workers_and_matches_serial(campaign, tmp_path):
     serial = {r["key"]: r for r in _rows(analyse([campaign], tmp_path / "serial", serial=True, **quiet).table)}
-    # tasks of one run here (8 runs, 2 workers: engine.chunk); the split of a task of several runs that kills its
-    # workers is measured by benchmarks/bench_campaign.py (200 runs, tasks of 8: exactly the 2 bad rows fail)
+    # tasks of 2 runs then 1 here (8 runs, 2 workers: engine.chunk); the split of a task of many runs that kills its
+    # workers is measured by benchmarks/bench_campaign.py (200 runs, tasks of 16: exactly the 2 bad rows fail)
     s = analyse([campaign], tmp_path / "cluster", workers=2, dashboard=False, functions={"identify": _dies}, **quiet)
     rows = {r["key"]: r for r in _rows(s.table)}
     assert len(rows) == 8 and s.analysed == 8 and s.failed == 2
@@ -136,14 +136,14 @@ def test_a_killed_client_leaves_good_parts_and_a_rerun_analyses_only_the_missing
 
 def test_chunks_balance_the_workers_and_cap_the_task_size():
     todo = list(range(200))
-    parts = chunk(todo, 2)  # 200 runs, 2 workers: 8 per task while 64 or more are left, then shrinking to 1
+    parts = chunk(todo, 2)  # 200 runs, 2 workers: 16 per task while 64 or more are left, then shrinking to 1
     sizes = [len(p) for p in parts]
-    assert sum(parts, []) == todo and sizes[:18] == [MAX_CHUNK] * 18 and sizes == sorted(sizes, reverse=True)
-    # each a quarter of the remaining share per worker: the last 8 are single runs
+    assert sum(parts, []) == todo and sizes[:9] == [MAX_CHUNK] * 9 and sizes == sorted(sizes, reverse=True)
+    # each half the remaining share per worker: the last 7 are single runs
     left = [sum(sizes[:k]) for k in range(len(sizes))]
-    assert all(s == max(1, min(MAX_CHUNK, (200 - a) // 8)) for s, a in zip(sizes, left, strict=True))
-    assert sizes[-8:] == [1] * 8 and len(parts) < 60
-    assert [len(p) for p in chunk(todo[:20], 2)] == [2, 2, 2] + [1] * 14  # at least 4 tasks per worker
+    assert all(s == max(1, min(MAX_CHUNK, (200 - a) // 4)) for s, a in zip(sizes, left, strict=True))
+    assert sizes[-7:] == [1] * 7 and len(parts) == 24
+    assert [len(p) for p in chunk(todo[:20], 2)] == [5, 3, 3, 2] + [1] * 7  # at least 2 tasks per worker
     assert [len(p) for p in chunk(todo[:5], 2)] == [1] * 5
 
 
@@ -159,16 +159,17 @@ def test_cli_bad_input_is_one_line_and_exit_2(campaign, tmp_path, capsys):
 
 _EARLY_CHILD = """
 import sys
-from multiprocessing import forkserver
+from hilbench.bench.campaign_analysis import cluster_host
 from hilbench.bench.cli.commands.analyse import start_early
 start_early(sys.argv[1:])
-print(forkserver._forkserver._forkserver_pid is not None)
+print(cluster_host._early is not None)
 """
 
 
-def test_the_fork_server_starts_before_the_parser_only_for_a_local_cluster(campaign, tmp_path):
-    """`hilbench analyse` starts its workers' fork server first thing (its 2 s of imports are the local cluster's
-    critical path), but only for a line that names a campaign folder and asks for no other engine."""
+def test_the_cluster_host_starts_before_the_parser_only_for_a_local_cluster(campaign, tmp_path):
+    """`hilbench analyse` starts its cluster's host process (and with it the workers' fork server, whose 1-2 s of
+    imports are the local cluster's critical path) first thing, but only for a line that names a campaign folder and
+    asks for no other engine."""
     def started(*args: str) -> bool:
         done = subprocess.run([sys.executable, "-c", _EARLY_CHILD, *args], capture_output=True, text=True,
                               timeout=60)

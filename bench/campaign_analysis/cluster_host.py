@@ -1,0 +1,185 @@
+"""The local cluster in a process of its own: the Dask scheduler, the nannies and the fork server of the workers run
+in a child process of ``hilbench analyse`` (the *cluster host*), and the command is one more client of it, as with
+``--scheduler``. So the command's process carries only the client's work: with the scheduler and the nannies in it
+(one process, one GIL, one event loop) it spent 1.4-2 ms of CPU per analysed run on 200 runs of 5 s at 5 kHz on a
+quiet 2-core machine, and 5-8 ms under load, most of it the scheduler's ticks, the workers' heartbeats and the
+nannies' monitors, which grow with the wall time, not the work. The host's own CPU per run is reported beside the
+client's (engine.Summary.scheduler_cpu_per_run): with N workers it is what one scheduler process must keep up with.
+
+The host starts the workers' fork server first thing, before it imports anything of hilbench or Dask: the server's
+imports (:data:`fork_server.WORKER_MODULES`, about 1-2 s on one core) are the cluster's critical path. It is started
+from a ``-c`` program (:data:`BOOT`), not ``-m``: multiprocessing would make the fork server and every worker import
+a ``__main__`` module again.
+
+The host gets its worker count and dashboard on its command line and starts the cluster at once, so that the whole
+start (the fork server's imports, distributed's, the scheduler, the workers) overlaps the client's own imports and
+planning. It answers with one JSON line on a copy of its stdout (its stdout itself goes to stderr, so that nothing a
+library prints can break the reply): ``{"address", "dashboard"}`` once the workers are up, or ``{"error"}``. Then it
+holds the cluster until its stdin ends (the client closed it, or died however it died: no cluster outlives its
+client), closes it, stops the fork server (so that its and its workers' CPU reach the client's resource usage) and
+exits.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import select
+import subprocess
+import sys
+import time
+
+from hilbench.analysis.execution import ENVIRONMENT
+from hilbench.bench.campaign_analysis.fork_server import WORKER_MODULES
+from hilbench.bench.errors import AnalyseError
+
+#: the host's program: its reply channel first, then the fork server (before any other import), then the cluster
+#: until its stdin ends. A program of its own, not a function of this module: importing any module of hilbench.bench
+#: imports numpy & co. (the package's __init__), CPU taken from the fork server's imports, the critical path.
+#: argv: the fork server's preload (JSON list), the request (JSON: workers, dashboard, Dask config)
+BOOT = """
+import json, os, sys
+reply = os.fdopen(os.dup(1), "w")
+os.dup2(2, 1)  # anything printed goes to stderr, not into the reply
+from multiprocessing import forkserver, get_context
+get_context("forkserver").set_forkserver_preload(json.loads(sys.argv[1]))
+forkserver.ensure_running()
+request = json.loads(sys.argv[2])
+import logging
+import dask
+from distributed import LocalCluster
+cluster = None
+try:
+    dask.config.set(request["config"])
+    try:
+        cluster = LocalCluster(n_workers=request["workers"], threads_per_worker=1, processes=True,
+                               dashboard_address=request["dashboard"], silence_logs=logging.CRITICAL)
+    except Exception as exc:
+        reply.write(json.dumps({"error": f"{type(exc).__name__}: {' '.join(str(exc).split())}"}) + "\\n")
+    else:
+        link = cluster.dashboard_link if request["dashboard"] else None
+        reply.write(json.dumps({"address": cluster.scheduler_address, "dashboard": link}) + "\\n")
+    reply.flush()
+    sys.stdin.read()  # until the client closes the pipe or dies
+except BrokenPipeError:  # the client is gone
+    pass
+finally:
+    if cluster is not None:
+        cluster.close()
+    # wait for the fork server, which reaps the workers: their CPU then counts in this process's children's, and so
+    # in the command's (a private method, the one CPython's tests use; without it the server exits by itself when
+    # this process does)
+    getattr(forkserver._forkserver, "_stop", lambda: None)()
+"""
+#: the local cluster's Dask settings (the host's scheduler and nannies, and the workers they start).
+#: allowed-failures 1: a task whose worker dies is given to a fresh worker once. worker-saturation 1.0: a worker
+#: holds only the task it runs (at the default 1.1 a one-thread worker also holds a queued task, and a death then
+#: counts against that innocent task too: a 200-run benchmark lost a third row that way). profile off: the worker's
+#: statistical profiler samples the task's stack every 10 ms and cost 15-25 % of the CPU of a 0.1 s identification
+#: (0.104-0.108 s against 0.077-0.091 s per task, measured). multiprocessing-method forkserver: the workers are forked
+#: from the server this process starts first (fork_server.WORKER_MODULES imported once; 3.5 s of CPU per worker when
+#: spawned). Housekeeping at a run's pace, not a web dashboard's: the event loops' health tick every 200 ms (20 ms),
+#: the system monitor every 2 s (0.5 s), the worker's memory check every 1 s (0.1 s), no work stealing (the chunks
+#: are sized by the client): the process of the scheduler and nannies spent 3.3-3.6 s of CPU on a 200-run campaign
+#: with Dask's defaults, 2.6 s with these.
+CONFIG = {"distributed.scheduler.allowed-failures": 1, "distributed.scheduler.worker-saturation": 1.0,
+          "distributed.worker.profile.enabled": False, "distributed.admin.tick.limit": "60s",
+          "distributed.admin.tick.interval": "200ms", "distributed.admin.system-monitor.interval": "2s",
+          "distributed.worker.memory.monitor-interval": "1s", "distributed.scheduler.work-stealing": False,
+          "distributed.worker.multiprocessing-method": "forkserver"}
+#: how long the cluster may take to come up, s (the fork server's imports take 1-2 s on an idle core, 10 s at a load
+#: of 20)
+START_TIMEOUT = 300.0
+
+
+def local_workers(workers: int | None) -> int:
+    """Worker processes of a local cluster: ``workers``, by default one per core."""
+    return workers or os.cpu_count() or 1
+
+
+def dashboard_address(wanted: bool) -> str | None:
+    """Where the cluster's dashboard listens: any free port (several analyses may run on one machine) when wanted
+    and the bokeh package is there, else None."""
+    import importlib.util
+
+    return ":0" if wanted and importlib.util.find_spec("bokeh") is not None else None
+
+
+class Host:
+    """The client's handle on a cluster host process of ``workers`` workers (started at once: its fork server starts
+    importing, then the cluster starts)."""
+
+    def __init__(self, workers: int, dashboard: str | None) -> None:
+        self.request = {"workers": workers, "dashboard": dashboard}
+        self.proc = subprocess.Popen([sys.executable, "-c", BOOT, json.dumps(["distributed", *WORKER_MODULES]),
+                                      json.dumps({**self.request, "config": CONFIG})],
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, env={**os.environ, **ENVIRONMENT},
+                                     close_fds=True)
+
+    def address(self, timeout: float = START_TIMEOUT) -> tuple[str, str | None]:
+        """(scheduler address, dashboard link), once the workers are up."""
+        assert self.proc.stdout is not None
+        line, deadline, fd = b"", time.monotonic() + timeout, self.proc.stdout.fileno()
+        while not line.endswith(b"\n"):
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([fd], [], [], left)[0]:
+                self.close()
+                raise AnalyseError(f"the local cluster did not start within {timeout:g} s")
+            got = os.read(fd, 65536)
+            if not got:
+                raise AnalyseError(f"the local cluster's process ended before it started (exit code "
+                                   f"{self.proc.wait()})")
+            line += got
+        doc = json.loads(line)
+        if "error" in doc:
+            self.close()
+            raise AnalyseError(f"the local cluster did not start: {doc['error'][:300]}")
+        return doc["address"], doc["dashboard"]
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def close(self, timeout: float = 60.0) -> None:
+        """End the host: it closes the cluster, stops its fork server and exits; killed if it does not in time."""
+        for pipe in (self.proc.stdin, self.proc.stdout):
+            if pipe is not None:
+                try:
+                    pipe.close()
+                except BrokenPipeError:
+                    pass
+        try:
+            self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+
+
+_early: Host | None = None
+
+
+def start_early(workers: int, dashboard: str | None) -> None:
+    """Start a host now (``hilbench analyse`` calls this before it builds its parser); :func:`take` hands it over."""
+    global _early
+    if _early is None:
+        _early = Host(workers, dashboard)
+
+
+def discard() -> None:
+    """End a host started early that no analysis took (nothing to analyse, or a refusal): killed, it never ran a
+    task; its workers exit with it (a nanny's worker watches its parent)."""
+    global _early
+    host, _early = _early, None
+    if host is not None:
+        host.proc.kill()
+        host.close()
+
+
+def take(workers: int, dashboard: str | None) -> Host:
+    """The host started early if it still runs with these settings, else a new one."""
+    global _early
+    host, _early = _early, None
+    if host is not None and host.alive() and host.request == {"workers": workers, "dashboard": dashboard}:
+        return host
+    if host is not None:
+        host.close()
+    return Host(workers, dashboard)

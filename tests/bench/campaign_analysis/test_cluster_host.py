@@ -1,0 +1,138 @@
+"""The local cluster's host process (bench.campaign_analysis.cluster_host): the scheduler and the nannies run outside
+the client's process, the host ends with its client however the client ends, and a cluster that cannot start is one
+line."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from hilbench.bench.campaign_analysis import cluster_host
+from hilbench.bench.errors import AnalyseError
+
+
+def _gone(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    # a zombie (exited, not yet reaped by a parent that is gone too) counts as gone
+    with open(f"/proc/{pid}/stat") as fh:
+        return fh.read().rsplit(")", 1)[1].split()[0] == "Z"
+
+
+def _descendants(pid: int) -> set[int]:
+    out, todo = set(), [pid]
+    while todo:
+        p = todo.pop()
+        try:
+            children = open(f"/proc/{p}/task/{p}/children").read().split()
+        except OSError:
+            continue
+        out.update(int(c) for c in children)
+        todo += [int(c) for c in children]
+    return out
+
+
+def test_the_scheduler_runs_in_the_host_not_in_the_client_and_ends_with_it():
+    from distributed import Client
+
+    host = cluster_host.Host(1, None)
+    address, dashboard = host.address()
+    assert dashboard is None
+    with Client(address, timeout="30s") as client:
+        scheduler_pid = client.run_on_scheduler(os.getpid)
+        workers = client.run(os.getpid)
+    assert scheduler_pid == host.proc.pid != os.getpid()
+    assert len(workers) == 1 and os.getpid() not in workers.values()
+    host.close()
+    assert host.proc.returncode == 0
+    deadline = time.monotonic() + 30
+    while not all(_gone(p) for p in workers.values()) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert all(_gone(p) for p in workers.values()), "a worker outlived its cluster host"
+
+
+_CLIENT = """
+import sys
+from hilbench.bench.campaign_analysis import cluster_host
+host = cluster_host.Host(1, None)
+print(host.proc.pid, host.address()[0], flush=True)
+sys.stdin.read()
+"""
+
+
+def test_a_client_killed_with_sigkill_takes_its_cluster_with_it():
+    client = subprocess.Popen([sys.executable, "-c", _CLIENT], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                              text=True)
+    try:
+        host_pid = int(client.stdout.readline().split()[0])
+        tree = _descendants(host_pid) | {host_pid}
+        assert len(tree) >= 3  # the host, its fork server, a worker
+        client.send_signal(signal.SIGKILL)
+        client.wait(10)
+        deadline = time.monotonic() + 30
+        while not all(_gone(p) for p in tree) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        left = [p for p in tree if not _gone(p)]
+        assert not left, f"processes of the cluster outlived their client: {left}"
+    finally:
+        client.kill()
+        client.wait()
+
+
+def test_a_refused_command_line_ends_the_host_it_started_early(tmp_path):
+    """`hilbench analyse` starts its cluster host before it parses its options; a line it then refuses (exit 2)
+    ends that host at once, also when the command runs inside a longer-lived process (the GUI, a test)."""
+    from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
+    from hilbench.bench.cli.main import main
+
+    folder = tmp_path / "c"
+    write_campaign(folder, SyntheticCampaign(runs=1, duration=0.5, sample_rate=1000.0, seed=1))
+    started = []
+    real = cluster_host.Host
+
+    class Spy(real):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            started.append(self)
+
+    cluster_host.Host = Spy
+    try:
+        assert main(["analyse", str(folder), "--workers", "1", "--thresholds", "-5"]) == 2
+    finally:
+        cluster_host.Host = real
+    assert len(started) == 1 and started[0].proc.poll() is not None and cluster_host._early is None
+
+
+def test_a_cluster_that_cannot_start_is_one_line():
+    host = cluster_host.Host(1, "not an address")
+    with pytest.raises(AnalyseError, match="the local cluster did not start: ") as err:
+        host.address()
+    assert "\n" not in str(err.value)
+    assert host.proc.wait(30) == 0
+
+
+def test_an_early_host_is_taken_once_with_its_settings_and_otherwise_ended():
+    cluster_host.discard()
+    cluster_host.start_early(1, None)
+    early = cluster_host._early
+    assert cluster_host.take(1, None) is early and cluster_host._early is None
+    early.close()
+    cluster_host.start_early(1, None)
+    other = cluster_host._early
+    replaced = cluster_host.take(2, None)  # another worker count: a new host, the early one ended
+    try:
+        assert replaced is not other and other.proc.poll() is not None
+        assert replaced.request == {"workers": 2, "dashboard": None}
+    finally:
+        replaced.close()
+    cluster_host.start_early(1, None)
+    unused = cluster_host._early
+    cluster_host.discard()
+    assert unused.proc.poll() is not None and cluster_host._early is None
