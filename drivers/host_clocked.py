@@ -26,7 +26,7 @@ import math
 import struct
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -261,6 +261,8 @@ class HostClockedDevice(Device):
     def _stream(self, values: np.ndarray, allow_loss: bool) -> Iterator[CycleSamples]:
         n, rate = len(values), self.config.sample_rate
         spec, tx = self._cycle_spec(values)
+        if self.feeds_watchdog:  # the cycle feeds the watchdog from its last command until the feed here has started
+            spec = replace(spec, keepalive=FEED_PERIOD)
         cycle = CanCycle(spec, tx)
         self._cycle, self._timing, self._progress = cycle, None, 0
         arrays, slots = cycle.arrays, range(len(spec.rx_ids))
@@ -273,7 +275,7 @@ class HostClockedDevice(Device):
             while True:
                 time.sleep(BLOCK_PERIOD)
                 cycle.check_started(started, self.label)
-                ended = not cycle.alive() or bool(arrays["ctl"][1])
+                ended = not cycle.alive() or cycle.finished
                 fault = fault or self._poll(cycle, n)
                 if fault:
                     cycle.stop()
@@ -281,7 +283,8 @@ class HostClockedDevice(Device):
                 elif (cycle.sent >= n or cycle.limit is not None) and not self._closed:
                     # the cycle's last command is out: the feed keeps the watchdog fed while it collects the tail
                     self._start_feed()
-                if ended:
+                if ended:  # the feed (when the drive needs one) has started: the cycle's keepalive may stop
+                    cycle.stop()
                     cycle.join()
                 sent = self._progress = cycle.sent
                 ready = min(cycle.received(j) for j in slots)

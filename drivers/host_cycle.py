@@ -121,6 +121,12 @@ class CanCycleSpec:
     operation disabled) goes out, and :attr:`CanCycle.limit` says which guard tripped on which frame.
 
     ``fd`` and ``width``: CAN-FD frames, and the payload bytes each row keeps (tx ``(n, len(tx_ids), width)``).
+
+    ``keepalive``: for a drive whose watchdog only its commands feed (ODrive, moteus), the period (s) at which the
+    cycle repeats ``end_data`` (``stop_data`` after an e-stop, both zero torque) from its last trigger until the
+    host stops it (:meth:`CanCycle.stop`), having started its own feed. The host's feed runs in a process of
+    normal priority: a host descheduled for longer than the watchdog timeout when the cycle ended left the drive
+    unfed, and its watchdog latched a fault after a complete run. 0: the cycle stops by itself after the tail.
     """
 
     interface: str
@@ -137,12 +143,14 @@ class CanCycleSpec:
     fd: bool = False   # CAN-FD frames (with bit-rate switch), e.g. moteus's
     width: int = 8     # payload bytes each tx and rx row holds (64 for CAN-FD)
     rx_len: tuple[int, ...] = ()  # each rx id's data length, bytes: a frame of another length is dropped, counted
+    keepalive: float = 0.0  # s between end_data frames from the last trigger until the host's stop (0: none)
 
 
 OWN_FRAMES_OPTION = ("virtual", "socketcan")  # interfaces that return own frames only when asked to
 _SENT, _STOP, _ESTOP, _ERROR, _REALTIME, _ECHOED = 0, 1, 2, 3, 4, 5  # control slots; rx counters from _RX
 _MALFORMED, _LIMIT, _LIMIT_AT = 6, 7, 8  # frames dropped undecoded; limit tripped (guard index + 1), at rx row
-_RX = 9
+_DONE = 9  # the cycle has collected its answers and only feeds the watchdog until stopped (keepalive)
+_RX = 10
 RT_PRIORITY = 20  # SCHED_FIFO priority of the cycle process, where the OS allows it
 START_LIMIT = 20.0  # s: the longest wait for a cycle's first trigger (a spawned process on a loaded host)
 TAIL_LIMIT = 60.0  # s: the longest wait, after the last trigger, for a lagging drive's remaining answers
@@ -251,6 +259,12 @@ class CanCycle:
 
     def alive(self) -> bool:
         return self._worker is not None and self._worker.is_alive()
+
+    @property
+    def finished(self) -> bool:
+        """Whether the cycle has ended its stream: stopped, or (with a keepalive) only feeding the watchdog."""
+        ctl = self.arrays["ctl"]
+        return bool(ctl[_STOP] or ctl[_DONE])
 
     def stop(self) -> None:
         self.arrays["ctl"][_STOP] = 1
@@ -425,8 +439,16 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
         ctl[_SENT] = k + 1
     if orphaned:
         return
-    for msg in stop_msgs if ctl[_ESTOP] else end_msgs:
-        bus.send(msg)
+    keepalive = spec.keepalive
+    next_feed = clock() + keepalive
+
+    def feed() -> None:  # zero torque for a drive whose watchdog only commands feed; every `keepalive` s
+        nonlocal next_feed
+        for msg in stop_msgs if ctl[_ESTOP] else end_msgs:
+            bus.send(msg)
+        next_feed = clock() + keepalive
+
+    feed()
     # The answers to the last triggers. A drive that lags (a simulated one on a loaded host) still answers
     # every trigger, in order: wait while answers keep coming, and count as lost only what stays silent.
     quiet = max(1.0, 20 * period)
@@ -436,11 +458,22 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
     # ODrive's cyclic frames are not answers to triggers, so its rows can run ahead of the commands sent).
     wanted = max(int(ctl[_SENT]), int(ctl[_LIMIT_AT]) + 1 if ctl[_LIMIT] else 0)
     while not ctl[_STOP] and answered < wanted and (left := min(end, last_call) - clock()) > 0:  # host gave up
-        msg = bus.recv(timeout=left)
+        msg = bus.recv(timeout=min(left, keepalive) if keepalive else left)
+        if keepalive and clock() >= next_feed:
+            feed()
         if msg is not None:
             take(msg)
             if min(counts or [0]) > answered:
                 answered, end = min(counts or [0]), clock() + quiet
+    if keepalive:
+        # The stream is over: the host takes the feed over when it is next scheduled, then stops the cycle. Until
+        # then (at most TAIL_LIMIT s, and never for a dead host: its drive's watchdog must trip) zero torque goes
+        # out from here; frames received meanwhile are no part of the stream.
+        ctl[_DONE] = 1
+        while not ctl[_STOP] and clock() < last_call and not (parent and os.getppid() != parent):
+            bus.recv(timeout=max(0.0, next_feed - clock()))
+            if clock() >= next_feed:
+                feed()
     ctl[_STOP] = 1
 
 

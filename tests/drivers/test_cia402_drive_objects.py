@@ -161,7 +161,11 @@ def test_a_drive_reacting_to_loss_in_every_state_is_left_without_a_consumer(rest
                 host._restore.clear()  # the host before the fix
         finally:
             host.close()
-        time.sleep(0.6)  # twice the consumer timeout
+        # twice the consumer timeout without a fault; a fault is waited for (the drive's check runs in a thread
+        # this loaded process may not schedule within a fixed sleep)
+        deadline = time.monotonic() + (0.6 if restore else 10.0)
+        while sim.state is not c.State.FAULT and time.monotonic() < deadline:
+            time.sleep(0.01)
         assert (sim.state is c.State.FAULT) == (not restore), sim.state
     finally:
         sim.close()

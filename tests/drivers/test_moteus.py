@@ -158,7 +158,9 @@ def test_a_host_limit_stops_the_stream_and_zero_torque_follows(bus):
         with pytest.raises(DeviceFaultError, match=r"stream stopped by the host at sample \d+: OVER_SPEED \(speed "):
             for _ in host.stream(np.full(3000, 8.0)):
                 pass
-        time.sleep(0.05)
+        deadline = time.monotonic() + 5.0  # the controller takes the frame in its own thread: waited for, not slept
+        while bus.sim.torque_held != 0.0 and time.monotonic() < deadline:
+            time.sleep(0.005)
         assert bus.sim.mode == Mode.POSITION and bus.sim.torque_held == 0.0  # the feed's zero torque
     finally:
         host.close()

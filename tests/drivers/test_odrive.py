@@ -6,6 +6,7 @@ import random
 import select
 import subprocess
 import sys
+import time
 import uuid
 
 import can
@@ -111,6 +112,26 @@ def test_watchdog_latches_until_clear_errors(odrive):
     host.clear_faults()
     host.arm()
     assert sim.state == o.AxisState.CLOSED_LOOP_CONTROL
+
+
+def test_a_host_descheduled_as_its_stream_ends_leaves_the_axis_fed(odrive):
+    """Only host commands feed the ODrive's watchdog. After the cycle's last command the host's own feed took over
+    when the stream loop next ran; a host descheduled then for longer than the watchdog timeout (a loaded machine:
+    the run file's writer, here the consumer of the stream, stalled) left the axis unfed, and it latched
+    WATCHDOG_TIMER_EXPIRED after a complete run (the next run refused to arm). The cycle now repeats zero torque
+    from its last command until the host has taken over."""
+    sim, host = odrive
+    host.configure(config())
+    host.arm()
+    n = 300  # 0.3 s at 1 kHz
+    blocks = host.stream(np.full(n, 0.5))
+    got = len(next(blocks))
+    time.sleep(n / 1000 + 2 * sim.watchdog_timeout)  # the whole stream and twice the timeout after it, unscheduled
+    assert sim.error == 0 and sim.state == o.AxisState.CLOSED_LOOP_CONTROL, o.describe_errors(sim.error)
+    got += sum(len(b) for b in blocks)
+    assert got == n and host.axis_error == 0
+    assert sim.input_torque == 0.0  # the stream's end: zero torque, still fed
+    host.disarm()
 
 
 def test_estop_mid_stream(odrive):

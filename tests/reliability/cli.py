@@ -30,14 +30,22 @@ def one_line_error(proc: subprocess.CompletedProcess) -> str:
     return lines[0]
 
 
-def wait_for_samples(path: Path, n: int, timeout: float = 60.0) -> int:
-    """Wait until the live run file at ``path`` holds ``n`` flushed samples; returns how many it holds."""
+def wait_for_samples(path: Path, n: int, timeout: float = 60.0, proc: subprocess.Popen | None = None) -> int:
+    """Wait until the live run file at ``path`` holds ``n`` flushed samples; returns how many it holds.
+
+    With ``proc`` (the process writing it), fail at once, with its output and the file's events, when it ends
+    first: a run that died early is reported as what it is, not as a slow start."""
     from hilbench.common.runfile import RunFileError, open_run
 
     deadline = time.monotonic() + timeout
     have = 0
     while time.monotonic() < deadline:
         time.sleep(0.1)
+        if proc is not None and proc.poll() is not None:
+            stdout, stderr = proc.communicate()
+            raise AssertionError(f"{path}: the run ended (exit {proc.returncode}) with {have} samples flushed, "
+                                 f"before {n}; events {run_events(path)}; stdout {stdout[-1000:]!r}; stderr "
+                                 f"{stderr[-2000:]!r}")
         if not path.exists():
             continue
         try:
@@ -48,3 +56,15 @@ def wait_for_samples(path: Path, n: int, timeout: float = 60.0) -> int:
         if have >= n:
             return have
     raise TimeoutError(f"{path}: {have} samples after {timeout} s, waited for {n}")
+
+
+def run_events(path: Path) -> list[tuple[str, str]]:
+    """The (kind, message) events of the run file at ``path`` (for a failing test's message); [] when it
+    cannot be read."""
+    from hilbench.common.runfile import RunFileError, open_run
+
+    try:
+        with open_run(path) as run:
+            return [(str(e["kind"]), str(e["message"])) for e in run.events]
+    except (RunFileError, OSError):
+        return []
