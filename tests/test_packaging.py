@@ -151,7 +151,10 @@ def test_every_python_example_of_the_readme_and_docs_runs_from_the_wheel(install
     """Each block, in order (the README's make the runs the docs' read), in a folder outside the source tree,
     against the installed hilbench.* names: a stale name or a changed signature fails here."""
     docs = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
-    blocks = [(doc, code) for doc in docs for code in _python_blocks(doc)]
+    # the Parquet query snippets (pandas, polars, DuckDB) run in tests/docs/test_campaign_analysis_queries.py, on a
+    # results table of their own and with those packages: not here, where the wheel's venv has neither
+    blocks = [(doc, code) for doc in docs for code in _python_blocks(doc)
+              if not re.search(r"^import (pandas|polars|duckdb)\b", code, flags=re.M)]
     assert len(blocks) >= 5 and all("hilbench" in code or "h5py" in code or "savemat" in code for _d, code in blocks)
     work = tmp_path / "examples"
     work.mkdir()
