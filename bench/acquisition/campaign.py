@@ -32,6 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
+from hilbench.bench.acquisition.campaign_index import INDEX_NAME
 from hilbench.bench.acquisition.campaign_plan import (
     GENERAL_KEYS,
     SETTING_UNITS,
@@ -55,7 +56,6 @@ from hilbench.drivers.errors import DeviceURLError
 
 #: Largest campaign file read, bytes: a campaign of a thousand runs is ~100 KB.
 MAX_CAMPAIGN_BYTES = 4 << 20
-INDEX_NAME = "index.json"
 LOCK_NAME = ".campaign.lock"
 RUN_KEYS = {"name", "protocol", "repeats"}
 @dataclass
