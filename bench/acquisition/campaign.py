@@ -32,7 +32,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
-from hilbench.bench.acquisition.campaign_index import INDEX_NAME
 from hilbench.bench.acquisition.campaign_plan import (
     GENERAL_KEYS,
     SETTING_UNITS,
@@ -48,6 +47,7 @@ from hilbench.bench.acquisition.campaign_plan import (
 )
 from hilbench.bench.acquisition.protocols import PROTOCOLS, Protocol, ProtocolError
 from hilbench.bench.acquisition.runner import Bench, DeviceSettings, Progress, RunControl, SettingsError
+from hilbench.bench.campaign_index import INDEX_NAME
 from hilbench.bench.errors import BenchError
 from hilbench.bench.storage.folder_lock import folder_lock
 from hilbench.common.runfile import writer_alive
