@@ -47,6 +47,7 @@ from hilbench.bench.acquisition.campaign_plan import (
 )
 from hilbench.bench.acquisition.protocols import PROTOCOLS, Protocol, ProtocolError
 from hilbench.bench.acquisition.runner import Bench, DeviceSettings, Progress, RunControl, SettingsError
+from hilbench.bench.campaign_index import INDEX_NAME
 from hilbench.bench.errors import BenchError
 from hilbench.bench.storage.folder_lock import folder_lock
 from hilbench.common.runfile import writer_alive
@@ -55,7 +56,6 @@ from hilbench.drivers.errors import DeviceURLError
 
 #: Largest campaign file read, bytes: a campaign of a thousand runs is ~100 KB.
 MAX_CAMPAIGN_BYTES = 4 << 20
-INDEX_NAME = "index.json"
 LOCK_NAME = ".campaign.lock"
 RUN_KEYS = {"name", "protocol", "repeats"}
 @dataclass

@@ -34,8 +34,8 @@ from hilbench.bench.campaign_analysis.fork_server import WORKER_MODULES
 from hilbench.bench.errors import AnalyseError
 
 #: the host's program: its reply channel first, then the fork server (before any other import), then the cluster
-#: until its stdin ends. A program of its own, not a function of this module: importing any module of hilbench.bench
-#: imports numpy & co. (the package's __init__), CPU taken from the fork server's imports, the critical path.
+#: until its stdin ends. A program of its own, not a function of this module: the host imports nothing of hilbench
+#: (CPU taken from the fork server's imports, the critical path).
 #: argv: the fork server's preload (JSON list), the request (JSON: workers, dashboard, Dask config)
 BOOT = """
 import json, os, sys

@@ -30,11 +30,11 @@ from pathlib import Path
 from typing import Any
 
 from hilbench import __version__
-from hilbench.bench.acquisition.campaign import INDEX_NAME
 from hilbench.bench.campaign_analysis import cluster_host
 from hilbench.bench.campaign_analysis.fork_server import MAX_WORKERS, warm_up
 from hilbench.bench.campaign_analysis.steps import STEPS, StepSettings, steps_for
 from hilbench.bench.campaign_analysis.table import ResultsFolder, row_key
+from hilbench.bench.campaign_index import INDEX_NAME
 from hilbench.bench.errors import AnalyseError
 
 StepFunction = Callable[[str, StepSettings], dict[str, Any]]

@@ -61,7 +61,7 @@ def start_early(argv: list[str]) -> None:
     command."""
     if any(a in ("-h", "--help") or a.startswith(("--serial", "--scheduler")) for a in argv):
         return
-    from hilbench.bench.acquisition.campaign import INDEX_NAME
+    from hilbench.bench.campaign_index import INDEX_NAME
 
     if not any(not a.startswith("-") and (Path(a) / INDEX_NAME).is_file() for a in argv):
         return
@@ -88,10 +88,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from hilbench.bench.acquisition.campaign import INDEX_NAME
     from hilbench.bench.analysis_input import MAX_THRESHOLDS, check_count
     from hilbench.bench.campaign_analysis.fork_server import MAX_WORKERS
     from hilbench.bench.campaign_analysis.steps import STEPS, StepSettings
+    from hilbench.bench.campaign_index import INDEX_NAME
     from hilbench.bench.errors import AnalyseError, BenchError
     from hilbench.bench.storage import outputs
 
