@@ -38,9 +38,18 @@ from hilbench.bench.errors import AnalyseError
 #: (CPU taken from the fork server's imports, the critical path).
 #: argv: the fork server's preload (JSON list), the request (JSON: workers, dashboard, Dask config)
 BOOT = """
-import json, os, sys
+import json, os, sys, threading
 reply = os.fdopen(os.dup(1), "w")
 os.dup2(2, 1)  # anything printed goes to stderr, not into the reply
+started, gone = threading.Event(), threading.Event()
+
+def watch():  # the client's end of stdin: it closed it or died. During the start nobody else listens: exit at once
+    sys.stdin.read()
+    gone.set()
+    if not started.is_set():
+        os._exit(1)  # the fork server quits when this process goes; a nanny's worker watches its parent
+
+threading.Thread(target=watch, daemon=True).start()
 from multiprocessing import forkserver, get_context
 get_context("forkserver").set_forkserver_preload(json.loads(sys.argv[1]))
 forkserver.ensure_running()
@@ -60,7 +69,8 @@ try:
         link = cluster.dashboard_link if request["dashboard"] else None
         reply.write(json.dumps({"address": cluster.scheduler_address, "dashboard": link}) + "\\n")
     reply.flush()
-    sys.stdin.read()  # until the client closes the pipe or dies
+    started.set()
+    gone.wait()  # until the client closes the pipe or dies
 except BrokenPipeError:  # the client is gone
     pass
 finally:
@@ -127,6 +137,7 @@ class Host:
                 raise AnalyseError(f"the local cluster did not start within {timeout:g} s")
             got = os.read(fd, 65536)
             if not got:
+                self.close()
                 raise AnalyseError(f"the local cluster's process ended before it started (exit code "
                                    f"{self.proc.wait()})")
             line += got
@@ -180,6 +191,7 @@ def take(workers: int, dashboard: str | None) -> Host:
     host, _early = _early, None
     if host is not None and host.alive() and host.request == {"workers": workers, "dashboard": dashboard}:
         return host
-    if host is not None:
+    if host is not None:  # started for other settings: it ran no task, killed like discard's
+        host.proc.kill()
         host.close()
     return Host(workers, dashboard)

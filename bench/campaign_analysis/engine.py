@@ -594,7 +594,12 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
     with dask.config.set({**cluster_host.CONFIG, "distributed.comm.timeouts.connect": f"{CONNECT_TIMEOUT:g}s"}):
         if address is None:  # the local cluster, in a process of its own (cluster_host)
             host = cluster_host.take(cluster_host.local_workers(workers), dashboard)
-            address, summary.dashboard = host.address()
+            try:
+                address, summary.dashboard = host.address()
+            except BaseException:  # e.g. Ctrl-C while it starts: no host outlives this call (the GUI lives on)
+                host.proc.kill()
+                host.close()
+                raise
         try:
             client = Client(address, timeout=f"{CONNECT_TIMEOUT:g}s")
         except (OSError, TimeoutError) as exc:

@@ -91,6 +91,46 @@ def test_a_client_killed_with_sigkill_takes_its_cluster_with_it():
         client.wait()
 
 
+_STARTING = """
+import sys
+from hilbench.bench.campaign_analysis import cluster_host
+host = cluster_host.Host(1, None)
+print(host.proc.pid, flush=True)
+sys.stdin.read()
+"""
+
+
+def test_a_client_killed_while_its_cluster_starts_ends_the_host_at_once():
+    """The host heard its client only once the cluster was up: a client killed during the start left the host
+    starting a whole cluster for nobody (or orphaned for good if the start hung). It now exits as soon as its stdin
+    ends, before any worker starts."""
+    reference = cluster_host.Host(1, None)  # how long a whole start takes here, now
+    t0 = time.monotonic()
+    reference.address()
+    start = time.monotonic() - t0
+    reference.close()
+    client = subprocess.Popen([sys.executable, "-c", _STARTING], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                              text=True)
+    try:
+        host_pid = int(client.stdout.readline())
+        client.send_signal(signal.SIGKILL)  # at once: the host is still importing (its start takes 1-2 s idle)
+        client.wait(10)
+        t0 = time.monotonic()
+        while not _gone(host_pid) and time.monotonic() - t0 < 30:
+            time.sleep(0.02)
+        assert _gone(host_pid), "the cluster host outlived its client"
+        took = time.monotonic() - t0
+        assert took < start / 2, f"the host took {took:.2f} s to end, a whole start {start:.2f} s"
+        tree = _descendants(host_pid)
+        deadline = time.monotonic() + 30
+        while not all(_gone(p) for p in tree) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert all(_gone(p) for p in tree)
+    finally:
+        client.kill()
+        client.wait()
+
+
 def test_a_refused_command_line_ends_the_host_it_started_early(tmp_path):
     """`hilbench analyse` starts its cluster host before it parses its options; a line it then refuses (exit 2)
     ends that host at once, also when the command runs inside a longer-lived process (the GUI, a test)."""
