@@ -85,8 +85,8 @@ def test_a_stalled_host_is_fed_only_up_to_the_keepalive_limit():
     _, last = run_cycle(bus, watchdog_timeout=0.1)
     feeds = np.array([t for t, kind in bus.log if kind == "end"]) - last
     limit = hc.keepalive_limit(0.1)
-    assert feeds[-1] <= limit + 1e-3 and feeds[-1] > limit - FEED - 0.05, feeds[-1]
-    assert np.max(np.diff(feeds)) < FEED + 0.05  # fed throughout: the descheduled host's case still holds
+    assert feeds[-1] <= limit + 1e-3 and feeds[-1] > limit - FEED - 0.1, feeds[-1]
+    assert np.max(np.diff(feeds)) < FEED + 0.1  # fed throughout (a loaded host's slack): the descheduled host's case
 
 
 @pytest.mark.device_free
@@ -171,7 +171,7 @@ def test_a_host_stalled_after_its_stream_leaves_the_drive_to_its_watchdog(drive)
     waited = time.monotonic() - last
     blocks.close()
     # fed up to the limit (a 1 s stall leaves the drive fed), then its watchdog (+ the ODrive's heartbeat period)
-    assert limit - 0.05 < waited < limit + timeout + 0.4, waited
+    assert limit - 0.05 < waited < limit + timeout + 1.0, waited  # 1 s: a loaded host's slack
 
 
 def test_disarm_during_the_keepalive_sends_no_feed_after_its_stop(drive, monkeypatch):
