@@ -131,9 +131,21 @@ class HostClockedDevice(Device):
         if self.feeds_watchdog and self._feed is None:
             self._feed = self.bus.send_periodic(self._feed_message(), FEED_PERIOD)
 
+    def _stop_cycle(self) -> None:
+        """Stop the stream's cycle and wait for its end (within FEED_PERIOD, or 0.1 s mid-stream): no frame of
+        the cycle (its zero-torque keepalive) can then follow the stop or idle command the caller sends next."""
+        cycle = self._cycle
+        if cycle is not None:
+            cycle.stop()
+            cycle.join()
+
     def _stop_feed(self) -> None:
         if self._feed is not None:
             self._feed.stop()
+            # python-can's stop() only flags its thread: joined, no feed frame can follow what the caller sends next
+            thread = getattr(self._feed, "thread", None)
+            if thread is not None:
+                thread.join(1.0)
             self._feed = None
 
     def _configured(self, doing: str):
@@ -262,7 +274,8 @@ class HostClockedDevice(Device):
         n, rate = len(values), self.config.sample_rate
         spec, tx = self._cycle_spec(values)
         if self.feeds_watchdog:  # the cycle feeds the watchdog from its last command until the feed here has started
-            spec = replace(spec, keepalive=FEED_PERIOD)
+            # (bounded by the watchdog timeout the configuration names: host_cycle.keepalive_limit)
+            spec = replace(spec, keepalive=FEED_PERIOD, watchdog_timeout=self.config.watchdog_timeout)
         cycle = CanCycle(spec, tx)
         self._cycle, self._timing, self._progress = cycle, None, 0
         arrays, slots = cycle.arrays, range(len(spec.rx_ids))

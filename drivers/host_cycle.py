@@ -127,6 +127,9 @@ class CanCycleSpec:
     host stops it (:meth:`CanCycle.stop`), having started its own feed. The host's feed runs in a process of
     normal priority: a host descheduled for longer than the watchdog timeout when the cycle ended left the drive
     unfed, and its watchdog latched a fault after a complete run. 0: the cycle stops by itself after the tail.
+    The repeats stop at the host's stop, at the host's death (the cycle's parent gone), and at the latest
+    :func:`keepalive_limit` (``watchdog_timeout``) s after the last trigger: a stalled host must not keep its drive
+    fed for long.
     """
 
     interface: str
@@ -144,6 +147,7 @@ class CanCycleSpec:
     width: int = 8     # payload bytes each tx and rx row holds (64 for CAN-FD)
     rx_len: tuple[int, ...] = ()  # each rx id's data length, bytes: a frame of another length is dropped, counted
     keepalive: float = 0.0  # s between end_data frames from the last trigger until the host's stop (0: none)
+    watchdog_timeout: float = 0.0  # s: the drive's watchdog timeout, which bounds the keepalive (0: not known)
 
 
 OWN_FRAMES_OPTION = ("virtual", "socketcan")  # interfaces that return own frames only when asked to
@@ -154,6 +158,19 @@ _RX = 10
 RT_PRIORITY = 20  # SCHED_FIFO priority of the cycle process, where the OS allows it
 START_LIMIT = 20.0  # s: the longest wait for a cycle's first trigger (a spawned process on a loaded host)
 TAIL_LIMIT = 60.0  # s: the longest wait, after the last trigger, for a lagging drive's remaining answers
+# The keepalive covers a host descheduled as its stream ends (the CLI was measured off the CPU ~1 s): at least
+# KEEPALIVE_MIN, at most KEEPALIVE_MAX, else KEEPALIVE_FACTOR watchdog timeouts, counted from the last trigger.
+KEEPALIVE_MIN, KEEPALIVE_MAX, KEEPALIVE_FACTOR = 1.5, 3.0, 3.0
+
+
+def keepalive_limit(watchdog_timeout: float) -> float:
+    """How long (s) after its last trigger a cycle may go on feeding a drive's watchdog with zero torque:
+    ``min(KEEPALIVE_MAX, max(KEEPALIVE_MIN, KEEPALIVE_FACTOR * watchdog_timeout))``, KEEPALIVE_MAX when the
+    timeout is not known (0). A host stalled longer than this leaves its drive unfed: the watchdog trips at
+    most this plus its timeout after the stream's last command."""
+    if watchdog_timeout <= 0:
+        return KEEPALIVE_MAX
+    return min(KEEPALIVE_MAX, max(KEEPALIVE_MIN, KEEPALIVE_FACTOR * watchdog_timeout))
 
 
 class CanCycle:
@@ -417,6 +434,7 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
 
     t0 = clock() + start_delay
     orphaned = False
+    last_trigger = clock()
     for k in range(n):
         if ctl[_STOP] or ctl[_LIMIT]:
             break
@@ -434,16 +452,25 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
             for j, msg in enumerate(msgs):
                 msg.data = bytearray(tx[k, j, :spec.tx_len[j]])
                 bus.send(msg)
-        host_time[k] = clock()
+        host_time[k] = last_trigger = clock()
         scheduled[k] = due
         ctl[_SENT] = k + 1
     if orphaned:
         return
     keepalive = spec.keepalive
     next_feed = clock() + keepalive
+    feed_until = last_trigger + keepalive_limit(spec.watchdog_timeout)
+
+    def feeding() -> bool:  # a stopped, dead or stalled host's drive is not fed: its watchdog must trip
+        return not ctl[_STOP] and clock() < feed_until and not (parent and os.getppid() != parent)
 
     def feed() -> None:  # zero torque for a drive whose watchdog only commands feed; every `keepalive` s
         nonlocal next_feed
+        # checked right before sending: the host's stop may have come (and its stop frame gone out) while the
+        # cycle waited in recv, and moteus's zero torque (position mode) would switch a stopped drive back on.
+        # Without a keepalive this is the one end frame (a CiA 402 drive's operation disabled): it always goes.
+        if keepalive and not feeding():
+            return
         for msg in stop_msgs if ctl[_ESTOP] else end_msgs:
             bus.send(msg)
         next_feed = clock() + keepalive
@@ -467,10 +494,10 @@ def _cycle_loop(bus, spec: CanCycleSpec, n: int, start_delay: float, ctl, host_t
                 answered, end = min(counts or [0]), clock() + quiet
     if keepalive:
         # The stream is over: the host takes the feed over when it is next scheduled, then stops the cycle. Until
-        # then (at most TAIL_LIMIT s, and never for a dead host: its drive's watchdog must trip) zero torque goes
-        # out from here; frames received meanwhile are no part of the stream.
+        # then (at most keepalive_limit s after the last trigger, and never for a dead host: its drive's watchdog
+        # must trip) zero torque goes out from here; frames received meanwhile are no part of the stream.
         ctl[_DONE] = 1
-        while not ctl[_STOP] and clock() < last_call and not (parent and os.getppid() != parent):
+        while feeding():
             bus.recv(timeout=max(0.0, next_feed - clock()))
             if clock() >= next_feed:
                 feed()

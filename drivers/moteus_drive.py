@@ -263,8 +263,7 @@ class MoteusDrive(HostClockedDevice):
 
     def disarm(self) -> None:
         self._halted = True
-        if self._cycle is not None:
-            self._cycle.stop()
+        self._stop_cycle()  # joined: no keepalive frame of the cycle follows the stop sent below
         self._stop_feed()
         self.bus.send(self._message(self.controller.make_stop()))
 

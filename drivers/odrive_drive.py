@@ -179,8 +179,7 @@ class OdriveDrive(HostClockedDevice):
         self._wait_heartbeat(lambda: self.axis_error == 0, "no error")
 
     def disarm(self) -> None:
-        if self._cycle is not None:
-            self._cycle.stop()
+        self._stop_cycle()  # joined: no keepalive frame of the cycle follows the stop sent below
         self._stop_feed()
         self._send(o.Cmd.SET_INPUT_TORQUE, o.FLOAT.pack(0.0))
         self._send(o.Cmd.SET_AXIS_STATE, o.U32.pack(o.AxisState.IDLE))
