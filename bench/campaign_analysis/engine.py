@@ -34,6 +34,7 @@ from hilbench.bench.campaign_analysis import cluster_host
 from hilbench.bench.campaign_analysis.fork_server import MAX_WORKERS, warm_up
 from hilbench.bench.campaign_analysis.steps import STEPS, StepSettings, steps_for
 from hilbench.bench.campaign_analysis.table import ResultsFolder, row_key
+from hilbench.bench.campaign_analysis.table import warm_up as warm_up_table
 from hilbench.bench.campaign_index import INDEX_NAME
 from hilbench.bench.errors import AnalyseError
 
@@ -437,6 +438,7 @@ def analyse(folders: list[Path], out: Path, steps: tuple[str, ...] = ("identify"
 def _analyse_locked(folders, out, steps, settings, serial, workers, scheduler, resume, progress,
                     fn, say, verbose, dashboard, t0, cpu0) -> Summary:
     results = ResultsFolder(out, say)
+    warm_up_table()
     results.clean_leftovers()  # of a killed analysis: this one holds the lock, so none is work in progress
     existing = results.read_rows()
     tasks, own_rows, reused, unplanned = plan(folders, steps, settings, existing if resume else None)
