@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pyarrow.parquet as pq
 
 from hilbench.bench.campaign_analysis.engine import analyse as analyse_campaign
@@ -38,3 +39,21 @@ def page_cell(row: dict, column: str) -> tuple[float, str]:
     cells = re.findall(r"<td[^>]*data-v='([^']*)'>([^<]*)</td>", section.split("<tbody>")[1].split("</tr>")[0])
     value, text = cells[heads.index(_header(column, column.replace("_", " ").replace("nrmse", "NRMSE"), {}))]
     return float(value), text
+
+
+#: the device sample rates every consistency test runs at (Hz), and the pytest ids of those and the host-clocked case
+RATES = (2000.0, 10000.0, 20000.0)
+CLOCKS = [(rate, False) for rate in RATES] + [(RATES[0], True)]
+CLOCK_IDS = ["2kHz", "10kHz", "20kHz", "host-clocked"]
+
+
+def clocked(channels: tuple[str, ...], data: dict, fs: float, host: bool) -> tuple[tuple[str, ...], dict, dict]:
+    """(channels, data, RunWriter keywords) of a run as a device-clocked device writes it (unchanged), or as a
+    host-clocked drive writes it (``host``): the same samples taken at host times jittered by +-0.2 sample
+    (a ``host_time`` channel and ``sample_times = host_time``), which the one loader resamples onto the grid."""
+    if not host:
+        return channels, data, {}
+    n = len(next(iter(data.values())))
+    jitter = np.random.default_rng(7).uniform(-0.2, 0.2, n) / fs
+    return ((*channels, "host_time"), {**data, "host_time": 50.0 + np.arange(n) / fs + jitter},
+            {"device": {"protocol": "CiA 402 over CANopen", "sample_times": "host_time"}})

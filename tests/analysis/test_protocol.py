@@ -28,7 +28,16 @@ from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_
 from hilbench.bench.cli import main
 from hilbench.bench.gui.analyses import run_analysis
 from hilbench.common.runfile import RunWriter
-from tests.analysis.consistency import FRACTION, RTOL, THRESHOLDS, campaign_row, page_cell
+from tests.analysis.consistency import (
+    CLOCK_IDS,
+    CLOCKS,
+    FRACTION,
+    RTOL,
+    THRESHOLDS,
+    campaign_row,
+    clocked,
+    page_cell,
+)
 
 pytestmark = pytest.mark.device_free
 
@@ -233,17 +242,36 @@ def test_the_residual_loop_reports_one_figure_everywhere(residual_run, tmp_path,
     capsys.readouterr()
 
 
-def test_the_afrf_reports_one_figure_everywhere(tmp_path, capsys):
-    """A stepped-sine run of a linear system: the first-harmonic compliance of the lowest amplitude (the campaign
-    row's column) from the Python API, the CLI's JSON, the GUI's result and the Parquet row, to 1e-6; whole, and
-    read one step window at a time under a small budget (the same bit for bit)."""
-    from hilbench.firmware_sim.engine.plant import PlantParams
-    from tests.analysis.afrf.test_afrf_run import _write_run
+def _afrf_run(path: Path, fs: float, host: bool) -> None:
+    """A stepped sine (1 and 3 Hz, 0.5 and 2 N m, 4 settle periods) on m x'' + c x' + k x = T (1, 10, 50) at
+    ``fs``, written as a device-clocked device or a host-clocked drive writes it."""
+    from hilbench.bench.acquisition.excitations import stepped_sine
+    from hilbench.firmware_sim.engine.plant import PlantParams, simulate
 
+    exc = stepped_sine(fs, frequencies=[1.0, 3.0], amplitudes=[0.5, 2.0], settle_periods=4, measure_periods=4)
+    out = simulate(PlantParams(inertia=1.0, spring=50.0, viscous=10.0), exc.u, 1.0 / fs)
+    k = np.arange(exc.u.size)
+    channels, data, kw = clocked(("sample_index", "t", "current_cmd", "current", "torque", "position", "counts"),
+                                 {"sample_index": k, "t": k / fs, "current_cmd": exc.u, "current": exc.u,
+                                  "torque": out.torque, "position": out.theta, "counts": np.zeros(k.size, np.int64)},
+                                 fs, host)
+    with RunWriter(path, sample_rate=fs, channels=channels, protocol_name="stepped_sine",
+                   protocol_params=exc.protocol(), protocol_arrays={"step_windows": exc.windows}, **kw) as w:
+        w.append(data)
+
+
+@pytest.mark.parametrize(("rate", "host_clocked"), CLOCKS, ids=CLOCK_IDS)
+def test_the_afrf_reports_one_figure_everywhere(rate, host_clocked, tmp_path, capsys):
+    """A stepped-sine run of a linear system at 2, 10 and 20 kHz and as a host-clocked drive records it: the
+    first-harmonic compliance of the lowest amplitude (the campaign row's column) from the Python API, the CLI's
+    JSON, the GUI's result and the Parquet row, to 1e-6; whole, and read one step window at a time under a small
+    budget (the same bit for bit; a host-clocked run is read whole, resampled). No 70/30 split: the AFRF takes
+    no validation run (it fits no model to score)."""
     folder = tmp_path / "c"
     folder.mkdir()
     run = folder / "afrf.h5"
-    _write_run(run, PlantParams(inertia=1.0, spring=50.0, viscous=10.0), [1.0, 3.0], [0.5, 2.0], settle=4)
+    _afrf_run(run, rate, host_clocked)
+    assert any(n.startswith("resampled on host_time") for n in load_record(run).notes) == host_clocked
     (folder / "index.json").write_text(json.dumps({"runs": [{"key": "a", "file": "afrf.h5", "status": "completed",
                                                              "protocol": "stepped_sine"}]}))
     afrf = protocol.entry("afrf")
@@ -261,24 +289,43 @@ def test_the_afrf_reports_one_figure_everywhere(tmp_path, capsys):
     assert row["afrf_compliance_low_amplitude"] == pytest.approx(compliance, rel=RTOL)
     from hilbench.analysis.afrf import array_cost
 
+    # a host-clocked run is resampled onto the grid in one read, so it is read whole under any budget
     streamed = afrf.read([run], protocol.ReadOptions(memory=array_cost(load_record(run).n_samples) - 1))
-    assert streamed.streamed
+    assert streamed.streamed != host_clocked
     assert afrf.report(afrf.analyse(streamed))[1]["afrf_compliance_low_amplitude"] == pytest.approx(compliance,
                                                                                                    rel=RTOL)
     capsys.readouterr()
 
 
-def test_the_skeleton_reports_one_figure_everywhere(tmp_path, capsys):
-    """A chirp run of the paper's system: the composed amplitude range of the skeleton (the campaign row's columns)
-    from the Python API, the CLI's JSON, the GUI's result, the Parquet row and the page's cell, to 1e-6; the
-    mass is the run's declared inertia everywhere (no option)."""
+def _chirp_run(path: Path, fs: float, host: bool) -> None:
+    """G sin(pi a t^2) (G = 5 N, a = 0.05 Hz/s, 20 s) on the paper's system at ``fs``, the torque logged as a
+    device logs it (hold_previous), written as a device-clocked device or a host-clocked drive writes it."""
     from hilbench.firmware_sim.engine.friction_models import paper_system
-    from tests.analysis.skeleton.test_skeleton_stream import _write_chirp
+    from hilbench.firmware_sim.engine.plant import simulate
 
+    params, g, a, duration = paper_system(), 5.0, 0.05, 20.0
+    t = np.arange(int(duration * fs)) / fs
+    out = simulate(params, g * np.sin(np.pi * a * t**2), 1 / fs, substeps=4)
+    torque = np.insert(g * np.sin(np.pi * a * t[:-1] ** 2), 0, 0.0)
+    channels, data, kw = clocked(("sample_index", "t", "torque", "position"),
+                                 {"sample_index": np.arange(t.size), "t": t, "torque": torque, "position": out.theta},
+                                 fs, host)
+    with RunWriter(path, sample_rate=fs, channels=channels, calibration={"inertia": params.inertia},
+                   protocol_name="chirp", protocol_params={"gain": g, "rate": a, "duration": duration}, **kw) as w:
+        w.append(data)
+
+
+@pytest.mark.parametrize(("rate", "host_clocked"), CLOCKS, ids=CLOCK_IDS)
+def test_the_skeleton_reports_one_figure_everywhere(rate, host_clocked, tmp_path, capsys):
+    """A chirp run of the paper's system at 2, 10 and 20 kHz and as a host-clocked drive records it: the composed
+    amplitude range of the skeleton (the campaign row's columns) from the Python API, the CLI's JSON, the GUI's
+    result, the Parquet row and the page's cell, to 1e-6; the mass is the run's declared inertia everywhere (no
+    option). No 70/30 split: the skeleton takes no validation run (ForceVib reads one run's own cycles)."""
     folder = tmp_path / "c"
     folder.mkdir()
     run = folder / "chirp.h5"
-    _write_chirp(run, paper_system(), 5.0, duration=20.0)
+    _chirp_run(run, rate, host_clocked)
+    assert any(n.startswith("resampled on host_time") for n in load_record(run).notes) == host_clocked
     (folder / "index.json").write_text(json.dumps({"runs": [{"key": "a", "file": "chirp.h5", "status": "completed",
                                                              "protocol": "chirp"}]}))
     sk = protocol.entry("skeleton")
@@ -299,19 +346,27 @@ def test_the_skeleton_reports_one_figure_everywhere(tmp_path, capsys):
     capsys.readouterr()
 
 
-def test_presliding_reports_one_figure_everywhere(tmp_path, capsys):
-    """A displacement-driven record of the DC motor's Maxwell-slip elements on a nested path: the break-away force
-    and initial stiffness from the Python API, the CLI's presliding.json, the GUI's result, the Parquet row and the
-    page's cell, to 1e-6."""
+@pytest.mark.parametrize(("rate", "host_clocked"), CLOCKS, ids=CLOCK_IDS)
+def test_presliding_reports_one_figure_everywhere(rate, host_clocked, tmp_path, capsys):
+    """A displacement-driven record of the DC motor's Maxwell-slip elements on a nested path (the same strokes in
+    the same time at 2, 10 and 20 kHz, and as a host-clocked drive records it): the break-away force and initial
+    stiffness from the Python API, the CLI's presliding.json, the GUI's result, the Parquet row and the page's
+    cell, to 1e-6. No 70/30 split: presliding takes no validation run (its figures are read off one path)."""
     from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_D
     from tests.analysis.presliding.records import dc_elements, maxwell_force, smooth_path
-    from tests.analysis.presliding.test_presliding_stream import _write
 
     folder = tmp_path / "c"
     folder.mkdir()
     run = folder / "p.h5"
-    x = smooth_path(DC_MOTOR_D, 200)
-    _write(run, x, maxwell_force(x, *dc_elements()) + 2e-3 * np.random.default_rng(5).standard_normal(x.size))
+    x = smooth_path(DC_MOTOR_D, int(rate / 10))
+    force = maxwell_force(x, *dc_elements()) + 2e-3 * np.random.default_rng(5).standard_normal(x.size)
+    k = np.arange(x.size)
+    channels, data, kw = clocked(("sample_index", "t", "position", "torque"),
+                                 {"sample_index": k, "t": k / rate, "position": x, "torque": force}, rate, host_clocked)
+    with RunWriter(run, sample_rate=rate, channels=channels, record="displacement-driven",
+                   protocol_name="presliding", protocol_params={"inertia": 0.0}, **kw) as w:
+        w.append(data)
+    assert any(n.startswith("resampled on host_time") for n in load_record(run).notes) == host_clocked
     (folder / "index.json").write_text(json.dumps({"runs": [{"key": "p", "file": "p.h5", "status": "completed",
                                                              "protocol": "presliding"}]}))
     ps = protocol.entry("presliding")
