@@ -128,13 +128,14 @@ def predict_case(case: Case, plant, gains: PositionGains, settings: MatrixSettin
 def measured_case(case: Case, run_file: str | Path, settings: MatrixSettings) -> CaseResult:
     """Metrics of a played case from its run file (position rad, commanded current A), by the registry's
     ``compensation`` analysis (hilbench.analysis.protocol), which rebuilds the reference from the run file."""
-    from hilbench.analysis.compensation.entry import TrackingSettings
+    from hilbench.analysis.compensation.entry import TrackingSettings, reference_head
     from hilbench.analysis.protocol import ReadOptions, entry
 
     analysis = entry("compensation")
     inputs = analysis.read([run_file], ReadOptions(allow_incomplete=True))
     m = analysis.analyse(inputs, TrackingSettings(settings.window, settings.tolerance)).value
-    ref = case.reference_path
+    # the samples the analysis scored: a host-clocked drive's grid may end one short of the reference
+    ref = reference_head(case.reference_path, inputs.record.position.size)
     ff = case.feedforward_result(settings.current_limit)
     return CaseResult(ref, case.compensation, m, ref.position - inputs.record.position, ff.clipped, str(run_file))
 

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from hilbench.analysis import protocol
+from hilbench.analysis.record import load_record
 from hilbench.bench.acquisition.breakaway_probe import BreakawayProbe
 from hilbench.bench.acquisition.compensation import CompensatedReference
 from hilbench.bench.campaign_analysis.steps import steps_for
@@ -30,7 +31,7 @@ from hilbench.common.runfile import (
 )
 from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_BREAKAWAY, DC_MOTOR_TORQUE_CONSTANT, dc_motor
 from hilbench.firmware_sim.engine.plant import simulate
-from tests.analysis.consistency import RTOL, campaign_row, page_cell
+from tests.analysis.consistency import CLOCK_IDS, CLOCKS, RTOL, campaign_row, clocked, page_cell
 
 pytestmark = pytest.mark.device_free
 
@@ -59,31 +60,42 @@ def _report_json(name: str, run: Path, out: Path) -> dict:
     return doc["summary"]
 
 
-def _compensated_run(path: Path) -> tuple[CompensatedReference, np.ndarray]:
-    """A compensated run (sine reference, 1 kHz, scored with a 0.02 s glitch window) whose position lags the
-    reference by 3 samples plus a 7 Hz ripple of 10 µrad: the tracking error is known sample by sample. Returns
-    the protocol and that error."""
+def _compensated_run(path: Path, fs: float, host: bool) -> tuple[CompensatedReference, np.ndarray]:
+    """A compensated run (sine reference at ``fs``, scored with a 0.02 s glitch window) whose position lags the
+    reference by 3 samples plus a 7 Hz ripple of 10 µrad: the tracking error is known sample by sample; written as
+    a device-clocked device or (``host``) a host-clocked drive writes it. Returns the protocol and that error."""
     proto = CompensatedReference(reference="sine", amplitudes=(1e-3, 1e-2), frequency=1.0, cycles=1, rest=0.1,
-                                 window=0.02, sample_rate=1000)
+                                 window=0.02, sample_rate=int(fs))
     ref, fs = proto.reference_path, float(proto.sample_rate)
     k = np.arange(ref.n)
     position = np.concatenate([np.zeros(3), ref.position[:-3]]) + 1e-5 * np.sin(2 * np.pi * 7 * k / fs)
     zeros = np.zeros(ref.n)
+    channels, data, kw = clocked(
+        (SAMPLE_INDEX, TIME, CURRENT_CMD, "current", "torque", "position", "counts", POSITION_CMD),
+        {SAMPLE_INDEX: k, TIME: k / fs, CURRENT_CMD: 0.3 * np.sin(k / 50), "current": zeros, "torque": zeros,
+         "position": position, "counts": k * 0, POSITION_CMD: ref.position}, fs, host)
     with RunWriter(path, sample_rate=fs, protocol_name=proto.name, protocol_params=proto.parameters(),
-                   channels=(SAMPLE_INDEX, TIME, CURRENT_CMD, "current", "torque", "position", "counts",
-                             POSITION_CMD)) as w:
-        w.append({SAMPLE_INDEX: k, TIME: k / fs, CURRENT_CMD: 0.3 * np.sin(k / 50), "current": zeros,
-                  "torque": zeros, "position": position, "counts": k * 0, POSITION_CMD: ref.position})
+                   channels=channels, **kw) as w:
+        w.append(data)
     return proto, ref.position - position
 
 
-def test_the_compensation_metrics_read_one_figure_everywhere(tmp_path, capsys):
+@pytest.mark.parametrize(("rate", "host_clocked"), CLOCKS, ids=CLOCK_IDS)
+def test_the_compensation_metrics_read_one_figure_everywhere(rate, host_clocked, tmp_path, capsys):
+    """At 2, 10 and 20 kHz and as a host-clocked drive records it. No 70/30 split: the compensation metrics take
+    no validation run (they score the run's own tracking against its own reference)."""
     from hilbench.bench.acquisition.compensation_matrix import MatrixSettings, measured_case, write_report
 
     folder = tmp_path / "c"
     folder.mkdir()
     run = folder / "m.sine.none-1.h5"
-    proto, error = _compensated_run(run)
+    proto, error = _compensated_run(run, rate, host_clocked)
+    rec = load_record(run, channels=(CURRENT_CMD,))
+    # the drive's last trigger came early (the jitter's seed), so its grid ends one sample short of the reference:
+    # the entry scores the samples the grid holds (it once refused the run as not completed)
+    assert rec.position.size == proto.reference_path.n - host_clocked
+    if host_clocked:  # the closed form on the grid the loader resampled the drive's samples onto
+        error = proto.reference_path.position[:rec.position.size] - rec.position
     _campaign(folder, run.name, proto.name)
     assert steps_for(proto.name, tuple(protocol.ANALYSES)) == ["compensation"]
     comp = protocol.entry("compensation")
@@ -93,7 +105,8 @@ def test_the_compensation_metrics_read_one_figure_everywhere(tmp_path, capsys):
         assert summary[column] == pytest.approx(value, rel=1e-12), column
     # the glitch: the peak |error| within the run's own 0.02 s after each reversal of the reference
     assert summary["glitch_window_s"] == 0.02
-    peaks = [np.max(np.abs(error[k:k + 20])) for k in summary["reversal_sample"]]
+    window = round(0.02 * rate)
+    peaks = [np.max(np.abs(error[k:k + window])) for k in summary["reversal_sample"]]
     assert summary["glitch_rad"] == pytest.approx(peaks, rel=1e-12)
     cli = _report_json("compensation", run, tmp_path / "r.json")
     # the matrix report `hilbench compensate --matrix` and a [[compensate]] campaign write from the played run
@@ -113,29 +126,35 @@ def test_the_compensation_metrics_read_one_figure_everywhere(tmp_path, capsys):
     capsys.readouterr()
 
 
-def _probe_run(path: Path) -> float:
-    """A break-away probe (5 kHz, 0.5 s ramps to twice the break-away current) played on the simulated DC
-    motor's plant (8 Maxwell-slip elements) and written as the runner writes it. Returns the motor's sliding
-    current (sum W_i / K_t, A)."""
+def _probe_run(path: Path, fs: float, host: bool) -> float:
+    """A break-away probe (at ``fs``, 0.5 s ramps to twice the break-away current) played on the simulated DC
+    motor's plant (8 Maxwell-slip elements) and written as the runner writes it, or (``host``) as a host-clocked
+    drive writes it. Returns the motor's sliding current (sum W_i / K_t, A)."""
     kt = DC_MOTOR_TORQUE_CONSTANT
-    probe = BreakawayProbe(peak=2 * DC_MOTOR_BREAKAWAY / kt, ramp_time=0.5, hold=0.2, sample_rate=5000)
+    probe = BreakawayProbe(peak=2 * DC_MOTOR_BREAKAWAY / kt, ramp_time=0.5, hold=0.2, sample_rate=int(fs))
     u, fs = probe.setpoints(), float(probe.sample_rate)
     out = simulate(dc_motor(8), u, 1 / fs)
     k = np.arange(u.size)
+    channels, data, kw = clocked(
+        (SAMPLE_INDEX, TIME, CURRENT_CMD, "current", "torque", "position", "counts"),
+        {SAMPLE_INDEX: k, TIME: k / fs, CURRENT_CMD: u, "current": out.current_meas, "torque": out.torque,
+         "position": out.theta, "counts": out.counts}, fs, host)
     with RunWriter(path, sample_rate=fs, protocol_name=probe.name, protocol_params=probe.parameters(),
-                   protocol_arrays=probe.protocol_arrays()) as w:
-        w.append({SAMPLE_INDEX: k, TIME: k / fs, CURRENT_CMD: u, "current": out.current_meas, "torque": out.torque,
-                  "position": out.theta, "counts": out.counts})
+                   protocol_arrays=probe.protocol_arrays(), channels=channels, **kw) as w:
+        w.append(data)
     return DC_MOTOR_BREAKAWAY / kt
 
 
-def test_the_breakaway_probe_reads_one_figure_everywhere(tmp_path, capsys):
+@pytest.mark.parametrize(("rate", "host_clocked"), CLOCKS, ids=CLOCK_IDS)
+def test_the_breakaway_probe_reads_one_figure_everywhere(rate, host_clocked, tmp_path, capsys):
+    """At 2, 10 and 20 kHz and as a host-clocked drive records it. No 70/30 split: the probe takes no validation
+    run (its levels are read off the run's own ramps)."""
     from hilbench.bench.acquisition.breakaway_probe import analyse_probe
 
     folder = tmp_path / "c"
     folder.mkdir()
     run = folder / "probe-1.h5"
-    level = _probe_run(run)
+    level = _probe_run(run, rate, host_clocked)
     _campaign(folder, run.name, BreakawayProbe.name)
     assert steps_for(BreakawayProbe.name, tuple(protocol.ANALYSES)) == ["breakaway"]
     probe = protocol.entry("breakaway")
