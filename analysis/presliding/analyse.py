@@ -15,7 +15,14 @@ from hilbench.analysis.identification.regressors import position_resolution
 from hilbench.analysis.presliding.edges import EdgePoints, edge_points
 from hilbench.analysis.presliding.identify import PreslidingFit, PreslidingSettings, fit_presliding
 from hilbench.analysis.presliding.parametric import RollingFit, fit_rolling, origin_uncertainty
-from hilbench.analysis.presliding.quantities import DEFAULT_FRACTION, Resolution, bootstrap, quantities, resolution
+from hilbench.analysis.presliding.quantities import (
+    DEFAULT_FRACTION,
+    Resolution,
+    bootstrap,
+    encoder_step,
+    quantities,
+    resolution,
+)
 from hilbench.analysis.presliding.reversals import MemoryCheck, extreme_forces, find_reversals, memory_check
 from hilbench.analysis.presliding.span import plan_span, x_means
 from hilbench.common.units import AXIS_UNITS as AXES
@@ -109,13 +116,16 @@ def analyse(t: np.ndarray, x: np.ndarray, force: np.ndarray, fs: float, axis: st
     x = np.asarray(x, float)
     options = {"counts_per_rev": counts_per_rev, "hysteresis": hysteresis, "fraction": fraction,
                "replicates": replicates, "seed": seed, "max_samples": max_samples}
-    step = position_resolution(x)  # of the samples as recorded, before any averaging
+    # of the samples as recorded, before any averaging; the calibration's encoder step when known (a resampled
+    # host-clocked record's smallest increment is a spline's, far below one count)
+    step = encoder_step(axis, counts_per_rev) or position_resolution(x)
     span = plan_span(x.size, max_samples, HYSTERESIS_STEPS * step if hysteresis is None else hysteresis,
                      lambda m, head: x_means(x, m, head), lambda a, b: x[a:b])
     if span is None:
         return _analyse_record(t, x, force, fs, axis, settings, step, **options)
     k = span.samples
-    res = _analyse_record(t[:k], x[:k], force[:k], fs, axis, settings, position_resolution(x[:k]), **options)
+    res = _analyse_record(t[:k], x[:k], force[:k], fs, axis, settings,
+                          encoder_step(axis, counts_per_rev) or position_resolution(x[:k]), **options)
     res.warnings.append(span.warning(x.size, fs, max_samples))
     return res
 

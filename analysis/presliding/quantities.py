@@ -96,6 +96,13 @@ class Resolution:
     resolved: dict[str, bool]
 
 
+def encoder_step(axis: str, counts_per_rev: float | None) -> float | None:
+    """The position step (rad) of a rotary encoder of ``counts_per_rev`` counts per revolution (the run file's
+    calibration), None when unknown or on a linear axis. The step comes from the calibration, not from the samples:
+    a host-clocked drive's record is resampled (a spline through the counts), which takes it off the count grid."""
+    return 2 * math.pi / float(counts_per_rev) if counts_per_rev and axis == "rotary" else None
+
+
 def resolution(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, loop_travels: np.ndarray,
                counts_per_rev: float | None = None, fraction: float = DEFAULT_FRACTION,
                step: float | None = None, rolling: RollingFit | None = None,
@@ -116,8 +123,8 @@ def resolution(fit: PreslidingFit, x: np.ndarray, force: np.ndarray, loop_travel
     edge-pinned virgin ramp (edges.py), ``edge_fixed`` the same with p = 2; one more line says which virgin curve
     and sum(k) to trust (:func:`trust_line`).
     """
-    if counts_per_rev and fit.model.axis == "rotary":
-        step, source = 2 * math.pi / float(counts_per_rev), f"{counts_per_rev:.0f} counts/rev"
+    if encoder_step(fit.model.axis, counts_per_rev):
+        step, source = encoder_step(fit.model.axis, counts_per_rev), f"{counts_per_rev:.0f} counts/rev"
     else:
         step = position_resolution(x) if step is None else step
         source = "measured from the displacement"

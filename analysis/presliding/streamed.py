@@ -33,7 +33,7 @@ from hilbench.analysis.presliding.analyse import (
     analyse_blocks,
 )
 from hilbench.analysis.presliding.identify import PreslidingSettings
-from hilbench.analysis.presliding.quantities import DEFAULT_FRACTION
+from hilbench.analysis.presliding.quantities import DEFAULT_FRACTION, encoder_step
 from hilbench.analysis.presliding.span import XMeans, plan_span
 
 #: second differences kept for the noise level's median (float64: 32 MiB)
@@ -62,8 +62,9 @@ class _Blocks:
         return np.concatenate(self.parts, axis=1) if self.parts else np.empty((self.carry.shape[0], 0))
 
 
-def _pass_one(reader, names, n: int, max_samples: int, chunk: int, progress) -> tuple[np.ndarray, int, float, int]:
-    """(block means (3, n/m), m, position step, samples where x moves)."""
+def _pass_one(reader, names, n: int, max_samples: int, chunk: int, progress, calibrated: float | None = None
+              ) -> tuple[np.ndarray, int, float, int]:
+    """(block means (3, n/m), m, position step, samples where x moves); the step is ``calibrated`` when given."""
     m = max(1, -(-n // max_samples))
     blocks = _Blocks(m, 3)
     stride = max(1, -(-n // NOISE_SAMPLES))
@@ -85,7 +86,7 @@ def _pass_one(reader, names, n: int, max_samples: int, chunk: int, progress) -> 
         tail = ext[-2:]
     d2 = np.concatenate(d2_parts) if d2_parts else np.empty(0)
     noise = 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / np.sqrt(6.0) if d2.size else 0.0
-    step = max(0.0 if math.isinf(quantum) else quantum, noise)
+    step = calibrated or max(0.0 if math.isinf(quantum) else quantum, noise)
     return blocks.result(), m, step, moves
 
 
@@ -139,14 +140,15 @@ def analyse_stream(reader, fs: float, axis: str, force_name: str, settings: Pres
         raise AnalysisError(f"max_samples must be >= 100, got {max_samples}")
     options = {"counts_per_rev": counts_per_rev, "hysteresis": hysteresis, "fraction": fraction,
                "replicates": replicates, "seed": seed}
-    first = _pass_one(reader, ("t", "position", force_name), n, max_samples, chunk, _ticks(progress, n))
+    calibrated = encoder_step(axis, counts_per_rev)  # the step as analyse.analyse takes it
+    first = _pass_one(reader, ("t", "position", force_name), n, max_samples, chunk, _ticks(progress, n), calibrated)
     span = plan_span(n, max_samples, HYSTERESIS_STEPS * first[2] if hysteresis is None else hysteresis,
                      _x_means(reader, first, n, chunk), lambda a, b: reader.read("position", a, b))
     if span is None:
         return _analyse_read(reader, first, fs, axis, force_name, settings, chunk, progress, options)
     head = _Head(reader, span.samples)
     again = _pass_one(head, ("t", "position", force_name), head.n_samples, max_samples, chunk,
-                      _ticks(progress, head.n_samples))
+                      _ticks(progress, head.n_samples), calibrated)
     res = _analyse_read(head, again, fs, axis, force_name, settings, chunk, progress, options)
     res.warnings.append(span.warning(n, fs, max_samples))
     return res
