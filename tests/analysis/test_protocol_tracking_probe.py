@@ -155,6 +155,7 @@ def test_the_breakaway_probe_reads_one_figure_everywhere(rate, host_clocked, tmp
     folder.mkdir()
     run = folder / "probe-1.h5"
     level = _probe_run(run, rate, host_clocked)
+    assert any(n.startswith("resampled on host_time") for n in load_record(run).notes) == host_clocked
     _campaign(folder, run.name, BreakawayProbe.name)
     assert steps_for(BreakawayProbe.name, tuple(protocol.ANALYSES)) == ["breakaway"]
     probe = protocol.entry("breakaway")
