@@ -6,7 +6,9 @@ for one model on one input whichever consumer computes it.
 - Consistency: identify, compare and the residual loop through every consumer they have (the Python API, the CLI's
   JSON, the GUI's result, the campaign's Parquet row) on the same runs (whole, and cut 70/30 into a head and a
   held-out tail: the CLI reads the two parts written as run files) at 2, 10 and 20 kHz and on a host-clocked
-  drive run (a ``sample_times`` channel: resampled by the one loader) report the same figure to 1e-6 relative.
+  drive run (a ``sample_times`` channel: resampled by the one loader) report the same figure to 1e-6 relative;
+  afrf, skeleton and presliding likewise at the same rates and host-clocked, whole only (they take no validation
+  run, so no 70/30 split applies).
 """
 
 from __future__ import annotations
