@@ -64,12 +64,13 @@ try:
         cluster = LocalCluster(n_workers=request["workers"], threads_per_worker=1, processes=True,
                                dashboard_address=request["dashboard"], silence_logs=logging.CRITICAL)
     except Exception as exc:
+        started.set()  # before the reply: a client that reads it may close stdin at once, and this ends in order
         reply.write(json.dumps({"error": f"{type(exc).__name__}: {' '.join(str(exc).split())}"}) + "\\n")
     else:
+        started.set()
         link = cluster.dashboard_link if request["dashboard"] else None
         reply.write(json.dumps({"address": cluster.scheduler_address, "dashboard": link}) + "\\n")
     reply.flush()
-    started.set()
     gone.wait()  # until the client closes the pipe or dies
 except BrokenPipeError:  # the client is gone
     pass

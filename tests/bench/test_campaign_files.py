@@ -98,7 +98,7 @@ def test_a_relative_simulator_config_is_read_from_the_campaign_folder(tmp_path, 
         load_campaign(bad)
 
 
-def test_the_plants_inertia_reaches_every_run_files_calibration(tmp_path, starts_devices):
+def test_the_plants_inertia_reaches_every_run_files_calibration(tmp_path):  # lockstep: unpaced
     """What the skeleton step reads when no --skeleton-mass is given (analysis.skeleton.run_mass)."""
     _write(tmp_path / "sim.toml", "[plant]\npreset = \"dc_motor\"\n")
     campaign = load_campaign(_write(tmp_path / "c.toml", CAMPAIGN.format(config="sim.toml",
@@ -108,27 +108,3 @@ def test_the_plants_inertia_reaches_every_run_files_calibration(tmp_path, starts
         with open_run(tmp_path / "out" / f"{key}.h5") as run:
             assert run.calibration["inertia"] == pytest.approx(0.00211)
             assert run.calibration["units"]["inertia"] == "kg*m^2"
-
-
-@pytest.mark.slow
-def test_a_planned_campaign_with_repeats_analysed_with_all_six_steps_has_no_failed_row(tmp_path, starts_devices):
-    """The issue's path: plan -> `repeats = 2` on every run -> campaign -> analyse with the six steps. The
-    skeleton step needs no option: J comes from the plan's [plant] inertia in every run file."""
-    import pyarrow.parquet as pq
-
-    plan = tmp_path / "plan.toml"
-    assert main(["plan", "--device", "sim://?pacing=lockstep", "--duration", "2", "-o", str(plan), "-q"]) == 0
-    edited = _write(tmp_path / "plan2.toml", re.sub(r'^(protocol = "[a-z_]+")$', r"\1\nrepeats = 2",
-                                                    plan.read_text(), flags=re.M))
-    assert main(["campaign", str(edited), "-o", str(tmp_path / "camp"), "--quiet"]) == 0
-    steps = "identify,compare,residual,presliding,afrf,skeleton"
-    assert main(["analyse", str(tmp_path / "camp"), "--steps", steps, "--serial", "-o", str(tmp_path / "res"),
-                 "--quiet"]) == 0
-    table = pq.read_table(tmp_path / "res" / "results.parquet").to_pydict()
-    rows = list(zip(table["key"], table["step"], table["status"], table["error"], strict=True))
-    assert [r for r in rows if r[2] != "ok"] == []
-    assert sorted({(k.rsplit("-", 1)[0], s) for k, s, *_ in rows}) == sorted(
-        [("identification", s) for s in ("compare", "identify", "residual")]
-        + [("chirp", s) for s in ("compare", "identify", "residual", "skeleton")]
-        + [("stepped_sine", "afrf"), ("presliding", "presliding")])
-    assert len(rows) == 18  # every step of every run, both repeats

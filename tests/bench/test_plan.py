@@ -273,7 +273,7 @@ def test_plan_checks_its_outputs_before_the_probe_moves_the_motor(tmp_path, caps
 PRESET_OPTIONS = {"dc_motor": [], "paper_system": ["--current-limit", "300", "--torque-constant", "1"]}
 
 
-def test_plan_on_every_shipped_preset_measures_the_load_against_its_parameters(tmp_path, capsys, starts_devices):
+def test_plan_on_every_shipped_preset_measures_the_load_against_its_parameters(tmp_path, capsys):  # lockstep
     """Issue 38: plan succeeds on every preset of firmware_sim/devices (sim_config.PRESETS), through the CLI on a
     lockstep simulator, and what its probe measured is the preset's. The probe's least squares has a spring term:
     on the DC motor the spring it fits is noise (|k| times the probe's travel under 2 % of the sliding current), on
@@ -344,7 +344,7 @@ def test_plan_on_every_shipped_preset_measures_the_load_against_its_parameters(t
         assert 0.3 * bound < swing <= bound, (swing, bound)
 
 
-def test_plan_on_a_spring_it_cannot_slide_says_so_in_one_line(tmp_path, capsys, starts_devices):
+def test_plan_on_a_spring_it_cannot_slide_says_so_in_one_line(tmp_path, capsys):  # lockstep: unpaced
     """The issue's command on the paper's system: 20 A at the default 0.2 N*m/A moves the load 0.05 rad against
     its spring, far short of its friction's saturation (about 10 rad of travel). One line: the spring and inertia
     the quick probe measured (k within 10 %, J within 8 %), and only options plan has (it named a 'peak current'

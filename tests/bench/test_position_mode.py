@@ -15,8 +15,6 @@ from hilbench.bench.acquisition import excitations
 from hilbench.bench.acquisition.protocols import ParameterSpec, Protocol
 from hilbench.bench.acquisition.runner import Bench, DeviceSettings
 
-pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the serial realtime part of make test
-
 FS = 10000
 CPR = 1 << 16
 

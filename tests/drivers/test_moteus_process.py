@@ -61,7 +61,7 @@ def test_cli_identify_run_against_the_controller_process_recovers_the_plant(cont
     assert info.returncode == 0, info.stderr
     assert "clock: host-clocked; runs current at 1000 Hz; position at 1000 Hz" in info.stdout, info.stdout
     out = tmp_path / "id.h5"
-    assert cli("run", "identify", "--device", url, "--sample-rate", "1000", "--duration", "15", "--quiet", "-o",
+    assert cli("run", "identify", "--device", url, "--sample-rate", "1000", "--duration", "10", "--quiet", "-o",
                str(out)).returncode == 0
     with open_run(out) as run:
         assert run.status == "completed"
@@ -69,8 +69,8 @@ def test_cli_identify_run_against_the_controller_process_recovers_the_plant(cont
         host_time, cmd, cycle = run.channel("host_time"), run.channel("current_cmd"), run.channel("cycle")
         u = run.protocol_array("setpoints")
         timing = [e["message"] for e in run.events if e["message"].startswith("host-clocked timing:")]
-    assert t.size == 15_000 and np.all(np.diff(host_time) > 0) and np.array_equal(cycle, np.arange(t.size))
-    assert len(timing) == 1 and timing[0].startswith("host-clocked timing: 15000 cycles at 1000 Hz")
+    assert t.size == 10_000 and np.all(np.diff(host_time) > 0) and np.array_equal(cycle, np.arange(t.size))
+    assert len(timing) == 1 and timing[0].startswith("host-clocked timing: 10000 cycles at 1000 Hz")
     # the commands recorded are those sent, float32 on the wire, sample for sample
     np.testing.assert_array_equal(cmd, np.float32(u * 0.2).astype(np.float64) / 0.2)
     # oracle: the C plant run directly on the float32 commands, 10 sub-samples per cycle (test_moteus.py).

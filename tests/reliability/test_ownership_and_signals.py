@@ -17,7 +17,7 @@ pytestmark = pytest.mark.usefixtures("starts_devices")  # starts a device: the s
 def test_a_second_program_on_the_port_is_refused_and_the_run_completes(simulator, tmp_path):
     _, pty = simulator(pacing="realtime")
     out = tmp_path / "run.h5"
-    run = start("run", "identify", "--device", f"serial://{pty}", "--sample-rate", "1000", "--duration", "10",
+    run = start("run", "identify", "--device", f"serial://{pty}", "--sample-rate", "1000", "--duration", "5",
                 "--quiet", "-o", out)
     wait_for_samples(out, 1000)
     line = one_line_error(hilbench("info", "--device", f"serial://{pty}"))
@@ -29,7 +29,7 @@ def test_a_second_program_on_the_port_is_refused_and_the_run_completes(simulator
     stdout, stderr = run.communicate(timeout=60)
     assert run.returncode == 0, stderr
     with open_run(out) as r:
-        assert r.status == "completed" and r.n_samples == 10000
+        assert r.status == "completed" and r.n_samples == 5000
         assert [e for e in r.events if e["kind"] in ("abort", "fault")] == []
     assert hilbench("info", "--device", f"serial://{pty}").returncode == 0  # free again
 
