@@ -3,6 +3,7 @@ campaign row of one run and one step, and the campaign page's cell of a row."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,13 @@ RTOL = 1e-6
 THRESHOLDS = 16
 FRACTION = 0.3
 quiet = {"progress": False, "say": lambda _line: None}
+
+
+def one_run_campaign(folder: Path, file: str, protocol_name: str, key: str = "a") -> None:
+    """``folder`` (made here if missing) as a campaign of one completed run ``file`` of protocol ``protocol_name``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "index.json").write_text(json.dumps({"runs": [{"key": key, "file": file, "status": "completed",
+                                                             "protocol": protocol_name}]}))
 
 
 def campaign_row(folder: Path, out: Path, step: str, fraction: float) -> dict:

@@ -38,6 +38,7 @@ from tests.analysis.consistency import (
     THRESHOLDS,
     campaign_row,
     clocked,
+    one_run_campaign,
     page_cell,
 )
 
@@ -274,8 +275,7 @@ def test_the_afrf_reports_one_figure_everywhere(rate, host_clocked, tmp_path, ca
     run = folder / "afrf.h5"
     _afrf_run(run, rate, host_clocked)
     assert any(n.startswith("resampled on host_time") for n in load_record(run).notes) == host_clocked
-    (folder / "index.json").write_text(json.dumps({"runs": [{"key": "a", "file": "afrf.h5", "status": "completed",
-                                                             "protocol": "stepped_sine"}]}))
+    one_run_campaign(folder, "afrf.h5", "stepped_sine")
     afrf = protocol.entry("afrf")
     summary = afrf.report(afrf.analyse(afrf.read([run], protocol.ReadOptions())))[1]
     compliance = summary["afrf_compliance_low_amplitude"]
@@ -328,8 +328,7 @@ def test_the_skeleton_reports_one_figure_everywhere(rate, host_clocked, tmp_path
     run = folder / "chirp.h5"
     _chirp_run(run, rate, host_clocked)
     assert any(n.startswith("resampled on host_time") for n in load_record(run).notes) == host_clocked
-    (folder / "index.json").write_text(json.dumps({"runs": [{"key": "a", "file": "chirp.h5", "status": "completed",
-                                                             "protocol": "chirp"}]}))
+    one_run_campaign(folder, "chirp.h5", "chirp")
     sk = protocol.entry("skeleton")
     summary = sk.report(sk.analyse(sk.read([run], protocol.ReadOptions())))[1]
     low, high = summary["skeleton_amplitude_min"], summary["skeleton_amplitude_max"]
@@ -381,8 +380,7 @@ def test_presliding_reports_one_figure_everywhere(rate, host_clocked, tmp_path, 
     run = folder / "p.h5"
     _presliding_run(run, rate, host_clocked)
     assert any(n.startswith("resampled on host_time") for n in load_record(run).notes) == host_clocked
-    (folder / "index.json").write_text(json.dumps({"runs": [{"key": "p", "file": "p.h5", "status": "completed",
-                                                             "protocol": "presliding"}]}))
+    one_run_campaign(folder, "p.h5", "presliding", key="p")
     ps = protocol.entry("presliding")
     summary = ps.report(ps.analyse(ps.read([run], protocol.ReadOptions())))[1]
     assert main(["-q", "presliding", str(run), "-o", str(tmp_path / "out")]) == 0

@@ -31,7 +31,7 @@ from hilbench.common.runfile import (
 )
 from hilbench.firmware_sim.engine.friction_models import DC_MOTOR_BREAKAWAY, DC_MOTOR_TORQUE_CONSTANT, dc_motor
 from hilbench.firmware_sim.engine.plant import simulate
-from tests.analysis.consistency import CLOCK_IDS, CLOCKS, RTOL, campaign_row, clocked, page_cell
+from tests.analysis.consistency import CLOCK_IDS, CLOCKS, RTOL, campaign_row, clocked, one_run_campaign, page_cell
 
 pytestmark = pytest.mark.device_free
 
@@ -44,12 +44,6 @@ def _shown(result, column: str) -> float:
     """The number the GUI's result table shows for ``column`` (its text, as the operator reads it)."""
     (text,) = [value for quantity, value, _unit in result.numbers if quantity == column]
     return float(text)
-
-
-def _campaign(folder: Path, file: str, protocol_name: str) -> None:
-    """``folder`` as a campaign of one completed run ``file`` of protocol ``protocol_name``."""
-    (folder / "index.json").write_text(json.dumps({"runs": [{"key": "a", "file": file, "status": "completed",
-                                                             "protocol": protocol_name}]}))
 
 
 def _report_json(name: str, run: Path, out: Path) -> dict:
@@ -96,7 +90,7 @@ def test_the_compensation_metrics_read_one_figure_everywhere(rate, host_clocked,
     assert rec.position.size == proto.reference_path.n - host_clocked
     if host_clocked:  # the closed form on the grid the loader resampled the drive's samples onto
         error = proto.reference_path.position[:rec.position.size] - rec.position
-    _campaign(folder, run.name, proto.name)
+    one_run_campaign(folder, run.name, proto.name)
     assert steps_for(proto.name, tuple(protocol.ANALYSES)) == ["compensation"]
     comp = protocol.entry("compensation")
     summary = comp.report(comp.analyse(comp.read([run], protocol.ReadOptions())))[1]
@@ -156,7 +150,7 @@ def test_the_breakaway_probe_reads_one_figure_everywhere(rate, host_clocked, tmp
     run = folder / "probe-1.h5"
     level = _probe_run(run, rate, host_clocked)
     assert any(n.startswith("resampled on host_time") for n in load_record(run).notes) == host_clocked
-    _campaign(folder, run.name, BreakawayProbe.name)
+    one_run_campaign(folder, run.name, BreakawayProbe.name)
     assert steps_for(BreakawayProbe.name, tuple(protocol.ANALYSES)) == ["breakaway"]
     probe = protocol.entry("breakaway")
     summary = probe.report(probe.analyse(probe.read([run], protocol.ReadOptions())))[1]
