@@ -16,8 +16,8 @@ start (the fork server's imports, distributed's, the scheduler, the workers) ove
 planning. It answers with one JSON line on a copy of its stdout (its stdout itself goes to stderr, so that nothing a
 library prints can break the reply): ``{"address", "dashboard"}`` once the workers are up, or ``{"error"}``. Then it
 holds the cluster until its stdin ends (the client closed it, or died however it died: no cluster outlives its
-client), closes it, stops the fork server (so that its and its workers' CPU reach the client's resource usage) and
-exits.
+client), closes it, kills and reaps the fork server (so that its and its workers' CPU reach the client's resource
+usage) and exits without an interpreter teardown (the two teardowns cost 0.35 s after the last task).
 """
 
 from __future__ import annotations
@@ -38,49 +38,84 @@ from hilbench.bench.errors import AnalyseError
 #: (CPU taken from the fork server's imports, the critical path).
 #: argv: the fork server's preload (JSON list), the request (JSON: workers, dashboard, Dask config)
 BOOT = """
-import json, os, sys, threading
+import json, os, signal, sys, threading
 reply = os.fdopen(os.dup(1), "w")
 os.dup2(2, 1)  # anything printed goes to stderr, not into the reply
-started, gone = threading.Event(), threading.Event()
+started, gone, lock = threading.Event(), threading.Event(), threading.Lock()
+
+def say(doc):  # one JSON line to the client (from this thread, the scheduler's loop and the start's deadline)
+    with lock:
+        reply.write(json.dumps(doc) + "\\n")
+        reply.flush()
+
+def fail(why):  # the cluster cannot start: the client reads why; its connection to the scheduler ends with this
+    try:
+        say({"error": " ".join(why.split())})
+    except OSError:
+        pass
+    os._exit(1)  # the fork server quits when this process goes; a nanny's worker watches its parent
 
 def watch():  # the client's end of stdin: it closed it or died. During the start nobody else listens: exit at once
     sys.stdin.read()
     gone.set()
     if not started.is_set():
-        os._exit(1)  # the fork server quits when this process goes; a nanny's worker watches its parent
+        os._exit(1)
 
 threading.Thread(target=watch, daemon=True).start()
 from multiprocessing import forkserver, get_context
 get_context("forkserver").set_forkserver_preload(json.loads(sys.argv[1]))
 forkserver.ensure_running()
 request = json.loads(sys.argv[2])
+deadline = threading.Timer(request["timeout"], fail, (f"it did not start within {request['timeout']:g} s",))
+deadline.daemon = True
+deadline.start()
 import logging
 import dask
 from distributed import LocalCluster
+from distributed.comm import get_address_host
+from distributed.diagnostics.plugin import SchedulerPlugin
+from distributed.utils import format_dashboard_link
+
+class Announce(SchedulerPlugin):
+    # the scheduler's address as soon as it listens, before the workers start: the client connects and submits
+    # while the fork server still imports, and the tasks wait in the scheduler's queue for the first worker
+    async def start(self, scheduler):
+        server = scheduler.services.get("dashboard") if request["dashboard"] else None  # (its HTTP server runs anyway)
+        link = format_dashboard_link(get_address_host(scheduler.address), server.port) if server else None
+        say({"address": scheduler.address, "dashboard": link})
+
 cluster = None
 try:
     dask.config.set(request["config"])
-    try:
-        cluster = LocalCluster(n_workers=request["workers"], threads_per_worker=1, processes=True,
-                               dashboard_address=request["dashboard"], silence_logs=logging.CRITICAL)
-    except Exception as exc:
-        started.set()  # before the reply: a client that reads it may close stdin at once, and this ends in order
-        reply.write(json.dumps({"error": f"{type(exc).__name__}: {' '.join(str(exc).split())}"}) + "\\n")
-    else:
-        started.set()
-        link = cluster.dashboard_link if request["dashboard"] else None
-        reply.write(json.dumps({"address": cluster.scheduler_address, "dashboard": link}) + "\\n")
-    reply.flush()
+    cluster = LocalCluster(n_workers=request["workers"], threads_per_worker=1, processes=True,
+                           dashboard_address=request["dashboard"], silence_logs=logging.CRITICAL,
+                           scheduler_kwargs={"plugins": [Announce()]})
+except Exception as exc:
+    fail(f"{type(exc).__name__}: {exc}")
+deadline.cancel()
+started.set()
+try:
+    say({"workers": request["workers"]})
     gone.wait()  # until the client closes the pipe or dies
+    code = 0
 except BrokenPipeError:  # the client is gone
-    pass
-finally:
-    if cluster is not None:
-        cluster.close()
-    # wait for the fork server, which reaps the workers: their CPU then counts in this process's children's, and so
-    # in the command's (a private method, the one CPython's tests use; without it the server exits by itself when
-    # this process does)
-    getattr(forkserver._forkserver, "_stop", lambda: None)()
+    code = 0
+except BaseException:
+    import traceback
+    traceback.print_exc()
+    code = 1
+cluster.close()  # the nannies end their workers, and the fork server reaps them
+# then the fork server, killed and reaped: the workers' CPU counts in this process's children's, and so in the
+# command's. Killed, not stopped: its interpreter's teardown (numpy, scipy, h5py, distributed) took 0.17 s of
+# CPU after the last task, and it holds nothing to flush. This process's own teardown took as long again: it
+# flushes its two streams and skips it (os._exit)
+pid = getattr(forkserver._forkserver, "_forkserver_pid", None)
+if pid:
+    os.kill(pid, signal.SIGKILL)
+    os.waitpid(pid, 0)
+sys.stdout.flush()
+sys.stderr.flush()
+os._exit(code)
 """
 #: the local cluster's Dask settings (the host's scheduler and nannies, and the workers they start).
 #: allowed-failures 1: a task whose worker dies is given to a fresh worker once. worker-saturation 1.0: a worker
@@ -122,31 +157,60 @@ class Host:
 
     def __init__(self, workers: int, dashboard: str | None) -> None:
         self.request = {"workers": workers, "dashboard": dashboard}
-        self.proc = subprocess.Popen([sys.executable, "-c", BOOT, json.dumps(["distributed", *WORKER_MODULES]),
-                                      json.dumps({**self.request, "config": CONFIG})],
+        # -W: the host's interpreter flags reach the fork server and multiprocessing's resource tracker, which warns
+        # on the command's stderr of the semaphores it cleans up when the host was killed (the command says so)
+        self.proc = subprocess.Popen([sys.executable, "-W", "ignore::UserWarning:multiprocessing.resource_tracker",
+                                      "-c", BOOT, json.dumps(["distributed", *WORKER_MODULES]),
+                                      json.dumps({**self.request, "config": CONFIG, "timeout": START_TIMEOUT})],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, env={**os.environ, **ENVIRONMENT},
                                      close_fds=True)
+        self._pending = b""
 
     def address(self, timeout: float = START_TIMEOUT) -> tuple[str, str | None]:
-        """(scheduler address, dashboard link), once the workers are up."""
-        assert self.proc.stdout is not None
-        line, deadline, fd = b"", time.monotonic() + timeout, self.proc.stdout.fileno()
-        while not line.endswith(b"\n"):
-            left = deadline - time.monotonic()
-            if left <= 0 or not select.select([fd], [], [], left)[0]:
-                self.close()
-                raise AnalyseError(f"the local cluster did not start within {timeout:g} s")
-            got = os.read(fd, 65536)
-            if not got:
-                self.close()
-                raise AnalyseError(f"the local cluster's process ended before it started (exit code "
-                                   f"{self.proc.wait()})")
-            line += got
+        """(scheduler address, dashboard link), once the scheduler listens (its workers may still be starting:
+        tasks submitted now wait for them; :meth:`failure` says if they never come)."""
+        line = self._line(timeout)
+        if line is None:
+            self.close()
+            raise AnalyseError(f"the local cluster did not start within {timeout:g} s")
+        if not line:
+            self.close()
+            raise AnalyseError(f"the local cluster's process ended before it started (exit code {self.proc.wait()})")
         doc = json.loads(line)
         if "error" in doc:
             self.close()
             raise AnalyseError(f"the local cluster did not start: {doc['error'][:300]}")
         return doc["address"], doc["dashboard"]
+
+    def failure(self, wait: float = 0.0) -> str | None:
+        """Why the cluster failed after its address came (its workers did not start, or its process ended), or
+        None while it is well (the host said its workers are up, or says nothing more within ``wait`` s)."""
+        deadline = time.monotonic() + wait
+        while True:
+            line = self._line(max(0.0, deadline - time.monotonic()))
+            if line is None:  # nothing (more) said in time
+                return None if self.alive() else f"its process ended (exit code {self.proc.wait()})"
+            if not line:
+                return f"its process ended (exit code {self.proc.wait()})"
+            doc = json.loads(line)
+            if "error" in doc:
+                return str(doc["error"])[:300]
+            # {"workers": n}: they came up; what follows tells
+
+    def _line(self, timeout: float) -> bytes | None:
+        """The host's next reply line; b"" at its end; None if none came within ``timeout`` s."""
+        assert self.proc.stdout is not None
+        deadline, fd = time.monotonic() + timeout, self.proc.stdout.fileno()
+        while b"\n" not in self._pending:
+            left = deadline - time.monotonic()
+            if not select.select([fd], [], [], max(0.0, left))[0]:
+                return None
+            got = os.read(fd, 65536)
+            if not got:
+                return b""
+            self._pending += got
+        line, _, self._pending = self._pending.partition(b"\n")
+        return line
 
     def alive(self) -> bool:
         return self.proc.poll() is None

@@ -17,14 +17,17 @@ worker becomes a ``failed`` row with the reason. The campaign always completes.
 
 from __future__ import annotations
 
+import concurrent.futures
 import hashlib
 import json
+import logging
 import math
 import os
 import re
 import stat
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -376,6 +379,14 @@ def _execute_items(items, settings, functions, results, row_key, write_part) -> 
     return out
 
 
+def execute_chunk_timed(items: list[dict[str, Any]], settings: StepSettings, functions: dict[str, StepFunction],
+                        results: str) -> tuple[float, list[Outcome]]:
+    """(when the task began on its worker, time.time(); :func:`execute_chunk`'s outcomes): the cluster's start-up
+    figure ends at its first task's start."""
+    began = time.time()
+    return began, execute_chunk(items, settings, functions, results)
+
+
 def chunk(todo: list[Task], workers: int) -> list[list[Task]]:
     """Split the tasks into chunks of at most MAX_CHUNK that shrink as the work left does (guided scheduling):
     each is half the remaining tasks' share per worker, so the last ones are single runs and no worker waits for
@@ -586,6 +597,7 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
     from distributed import Client, as_completed
     from distributed.scheduler import KilledWorker
 
+    t0_wall = time.time() - (time.perf_counter() - t0)  # the command's start on the workers' clock
     dashboard = cluster_host.dashboard_address(want_dashboard)
     if want_dashboard and dashboard is None and verbose:
         say("dask dashboard: not available (it needs the bokeh package); going on without it")
@@ -593,7 +605,10 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
     host = None
     # the local cluster's settings are the cluster host's (cluster_host.CONFIG); this client's own: the same where
     # they apply to it, and the connect timeout
-    with dask.config.set({**cluster_host.CONFIG, "distributed.comm.timeouts.connect": f"{CONNECT_TIMEOUT:g}s"}):
+    # Dask's own log lines (a lost scheduler, a rescheduled task) stay out of the command's output unless -v: what
+    # they mean reaches the user as this command's one line or as a row's error
+    with (dask.config.set({**cluster_host.CONFIG, "distributed.comm.timeouts.connect": f"{CONNECT_TIMEOUT:g}s"}),
+          _quiet(logging.getLogger("distributed"), not verbose)):
         if address is None:  # the local cluster, in a process of its own (cluster_host)
             host = cluster_host.take(cluster_host.local_workers(workers), dashboard)
             try:
@@ -613,18 +628,23 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
             if dashboard is not None and (summary.dashboard or client.dashboard_link):
                 summary.dashboard = summary.dashboard or client.dashboard_link
                 say(f"dask dashboard: {summary.dashboard}")
-            if scheduler is not None:  # a remote worker must reach the results folder at the same path
+            if host is None:  # a remote cluster: its workers are up, they must reach the results folder at the same
+                # path, and they import the steps before the first task (a local worker is forked from a fork server
+                # that has; the local cluster's workers may still be starting: the tasks wait for them)
                 refused = [why for why in client.run(_check_writable, str(out)).values() if why]
                 if refused:
                     raise AnalyseError(refused[0])
-            client.run(warm_up)  # a remote worker imports before the tasks (a forked one has); startup_time: how long
-            summary.startup_time, summary.startup_cpu = time.perf_counter() - t0, time.process_time() - cpu0
-            n_workers = len(client.scheduler_info()["workers"]) or 1
+                client.run(warm_up)
+                n_workers = len(client.scheduler_info()["workers"]) or 1
+            else:
+                n_workers = cluster_host.local_workers(workers)
+            summary.startup_cpu = time.process_time() - cpu0
             futures = as_completed()
             submitted: dict[Any, list[Task]] = {}
+            began: list[float] = []  # when each task began on its worker (time.time())
 
             def submit(part: list[Task]) -> None:
-                future = client.submit(execute_chunk, _items(part), settings, fn, str(out), pure=False)
+                future = client.submit(execute_chunk_timed, _items(part), settings, fn, str(out), pure=False)
                 submitted[future] = part
                 futures.add(future)
 
@@ -634,7 +654,8 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
             for future in futures:
                 part = submitted.pop(future)
                 try:
-                    outcomes = future.result()
+                    start, outcomes = future.result()
+                    began.append(start)
                 except KilledWorker as exc:
                     if len(part) > 1:  # one of its runs kills workers: find which, run by run
                         for task in part:
@@ -642,9 +663,22 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
                         continue
                     outcomes = [_died(part[0], exc, out)]
                 except Exception as exc:  # e.g. a result that cannot be unpickled: the chunk's runs fail here
+                    # a lost scheduler cancels every task: the host's word (or its end) then comes within moments
+                    lost = isinstance(exc, concurrent.futures.CancelledError)
+                    why = host.failure(wait=5.0 if lost else 0.0) if host is not None else None
+                    if why is None and lost and host is None:
+                        why = f"the connection to --scheduler {address} was lost ({one_line(exc)[:200]})"
+                    elif why is not None:
+                        why = f"the local cluster failed: {why}"
+                    if why is not None:  # not the runs': the cluster itself is gone; what its workers wrote stays
+                        raise AnalyseError(f"{why}; the rows of the runs it finished are kept: the same command "
+                                           "again analyses the rest") from None
                     outcomes = [_died(task, exc, out) for task in part]
                 record(part, outcomes)
             summary.work_cpu += time.process_time() - loop_cpu
+            # start-up: from the command's start to the first task's start on a worker (the local cluster's tasks
+            # are submitted while its workers start)
+            summary.startup_time = (min(began) - t0_wall if began else time.perf_counter() - t0)
             end = _scheduler_cpu(client)
             if scheduler_cpu is not None and end is not None:
                 summary.scheduler_cpu = end - scheduler_cpu
@@ -652,6 +686,21 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
             client.close()
             if host is not None:
                 host.close()
+
+
+@contextmanager
+def _quiet(logger: logging.Logger, quiet: bool) -> Iterator[None]:
+    """Only critical records through ``logger``'s handlers while it runs, if ``quiet``: Dask logs through the
+    handlers of its ``distributed`` logger, and its child loggers' records reach them whatever the parent's
+    level."""
+    handlers = [(h, h.level) for h in logger.handlers] if quiet else []
+    for h, _ in handlers:
+        h.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        for h, level in handlers:
+            h.setLevel(level)
 
 
 def _scheduler_cpu(client: Any) -> float | None:

@@ -49,6 +49,7 @@ def test_the_scheduler_runs_in_the_host_not_in_the_client_and_ends_with_it():
     address, dashboard = host.address()
     assert dashboard is None
     with Client(address, timeout="30s") as client:
+        client.wait_for_workers(1, timeout=60)  # the address comes as soon as the scheduler listens
         scheduler_pid = client.run_on_scheduler(os.getpid)
         workers = client.run(os.getpid)
     assert scheduler_pid == host.proc.pid != os.getpid()
@@ -65,9 +66,13 @@ def test_the_scheduler_runs_in_the_host_not_in_the_client_and_ends_with_it():
 
 _CLIENT = """
 import sys
+from distributed import Client
 from hilbench.bench.campaign_analysis import cluster_host
 host = cluster_host.Host(1, None)
-print(host.proc.pid, host.address()[0], flush=True)
+address = host.address()[0]
+with Client(address, timeout="30s") as client:
+    client.wait_for_workers(1, timeout=60)
+print(host.proc.pid, address, flush=True)
 sys.stdin.read()
 """
 
@@ -160,7 +165,7 @@ def test_a_cluster_that_cannot_start_is_one_line():
     with pytest.raises(AnalyseError, match="the local cluster did not start: ") as err:
         host.address()
     assert "\n" not in str(err.value)
-    assert host.proc.wait(30) == 0
+    assert host.proc.wait(30) == 1
 
 
 def test_an_early_host_is_taken_once_with_its_settings_and_otherwise_ended():
@@ -181,3 +186,59 @@ def test_an_early_host_is_taken_once_with_its_settings_and_otherwise_ended():
     unused = cluster_host._early
     cluster_host.discard()
     assert unused.proc.poll() is not None and cluster_host._early is None
+
+
+def _slow(path: str, settings) -> dict:
+    time.sleep(0.05)
+    return {"samples": os.path.getsize(path)}
+
+
+def test_a_cluster_host_killed_mid_analysis_is_one_line_and_the_same_command_finishes(tmp_path):
+    """The local cluster's process killed (-9) while its workers analyse: the command ends with one line naming the
+    cluster, not with a "worker died" row for every run of the tasks it lost (what it wrote before: rows that a
+    resumed analysis then kept); the rows the workers wrote stay, and the same analysis again gives one ok row per
+    run."""
+    import threading
+
+    import pyarrow.parquet as pq
+
+    from hilbench.bench.campaign_analysis.engine import analyse
+    from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
+
+    campaign, out = tmp_path / "c", tmp_path / "r"
+    write_campaign(campaign, SyntheticCampaign(runs=24, duration=0.3, seed=5))
+    killed: list[int] = []
+
+    def kill_the_host_after_the_first_part() -> None:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not killed:
+            if (out / "parts").is_dir() and any((out / "parts").glob("*.parquet")):
+                for pid in _descendants(os.getpid()):
+                    try:
+                        line = open(f"/proc/{pid}/cmdline", "rb").read()
+                    except OSError:
+                        continue
+                    if b"set_forkserver_preload" in line and b"forkserver import main" not in line:
+                        os.kill(pid, signal.SIGKILL)
+                        killed.append(pid)
+                        return
+            time.sleep(0.01)
+
+    killer = threading.Thread(target=kill_the_host_after_the_first_part)
+    killer.start()
+    t0 = time.monotonic()
+    with pytest.raises(AnalyseError) as err:
+        analyse([campaign], out, workers=2, dashboard=False, progress=False, say=lambda _l: None,
+                functions={"identify": _slow})
+    killer.join()
+    assert killed and time.monotonic() - t0 < 60
+    assert str(err.value).startswith("the local cluster failed: its process ended (exit code -9)")
+    assert "\n" not in str(err.value)
+    kept = sum(pq.read_metadata(f).num_rows for f in (out / "parts").glob("*.parquet"))
+    assert 0 < kept < 24
+    again = analyse([campaign], out, workers=2, dashboard=False, progress=False, say=lambda _l: None,
+                    functions={"identify": _slow})
+    rows = pq.read_table(again.table).to_pylist()
+    assert sorted(r["key"] for r in rows) == sorted({r["key"] for r in rows}) and len(rows) == 24
+    assert all(r["status"] == "ok" for r in rows), [r["error"] for r in rows if r["status"] != "ok"]
+    assert again.skipped == kept and again.analysed == 24 - kept
