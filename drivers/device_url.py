@@ -26,12 +26,14 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 from urllib.parse import parse_qsl, urlsplit
 
-from hilbench.drivers.amplifier import Amplifier
-from hilbench.drivers.device import Device
 from hilbench.drivers.errors import DeviceURLError, DriverError
-from hilbench.drivers.links import CanLink, SerialLink
+
+if TYPE_CHECKING:  # the openers import them: a help text's describe_schemes() costs no numpy and no h5py
+    from hilbench.drivers.amplifier import Amplifier
+    from hilbench.drivers.device import Device
 
 SIM_START_TIMEOUT = 20.0  # s, for the simulator to print its pty path
 
@@ -86,6 +88,9 @@ def _serial_parts(url: str) -> tuple[str, dict[str, str]]:
 
 
 def _open_serial(url: str, timeout: float) -> Amplifier:
+    from hilbench.drivers.amplifier import Amplifier
+    from hilbench.drivers.links import SerialLink
+
     port, params = _serial_parts(url)
     return Amplifier(SerialLink(port, _int(params, "baud", 2_000_000, url)), timeout=timeout)
 
@@ -102,6 +107,9 @@ def _can_parts(url: str) -> tuple[str, str, dict[str, str]]:
 
 
 def _open_can(url: str, timeout: float) -> Amplifier:
+    from hilbench.drivers.amplifier import Amplifier
+    from hilbench.drivers.links import CanLink
+
     interface, channel, params = _can_parts(url)
     kwargs = {"bitrate": _int(params, "bitrate", 0, url)} if "bitrate" in params else {}
     fd = params.get("fd", "0") in ("1", "true")
@@ -113,6 +121,9 @@ def _sim_params(url: str) -> dict[str, str]:
 
 
 def _open_sim(url: str, timeout: float) -> Amplifier:
+    from hilbench.drivers.amplifier import Amplifier
+    from hilbench.drivers.links import SerialLink
+
     proc, path = start_simulator(_sim_params(url))
     try:
         link = SerialLink(path)

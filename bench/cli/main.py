@@ -32,7 +32,22 @@ def _user_errors() -> tuple[type[BaseException], ...]:
     return tuple(errors)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def command_modules() -> list[str]:
+    """The modules of :mod:`hilbench.bench.cli.commands` that register a subcommand, sorted by name."""
+    return sorted(m.name for m in pkgutil.iter_modules(commands.__path__) if not m.name.startswith("_"))
+
+
+def command_module(command: str) -> str | None:
+    """The module that registers ``command``: its name, or its name + "_" where the name is a Python keyword
+    (``import_`` registers ``import``); None for a name no module bears."""
+    names = command_modules()
+    return next((name for name in (command, command + "_") if name in names), None)
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``hilbench`` parser. With ``command``, only that command's module registers (its imports are all a
+    command line pays for, e.g. ``hilbench docs`` imports no numpy); with None or a name no module registers,
+    every module does, so that the help lists every command and an unknown one is named with the choices."""
     parser = argparse.ArgumentParser(
         prog="hilbench",
         description="hilbench: hardware-in-the-loop friction test bench (device, runs, analysis).",
@@ -47,13 +62,19 @@ def build_parser() -> argparse.ArgumentParser:
         "--traceback", action="store_true", help="show the full traceback on errors (for bug reports)"
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
-        if info.name.startswith("_"):
-            continue
-        module = importlib.import_module(f"hilbench.bench.cli.commands.{info.name}")
-        module.register(sub)
+    only = command_module(command) if command else None
+    for name in [only] if only else command_modules():
+        importlib.import_module(f"hilbench.bench.cli.commands.{name}").register(sub)
+    if only and command not in sub.choices:  # a module's other spelling (``import_``): the full parser says so
+        return build_parser()
     _plain_texts(parser)
     return parser
+
+
+def named_command(argv: list[str]) -> str | None:
+    """The command ``argv`` (without the global flags) names: its first argument unless that is an option
+    (``-h``, ``--version``, an abbreviation or a mistake: the full parser answers those)."""
+    return argv[0] if argv and not argv[0].startswith("-") else None
 
 
 # Docstrings (protocol classes, analyses) feed help texts; a terminal shows them as plain text, not reST.
@@ -118,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
         from hilbench.bench.cli.commands.analyse import start_early
 
         start_early(argv[1:])
-    parser = build_parser()
+    parser = build_parser(named_command(argv))
     args = parser.parse_args(argv)
     args.traceback = "traceback" in flags
     previous, outputs.verbosity = outputs.verbosity, 0 if "quiet" in flags else 2 if "verbose" in flags else 1
