@@ -91,7 +91,11 @@ try:
                            dashboard_address=request["dashboard"], silence_logs=logging.CRITICAL,
                            scheduler_kwargs={"plugins": [Announce()]})
 except Exception as exc:
-    fail(f"{type(exc).__name__}: {exc}")
+    why, seen = [], exc
+    while seen is not None and len(why) < 4:  # Dask's "Nanny failed to start." says why in its cause
+        why.append(f"{type(seen).__name__}: {seen}")
+        seen = seen.__cause__ or seen.__context__
+    fail("; because ".join(why))
 deadline.cancel()
 started.set()
 try:

@@ -242,3 +242,27 @@ def test_a_cluster_host_killed_mid_analysis_is_one_line_and_the_same_command_fin
     assert sorted(r["key"] for r in rows) == sorted({r["key"] for r in rows}) and len(rows) == 24
     assert all(r["status"] == "ok" for r in rows), [r["error"] for r in rows if r["status"] != "ok"]
     assert again.skipped == kept and again.analysed == 24 - kept
+
+
+def test_a_cluster_that_does_not_start_in_time_says_so_in_one_line(monkeypatch):
+    """The host bounds its own start (its deadline's word reaches the client as the cluster's error: the client
+    submits as soon as the scheduler listens, so a start that hangs later must end the host, not the wait)."""
+    monkeypatch.setattr(cluster_host, "START_TIMEOUT", 0.05)
+    host = cluster_host.Host(1, None)
+    t0 = time.monotonic()
+    with pytest.raises(AnalyseError, match=r"the local cluster did not start: it did not start within 0.05 s$"):
+        host.address()
+    assert time.monotonic() - t0 < 10 and host.proc.wait(30) == 1
+
+
+def test_workers_that_cannot_start_after_the_scheduler_listens_are_the_hosts_word(monkeypatch):
+    """The address comes before the workers; a worker start that fails then is the host's second word, which the
+    command reads when its tasks are cancelled (engine._on_cluster), and the host ends."""
+    monkeypatch.setattr(cluster_host, "CONFIG", {**cluster_host.CONFIG,
+                                                 "distributed.worker.multiprocessing-method": "no-such-method"})
+    host = cluster_host.Host(1, None)
+    address, _ = host.address()
+    assert address.startswith("tcp://")
+    why = host.failure(wait=60)
+    assert why is not None and "no-such-method" in why and "\n" not in why
+    assert host.proc.wait(30) == 1
