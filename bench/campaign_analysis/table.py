@@ -22,6 +22,7 @@ campaign uid, run key and step (:data:`SLOT`).
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import uuid
 from collections.abc import Callable, Iterable
@@ -29,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 import pyarrow as pa
+import pyarrow.json as pj
 import pyarrow.parquet as pq
 
 from hilbench.bench.campaign_analysis.steps import COLUMNS
@@ -36,11 +38,11 @@ from hilbench.common.units import AXIS_UNITS, axis_unit
 
 
 def warm_up() -> None:
-    """Make pyarrow's first array now: it imports pandas then, when pandas is installed (0.15-0.3 s of CPU). The
-    client calls this before the first task, beside the cluster's start, so that the import is not paid in the
-    compaction at the end, on the critical path after the last task (and counted as per-run work: 1.37 against
-    0.6 ms of client CPU per run on 200 runs with pandas installed)."""
-    pa.array([0.0])
+    """Build a one-row table now, beside the cluster's start: the JSON reader :func:`to_table` uses sets itself up
+    on its first call (about 0.5 ms of CPU; importing it, 0.4 ms, is done with this module). It once made pyarrow's
+    first array here, to pay the pandas import ``pa.array`` makes when pandas is installed (0.17-0.26 s) before the
+    compaction at the end; :func:`to_table` no longer calls ``pa.array`` and no process here imports pandas."""
+    to_table([{"key": "warm-up", "repeat": 0, "load": 0.0}])
 
 
 TABLE_NAME = "results.parquet"
@@ -95,22 +97,67 @@ def slot_of(row: dict[str, Any]) -> tuple:
     return tuple(row.get(k) for k in SLOT)
 
 
+#: the converter of a value in each non-text column (text goes as it is)
+_CAST: dict[str, type] = {name: {"float64": float, "int64": int}[kind] for name, (kind, _unit) in ALL_COLUMNS.items()
+                          if kind != "string"}
+#: what the JSON reader parses into: SCHEMA without its field metadata (the reader's schema carries none)
+_PLAIN = pa.schema([pa.field(f.name, f.type) for f in SCHEMA])
+#: NaN and infinities go as NaN and Infinity, which pyarrow's reader takes; every float as its shortest repr, which
+#: the reader parses back to the same double
+_JSON = json.JSONEncoder(ensure_ascii=False, check_circular=False, allow_nan=True, separators=(",", ":"))
+
+
 def to_table(rows: Iterable[dict[str, Any]]) -> pa.Table:
-    """Rows (dicts; missing columns null, unknown ones refused) as a table of :data:`SCHEMA`."""
+    """Rows (dicts; missing columns null, unknown ones refused) as a table of :data:`SCHEMA`.
+
+    Built by pyarrow's JSON reader from the rows as JSON lines, not by ``pa.array``: that one imports pandas when
+    pandas is installed (it asks whether the values are a pandas object), 0.17-0.26 s of CPU in every process that
+    writes a part; the reader never does. The table equals the one ``pa.array`` makes, bit for bit
+    (tests/bench/campaign_analysis/test_table_build.py)."""
     rows = list(rows)
     for row in rows:
         unknown = set(row) - set(ALL_COLUMNS)
         if unknown:
             raise KeyError(f"result columns not in the table schema: {', '.join(sorted(unknown))}")
-    columns = {}
-    for name, (kind, _unit) in ALL_COLUMNS.items():
-        values = [row.get(name) for row in rows]
-        if kind == "float64":
-            values = [None if v is None else float(v) for v in values]
-        elif kind == "int64":
-            values = [None if v is None else int(v) for v in values]
-        columns[name] = pa.array(values, type=_TYPES[kind])
-    return pa.Table.from_pydict(columns, schema=SCHEMA)
+    if not rows:  # not SCHEMA.empty_table(): that imports pandas too
+        return pa.Table.from_arrays([pa.nulls(0, f.type) for f in SCHEMA], schema=SCHEMA)
+    rows_cast = [{k: v if v is None or k not in _CAST else _CAST[k](v) for k, v in row.items()} for row in rows]
+    try:
+        payload = "\n".join(map(_JSON.encode, rows_cast)).encode("utf-8")
+        plain = pj.read_json(pa.BufferReader(payload),
+                             read_options=pj.ReadOptions(use_threads=False, block_size=_block_size(len(payload))),
+                             parse_options=pj.ParseOptions(explicit_schema=_PLAIN,
+                                                           unexpected_field_behavior="error"))
+    except (TypeError, UnicodeEncodeError, pa.ArrowInvalid):  # the encoder's, the reader's
+        _refuse(rows)
+        raise
+    return pa.Table.from_arrays(plain.select(list(_PLAIN.names)).columns, schema=SCHEMA)
+
+
+def _block_size(n: int) -> int:
+    """One block for the whole payload (one chunk per column, as ``pa.array`` made); the reader's limit beyond."""
+    return min(n + 1, 2**31 - 1)
+
+
+def _refuse(rows: list[dict[str, Any]]) -> None:
+    """Raise one line naming the column and the run of the value the JSON reader refused (the type ``pa.array``
+    raised for it: a text column of another type, an integer outside int64, text with a lone surrogate)."""
+    for row in rows:
+        for name, v in row.items():
+            if v is None:
+                continue
+            where = f"result column {name!r} of {row.get('key')!r} (step {row.get('step')!r})"
+            if name in _CAST:
+                if _CAST[name] is int and not -2**63 <= int(v) < 2**63:
+                    raise OverflowError(f"{where}: {int(v)} is outside the int64 range")
+                continue
+            if not isinstance(v, str):
+                raise TypeError(f"{where}: {type(v).__name__} {v!r} where text is expected")
+            try:
+                v.encode("utf-8")
+            except UnicodeEncodeError as exc:
+                raise ValueError(f"{where}: text {v!r} is not valid UTF-8 (a lone surrogate at {exc.start}, e.g. "
+                                 "an undecodable file name)") from None
 
 
 def fsync_folder(folder: Path) -> None:
