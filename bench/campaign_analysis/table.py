@@ -22,15 +22,15 @@ campaign uid, run key and step (:data:`SLOT`).
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import uuid
+from array import array
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pyarrow as pa
-import pyarrow.json as pj
 import pyarrow.parquet as pq
 
 from hilbench.bench.campaign_analysis.steps import COLUMNS
@@ -38,10 +38,10 @@ from hilbench.common.units import AXIS_UNITS, axis_unit
 
 
 def warm_up() -> None:
-    """Build a one-row table now, beside the cluster's start: the JSON reader :func:`to_table` uses sets itself up
-    on its first call (about 0.5 ms of CPU; importing it, 0.4 ms, is done with this module). It once made pyarrow's
-    first array here, to pay the pandas import ``pa.array`` makes when pandas is installed (0.17-0.26 s) before the
-    compaction at the end; :func:`to_table` no longer calls ``pa.array`` and no process here imports pandas."""
+    """Build a one-row table now, beside the cluster's start, so that its first call (0.4 ms of CPU more than later
+    ones) is not left for the compaction at the end, on the critical path after the last task. It once made
+    pyarrow's first array here, to pay the pandas import ``pa.array`` makes when pandas is installed (0.17-0.26 s of
+    CPU); :func:`to_table` no longer calls ``pa.array``, and nothing of ``hilbench analyse`` imports pandas."""
     to_table([{"key": "warm-up", "repeat": 0, "load": 0.0}])
 
 
@@ -97,67 +97,89 @@ def slot_of(row: dict[str, Any]) -> tuple:
     return tuple(row.get(k) for k in SLOT)
 
 
-#: the converter of a value in each non-text column (text goes as it is)
-_CAST: dict[str, type] = {name: {"float64": float, "int64": int}[kind] for name, (kind, _unit) in ALL_COLUMNS.items()
-                          if kind != "string"}
-#: what the JSON reader parses into: SCHEMA without its field metadata (the reader's schema carries none)
-_PLAIN = pa.schema([pa.field(f.name, f.type) for f in SCHEMA])
-#: NaN and infinities go as NaN and Infinity, which pyarrow's reader takes; every float as its shortest repr, which
-#: the reader parses back to the same double
-_JSON = json.JSONEncoder(ensure_ascii=False, check_circular=False, allow_nan=True, separators=(",", ":"))
+#: the most bytes of text in one chunk of a column (Arrow's 32-bit offsets); a column of more has several chunks
+TEXT_CHUNK = 2**31 - 1
 
 
 def to_table(rows: Iterable[dict[str, Any]]) -> pa.Table:
-    """Rows (dicts; missing columns null, unknown ones refused) as a table of :data:`SCHEMA`.
+    """Rows (dicts; missing columns null, unknown ones refused) as a table of :data:`SCHEMA`: float columns hold
+    ``float(v)``, int64 ones ``int(v)``, text ones str (valid UTF-8); one line naming the column and run otherwise.
 
-    Built by pyarrow's JSON reader from the rows as JSON lines, not by ``pa.array``: that one imports pandas when
-    pandas is installed (it asks whether the values are a pandas object), 0.17-0.26 s of CPU in every process that
-    writes a part; the reader never does. The table equals the one ``pa.array`` makes, bit for bit
-    (tests/bench/campaign_analysis/test_table_build.py)."""
+    Each column is made from its buffers (the values packed by the standard library's ``array``, the validity bits
+    by numpy), not by ``pa.array``: that one imports pandas when pandas is installed (it asks whether the values
+    are a pandas object), 0.17-0.26 s of CPU in every process that writes a part. The table is the one ``pa.array``
+    made, bit for bit, at the same CPU (tests/bench/campaign_analysis/test_table_build.py)."""
     rows = list(rows)
     for row in rows:
         unknown = set(row) - set(ALL_COLUMNS)
         if unknown:
             raise KeyError(f"result columns not in the table schema: {', '.join(sorted(unknown))}")
-    if not rows:  # not SCHEMA.empty_table(): that imports pandas too
-        return pa.Table.from_arrays([pa.nulls(0, f.type) for f in SCHEMA], schema=SCHEMA)
-    rows_cast = [{k: v if v is None or k not in _CAST else _CAST[k](v) for k, v in row.items()} for row in rows]
     try:
-        payload = "\n".join(map(_JSON.encode, rows_cast)).encode("utf-8")
-        plain = pj.read_json(pa.BufferReader(payload),
-                             read_options=pj.ReadOptions(use_threads=False, block_size=_block_size(len(payload))),
-                             parse_options=pj.ParseOptions(explicit_schema=_PLAIN,
-                                                           unexpected_field_behavior="error"))
-    except (TypeError, UnicodeEncodeError, pa.ArrowInvalid):  # the encoder's, the reader's
+        columns = [_column(kind, [row.get(name) for row in rows]) for name, (kind, _unit) in ALL_COLUMNS.items()]
+    except (TypeError, ValueError, OverflowError):  # say which column of which run
         _refuse(rows)
         raise
-    return pa.Table.from_arrays(plain.select(list(_PLAIN.names)).columns, schema=SCHEMA)
+    return pa.Table.from_arrays(columns, schema=SCHEMA)
 
 
-def _block_size(n: int) -> int:
-    """One block for the whole payload (one chunk per column, as ``pa.array`` made); the reader's limit beyond."""
-    return min(n + 1, 2**31 - 1)
+def _column(kind: str, values: list[Any]) -> pa.Array | pa.ChunkedArray:
+    """One column's values (None: null) as an Arrow array of ``kind``'s type."""
+    n = len(values)
+    present = [v is not None for v in values]
+    if not any(present):
+        return pa.nulls(n, _TYPES[kind])
+    if kind == "float64":
+        data = array("d", [0.0 if v is None else float(v) for v in values])
+    elif kind == "int64":
+        data = array("q", [0 if v is None else int(v) for v in values])
+    else:
+        return _text(values, present)
+    return pa.Array.from_buffers(_TYPES[kind], n, [_validity(present), pa.py_buffer(data)])
+
+
+def _validity(present: list[bool]) -> pa.Buffer | None:
+    """Arrow's validity bitmap (bit i of byte i // 8, least significant first), None when nothing is null."""
+    return None if all(present) else pa.py_buffer(np.packbits(np.array(present, dtype=bool), bitorder="little"))
+
+
+def _text(values: list[Any], present: list[bool]) -> pa.Array | pa.ChunkedArray:
+    """A text column: the UTF-8 bytes end to end and their offsets, in chunks of at most :data:`TEXT_CHUNK` bytes."""
+    encoded = [str.encode(v, "utf-8") if v is not None else b"" for v in values]  # str.encode: refuses non-text
+    ends = np.cumsum([len(b) for b in encoded], dtype=np.int64)
+    chunks, start, base = [], 0, 0
+    while start < len(values):
+        stop = int(np.searchsorted(ends, base + TEXT_CHUNK, side="right"))
+        if stop == start:
+            raise ValueError(f"a text of more than {TEXT_CHUNK} bytes (what one Arrow string holds)")
+        offsets = np.concatenate(([0], ends[start:stop] - base)).astype(np.int32)
+        chunks.append(pa.Array.from_buffers(pa.string(), stop - start, [
+            _validity(present[start:stop]), pa.py_buffer(offsets), pa.py_buffer(b"".join(encoded[start:stop]))]))
+        start, base = stop, int(ends[stop - 1])
+    return chunks[0] if len(chunks) == 1 else pa.chunked_array(chunks, type=pa.string())
 
 
 def _refuse(rows: list[dict[str, Any]]) -> None:
-    """Raise one line naming the column and the run of the value the JSON reader refused (the type ``pa.array``
-    raised for it: a text column of another type, an integer outside int64, text with a lone surrogate)."""
+    """Raise one line naming the column and the run of a value Arrow cannot hold (of the kind ``pa.array`` raised
+    for it: a text column of another type, an integer outside int64, text with a lone surrogate, or too long)."""
     for row in rows:
         for name, v in row.items():
             if v is None:
                 continue
             where = f"result column {name!r} of {row.get('key')!r} (step {row.get('step')!r})"
-            if name in _CAST:
-                if _CAST[name] is int and not -2**63 <= int(v) < 2**63:
-                    raise OverflowError(f"{where}: {int(v)} is outside the int64 range")
+            kind = ALL_COLUMNS[name][0]
+            if kind == "int64" and not -2**63 <= int(v) < 2**63:
+                raise OverflowError(f"{where}: {int(v)} is outside the int64 range")
+            if kind != "string":
                 continue
             if not isinstance(v, str):
                 raise TypeError(f"{where}: {type(v).__name__} {v!r} where text is expected")
             try:
-                v.encode("utf-8")
+                size = len(v.encode("utf-8"))
             except UnicodeEncodeError as exc:
                 raise ValueError(f"{where}: text {v!r} is not valid UTF-8 (a lone surrogate at {exc.start}, e.g. "
                                  "an undecodable file name)") from None
+            if size > TEXT_CHUNK:
+                raise ValueError(f"{where}: a text of {size} bytes, more than one Arrow string holds ({TEXT_CHUNK})")
 
 
 def fsync_folder(folder: Path) -> None:

@@ -1,6 +1,6 @@
-"""How the results table is built (bench.campaign_analysis.table.to_table): from the rows as JSON lines through
-pyarrow's JSON reader, never through ``pa.array``, which imports pandas when pandas is installed (0.17-0.26 s of CPU
-in every process that writes a part; issue 41).
+"""How the results table is built (bench.campaign_analysis.table.to_table): each column from its buffers
+(``pa.Array.from_buffers``), never through ``pa.array``, which imports pandas when pandas is installed (0.17-0.26 s of
+CPU in every process that writes a part; issue 41).
 
 The oracle is the construction to_table used before, ``pa.array`` per column (kept here, :func:`by_pa_array`): the
 new table must equal it exactly (``equals`` with the field metadata, every float's bits, and the Parquet bytes
@@ -24,6 +24,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
+from hilbench.bench.campaign_analysis import table
 from hilbench.bench.campaign_analysis.table import _TYPES, ALL_COLUMNS, SCHEMA, to_table
 
 pytestmark = pytest.mark.device_free
@@ -161,6 +162,22 @@ def test_zero_rows_and_all_null_columns():
     assert_same([{name: None for name in ALL_COLUMNS} for _ in range(4)])
     table = to_table([{"key": "a"}, {"key": "b", "step": None}])
     assert table.column("inertia").null_count == 2 and table.column("key").to_pylist() == ["a", "b"]
+
+
+def test_text_beyond_one_chunk_goes_into_several(monkeypatch):
+    """A text column of more bytes than Arrow's 32-bit offsets reach is split into chunks (here with the limit set
+    to 60 bytes, more than any one generated text): the same values, each chunk within the limit, none of the 32-bit
+    offsets wrapped; a single text beyond the limit is one line naming its column and run."""
+    rows = random_rows(7, 60)
+    monkeypatch.setattr(table, "TEXT_CHUNK", 60)
+    new = to_table(rows)
+    new.validate(full=True)
+    assert new.equals(by_pa_array(rows), check_metadata=True)
+    column = new.column("environment")
+    assert column.num_chunks > 3
+    assert all(len(chunk.buffers()[2] or b"") <= 60 for chunk in column.chunks)
+    with pytest.raises(ValueError, match=r"^result column 'name' of 'k' \(step None\): a text of 61 bytes, more "):
+        to_table([{"key": "k", "name": "x" * 61}])
 
 
 def test_an_unknown_column_is_refused_with_the_same_message():
