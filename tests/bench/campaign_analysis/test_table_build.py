@@ -2,7 +2,7 @@
 (``pa.Array.from_buffers``), never through ``pa.array``, which imports pandas when pandas is installed (0.17-0.26 s of
 CPU in every process that writes a part; issue 41).
 
-The oracle is the construction to_table used before, ``pa.array`` per column (kept here, :func:`by_pa_array`): the
+The oracle is the construction to_table used before, ``pa.array`` per column (pa_array_oracle.by_pa_array): the
 new table must equal it exactly (``equals`` with the field metadata, every float's bits, and the Parquet bytes
 written from each) on rows from a generator written for the purpose: every kind of double (random bit patterns,
 subnormals down to 5e-324, 1e308, -0.0), integers across the int64 range, None, text with quotes, backslashes,
@@ -25,28 +25,12 @@ import pyarrow.parquet as pq
 import pytest
 
 from hilbench.bench.campaign_analysis import table
-from hilbench.bench.campaign_analysis.table import _TYPES, ALL_COLUMNS, SCHEMA, to_table
+from hilbench.bench.campaign_analysis.table import ALL_COLUMNS, SCHEMA, to_table
+from tests.bench.campaign_analysis.pa_array_oracle import by_pa_array
 
 pytestmark = pytest.mark.device_free
 
 KINDS = {name: kind for name, (kind, _unit) in ALL_COLUMNS.items()}
-
-
-def by_pa_array(rows: list[dict[str, Any]]) -> pa.Table:
-    """The oracle: to_table as it was before issue 41's change, one ``pa.array`` per column."""
-    for row in rows:
-        unknown = set(row) - set(ALL_COLUMNS)
-        if unknown:
-            raise KeyError(f"result columns not in the table schema: {', '.join(sorted(unknown))}")
-    columns = {}
-    for name, (kind, _unit) in ALL_COLUMNS.items():
-        values = [row.get(name) for row in rows]
-        if kind == "float64":
-            values = [None if v is None else float(v) for v in values]
-        elif kind == "int64":
-            values = [None if v is None else int(v) for v in values]
-        columns[name] = pa.array(values, type=_TYPES[kind])
-    return pa.Table.from_pydict(columns, schema=SCHEMA)
 
 
 #: doubles at the edges of the format: subnormals (the smallest, the largest), the smallest normal, the largest
