@@ -24,10 +24,12 @@ from __future__ import annotations
 import hashlib
 import os
 import uuid
+from array import array
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
@@ -36,11 +38,11 @@ from hilbench.common.units import AXIS_UNITS, axis_unit
 
 
 def warm_up() -> None:
-    """Make pyarrow's first array now: it imports pandas then, when pandas is installed (0.15-0.3 s of CPU). The
-    client calls this before the first task, beside the cluster's start, so that the import is not paid in the
-    compaction at the end, on the critical path after the last task (and counted as per-run work: 1.37 against
-    0.6 ms of client CPU per run on 200 runs with pandas installed)."""
-    pa.array([0.0])
+    """Build a one-row table now, beside the cluster's start, so that its first call (0.4 ms of CPU more than later
+    ones) is not left for the compaction at the end, on the critical path after the last task. It once made
+    pyarrow's first array here, to pay the pandas import ``pa.array`` makes when pandas is installed (0.17-0.26 s of
+    CPU); :func:`to_table` no longer calls ``pa.array``, and nothing of ``hilbench analyse`` imports pandas."""
+    to_table([{"key": "warm-up", "repeat": 0, "load": 0.0}])
 
 
 TABLE_NAME = "results.parquet"
@@ -95,22 +97,96 @@ def slot_of(row: dict[str, Any]) -> tuple:
     return tuple(row.get(k) for k in SLOT)
 
 
+_NAMES = frozenset(ALL_COLUMNS)
+#: the most bytes of text in one chunk of a column (Arrow's 32-bit offsets); a column of more has several chunks
+TEXT_CHUNK = 2**31 - 1
+
+
 def to_table(rows: Iterable[dict[str, Any]]) -> pa.Table:
-    """Rows (dicts; missing columns null, unknown ones refused) as a table of :data:`SCHEMA`."""
+    """Rows (dicts; missing columns null, unknown ones refused) as a table of :data:`SCHEMA`: float columns hold
+    ``float(v)``, int64 ones ``int(v)``, text ones str (valid UTF-8); one line naming the column and run otherwise.
+
+    Each column is made from its buffers (the values packed by the standard library's ``array``, the validity bits
+    by numpy), not by ``pa.array``: that one imports pandas when pandas is installed (it asks whether the values
+    are a pandas object), 0.17-0.26 s of CPU in every process that writes a part. The table is the one ``pa.array``
+    made, bit for bit (tests/bench/campaign_analysis/test_table_build.py), in 0.9x its CPU on 16 or 800 rows."""
     rows = list(rows)
     for row in rows:
-        unknown = set(row) - set(ALL_COLUMNS)
-        if unknown:
+        if not _NAMES.issuperset(row):
+            unknown = set(row) - _NAMES
             raise KeyError(f"result columns not in the table schema: {', '.join(sorted(unknown))}")
-    columns = {}
-    for name, (kind, _unit) in ALL_COLUMNS.items():
-        values = [row.get(name) for row in rows]
-        if kind == "float64":
-            values = [None if v is None else float(v) for v in values]
-        elif kind == "int64":
-            values = [None if v is None else int(v) for v in values]
-        columns[name] = pa.array(values, type=_TYPES[kind])
-    return pa.Table.from_pydict(columns, schema=SCHEMA)
+    try:
+        columns = [_column(kind, [row.get(name) for row in rows]) for name, (kind, _unit) in ALL_COLUMNS.items()]
+    except (TypeError, ValueError, OverflowError):  # say which column of which run
+        _refuse(rows)
+        raise
+    return pa.Table.from_arrays(columns, schema=SCHEMA)
+
+
+def _column(kind: str, values: list[Any]) -> pa.Array | pa.ChunkedArray:
+    """One column's values (None: null) as an Arrow array of ``kind``'s type."""
+    n = len(values)
+    if values.count(None) == n:
+        return pa.nulls(n, _TYPES[kind])
+    if kind == "float64":
+        data = array("d", [0.0 if v is None else float(v) for v in values])
+    elif kind == "int64":
+        data = array("q", [0 if v is None else int(v) for v in values])
+    else:
+        return _text(values)
+    return pa.Array.from_buffers(_TYPES[kind], n, [_validity(values), pa.py_buffer(data)])
+
+
+def _validity(values: list[Any]) -> pa.Buffer | None:
+    """Arrow's validity bitmap (bit i of byte i // 8, least significant first), None when nothing is null."""
+    if None not in values:
+        return None
+    return pa.py_buffer(np.packbits(np.array([v is not None for v in values], dtype=bool), bitorder="little"))
+
+
+def _text(values: list[Any]) -> pa.Array | pa.ChunkedArray:
+    """A text column: the UTF-8 bytes end to end and their offsets, in chunks of at most :data:`TEXT_CHUNK` bytes."""
+    texts = ["" if v is None else v for v in values]
+    joined = "".join(texts)  # refuses what is not text
+    data = joined.encode("utf-8")  # refuses a lone surrogate
+    # one byte per character when all is ASCII (one comparison), else each text's own UTF-8 length
+    sizes = map(len, texts) if len(data) == len(joined) else (len(t.encode("utf-8")) for t in texts)
+    ends = np.fromiter(sizes, dtype=np.int64, count=len(texts)).cumsum()
+    chunks, start, base = [], 0, 0
+    while start < len(values):
+        stop = int(np.searchsorted(ends, base + TEXT_CHUNK, side="right"))
+        if stop == start:
+            raise ValueError(f"a text of more than {TEXT_CHUNK} bytes (what one Arrow string holds)")
+        offsets = np.concatenate(([0], ends[start:stop] - base)).astype(np.int32)
+        chunk = data if start == 0 and stop == len(values) else memoryview(data)[base:ends[stop - 1]]
+        chunks.append(pa.Array.from_buffers(pa.string(), stop - start, [
+            _validity(values[start:stop]), pa.py_buffer(offsets), pa.py_buffer(chunk)]))
+        start, base = stop, int(ends[stop - 1])
+    return chunks[0] if len(chunks) == 1 else pa.chunked_array(chunks, type=pa.string())
+
+
+def _refuse(rows: list[dict[str, Any]]) -> None:
+    """Raise one line naming the column and the run of a value Arrow cannot hold (of the kind ``pa.array`` raised
+    for it: a text column of another type, an integer outside int64, text with a lone surrogate, or too long)."""
+    for row in rows:
+        for name, v in row.items():
+            if v is None:
+                continue
+            where = f"result column {name!r} of {row.get('key')!r} (step {row.get('step')!r})"
+            kind = ALL_COLUMNS[name][0]
+            if kind == "int64" and not -2**63 <= int(v) < 2**63:
+                raise OverflowError(f"{where}: {int(v)} is outside the int64 range")
+            if kind != "string":
+                continue
+            if not isinstance(v, str):
+                raise TypeError(f"{where}: {type(v).__name__} {v!r} where text is expected")
+            try:
+                size = len(v.encode("utf-8"))
+            except UnicodeEncodeError as exc:
+                raise ValueError(f"{where}: text {v!r} is not valid UTF-8 (a lone surrogate at {exc.start}, e.g. "
+                                 "an undecodable file name)") from None
+            if size > TEXT_CHUNK:
+                raise ValueError(f"{where}: a text of {size} bytes, more than one Arrow string holds ({TEXT_CHUNK})")
 
 
 def fsync_folder(folder: Path) -> None:

@@ -13,7 +13,7 @@ KEYS = {"name", "value", "unit", "baseline_name", "baseline_value", "ratio", "ta
 #: benchmarks that start no device (pure computation, files, or a Dask cluster): the parallel part of make test;
 #: the others start a device and are marked realtime
 DEVICE_FREE = {"bench_afrf", "bench_campaign", "bench_identification", "bench_long_run", "bench_plant",
-               "bench_residual", "bench_runfile", "bench_skeleton"}
+               "bench_residual", "bench_results_table", "bench_runfile", "bench_skeleton"}
 
 
 @pytest.mark.parametrize("name", [n if n in DEVICE_FREE else pytest.param(n, marks=pytest.mark.realtime)
