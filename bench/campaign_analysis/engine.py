@@ -663,9 +663,10 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
                         continue
                     outcomes = [_died(part[0], exc, out)]
                 except Exception as exc:  # e.g. a result that cannot be unpickled: the chunk's runs fail here
-                    # a lost scheduler cancels every task: the host's word (or its end) then comes within moments
+                    # a lost scheduler cancels every task, and a connection to it or a worker may close first: the
+                    # host's word (or its end: its sockets may close a moment before its reply pipe) comes soon
                     lost = isinstance(exc, concurrent.futures.CancelledError)
-                    why = host.failure(wait=5.0 if lost else 0.0) if host is not None else None
+                    why = host.failure(wait=5.0 if lost or isinstance(exc, OSError) else 0.0) if host else None
                     if why is None and lost and host is None:
                         why = f"the connection to --scheduler {address} was lost ({one_line(exc)[:200]})"
                     elif why is not None:
