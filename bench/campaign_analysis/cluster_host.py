@@ -71,7 +71,11 @@ deadline.daemon = True
 deadline.start()
 import logging
 import dask
+import distributed.utils
 from distributed import LocalCluster
+# the fork server runs with its preload: Dask's first nanny would otherwise import every package its version report
+# lists (numpy, pandas, lz4: 0.2-0.3 s of CPU here, on the start's critical path) to preload a server that exists
+distributed.utils._forkserver_preload_set = True
 from distributed.comm import get_address_host
 from distributed.diagnostics.plugin import SchedulerPlugin
 from distributed.utils import format_dashboard_link
