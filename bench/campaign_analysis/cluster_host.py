@@ -223,14 +223,17 @@ class Host:
     def alive(self) -> bool:
         return self.proc.poll() is None
 
-    def close(self, timeout: float = 60.0) -> None:
-        """End the host: it closes the cluster, stops its fork server and exits; killed if it does not in time."""
+    def close(self, timeout: float = 60.0, wait: bool = True) -> None:
+        """End the host: it closes the cluster, stops its fork server and exits; killed if it does not in time.
+        ``wait=False`` only tells it (a later close waits)."""
         for pipe in (self.proc.stdin, self.proc.stdout):
-            if pipe is not None:
+            if pipe is not None and not pipe.closed:
                 try:
                     pipe.close()
                 except BrokenPipeError:
                     pass
+        if not wait:
+            return
         try:
             self.proc.wait(timeout)
         except subprocess.TimeoutExpired:
