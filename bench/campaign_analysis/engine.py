@@ -43,10 +43,11 @@ from hilbench.bench.errors import AnalyseError
 
 StepFunction = Callable[[str, StepSettings], dict[str, Any]]
 #: most runs per task: large enough that the per-task cost vanishes (a task costs the client about 2.7 ms of CPU:
-#: its round trips and reading its part; the scheduler as much again), small enough that a worker's death or a killed
-#: client loses little. 16 with chunks of half a worker's share: 24 tasks for 200 runs on 2 workers (44 with 8 and a
-#: quarter), the last 7 single runs
-MAX_CHUNK = 16
+#: its round trips and reading its part; the scheduler as much again; and its worker waits 9-18 ms between two tasks,
+#: Dask's hand-over through the scheduler), small enough that a worker's death or a killed client loses little. 32
+#: with chunks of a worker's share of what is left: 12 tasks for 200 runs on 2 workers (24 with 16 and half a share:
+#: 0.1 s less wall time in three alternating pairs, 6.14-6.50 s against 6.24-6.61 s), the last 3 single runs
+MAX_CHUNK = 32
 _QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(\S*)\s*$")
 #: environment keys read into numeric columns: key -> (column, accepted units)
 #: largest campaign index read, bytes (a thousand runs are ~1 MB)
@@ -388,10 +389,10 @@ def execute_chunk_timed(items: list[dict[str, Any]], settings: StepSettings, fun
 
 
 def chunk(todo: list[Task], workers: int) -> list[list[Task]]:
-    """Split the tasks into chunks of at most MAX_CHUNK that shrink as the work left does (guided scheduling):
-    each is half the remaining tasks' share per worker, so the last ones are single runs and no worker waits for
+    """Split the tasks into chunks of at most MAX_CHUNK that shrink as the work left does (guided self-scheduling):
+    each is the remaining tasks' share per worker, so the last ones are single runs and no worker waits long for
     another's last big chunk; small campaigns get small chunks."""
-    out, i, per = [], 0, 2 * max(1, workers)
+    out, i, per = [], 0, max(1, workers)
     while i < len(todo):
         size = max(1, min(MAX_CHUNK, (len(todo) - i) // per))
         out.append(todo[i:i + size])
@@ -490,7 +491,7 @@ def _analyse_locked(folders, out, steps, settings, serial, workers, scheduler, r
             # execute_chunk runs under the execution policy (one BLAS thread; 200 short runs with OpenBLAS's two:
             # 29.9 s of CPU in 15.3 s, against 14.8 s of CPU in 13.9 s with one thread)
             cpu = time.process_time()
-            for part in chunk(tasks, 1):
+            for part in chunk(tasks, 2):  # parts as two workers' (what a killed loop keeps: all but its last)
                 record(part, execute_chunk(_items(part), settings, fn, str(out)))
             summary.work_cpu += time.process_time() - cpu  # (serial: the analyses themselves)
         elif tasks:

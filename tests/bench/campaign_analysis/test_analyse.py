@@ -136,15 +136,17 @@ def test_a_killed_client_leaves_good_parts_and_a_rerun_analyses_only_the_missing
 
 def test_chunks_balance_the_workers_and_cap_the_task_size():
     todo = list(range(200))
-    parts = chunk(todo, 2)  # 200 runs, 2 workers: 16 per task while 64 or more are left, then shrinking to 1
+    parts = chunk(todo, 2)  # 200 runs, 2 workers: 32 per task while 64 or more are left, then shrinking to 1
     sizes = [len(p) for p in parts]
-    assert sum(parts, []) == todo and sizes[:9] == [MAX_CHUNK] * 9 and sizes == sorted(sizes, reverse=True)
-    # each half the remaining share per worker: the last 7 are single runs
+    assert sum(parts, []) == todo and sizes[:5] == [MAX_CHUNK] * 5 and sizes == sorted(sizes, reverse=True)
+    # each the remaining share per worker (guided self-scheduling): the last 3 are single runs
     left = [sum(sizes[:k]) for k in range(len(sizes))]
-    assert all(s == max(1, min(MAX_CHUNK, (200 - a) // 4)) for s, a in zip(sizes, left, strict=True))
-    assert sizes[-7:] == [1] * 7 and len(parts) == 24
-    assert [len(p) for p in chunk(todo[:20], 2)] == [5, 3, 3, 2] + [1] * 7  # at least 2 tasks per worker
-    assert [len(p) for p in chunk(todo[:5], 2)] == [1] * 5
+    assert all(s == max(1, min(MAX_CHUNK, (200 - a) // 2)) for s, a in zip(sizes, left, strict=True))
+    assert sizes == [32] * 5 + [20, 10, 5, 2, 1, 1, 1] and len(parts) == 12
+    # what one worker takes while the other runs the biggest chunk of the tail: never more than one run apart
+    assert sum(sizes[6:]) == sizes[5]
+    assert [len(p) for p in chunk(todo[:20], 2)] == [10, 5, 2, 1, 1, 1]
+    assert [len(p) for p in chunk(todo[:3], 2)] == [1] * 3
 
 
 def test_cli_bad_input_is_one_line_and_exit_2(campaign, tmp_path, capsys):
