@@ -26,6 +26,7 @@ import os
 import re
 import stat
 import time
+import uuid
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -33,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from hilbench import __version__
-from hilbench.bench.campaign_analysis import cluster_host
+from hilbench.bench.campaign_analysis import cluster_host, opaque
 from hilbench.bench.campaign_analysis.fork_server import MAX_WORKERS, warm_up
 from hilbench.bench.campaign_analysis.steps import STEPS, StepSettings, steps_for
 from hilbench.bench.campaign_analysis.table import ResultsFolder, row_key
@@ -649,7 +650,8 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
             began: list[float] = []  # when each task began on its worker (time.time())
 
             def submit(part: list[Task]) -> None:
-                future = client.submit(execute_chunk_timed, _items(part), settings, fn, str(out), pure=False)
+                payload = opaque.pack(execute_chunk_timed, _items(part), settings, fn, str(out))
+                future = client.submit(opaque.call, payload, key=f"analyse-chunk-{uuid.uuid4().hex}")
                 submitted[future] = part
                 futures.add(future)
 

@@ -266,3 +266,42 @@ def test_workers_that_cannot_start_after_the_scheduler_listens_are_the_hosts_wor
     why = host.failure(wait=60)
     assert why is not None and "no-such-method" in why and "\n" not in why
     assert host.proc.wait(30) == 1
+
+
+def test_the_scheduler_unpickles_no_analysis_to_schedule_the_tasks(tmp_path):
+    """Dask's scheduler unpickles every task to build its graph: the engine's chunk function and its settings used
+    to import the engine, pyarrow and every analysis into the host (0.14 s of its CPU, its event loop
+    blocked while the first workers waited). Tasks go as an opaque payload (bench.campaign_analysis.opaque): the
+    scheduler imports that light module only, and the worker runs the task as before."""
+    from distributed import Client
+
+    from hilbench.bench.campaign_analysis import opaque
+    from hilbench.bench.campaign_analysis.engine import _items, execute_chunk_timed, plan
+    from hilbench.bench.campaign_analysis.steps import StepSettings
+    from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
+
+    write_campaign(tmp_path / "c", SyntheticCampaign(runs=1, duration=2.0, sample_rate=1000.0, seed=2))
+    tasks, _, _, _ = plan([tmp_path / "c"], ("identify",), StepSettings())
+    args = (_items(tasks), StepSettings(), {}, str(tmp_path / "r"))
+
+    def imported(client) -> list[str]:  # what of the analysis the scheduler's process has imported
+        return client.run_on_scheduler(lambda: sorted(
+            m for m in ("pyarrow", "hilbench.bench.campaign_analysis.engine",
+                        "hilbench.bench.campaign_analysis.steps", "hilbench.analysis.protocol")
+            if m in __import__("sys").modules))
+
+    host = cluster_host.Host(1, None)
+    try:
+        address, _ = host.address()
+        with Client(address, timeout="30s") as client:
+            began, outcomes = client.submit(opaque.call, opaque.pack(execute_chunk_timed, *args),
+                                            key="opaque").result(timeout=120)
+            opaque_imports = imported(client)
+            # the control: the same task as Dask's own pickle of the function and its arguments
+            client.submit(execute_chunk_timed, *args, key="plain").result(timeout=120)
+            plain_imports = imported(client)
+    finally:
+        host.close()
+    assert [o[1] for o in outcomes] == ["ok"] and began > 0
+    assert opaque_imports == []
+    assert "hilbench.bench.campaign_analysis.engine" in plain_imports and "pyarrow" in plain_imports
