@@ -135,7 +135,7 @@ def _run(args: argparse.Namespace) -> int:
     per_run = summary.scheduler_cpu_per_run
     scheduler = "" if per_run is None else f", scheduler {1e3 * per_run:.2f} ms per run"
     outputs.say(f"{summary.analysed} analysed ({summary.failed} failed), {summary.skipped} already there, "
-                f"{summary.total} rows in all ({summary.wall_time:.1f} s, {summary.startup_time:.1f} s of it start-up; "
+                f"{summary.total} rows in all ({summary.wall_time:.2f} s, {summary.startup_time:.2f} s of it start-up; "
                 f"client CPU {1e3 * summary.client_cpu_per_run:.2f} ms per run{scheduler}) "
                 f"-> {summary.table}")
     return 0
