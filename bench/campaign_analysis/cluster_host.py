@@ -13,11 +13,14 @@ a ``__main__`` module again.
 
 The host gets its worker count and dashboard on its command line and starts the cluster at once, so that the whole
 start (the fork server's imports, distributed's, the scheduler, the workers) overlaps the client's own imports and
-planning. It answers with one JSON line on a copy of its stdout (its stdout itself goes to stderr, so that nothing a
-library prints can break the reply): ``{"address", "dashboard"}`` once the workers are up, or ``{"error"}``. Then it
-holds the cluster until its stdin ends (the client closed it, or died however it died: no cluster outlives its
-client), closes it, kills and reaps the fork server (so that its and its workers' CPU reach the client's resource
-usage) and exits without an interpreter teardown (the two teardowns cost 0.35 s after the last task).
+planning. It answers with JSON lines on a copy of its stdout (its stdout itself goes to stderr, so that nothing a
+library prints can break the reply): ``{"address", "dashboard"}`` as soon as the scheduler listens (the client
+connects while the workers start), then ``{"workers"}`` once they are up (the client submits then: a task that
+killed its worker during the start would fail the start itself), or ``{"error"}`` instead of either, after which it
+exits (its start is bounded by :data:`START_TIMEOUT`). Then it holds the cluster until its stdin ends (the client
+closed it, or died however it died: no cluster outlives its client), closes it, kills and reaps the fork server (so
+that its and its workers' CPU reach the client's resource usage) and exits without an interpreter teardown (the two
+teardowns cost 0.35 s after the last task).
 """
 
 from __future__ import annotations
@@ -81,8 +84,8 @@ from distributed.diagnostics.plugin import SchedulerPlugin
 from distributed.utils import format_dashboard_link
 
 class Announce(SchedulerPlugin):
-    # the scheduler's address as soon as it listens, before the workers start: the client connects and submits
-    # while the fork server still imports, and the tasks wait in the scheduler's queue for the first worker
+    # the scheduler's address as soon as it listens, before the workers start: the client connects while the fork
+    # server still imports, and submits once the workers are up (its second word)
     async def start(self, scheduler):
         server = scheduler.services.get("dashboard") if request["dashboard"] else None  # (its HTTP server runs anyway)
         link = format_dashboard_link(get_address_host(scheduler.address), server.port) if server else None
@@ -173,10 +176,11 @@ class Host:
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, env={**os.environ, **ENVIRONMENT},
                                      close_fds=True)
         self._pending = b""
+        self.up = False  # the host said its workers are up
 
     def address(self, timeout: float = START_TIMEOUT) -> tuple[str, str | None]:
         """(scheduler address, dashboard link), once the scheduler listens (its workers may still be starting:
-        tasks submitted now wait for them; :meth:`failure` says if they never come)."""
+        :meth:`wait_up`)."""
         line = self._line(timeout)
         if line is None:
             self.close()
@@ -189,6 +193,23 @@ class Host:
             self.close()
             raise AnalyseError(f"the local cluster did not start: {doc['error'][:300]}")
         return doc["address"], doc["dashboard"]
+
+    def wait_up(self, timeout: float = START_TIMEOUT) -> None:
+        """Until the host says its workers are up; one line if it says why they are not, ends, or is silent for
+        ``timeout`` s. The command submits after this: a task that kills its worker while the cluster starts would
+        fail the cluster's start (Dask's "Nanny failed to start worker process"), not just its own runs."""
+        deadline = time.monotonic() + timeout
+        while not self.up:
+            line = self._line(max(0.0, deadline - time.monotonic()))
+            if line is None:
+                raise AnalyseError(f"the local cluster's workers did not start within {timeout:g} s")
+            if not line:
+                raise AnalyseError(f"the local cluster's process ended before its workers started (exit code "
+                                   f"{self.proc.wait()})")
+            doc = json.loads(line)
+            if "error" in doc:
+                raise AnalyseError(f"the local cluster did not start: {str(doc['error'])[:300]}")
+            self.up = "workers" in doc
 
     def failure(self, wait: float = 0.0) -> str | None:
         """Why the cluster failed after its address came (its workers did not start, or its process ended), or
@@ -203,7 +224,7 @@ class Host:
             doc = json.loads(line)
             if "error" in doc:
                 return str(doc["error"])[:300]
-            # {"workers": n}: they came up; what follows tells
+            self.up = self.up or "workers" in doc  # they came up; what follows tells
 
     def _line(self, timeout: float) -> bytes | None:
         """The host's next reply line; b"" at its end; None if none came within ``timeout`` s."""

@@ -636,13 +636,18 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
                 say(f"dask dashboard: {summary.dashboard}")
             if host is None:  # a remote cluster: its workers are up, they must reach the results folder at the same
                 # path, and they import the steps before the first task (a local worker is forked from a fork server
-                # that has; the local cluster's workers may still be starting: the tasks wait for them)
+                # that has)
                 refused = [why for why in client.run(_check_writable, str(out)).values() if why]
                 if refused:
                     raise AnalyseError(refused[0])
                 client.run(warm_up)
                 n_workers = len(client.scheduler_info()["workers"]) or 1
-            else:
+            else:  # connected while the workers start; the tasks go once they are up (Host.wait_up)
+                try:
+                    host.wait_up()
+                except AnalyseError:
+                    host.proc.kill()
+                    raise
                 n_workers = cluster_host.local_workers(workers)
             summary.startup_cpu = time.process_time() - cpu0
             futures = as_completed()

@@ -48,8 +48,8 @@ def test_the_scheduler_runs_in_the_host_not_in_the_client_and_ends_with_it():
     host = cluster_host.Host(1, None)
     address, dashboard = host.address()
     assert dashboard is None
+    host.wait_up()  # the address comes as soon as the scheduler listens
     with Client(address, timeout="30s") as client:
-        client.wait_for_workers(1, timeout=60)  # the address comes as soon as the scheduler listens
         scheduler_pid = client.run_on_scheduler(os.getpid)
         workers = client.run(os.getpid)
     assert scheduler_pid == host.proc.pid != os.getpid()
@@ -66,12 +66,10 @@ def test_the_scheduler_runs_in_the_host_not_in_the_client_and_ends_with_it():
 
 _CLIENT = """
 import sys
-from distributed import Client
 from hilbench.bench.campaign_analysis import cluster_host
 host = cluster_host.Host(1, None)
 address = host.address()[0]
-with Client(address, timeout="30s") as client:
-    client.wait_for_workers(1, timeout=60)
+host.wait_up()
 print(host.proc.pid, address, flush=True)
 sys.stdin.read()
 """
@@ -305,3 +303,32 @@ def test_the_scheduler_unpickles_no_analysis_to_schedule_the_tasks(tmp_path):
     assert [o[1] for o in outcomes] == ["ok"] and began > 0
     assert opaque_imports == []
     assert "hilbench.bench.campaign_analysis.engine" in plain_imports and "pyarrow" in plain_imports
+
+
+def _dies_on_the_first_run(path: str, settings) -> dict:
+    if path.endswith("id1-1.h5"):
+        os._exit(3)  # the worker dies as on a segfault, on the first task it is given
+    return _slow(path, settings)
+
+
+def test_a_task_that_kills_its_worker_at_once_is_its_runs_failure_not_the_clusters():
+    """The command connects while the workers start and submits once the host says they are up: tasks submitted at
+    once reached the first worker while the cluster still started, and one that killed it failed the start itself
+    ("Nanny failed to start worker process": the whole analysis ended with exit 2; found by the quick benchmark)."""
+    import tempfile
+    from pathlib import Path
+
+    import pyarrow.parquet as pq
+
+    from hilbench.bench.campaign_analysis.engine import analyse
+    from hilbench.bench.campaign_analysis.synthetic import SyntheticCampaign, write_campaign
+
+    with tempfile.TemporaryDirectory() as tmp:
+        campaign = Path(tmp) / "c"
+        write_campaign(campaign, SyntheticCampaign(runs=6, duration=0.3, seed=9))
+        s = analyse([campaign], Path(tmp) / "r", workers=2, dashboard=False, progress=False,
+                    say=lambda _l: None, functions={"identify": _dies_on_the_first_run})
+        rows = {r["key"]: r for r in pq.read_table(s.table).to_pylist()}
+    assert len(rows) == 6 and s.failed == 1
+    assert rows["id1-1"]["status"] == "failed" and "worker died twice" in rows["id1-1"]["error"]
+    assert all(r["status"] == "ok" for k, r in rows.items() if k != "id1-1")
