@@ -33,7 +33,7 @@ import sys
 import time
 
 from hilbench.analysis.execution import ENVIRONMENT
-from hilbench.bench.campaign_analysis.fork_server import WORKER_MODULES
+from hilbench.bench.campaign_analysis.fork_server import PRELOAD
 from hilbench.bench.errors import AnalyseError
 
 #: the host's program: its reply channel first, then the fork server (before any other import), then the cluster
@@ -171,7 +171,7 @@ class Host:
         # -W: the host's interpreter flags reach the fork server and multiprocessing's resource tracker, which warns
         # on the command's stderr of the semaphores it cleans up when the host was killed (the command says so)
         self.proc = subprocess.Popen([sys.executable, "-W", "ignore::UserWarning:multiprocessing.resource_tracker",
-                                      "-c", BOOT, json.dumps(["distributed", *WORKER_MODULES]),
+                                      "-c", BOOT, json.dumps([PRELOAD]),
                                       json.dumps({**self.request, "config": CONFIG, "timeout": START_TIMEOUT})],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, env={**os.environ, **ENVIRONMENT},
                                      close_fds=True)
