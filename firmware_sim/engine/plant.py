@@ -287,7 +287,15 @@ def stiffest_eigenvalue(params: PlantParams) -> float:
         B += params.gms.viscous
     if params.hysteresis is not None:
         K += 2.0 * params.hysteresis.h / params.hysteresis.d
-    roots = np.roots([J, B, K]) if (B > 0 or K > 0) else np.zeros(1)
+    # s^2 + (B/J) s + K/J, as numpy.roots normalises [J, B, K] (the same companion matrix, bit for bit); an inertia
+    # so small that B/J or K/J overflow (1e-308 kg*m^2 in a model file) is refused here in one line, not as a
+    # LinAlgError from the eigenvalue solver
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        b, k = B / J, K / J
+    if not (math.isfinite(b) and math.isfinite(k)):
+        raise PlantParameterError(f"inertia {J:g} is too small for the model's damping {B:g} and stiffness {K:g}: "
+                                  "its modes are infinitely fast")
+    roots = np.roots([1.0, b, k]) if (B > 0 or K > 0) else np.zeros(1)
     return float(np.max(np.abs(roots)))
 
 

@@ -129,3 +129,24 @@ def test_set_deflections_continues_a_run_exactly():
     big = np.full(p.n_elements, 1.0)
     b.set_deflections(big)  # clipped to the slip displacements
     np.testing.assert_allclose(b.deflections, p.ms_delta, rtol=1e-15)
+
+
+def test_stiffest_eigenvalue_is_the_quadratics_root_and_refuses_a_vanishing_inertia():
+    """max |s| of J s^2 + B s + K = 0: the closed form for an overdamped and an underdamped case (1e-12), the same
+    figure as numpy.roots([J, B, K]) bit for bit, and a model file's 1e-308 kg*m^2 is one PlantParameterError, not a
+    LinAlgError from the eigenvalue solver (the compensate fuzz test found it)."""
+    import math
+
+    import numpy as np
+
+    from hilbench.firmware_sim.engine.plant import PlantParameterError, PlantParams, stiffest_eigenvalue
+
+    over = PlantParams(inertia=0.01, viscous=3.0, spring=20.0)  # roots (-3 +- sqrt(9 - 0.8)) / 0.02
+    assert stiffest_eigenvalue(over) == pytest.approx((3.0 + math.sqrt(9.0 - 0.8)) / 0.02, rel=1e-12)
+    under = PlantParams(inertia=0.01, viscous=0.02, spring=400.0)  # |s| = sqrt(K / J) for complex roots
+    assert stiffest_eigenvalue(under) == pytest.approx(math.sqrt(400.0 / 0.01), rel=1e-12)
+    for p in (over, under):
+        assert stiffest_eigenvalue(p) == float(np.max(np.abs(np.roots([p.inertia, p.viscous, p.spring]))))
+    with pytest.raises(PlantParameterError, match="inertia 1.11254e-308 is too small"):
+        stiffest_eigenvalue(PlantParams(inertia=1.1125369292536007e-308, viscous=0.004, ms_stiffness=(399.5,),
+                                        ms_slip=(1e-3,)))
