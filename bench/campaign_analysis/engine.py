@@ -38,7 +38,6 @@ from hilbench.bench.campaign_analysis import cluster_host, opaque
 from hilbench.bench.campaign_analysis.fork_server import MAX_WORKERS, warm_up
 from hilbench.bench.campaign_analysis.steps import STEPS, StepSettings, steps_for
 from hilbench.bench.campaign_analysis.table import ResultsFolder, row_key
-from hilbench.bench.campaign_analysis.table import warm_up as warm_up_table
 from hilbench.bench.campaign_index import INDEX_NAME
 from hilbench.bench.errors import AnalyseError
 
@@ -451,7 +450,6 @@ def analyse(folders: list[Path], out: Path, steps: tuple[str, ...] = ("identify"
 def _analyse_locked(folders, out, steps, settings, serial, workers, scheduler, resume, progress,
                     fn, say, verbose, dashboard, t0, cpu0) -> Summary:
     results = ResultsFolder(out, say)
-    warm_up_table()
     results.clean_leftovers()  # of a killed analysis: this one holds the lock, so none is work in progress
     existing = results.read_rows()
     tasks, own_rows, reused, unplanned = plan(folders, steps, settings, existing if resume else None)
@@ -678,11 +676,12 @@ def _on_cluster(todo: list[Task], settings: StepSettings, fn: dict[str, StepFunc
                     # a lost scheduler cancels every task, and a connection to it or a worker may close first: the
                     # host's word (or its end: its sockets may close a moment before its reply pipe) comes soon
                     lost = isinstance(exc, concurrent.futures.CancelledError)
-                    why = host.failure(wait=5.0 if lost or isinstance(exc, OSError) else 0.0) if host else None
-                    if why is None and lost and host is None:
-                        why = f"the connection to --scheduler {address} was lost ({one_line(exc)[:200]})"
-                    elif why is not None:
-                        why = f"the local cluster failed: {why}"
+                    if host is not None:
+                        why = host.failure(wait=5.0 if lost or isinstance(exc, OSError) else 0.0)
+                        why = why and f"the local cluster failed: {why}"
+                    else:
+                        why = f"the connection to --scheduler {address} was lost ({one_line(exc)[:200]})" if lost \
+                            else None
                     if why is not None:  # not the runs': the cluster itself is gone; what its workers wrote stays
                         raise AnalyseError(f"{why}; the rows of the runs it finished are kept: the same command "
                                            "again analyses the rest") from None

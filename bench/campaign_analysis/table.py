@@ -36,15 +36,6 @@ import pyarrow.parquet as pq
 from hilbench.bench.campaign_analysis.steps import COLUMNS
 from hilbench.common.units import AXIS_UNITS, axis_unit
 
-
-def warm_up() -> None:
-    """Build a one-row table now, beside the cluster's start, so that its first call (0.4 ms of CPU more than later
-    ones) is not left for the compaction at the end, on the critical path after the last task. It once made
-    pyarrow's first array here, to pay the pandas import ``pa.array`` makes when pandas is installed (0.17-0.26 s of
-    CPU); :func:`to_table` no longer calls ``pa.array``, and nothing of ``hilbench analyse`` imports pandas."""
-    to_table([{"key": "warm-up", "repeat": 0, "load": 0.0}])
-
-
 TABLE_NAME = "results.parquet"
 PARTS = "parts"
 SET_ASIDE = "set-aside"

@@ -200,8 +200,7 @@ def test_a_value_arrow_cannot_hold_is_one_line_naming_its_column_and_run(column,
 #: a fresh interpreter writes a part, reads it back and compacts, as a worker and the client do
 NO_PANDAS = """
 import json, sys
-from hilbench.bench.campaign_analysis.table import ResultsFolder, row_key, warm_up, write_part
-warm_up()
+from hilbench.bench.campaign_analysis.table import ResultsFolder, row_key, write_part
 rows = [{"campaign_uid": "u", "key": f"r{i}", "run_id": f"id{i}", "content_hash": "h", "step": "identify",
          "settings_hash": "s", "hilbench_version": "v", "status": "ok", "error": "", "inertia": 1e-4 * i,
          "repeat": i} for i in range(16)]
